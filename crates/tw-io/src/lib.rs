@@ -1,0 +1,147 @@
+//! terawalk input: every way triangles enter the system.
+//!
+//! All importers stream: they hand triangles to a [`TriangleSink`] as they parse, and never hold
+//! the file in memory. Formats whose faces refer to vertices read earlier (OBJ, PLY) keep those
+//! vertices in a [`vertex_store::VertexStore`], which spills to disk beyond a memory budget, so
+//! files larger than RAM work in bounded memory.
+//!
+//! Main types:
+//! - [`Triangle`]: positions in f64 (input coordinates), optional per-vertex normals and colours,
+//!   and the id of the object it belongs to.
+//! - [`TriangleSink`]: what a source pushes into (a statistics counter, a file writer, the build).
+//! - [`open_source`]: detects the format of a file (gzip by magic bytes, then the format by its
+//!   contents and extension) and returns a boxed [`TriangleSource`].
+//! - [`Scene`]: several inputs streamed as one scene, object ids kept distinct, degenerate
+//!   triangles dropped and counted.
+//! - [`generate`]: the procedural power plant; [`write`]: PLY/OBJ/STL/GLB writers.
+//!
+//! ```no_run
+//! use tw_io::{Scene, SceneOptions, SceneStats};
+//! let scene = Scene::open(&["plant.ply", "extra.obj.gz"], SceneOptions::default()).unwrap();
+//! let mut stats = SceneStats::default();
+//! let summary = scene.stream(&mut stats).unwrap();
+//! println!("{} triangles in {} objects", stats.triangles, summary.objects);
+//! ```
+
+pub mod error;
+pub mod format;
+pub mod generate;
+pub mod gltf;
+pub mod input;
+pub mod obj;
+pub mod ply;
+pub mod scene;
+pub mod stl;
+pub mod vertex_store;
+pub mod write;
+
+pub use error::{ImportError, Position};
+pub use format::{open_source, Format};
+pub use scene::{Scene, SceneOptions, SceneStats, SceneSummary};
+
+use tw_core::Rgba8;
+
+/// Index of an object. Sources number their objects densely from 0 in the order they announce
+/// them; a [`Scene`] offsets each file's ids so that objects of different files stay distinct.
+pub type ObjectId = u32;
+
+/// One triangle as an importer yields it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Triangle {
+    /// Vertex positions in the input's coordinates and units.
+    pub positions: [[f64; 3]; 3],
+    /// Per-vertex normals when the file has them (not necessarily unit length).
+    pub normals: Option<[[f32; 3]; 3]>,
+    /// Per-vertex colours when the file has them. An object's colour (an OBJ material, a glTF
+    /// base colour) is in [`ObjectInfo::color`] instead.
+    pub colors: Option<[Rgba8; 3]>,
+    /// The object this triangle belongs to; announced with [`TriangleSink::object`] first.
+    pub object: ObjectId,
+}
+
+impl Triangle {
+    pub fn new(positions: [[f64; 3]; 3], object: ObjectId) -> Triangle {
+        Triangle { positions, normals: None, colors: None, object }
+    }
+
+    /// Twice the area (the length of the cross product of two edges).
+    pub fn double_area(&self) -> f64 {
+        let [a, b, c] = self.positions;
+        let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
+        (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+    }
+
+    /// A triangle with two equal vertices or zero area carries nothing visible.
+    pub fn is_degenerate(&self) -> bool {
+        let [a, b, c] = self.positions;
+        a == b || b == c || a == c || self.double_area() == 0.0
+    }
+}
+
+/// What a source says about an object when it first meets it.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ObjectInfo {
+    /// The name in the file (OBJ `o`/`g`, glTF node or mesh name), or empty.
+    pub name: String,
+    /// The object's colour: an OBJ material's diffuse colour, a glTF base colour.
+    pub color: Option<Rgba8>,
+}
+
+/// An indexed mesh chunk, for sources that naturally produce indexed geometry (the generator).
+/// Writers that keep indices (PLY, OBJ, GLB) override [`TriangleSink::mesh`]; everyone else gets
+/// it expanded into triangles.
+#[derive(Clone, Copy, Debug)]
+pub struct MeshChunk<'a> {
+    pub object: ObjectId,
+    pub positions: &'a [[f64; 3]],
+    /// Three indices into `positions` per triangle; every index is `< positions.len()`.
+    pub indices: &'a [u32],
+}
+
+/// Receives what a source streams. Sources call [`TriangleSink::object`] for an object before
+/// any of its triangles.
+pub trait TriangleSink {
+    /// A new object, with the id its triangles will carry.
+    fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError>;
+
+    /// One triangle.
+    fn triangle(&mut self, triangle: &Triangle) -> Result<(), ImportError>;
+
+    /// An indexed chunk. The default expands it into [`TriangleSink::triangle`] calls.
+    fn mesh(&mut self, chunk: &MeshChunk<'_>) -> Result<(), ImportError> {
+        for t in chunk.indices.chunks_exact(3) {
+            let p = |i: u32| chunk.positions[i as usize];
+            self.triangle(&Triangle::new([p(t[0]), p(t[1]), p(t[2])], chunk.object))?;
+        }
+        Ok(())
+    }
+
+    /// How far the source has got: bytes of the input file consumed (compressed bytes for a .gz),
+    /// or for a generator the triangles produced. Called now and then, for progress bars.
+    fn progress(&mut self, _done: u64) {}
+}
+
+/// A stream of triangles from one file or generator.
+pub trait TriangleSource {
+    /// A name for messages: the file's path, or a description of the generator.
+    fn name(&self) -> String;
+
+    /// The total that [`TriangleSink::progress`] counts towards, when known.
+    fn progress_total(&self) -> Option<u64>;
+
+    /// Streams every object and triangle into `sink`, in file order. Consumes the source.
+    fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError>;
+}
+
+/// What a source reports when it has streamed everything.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SourceSummary {
+    /// Objects announced.
+    pub objects: u32,
+    /// Vertices the file declares or defined (for statistics; STL counts 3 per triangle).
+    pub vertices: u64,
+    /// Bytes read from disk (compressed bytes for a .gz).
+    pub bytes: u64,
+}
