@@ -107,7 +107,11 @@ pub fn detect(input: &mut Input) -> Result<Format, ImportError> {
 
 /// Opens `path` as a triangle source, detecting gzip and the format.
 pub fn open_source(path: &Path, options: &ImportOptions) -> Result<Box<dyn TriangleSource>, ImportError> {
-    let mut input = Input::open(path)?;
+    open_input(Input::open(path)?, options)
+}
+
+/// Detects the format of an opened input and returns its source.
+pub fn open_input(mut input: Input, options: &ImportOptions) -> Result<Box<dyn TriangleSource>, ImportError> {
     let format = detect(&mut input)?;
     match format {
         Format::Obj => crate::obj::open(input, options),

@@ -54,6 +54,24 @@ impl Input {
         })
     }
 
+    /// An input over bytes in memory (fuzzing, tests). `path` is only used in messages and to
+    /// resolve relative references (glTF buffers). Gzip is detected as for files.
+    pub fn from_bytes(path: &Path, bytes: Vec<u8>) -> Input {
+        let gzip = bytes.starts_with(&[0x1f, 0x8b]);
+        let file_len = bytes.len() as u64;
+        let disk_bytes = Arc::new(AtomicU64::new(0));
+        let counted = CountingReader { inner: io::Cursor::new(bytes), count: disk_bytes.clone() };
+        let inner: Box<dyn Read + Send> =
+            if gzip { Box::new(flate2::read::MultiGzDecoder::new(counted)) } else { Box::new(counted) };
+        Input {
+            path: path.to_path_buf(),
+            gzip,
+            file_len,
+            disk_bytes,
+            reader: BufReader::with_capacity(READ_BUFFER, inner),
+        }
+    }
+
     /// Bytes read from disk so far (compressed bytes for gzip).
     pub fn disk_bytes(&self) -> u64 {
         self.disk_bytes.load(Ordering::Relaxed)
