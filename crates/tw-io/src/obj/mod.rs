@@ -21,7 +21,7 @@
 //! 5. Objects: see [`Parser::object_for_face`]. `o` and `g` both begin a new object, but an object
 //!    is announced to the sink only with its first face, so consecutive `o`/`g` lines without faces
 //!    between them make one object, named by the last of them. Faces before any `o`/`g` belong to
-//!    an object named after the file stem. Each object has one colour: when `usemtl` changes the
+//!    an object named after the file stem, and so do faces after a bare `o` or `g` (no name). Each object has one colour: when `usemtl` changes the
 //!    material within an `o`/`g`, the following faces go to an object named `group/material`
 //!    (switching back to a material already used in the same `o`/`g` reuses its object).
 //!
