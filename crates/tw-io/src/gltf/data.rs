@@ -251,9 +251,13 @@ impl Store {
             Some(BufferData::External { path: file_path, file }) => {
                 if file.is_none() {
                     let f = RandomFile::open(file_path, file_path).map_err(|e| {
+                        let why = match e {
+                            ImportError::Io { source, .. } => source.to_string(),
+                            other => other.to_string(),
+                        };
                         json_err(
                             &path,
-                            format!("buffers[{index}]: cannot read \"{}\": {e}", file_path.display()),
+                            format!("buffers[{index}]: cannot read \"{}\": {why}", file_path.display()),
                         )
                     })?;
                     if f.end() < declared {

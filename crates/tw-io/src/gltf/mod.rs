@@ -6,8 +6,11 @@
 //! Stages (see [`open`] and [`GltfSource::stream`]):
 //! 1. Header: for a GLB, the 12-byte header and the JSON chunk are read from the input stream
 //!    ([`container::read_head`]); a `.gltf` is read whole (it is the JSON). The document is parsed
-//!    with the `gltf` crate's JSON types (not `gltf::import`, which loads every buffer and image).
-//! 2. Scene: the default scene (else scene 0, else every parentless node, else every mesh once) is
+//!    with the `gltf` crate's JSON types (not `gltf::import`, which loads every buffer and image),
+//!    without its validation (which panics on some bad indices): every index is checked where it
+//!    is used, and errors name the JSON path ("meshes[2].primitives[0]: ...").
+//! 2. Scene: the default scene (else scene 0, else every parentless node, else every mesh once;
+//!    a default scene index in a file without scenes is ignored with a warning) is
 //!    walked depth-first with an explicit stack, composing node transforms in f64
 //!    ([`scene::instances`]). A node reached twice (cycle, two parents) is an error.
 //! 3. Binary access: a plain `.glb` on disk is read with positioned reads; a gzip'ed (or
@@ -68,6 +71,7 @@ const KNOWN_EXTENSIONS: &[&str] = &[
     "EXT_mesh_gpu_instancing",
     "KHR_lights_punctual",
     "KHR_xmp_json_ld",
+    "KHR_technique_webgl",
     "MSFT_texture_dds",
 ];
 const KNOWN_PREFIXES: &[&str] = &["KHR_materials_", "KHR_texture_", "EXT_texture_"];
@@ -167,27 +171,36 @@ fn parse_json(bytes: &[u8], path: &Path, glb: bool) -> Result<json::Root, Import
     // GLB JSON chunks are padded with spaces; some writers pad with zeros.
     let end = bytes.iter().rposition(|&b| b != 0 && !b.is_ascii_whitespace()).map_or(0, |p| p + 1);
     let bytes = &bytes[..end];
-    let root: json::Root = serde_json::from_slice(bytes).map_err(|e| {
-        if let Some(v) = gltf_version(bytes).filter(|v| !v.starts_with('2')) {
-            return ImportError::unsupported(path, format!("glTF version {v}; only glTF 2.0 is read"));
-        }
-        let text = e.to_string();
-        let message = text.rsplit_once(" at line ").map_or(text.as_str(), |(m, _)| m);
-        if glb {
-            let at = line_column_offset(bytes, e.line(), e.column());
-            ImportError::parse(
-                path,
-                Position::Byte(container::JSON_START + at),
-                format!("invalid glTF JSON: {message}"),
-            )
-        } else {
-            ImportError::parse(
-                path,
-                Position::Line(e.line() as u64),
-                format!("column {}: invalid glTF JSON: {message}", e.column()),
-            )
-        }
-    })?;
+    let root: json::Root = match serde_json::from_slice(bytes) {
+        Ok(root) => root,
+        Err(e) => match lenient_parse(bytes) {
+            Some(root) => root,
+            None => {
+                if let Some(v) = gltf_version(bytes).filter(|v| !v.starts_with('2')) {
+                    return Err(ImportError::unsupported(
+                        path,
+                        format!("glTF version {v}; only glTF 2.0 is read"),
+                    ));
+                }
+                let text = e.to_string();
+                let message = text.rsplit_once(" at line ").map_or(text.as_str(), |(m, _)| m);
+                return Err(if glb {
+                    let at = line_column_offset(bytes, e.line(), e.column());
+                    ImportError::parse(
+                        path,
+                        Position::Byte(container::JSON_START + at),
+                        format!("invalid glTF JSON: {message}"),
+                    )
+                } else {
+                    ImportError::parse(
+                        path,
+                        Position::Line(e.line() as u64),
+                        format!("column {}: invalid glTF JSON: {message}", e.column()),
+                    )
+                });
+            }
+        },
+    };
     if !root.asset.version.starts_with("2.") {
         return Err(ImportError::unsupported(
             path,
@@ -197,10 +210,33 @@ fn parse_json(bytes: &[u8], path: &Path, glb: bool) -> Result<json::Root, Import
     Ok(root)
 }
 
+/// Parses a document that the `gltf` crate's types reject for a reason the specification does
+/// not give: a scene without `nodes` (optional in glTF 2.0, required by gltf-json 1.4). Only
+/// tried after a failure, so valid files are parsed once.
+fn lenient_parse(bytes: &[u8]) -> Option<json::Root> {
+    let mut v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let mut fixed = false;
+    for scene in v.get_mut("scenes")?.as_array_mut()? {
+        if let Some(s) = scene.as_object_mut() {
+            if !s.contains_key("nodes") {
+                s.insert("nodes".into(), serde_json::Value::Array(Vec::new()));
+                fixed = true;
+            }
+        }
+    }
+    if !fixed {
+        return None;
+    }
+    serde_json::from_value(v).ok()
+}
+
 /// `asset.version` of a document that the glTF 2.0 types could not parse.
 fn gltf_version(bytes: &[u8]) -> Option<String> {
     let v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
-    Some(v.get("asset")?.get("version")?.as_str()?.to_string())
+    match v.get("asset")?.get("version")? {
+        serde_json::Value::String(s) => Some(s.clone()),
+        other => Some(other.to_string()),
+    }
 }
 
 /// Byte offset of 1-based `line` and `column` in `text`.

@@ -131,7 +131,17 @@ pub(super) fn local_matrix(node: &json::Node, index: usize, path: &Path) -> Resu
 pub(super) fn instances(root: &json::Root, path: &Path) -> Result<Vec<Instance>, ImportError> {
     let err = |m: String| ImportError::parse(path, Position::File, m);
     let nodes = &root.nodes;
-    let roots: Vec<(usize, String)> = match (root.scene, root.scenes.is_empty()) {
+    let mut default_scene = root.scene;
+    if let Some(s) = default_scene.filter(|_| root.scenes.is_empty()) {
+        // Unambiguous enough to draw: without scenes, every parentless node is the scene.
+        tracing::warn!(
+            "{}: scene {} does not exist (no scenes); drawing every root node",
+            path.display(),
+            s.value()
+        );
+        default_scene = None;
+    }
+    let roots: Vec<(usize, String)> = match (default_scene, root.scenes.is_empty()) {
         (Some(s), _) => {
             let scene = root.scenes.get(s.value()).ok_or_else(|| {
                 err(format!("scene {} does not exist ({} scenes)", s.value(), root.scenes.len()))

@@ -1040,3 +1040,41 @@ fn paths_in_messages_name_the_file() {
     let e = import_path(&path).unwrap_err();
     assert!(e.to_string().contains("broken.glb"), "{e}");
 }
+
+#[test]
+fn scenes_without_nodes_and_a_dangling_default_scene_are_empty_not_errors() {
+    // As in assimp's TestNoRootNode models: `scenes[0].nodes` is optional in glTF 2.0.
+    let c =
+        import_files(&[("m.gltf", br#"{"asset": {"version": "2.0"}, "scene": 0, "scenes": [{}]}"#)]).unwrap();
+    assert_eq!((c.tris.len(), c.objects.len()), (0, 0));
+    let c = import_files(&[("m.gltf", br#"{"asset": {"version": "2.0"}, "scene": 0}"#)]).unwrap();
+    assert_eq!(c.tris.len(), 0);
+    // With scenes present, a bad default scene stays an error.
+    let e = import_files(&[("m.gltf", br#"{"asset": {"version": "2.0"}, "scene": 1, "scenes": [{}]}"#)]);
+    assert!(err_text(e).0.contains("scene 1 does not exist"));
+}
+
+#[test]
+fn gltf_1_with_numeric_version_is_unsupported() {
+    let d = br#"{"asset": {"version": 1}, "accessors": {"a": {}}}"#;
+    let e = import_files(&[("m.gltf", d)]).unwrap_err();
+    assert!(matches!(e, ImportError::Unsupported { .. }) && e.to_string().contains("version 1"), "{e}");
+}
+
+#[test]
+fn every_corrupted_byte_is_an_error_or_a_result_never_a_panic() {
+    let (b, d) = square(USHORT);
+    let (md, mbin) = meshopt_doc("TRIANGLES", true);
+    for (name, good) in [("plain.glb", glb(&d, &b.bytes)), ("meshopt.glb", glb(&md, &mbin))] {
+        for at in 0..good.len() {
+            for value in [0x00, 0xff, good[at] ^ 0x01, b'9'] {
+                let mut bytes = good.clone();
+                bytes[at] = value;
+                let path = PathBuf::from(format!("/nonexistent/{name}"));
+                if let Ok(src) = open_input(Input::from_bytes(&path, bytes), &ImportOptions::default()) {
+                    let _ = src.stream(&mut Collect::default());
+                }
+            }
+        }
+    }
+}
