@@ -16,7 +16,7 @@
 //!              |            then all indices (bufferView 1)
 //! ```
 //! The JSON must precede BIN but is known only at the end, so positions and indices stream into
-//! two [`Spill`] files; the JSON is serialised twice (once to measure its length), never held in
+//! two unnamed temporary files; the JSON is serialised twice (once to measure its length), never held in
 //! memory. GLB lengths are u32: a binary chunk that would pass 4 GiB is an error as soon as a
 //! triangle would cross it.
 

@@ -2,7 +2,7 @@
 //!
 //! Every writer is a [`TriangleSink`] that streams with bounded memory, whatever the size of the
 //! scene: bytes whose place in the file depends on counts known only at the end go to an unnamed
-//! temporary file ([`Spill`]) in the target's directory and are appended by
+//! temporary file in the target's directory and are appended by
 //! [`SceneWriter::finish`]. Memory is a few MiB of buffers plus a small record per object (GLB
 //! and OBJ also keep one per material colour, GLB one per run of consecutive triangles of an
 //! object).

@@ -18,7 +18,7 @@
 //! ```
 //!
 //! Vertices and faces arrive interleaved, so vertices go straight into the file after a header
-//! of fixed length and faces into a [`Spill`] file, appended at the end. The counts are known
+//! of fixed length and faces into an unnamed temporary file, appended at the end. The counts are known
 //! only then: the header is written again over the first one, and its comment line is padded
 //! with spaces so that the final header, with exact counts, has the length of the first one
 //! (written with 20-digit counts). This keeps the counts plain decimal without leading zeros or
