@@ -1,0 +1,199 @@
+//! A pinhole camera: where it is, what it looks at, and how to frame a bounding box.
+
+use tw_core::Aabb;
+
+/// A perspective camera in the scene's own coordinates (f64, so that georeferenced scenes with
+/// large coordinates keep their precision: everything is made relative to `eye` first).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    /// Position of the eye.
+    pub eye: [f64; 3],
+    /// A point the camera looks at (the image centre); also sets the scale of the near plane.
+    pub target: [f64; 3],
+    /// The scene's up direction; need not be perpendicular to the view, nor unit length.
+    pub up: [f64; 3],
+    /// Vertical field of view in degrees (clamped to 1..=170 when used).
+    pub fovy_deg: f64,
+}
+
+impl Default for Camera {
+    /// At (0, 0, 1) looking at the origin, Y up, 45°.
+    fn default() -> Self {
+        Camera { eye: [0.0, 0.0, 1.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], fovy_deg: 45.0 }
+    }
+}
+
+/// Field of view that [`Camera::look_at_bounds`] uses.
+pub const FRAMING_FOVY_DEG: f64 = 40.0;
+
+impl Camera {
+    /// A camera that sees the whole box `bounds` from `direction`: the eye lies in `direction`
+    /// from the box centre (so `[1, 1, 1]` views from the +x +y +z corner, `[0, 0, 1]` from
+    /// above), far enough that the box's bounding sphere fits the vertical field of view (and the
+    /// horizontal one, for images at least as wide as high). Up is +Z, or +Y when `direction` is
+    /// (nearly) vertical; use [`Camera::look_at_bounds_up`] for Y-up scenes.
+    ///
+    /// An empty box frames the unit box at the origin; a zero `direction` means `[1, 1, 1]`.
+    pub fn look_at_bounds(bounds: &Aabb, direction: [f64; 3]) -> Camera {
+        Camera::look_at_bounds_up(bounds, direction, [0.0, 0.0, 1.0])
+    }
+
+    /// [`Camera::look_at_bounds`] with the scene's up direction given (falls back to another
+    /// axis when `direction` is parallel to `up`).
+    pub fn look_at_bounds_up(bounds: &Aabb, direction: [f64; 3], up: [f64; 3]) -> Camera {
+        let finite = |p: &[f64; 3]| p.iter().all(|v| v.is_finite());
+        let (center, radius) = if bounds.is_empty() || !finite(&bounds.min) || !finite(&bounds.max) {
+            ([0.5; 3], 0.75f64.sqrt())
+        } else {
+            let r = 0.5 * bounds.diagonal();
+            (bounds.center(), if r > 0.0 { r } else { 1.0 })
+        };
+        let dir =
+            normalize(direction).unwrap_or_else(|| normalize([1.0, 1.0, 1.0]).unwrap_or([0.0, 0.0, 1.0]));
+        let up = normalize(up).unwrap_or([0.0, 0.0, 1.0]);
+        let up = if dot(dir, up).abs() > 0.999 {
+            // Looking along up: any perpendicular axis will do; prefer the one least aligned.
+            least_aligned_axis(up)
+        } else {
+            up
+        };
+        let half = (FRAMING_FOVY_DEG * 0.5).to_radians();
+        let distance = radius / half.sin() * 1.02;
+        Camera {
+            eye: [
+                center[0] + dir[0] * distance,
+                center[1] + dir[1] * distance,
+                center[2] + dir[2] * distance,
+            ],
+            target: center,
+            up,
+            fovy_deg: FRAMING_FOVY_DEG,
+        }
+    }
+
+    /// Orthonormal view basis: right, up, forward (unit vectors, right-handed: right = forward ×
+    /// up). Degenerate inputs fall back: eye = target looks along −Z, `up` parallel to the view
+    /// direction picks another up.
+    pub fn basis(&self) -> Basis {
+        let f = normalize(sub(self.target, self.eye)).unwrap_or([0.0, 0.0, -1.0]);
+        let up = normalize(self.up).unwrap_or([0.0, 1.0, 0.0]);
+        let ortho = |u: [f64; 3]| normalize(sub(u, scale(f, dot(u, f))));
+        let u = ortho(up).or_else(|| ortho(least_aligned_axis(f))).unwrap_or([0.0, 1.0, 0.0]);
+        let r = cross(f, u);
+        Basis { right: r, up: u, forward: f }
+    }
+
+    /// The vertical field of view in radians, clamped to 1°..=170° (45° if not finite).
+    pub fn fovy(&self) -> f64 {
+        let d = if self.fovy_deg.is_finite() { self.fovy_deg.clamp(1.0, 170.0) } else { 45.0 };
+        d.to_radians()
+    }
+
+    /// Distance from eye to target (0 if they coincide or are not finite).
+    pub fn target_distance(&self) -> f64 {
+        let d = sub(self.target, self.eye);
+        let l = dot(d, d).sqrt();
+        if l.is_finite() {
+            l
+        } else {
+            0.0
+        }
+    }
+}
+
+/// The camera's orthonormal axes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Basis {
+    pub right: [f64; 3],
+    pub up: [f64; 3],
+    pub forward: [f64; 3],
+}
+
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+pub(crate) fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
+    [a[0] * s, a[1] * s, a[2] * s]
+}
+
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// The unit vector along `a`, or `None` for a zero or non-finite vector.
+pub(crate) fn normalize(a: [f64; 3]) -> Option<[f64; 3]> {
+    let l = dot(a, a).sqrt();
+    (l > 0.0 && l.is_finite()).then(|| scale(a, 1.0 / l))
+}
+
+/// The coordinate axis least aligned with `v`.
+pub(crate) fn least_aligned_axis(v: [f64; 3]) -> [f64; 3] {
+    let a = v.map(f64::abs);
+    if a[0] <= a[1] && a[0] <= a[2] {
+        [1.0, 0.0, 0.0]
+    } else if a[1] <= a[2] {
+        [0.0, 1.0, 0.0]
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: [f64; 3], b: [f64; 3]) -> bool {
+        (0..3).all(|i| (a[i] - b[i]).abs() < 1e-12)
+    }
+
+    #[test]
+    fn basis_is_orthonormal_and_right_handed() {
+        let c = Camera { eye: [0.0, 0.0, 5.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], fovy_deg: 60.0 };
+        let b = c.basis();
+        assert!(close(b.forward, [0.0, 0.0, -1.0]));
+        assert!(close(b.up, [0.0, 1.0, 0.0]));
+        assert!(close(b.right, [1.0, 0.0, 0.0]));
+    }
+
+    #[test]
+    fn degenerate_cameras_get_a_usable_basis() {
+        let same = Camera { eye: [1.0; 3], target: [1.0; 3], up: [0.0; 3], fovy_deg: f64::NAN };
+        let b = same.basis();
+        assert!(close(b.forward, [0.0, 0.0, -1.0]));
+        assert!((dot(b.up, b.up) - 1.0).abs() < 1e-12 && dot(b.up, b.forward).abs() < 1e-12);
+        assert_eq!(same.fovy(), 45f64.to_radians());
+        let parallel =
+            Camera { eye: [0.0; 3], target: [0.0, 0.0, -3.0], up: [0.0, 0.0, 2.0], fovy_deg: 400.0 };
+        let b = parallel.basis();
+        assert!(dot(b.up, b.forward).abs() < 1e-12 && (dot(b.right, b.right) - 1.0).abs() < 1e-12);
+        assert_eq!(parallel.fovy(), 170f64.to_radians());
+    }
+
+    #[test]
+    fn look_at_bounds_centres_the_box_from_the_direction() {
+        let b = Aabb::from_points(&[[0.0, 0.0, 0.0], [2.0, 4.0, 6.0]]);
+        let c = Camera::look_at_bounds(&b, [0.0, -1.0, 0.0]);
+        assert_eq!(c.target, [1.0, 2.0, 3.0]);
+        assert!(c.eye[1] < 0.0 && (c.eye[0] - 1.0).abs() < 1e-12 && (c.eye[2] - 3.0).abs() < 1e-12);
+        assert_eq!(c.up, [0.0, 0.0, 1.0]);
+        // Straight down: up must change.
+        let top = Camera::look_at_bounds(&b, [0.0, 0.0, 1.0]);
+        assert!(top.eye[2] > 6.0);
+        assert!(dot(top.up, [0.0, 0.0, 1.0]).abs() < 1e-12);
+    }
+
+    #[test]
+    fn look_at_bounds_of_empty_or_flat_boxes() {
+        let c = Camera::look_at_bounds(&Aabb::EMPTY, [0.0; 3]);
+        assert_eq!(c.target, [0.5; 3]);
+        assert!(c.eye.iter().all(|v| v.is_finite() && *v > 0.5));
+        let point = Aabb::from_points(&[[3.0, 3.0, 3.0]]);
+        let c = Camera::look_at_bounds(&point, [1.0, 0.0, 0.0]);
+        assert!(c.target_distance() > 0.0);
+    }
+}
