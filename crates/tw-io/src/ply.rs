@@ -556,15 +556,16 @@ fn read_header(rd: &mut ByteReader, path: &Path) -> Result<Header, ImportError> 
         if header_bytes > MAX_HEADER_BYTES {
             return Err(err(format!("the header is longer than {MAX_HEADER_BYTES} bytes")));
         }
-        let Ok(text) = std::str::from_utf8(rd.bytes(range)) else {
-            return Err(err("the header line is not text (binary data inside the header?)".into()));
-        };
+        let bytes = rd.bytes(range);
         if line_no == 1 {
-            if text.trim_end() != "ply" {
+            if bytes.trim_ascii_end() != b"ply" {
                 return Err(err("not a PLY file: the first line must be \"ply\"".into()));
             }
             continue;
         }
+        let Ok(text) = std::str::from_utf8(bytes) else {
+            return Err(err("the header line is not text (binary data inside the header?)".into()));
+        };
         let mut words = text.split_ascii_whitespace();
         let Some(keyword) = words.next() else { continue };
         match keyword {
@@ -1359,4 +1360,489 @@ fn skip_ascii_property(tokens: &mut Tokens, p: &Property, cap: i64) -> Result<()
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::io::Write;
+
+    /// A sink that keeps everything.
+    #[derive(Default)]
+    struct Collect {
+        objects: Vec<(u32, ObjectInfo)>,
+        tris: Vec<Triangle>,
+        progress_calls: u64,
+    }
+
+    impl TriangleSink for Collect {
+        fn object(&mut self, id: u32, info: &ObjectInfo) -> Result<(), ImportError> {
+            self.objects.push((id, info.clone()));
+            Ok(())
+        }
+        fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+            assert!(!self.objects.is_empty(), "triangle before object");
+            self.tris.push(*t);
+            Ok(())
+        }
+        fn progress(&mut self, _done: u64) {
+            self.progress_calls += 1;
+        }
+    }
+
+    fn gz(bytes: &[u8]) -> Vec<u8> {
+        let mut enc = flate2::write::GzEncoder::new(Vec::new(), flate2::Compression::fast());
+        enc.write_all(bytes).unwrap();
+        enc.finish().unwrap()
+    }
+
+    fn run_opts(name: &str, bytes: &[u8], options: &ImportOptions) -> Result<(Collect, SourceSummary), ImportError> {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join(name);
+        std::fs::write(&p, bytes).unwrap();
+        let source = open(Input::open(&p)?, options)?;
+        let mut sink = Collect::default();
+        let summary = source.stream(&mut sink)?;
+        Ok((sink, summary))
+    }
+
+    fn run(name: &str, bytes: &[u8]) -> Result<(Collect, SourceSummary), ImportError> {
+        run_opts(name, bytes, &ImportOptions::default())
+    }
+
+    fn err(name: &str, bytes: &[u8]) -> ImportError {
+        match run(name, bytes) {
+            Ok((c, _)) => panic!("expected an error, got {} triangles", c.tris.len()),
+            Err(e) => e,
+        }
+    }
+
+    fn positions(c: &Collect) -> Vec<[[f64; 3]; 3]> {
+        c.tris.iter().map(|t| t.positions).collect()
+    }
+
+    /// Binary writer for fixtures.
+    struct W {
+        big: bool,
+        out: Vec<u8>,
+    }
+
+    impl W {
+        fn new(header: &str, big: bool) -> W {
+            W { big, out: header.as_bytes().to_vec() }
+        }
+        fn put(&mut self, le: &[u8], be: &[u8]) -> &mut Self {
+            self.out.extend_from_slice(if self.big { be } else { le });
+            self
+        }
+        fn f32(&mut self, v: f32) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn f64(&mut self, v: f64) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn i32(&mut self, v: i32) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn u32(&mut self, v: u32) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn i16(&mut self, v: i16) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn u16(&mut self, v: u16) -> &mut Self {
+            self.put(&v.to_le_bytes(), &v.to_be_bytes())
+        }
+        fn u8(&mut self, v: u8) -> &mut Self {
+            self.out.push(v);
+            self
+        }
+    }
+
+    const SQUARE: [[f32; 3]; 4] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.5, -2.25]];
+
+    /// A quad (fanned into two triangles) and a triangle, in the three encodings.
+    fn square(encoding: &str) -> Vec<u8> {
+        let header = format!(
+            "ply\nformat {encoding} 1.0\ncomment made by hand\nobj_info test\nelement vertex 4\n\
+             property float x\nproperty float y\nproperty float z\nelement face 2\n\
+             property list uchar int vertex_indices\nend_header\n"
+        );
+        if encoding == "ascii" {
+            let mut s = header;
+            for v in SQUARE {
+                s += &format!("{} {} {}\n", v[0], v[1], v[2]);
+            }
+            s += "4 0 1 2 3\n3 3 2 1\n";
+            return s.into_bytes();
+        }
+        let mut w = W::new(&header, encoding == "binary_big_endian");
+        for v in SQUARE {
+            w.f32(v[0]).f32(v[1]).f32(v[2]);
+        }
+        w.u8(4).i32(0).i32(1).i32(2).i32(3);
+        w.u8(3).i32(3).i32(2).i32(1);
+        w.out
+    }
+
+    fn square_triangles() -> Vec<[[f64; 3]; 3]> {
+        let v = |i: usize| SQUARE[i].map(|c| c as f64);
+        vec![[v(0), v(1), v(2)], [v(0), v(2), v(3)], [v(3), v(2), v(1)]]
+    }
+
+    #[test]
+    fn all_encodings_plain_and_gzip_give_the_same_triangles() {
+        for enc in ["ascii", "binary_little_endian", "binary_big_endian"] {
+            for zipped in [false, true] {
+                let bytes = if zipped { gz(&square(enc)) } else { square(enc) };
+                let (c, s) = run("square.ply", &bytes).unwrap_or_else(|e| panic!("{enc} {zipped}: {e}"));
+                assert_eq!(positions(&c), square_triangles(), "{enc} gzip={zipped}");
+                assert_eq!(c.objects, vec![(0, ObjectInfo { name: "square".into(), color: None })]);
+                assert_eq!(s.objects, 1);
+                assert_eq!(s.vertices, 4);
+                assert_eq!(s.bytes, bytes.len() as u64);
+                assert!(c.tris.iter().all(|t| t.normals.is_none() && t.colors.is_none() && t.object == 0));
+                assert!(c.progress_calls > 0);
+            }
+        }
+    }
+
+    #[test]
+    fn object_name_is_the_file_stem() {
+        let (c, _) = run("Pump House.ply.gz", &gz(&square("ascii"))).unwrap();
+        assert_eq!(c.objects[0].1.name, "Pump House");
+        assert_eq!(object_name(Path::new("/a/b.c.PLY.GZ")), "b.c");
+        assert_eq!(object_name(Path::new(".hidden")), ".hidden");
+    }
+
+    #[test]
+    fn crlf_header_and_blank_body_lines() {
+        let text = String::from_utf8(square("ascii")).unwrap().replace('\n', "\r\n").replace("4 0 1", "\r\n4 0 1");
+        let (c, _) = run("crlf.ply", text.as_bytes()).unwrap();
+        assert_eq!(positions(&c), square_triangles());
+    }
+
+    #[test]
+    fn normals_and_uchar_colours_per_vertex() {
+        let header = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                      property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
+                      property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n\
+                      element face 1\nproperty list uchar uint vertex_indices\nend_header\n";
+        let mut w = W::new(header, false);
+        for i in 0..3u8 {
+            w.f32(i as f32).f32(0.0).f32(i as f32 * 0.5);
+            w.f32(0.0).f32(0.0).f32(if i == 2 { f32::NAN } else { 1.0 });
+            w.u8(10 * i).u8(20).u8(30).u8(255 - i);
+        }
+        w.u8(3).u32(0).u32(1).u32(2);
+        let (c, _) = run("n.ply", &w.out).unwrap();
+        let t = c.tris[0];
+        assert_eq!(t.positions, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [2.0, 0.0, 1.0]]);
+        // A NaN normal becomes zero rather than an error.
+        assert_eq!(t.normals, Some([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]));
+        assert_eq!(t.colors, Some([Rgba8([0, 20, 30, 255]), Rgba8([10, 20, 30, 254]), Rgba8([20, 20, 30, 253])]));
+    }
+
+    #[test]
+    fn float_colours_and_double_coordinates_in_ascii() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty double x\nproperty double y\nproperty double z\n\
+                    property float red\nproperty float green\nproperty float blue\nelement face 1\n\
+                    property list uchar int vertex_indices\nend_header\n\
+                    1000000.125 2 3 1 0 0.5\n4 5 6 0 1 0\n7 8 9e1 0 0 1\n3 0 1 2\n";
+        let (c, _) = run("c.ply", text.as_bytes()).unwrap();
+        let t = c.tris[0];
+        assert_eq!(t.positions, [[1000000.125, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 90.0]]);
+        assert_eq!(t.colors, Some([Rgba8([255, 0, 128, 255]), Rgba8([0, 255, 0, 255]), Rgba8([0, 0, 255, 255])]));
+        assert_eq!(t.normals, None);
+    }
+
+    #[test]
+    fn integer_coordinates_type_aliases_and_vertex_index() {
+        let header = "ply\nformat binary_big_endian 1.0\nelement vertex 3\nproperty int16 x\nproperty int8 y\n\
+                      property float64 z\nelement face 1\nproperty list uint16 uint8 vertex_index\nend_header\n";
+        let mut w = W::new(header, true);
+        w.i16(-300).u8(0xff).f64(0.25);
+        w.i16(7).u8(1).f64(-1.0);
+        w.i16(0).u8(2).f64(0.0);
+        w.u16(3).u8(2).u8(0).u8(1);
+        let (c, _) = run("i.ply", &w.out).unwrap();
+        assert_eq!(c.tris[0].positions, [[0.0, 2.0, 0.0], [-300.0, -1.0, 0.25], [7.0, 1.0, -1.0]]);
+    }
+
+    /// Extra elements before, between and after, with lists, and extra vertex and face properties.
+    fn cluttered(encoding: &str) -> Vec<u8> {
+        let header = format!(
+            "ply\nformat {encoding} 1.0\nelement material 2\nproperty list uchar uchar name\nproperty float shine\n\
+             element vertex 3\nproperty float confidence\nproperty float x\nproperty list uchar short tags\n\
+             property float y\nproperty float z\nproperty uchar flags\n\
+             element edge 1\nproperty int vertex1\nproperty int vertex2\n\
+             element face 2\nproperty uchar kind\nproperty list uchar int vertex_indices\n\
+             property list uchar float texcoord\nelement extra 1\nproperty list int double values\nend_header\n"
+        );
+        if encoding == "ascii" {
+            return (header
+                + "3 65 66 67 0.5\n0 1\n\
+                   0.9 0 2 5 6 0 0 7\n0.8 1 0 0 0 0\n0.7 0 1 1 1 0 0\n\
+                   0 1\n\
+                   9 3 0 1 2 6 0 0 1 0 0 1\n1 4 2 1 0 2 0\n\
+                   2 1.5 2.5\n")
+                .into_bytes();
+        }
+        let mut w = W::new(&header, encoding == "binary_big_endian");
+        w.u8(3).u8(65).u8(66).u8(67).f32(0.5);
+        w.u8(0).f32(1.0);
+        w.f32(0.9).f32(0.0).u8(2).i16(5).i16(6).f32(0.0).f32(0.0).u8(7);
+        w.f32(0.8).f32(1.0).u8(0).f32(0.0).f32(0.0).u8(0);
+        w.f32(0.7).f32(0.0).u8(1).i16(1).f32(1.0).f32(0.0).u8(0);
+        w.i32(0).i32(1);
+        w.u8(9).u8(3).i32(0).i32(1).i32(2).u8(6).f32(0.0).f32(0.0).f32(1.0).f32(0.0).f32(0.0).f32(1.0);
+        w.u8(1).u8(4).i32(2).i32(1).i32(0).i32(2).u8(0);
+        w.i32(2).f64(1.5).f64(2.5);
+        w.out
+    }
+
+    #[test]
+    fn extra_elements_and_properties_are_skipped_in_every_encoding() {
+        let a = [0.0, 0.0, 0.0];
+        let b = [1.0, 0.0, 0.0];
+        let c = [0.0, 1.0, 0.0];
+        for enc in ["ascii", "binary_little_endian", "binary_big_endian"] {
+            let (got, s) = run("x.ply", &cluttered(enc)).unwrap_or_else(|e| panic!("{enc}: {e}"));
+            // The quad 2 1 0 2 fans into (2 1 0) and (2 0 2).
+            assert_eq!(positions(&got), vec![[a, b, c], [c, b, a], [c, a, c]], "{enc}");
+            assert_eq!(s.vertices, 3);
+        }
+    }
+
+    #[test]
+    fn polygons_are_fanned_and_short_faces_skipped() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 4\nproperty list uchar int vertex_indices\nend_header\n\
+                    0 0 0\n1 0 0\n2 1 0\n1 2 0\n0 1 0\n5 0 1 2 3 4\n2 0 1\n0\n1 4\n";
+        let (c, _) = run("fan.ply", text.as_bytes()).unwrap();
+        let v = |i: usize| [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]][i];
+        assert_eq!(positions(&c), vec![[v(0), v(1), v(2)], [v(0), v(2), v(3)], [v(0), v(3), v(4)]]);
+    }
+
+    #[test]
+    fn point_cloud_without_faces_announces_the_object() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+                    end_header\n1 2 3\nnan 0 0\n";
+        let (c, s) = run("cloud.ply", text.as_bytes()).unwrap();
+        assert_eq!(c.objects.len(), 1);
+        assert!(c.tris.is_empty());
+        assert_eq!(s, SourceSummary { objects: 1, vertices: 2, bytes: text.len() as u64 });
+    }
+
+    #[test]
+    fn zero_faces_declared() {
+        let text = "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
+                    property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
+        let (c, s) = run("empty.ply", text.as_bytes()).unwrap();
+        assert_eq!((c.objects.len(), c.tris.len(), s.objects), (1, 0, 1));
+    }
+
+    /// Many vertices: records straddle read buffers, and with no vertex memory the store spills.
+    #[test]
+    fn large_binary_file_spills_and_streams_exactly() {
+        let n = 120_000u32; // 1.4 MB of vertices: more than one read buffer
+        let header = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex {n}\nproperty float x\nproperty float y\n\
+             property float z\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+             element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            n - 2
+        );
+        let mut w = W::new(&header, false);
+        for i in 0..n {
+            w.f32(i as f32).f32((i % 7) as f32).f32(-(i as f32)).u8(i as u8).u8(1).u8(2);
+        }
+        // Every 64th face refers to a far-away vertex, so that spilled blocks are read back.
+        let far = |i: u32| if i % 64 == 0 { (i * 7919) % n } else { i };
+        for i in 0..n - 2 {
+            w.u8(3).i32(far(i) as i32).i32(far(i + 1) as i32).i32(far(i + 2) as i32);
+        }
+        let options = ImportOptions { vertex_memory: 0, spill_dir: None };
+        let (c, s) = run_opts("big.ply", &gz(&w.out), &options).unwrap();
+        assert_eq!(c.tris.len(), n as usize - 2);
+        assert_eq!(s.vertices, n as u64);
+        for (i, t) in c.tris.iter().enumerate() {
+            for (k, p) in t.positions.iter().enumerate() {
+                let v = far(i as u32 + k as u32);
+                assert_eq!(*p, [v as f64, (v % 7) as f64, -(v as f64)]);
+                assert_eq!(t.colors.unwrap()[k], Rgba8([v as u8, 1, 2, 255]));
+            }
+        }
+    }
+
+    // ---- errors ----
+
+    fn assert_err(e: &ImportError, pos: Position, text: &str) {
+        assert_eq!(e.position(), Some(pos), "{e}");
+        assert!(e.to_string().contains(text), "{e:?} does not contain {text:?}");
+    }
+
+    #[test]
+    fn empty_file() {
+        assert_err(&err("e.ply", b""), Position::File, "empty file");
+    }
+
+    #[test]
+    fn garbage_bytes() {
+        assert_err(&err("g.ply", b"\x00\x9f\x13garbage\n\x01"), Position::Line(1), "not a PLY file");
+        assert_err(&err("g.ply", b"ply\n\xff\xfe\xfd\n"), Position::Line(2), "not text");
+        assert_err(&err("g.ply", b"ply\nformat ascii 1.0\nelephant 3\n"), Position::Line(3), "unknown header line");
+    }
+
+    #[test]
+    fn truncated_header() {
+        let e = err("t.ply", b"ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\n");
+        assert_err(&e, Position::Line(5), "ends inside the header");
+    }
+
+    #[test]
+    fn unknown_format_and_version() {
+        assert_err(&err("f.ply", b"ply\nformat binary_middle_endian 1.0\nend_header\n"), Position::Line(2), "unknown format");
+        assert_err(&err("f.ply", b"ply\nformat ascii 2.0\nend_header\n"), Position::Line(2), "version 2.0");
+        assert_err(&err("f.ply", b"ply\nend_header\n"), Position::Line(2), "no \"format\" line");
+    }
+
+    #[test]
+    fn unknown_property_type() {
+        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float128 x\nend_header\n";
+        assert_err(&err("p.ply", text), Position::Line(4), "unknown property type \"float128\"");
+        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty list float int x\nend_header\n";
+        assert_err(&err("p.ply", text), Position::Line(4), "must be an integer type");
+    }
+
+    #[test]
+    fn missing_z() {
+        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n";
+        assert_err(&err("z.ply", text), Position::Line(3), "no property \"z\"");
+    }
+
+    #[test]
+    fn face_without_vertex_indices() {
+        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+                     element face 1\nproperty list uchar int corners\nend_header\n";
+        assert_err(&err("f.ply", text), Position::Line(7), "no list \"vertex_indices\"");
+        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+                     element face 1\nproperty list uchar float vertex_indices\nend_header\n";
+        assert_err(&err("f.ply", text), Position::Line(8), "list of integers");
+    }
+
+    #[test]
+    fn faces_before_vertices() {
+        let text = b"ply\nformat ascii 1.0\nelement face 1\nproperty list uchar int vertex_indices\n\
+                     element vertex 3\nproperty float x\nproperty float y\nproperty float z\nend_header\n";
+        let e = err("o.ply", text);
+        assert!(matches!(e, ImportError::Unsupported { .. }), "{e:?}");
+        assert!(e.to_string().contains("faces before vertices are not supported"), "{e}");
+    }
+
+    #[test]
+    fn truncated_binary_body_plain_is_found_at_open() {
+        let mut bytes = square("binary_little_endian");
+        bytes.truncate(bytes.len() - 3);
+        assert_err(&err("t.ply", &bytes), Position::Byte(bytes.len() as u64), "truncated");
+    }
+
+    #[test]
+    fn truncated_binary_body_gzip_is_found_while_streaming() {
+        for cut in [3, 20, 60] {
+            let mut bytes = square("binary_big_endian");
+            bytes.truncate(bytes.len() - cut);
+            let e = err("t.ply.gz", &gz(&bytes));
+            assert_err(&e, Position::Byte(bytes.len() as u64), "the file is truncated");
+        }
+    }
+
+    #[test]
+    fn truncated_ascii_body() {
+        let text = String::from_utf8(square("ascii")).unwrap();
+        let cut = &text[..text.len() - "3 3 2 1\n".len()];
+        assert_err(&err("t.ply", cut.as_bytes()), Position::Line(17), "ends before face 1 of 2");
+    }
+
+    #[test]
+    fn absurd_vertex_count_does_not_allocate() {
+        let header = "ply\nformat binary_little_endian 1.0\nelement vertex 99999999999\nproperty float x\n\
+                      property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+                      end_header\n";
+        let mut bytes = header.as_bytes().to_vec();
+        bytes.extend_from_slice(&[0; 100]);
+        assert_err(&err("a.ply", &bytes), Position::Byte(bytes.len() as u64), "truncated");
+        // Compressed: the size is unknown, found lazily.
+        let e = err("a.ply.gz", &gz(&bytes));
+        assert_err(&e, Position::Byte(bytes.len() as u64), "ends in vertex 8 of 99999999999");
+        let text = "ply\nformat ascii 1.0\nelement vertex 99999999999\nproperty float x\nproperty float y\n\
+                    property float z\nend_header\n1 2 3\n";
+        assert_err(&err("a.ply", text.as_bytes()), Position::Line(9), "ends before vertex 1");
+        let text = "ply\nformat ascii 1.0\nelement vertex -5\nend_header\n";
+        assert_err(&err("a.ply", text.as_bytes()), Position::Line(3), "invalid count");
+    }
+
+    #[test]
+    fn absurd_list_count() {
+        let header = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                      property float z\nelement face 1\nproperty list uint int vertex_indices\nend_header\n";
+        let mut w = W::new(header, false);
+        for _ in 0..9 {
+            w.f32(0.0);
+        }
+        let face_at = w.out.len() as u64;
+        w.u32(4_000_000_000).i32(0).i32(1).i32(2);
+        assert_err(&err("l.ply", &w.out), Position::Byte(face_at), "4000000000 items (at most 65536");
+        let text = "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 1\nproperty list uint int vertex_indices\nend_header\n0 0 0\n4000000000 0 0 0\n";
+        assert_err(&err("l.ply", text.as_bytes()), Position::Line(11), "at most 65536");
+        let text = text.replace("4000000000", "-3");
+        assert_err(&err("l.ply", text.as_bytes()), Position::Line(11), "negative length");
+    }
+
+    #[test]
+    fn index_out_of_range_or_negative() {
+        for (bad, what) in [(4, "index 4 out of range"), (-1, "index -1 out of range")] {
+            let mut bytes = square("binary_little_endian");
+            let n = bytes.len();
+            bytes[n - 4..].copy_from_slice(&(bad as i32).to_le_bytes());
+            let face1 = (n - 13) as u64;
+            assert_err(&err("r.ply", &bytes), Position::Byte(face1), &format!("face 1: vertex {what}"));
+            let text = String::from_utf8(square("ascii")).unwrap().replace("3 3 2 1", &format!("3 3 2 {bad}"));
+            assert_err(&err("r.ply", text.as_bytes()), Position::Line(17), what);
+        }
+    }
+
+    #[test]
+    fn non_finite_coordinates() {
+        for bad in [f32::NAN, f32::INFINITY, f32::NEG_INFINITY] {
+            let mut bytes = square("binary_little_endian");
+            let header_len = bytes.len() - 4 * 12 - 17 - 13;
+            let at = header_len + 2 * 12 + 4; // vertex 2, y
+            bytes[at..at + 4].copy_from_slice(&bad.to_le_bytes());
+            let e = err("n.ply", &bytes);
+            assert_err(&e, Position::Byte((header_len + 24) as u64), "vertex 2: non-finite coordinate");
+        }
+        for bad in ["nan", "inf", "-infinity"] {
+            let text = String::from_utf8(square("ascii")).unwrap().replace("1 1 0", &format!("1 {bad} 0"));
+            assert_err(&err("n.ply", text.as_bytes()), Position::Line(14), "vertex 2: non-finite");
+        }
+    }
+
+    #[test]
+    fn ascii_value_count_and_number_errors() {
+        let text = String::from_utf8(square("ascii")).unwrap();
+        assert_err(&err("v.ply", text.replace("1 1 0", "1 1").as_bytes()), Position::Line(14), "fewer values");
+        assert_err(&err("v.ply", text.replace("1 1 0", "1 1 0 9").as_bytes()), Position::Line(14), "more values");
+        assert_err(&err("v.ply", text.replace("1 1 0", "1 1x 0").as_bytes()), Position::Line(14), "invalid number \"1x\"");
+        assert_err(&err("v.ply", text.replace("3 3 2 1", "3 3 2").as_bytes()), Position::Line(17), "fewer values");
+        assert_err(&err("v.ply", text.replace("3 3 2 1", "3 3 2 1.5").as_bytes()), Position::Line(17), "invalid number");
+    }
+
+    #[test]
+    fn trailing_data_is_tolerated() {
+        let mut bytes = square("binary_little_endian");
+        bytes.extend_from_slice(b"trailing junk");
+        let (c, _) = run("t.ply", &bytes).unwrap();
+        assert_eq!(c.tris.len(), 3);
+    }
 }
