@@ -844,9 +844,16 @@ fn color_byte(ty: Scalar, v: f64) -> u8 {
     }
 }
 
+/// Positions as the file gives them: `f32` when every coordinate type converts to `f32`
+/// exactly (the common `float x y z`), which halves the memory and the spilling; else `f64`.
+enum Positions {
+    F32(VertexStore<[f32; 3]>),
+    F64(VertexStore<[f64; 3]>),
+}
+
 /// The vertex stores.
 struct Vertices {
-    pos: VertexStore<[f64; 3]>,
+    pos: Positions,
     normals: Option<VertexStore<[f32; 3]>>,
     colors: Option<VertexStore<Rgba8>>,
 }
@@ -860,13 +867,25 @@ struct Corner {
 }
 
 impl Vertices {
-    /// Stores sharing `budget` bytes in proportion to their record sizes.
-    fn new(normals: bool, colors: bool, options: &ImportOptions) -> Vertices {
-        let weight = 24 + if normals { 12 } else { 0 } + if colors { 4 } else { 0 };
+    /// Stores sharing [`ImportOptions::vertex_memory`] in proportion to their record sizes.
+    fn new(layout: Option<&VertexLayout>, options: &ImportOptions) -> Vertices {
+        let (normals, colors) = layout.map_or((false, false), |l| (l.normals, l.colors));
+        let exact_f32 = layout.is_some_and(|l| {
+            l.fields.iter().all(|&(_, role, ty)| {
+                !matches!(role, Role::X | Role::Y | Role::Z)
+                    || matches!(ty, Scalar::F32 | Scalar::I8 | Scalar::U8 | Scalar::I16 | Scalar::U16)
+            })
+        });
+        let pos_size = if exact_f32 { 12 } else { 24 };
+        let weight = pos_size + if normals { 12 } else { 0 } + if colors { 4 } else { 0 };
         let share = |w: usize| options.vertex_memory / weight * w;
         let dir = || options.spill_dir.clone();
         Vertices {
-            pos: VertexStore::new(share(24), dir()),
+            pos: if exact_f32 {
+                Positions::F32(VertexStore::new(share(12), dir()))
+            } else {
+                Positions::F64(VertexStore::new(share(24), dir()))
+            },
             normals: normals.then(|| VertexStore::new(share(12), dir())),
             colors: colors.then(|| VertexStore::new(share(4), dir())),
         }
@@ -874,7 +893,10 @@ impl Vertices {
 
     #[inline]
     fn push(&mut self, v: &VertexValues) -> io::Result<()> {
-        self.pos.push(v.pos)?;
+        match &mut self.pos {
+            Positions::F32(s) => s.push(v.pos.map(|c| c as f32))?,
+            Positions::F64(s) => s.push(v.pos)?,
+        }
         if let Some(n) = &mut self.normals {
             n.push(v.normal)?;
         }
@@ -888,7 +910,10 @@ impl Vertices {
     #[inline]
     fn corner(&mut self, i: u64) -> io::Result<Corner> {
         Ok(Corner {
-            pos: self.pos.get(i)?,
+            pos: match &mut self.pos {
+                Positions::F32(s) => s.get(i)?.map(|c| c as f64),
+                Positions::F64(s) => s.get(i)?,
+            },
             normal: match &mut self.normals {
                 Some(s) => Some(s.get(i)?),
                 None => None,
@@ -901,7 +926,17 @@ impl Vertices {
     }
 
     fn len(&self) -> u64 {
-        self.pos.len()
+        match &self.pos {
+            Positions::F32(s) => s.len(),
+            Positions::F64(s) => s.len(),
+        }
+    }
+
+    fn stats(&self) -> crate::vertex_store::StoreStats {
+        match &self.pos {
+            Positions::F32(s) => s.stats(),
+            Positions::F64(s) => s.stats(),
+        }
     }
 }
 
@@ -1026,7 +1061,7 @@ impl TriangleSource for PlySource {
         for el in &header.elements {
             match (&el.role, header.encoding) {
                 (ElementRole::Vertex(layout), _) if faces_declared > 0 => {
-                    let mut v = Vertices::new(layout.normals, layout.colors, &options);
+                    let mut v = Vertices::new(Some(layout), &options);
                     if header.encoding == Encoding::Ascii {
                         body.ascii_vertices(&mut rd, el, layout, &mut v, sink)?;
                     } else {
@@ -1035,7 +1070,7 @@ impl TriangleSource for PlySource {
                     body.vertices = Some(v);
                 }
                 (ElementRole::Face(layout), _) if el.count > 0 => {
-                    let mut v = body.vertices.take().unwrap_or_else(|| Vertices::new(false, false, &options));
+                    let mut v = body.vertices.take().unwrap_or_else(|| Vertices::new(None, &options));
                     let result = if header.encoding == Encoding::Ascii {
                         body.ascii_faces(&mut rd, el, layout, &mut v, sink)
                     } else {
@@ -1061,7 +1096,7 @@ impl TriangleSource for PlySource {
             tracing::warn!("{}: {} faces of fewer than 3 vertices skipped", path.display(), body.faces.short);
         }
         if let Some(v) = &body.vertices {
-            let st = v.pos.stats();
+            let st = v.stats();
             if st.blocks_spilled > 0 {
                 tracing::debug!(
                     "{}: vertex store spilled {} blocks, loaded {}",
