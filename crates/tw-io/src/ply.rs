@@ -66,7 +66,8 @@ pub fn open(input: Input, options: &ImportOptions) -> Result<Box<dyn TriangleSou
     if header.encoding != Encoding::Ascii && !gzip {
         // Every record takes at least its scalars and list counts: a file too short for the
         // declared counts is truncated, and we say so now rather than after hours of work.
-        let need: u128 = header.elements.iter().map(|e| e.count as u128 * min_record_size(&e.props) as u128).sum();
+        let need: u128 =
+            header.elements.iter().map(|e| e.count as u128 * min_record_size(&e.props) as u128).sum();
         let have = file_len.saturating_sub(rd.position()) as u128;
         if need > have {
             return Err(ImportError::parse(
@@ -86,7 +87,8 @@ pub fn open(input: Input, options: &ImportOptions) -> Result<Box<dyn TriangleSou
 /// The object name of a file: its name without `.gz` and without its extension.
 pub(crate) fn object_name(path: &Path) -> String {
     let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let name = if name.to_ascii_lowercase().ends_with(".gz") { name[..name.len() - 3].to_string() } else { name };
+    let name =
+        if name.to_ascii_lowercase().ends_with(".gz") { name[..name.len() - 3].to_string() } else { name };
     match name.rfind('.') {
         Some(i) if i > 0 => name[..i].to_string(),
         _ => name,
@@ -181,7 +183,10 @@ impl ByteReader {
         }
         if self.end == self.buf.len() {
             if self.buf.len() >= MAX_BUFFER {
-                return Err(io::Error::new(io::ErrorKind::InvalidData, "a record or line is larger than 64 MiB"));
+                return Err(io::Error::new(
+                    io::ErrorKind::InvalidData,
+                    "a record or line is larger than 64 MiB",
+                ));
             }
             self.buf.resize(self.buf.len() * 2, 0);
         }
@@ -546,7 +551,10 @@ fn read_header(rd: &mut ByteReader, path: &Path) -> Result<Header, ImportError> 
     loop {
         line_no += 1;
         let err = |msg: String| ImportError::parse(path, Position::Line(line_no), msg);
-        let range = match rd.read_line(MAX_HEADER_LINE).map_err(|e| ImportError::io(path, Position::Line(line_no), e))? {
+        let range = match rd
+            .read_line(MAX_HEADER_LINE)
+            .map_err(|e| ImportError::io(path, Position::Line(line_no), e))?
+        {
             Line::Text(r) => r,
             Line::Eof if line_no == 1 => return Err(ImportError::parse(path, Position::File, "empty file")),
             Line::Eof => return Err(err("the file ends inside the header (no \"end_header\" line)".into())),
@@ -572,7 +580,9 @@ fn read_header(rd: &mut ByteReader, path: &Path) -> Result<Header, ImportError> 
             "comment" | "obj_info" => continue,
             "format" => {
                 let (Some(name), Some(version), None) = (words.next(), words.next(), words.next()) else {
-                    return Err(err("expected \"format <ascii|binary_little_endian|binary_big_endian> 1.0\"".into()));
+                    return Err(err(
+                        "expected \"format <ascii|binary_little_endian|binary_big_endian> 1.0\"".into(),
+                    ));
                 };
                 if encoding.is_some() {
                     return Err(err("a second \"format\" line".into()));
@@ -667,7 +677,10 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
                 for (pi, p) in el.props.iter().enumerate() {
                     let Some(role) = Role::of(&p.name) else { continue };
                     let PropKind::Scalar(t) = p.kind else {
-                        return Err(at(p.line, format!("vertex property {} must be a scalar, not a list", p.name)));
+                        return Err(at(
+                            p.line,
+                            format!("vertex property {} must be a scalar, not a list", p.name),
+                        ));
                     };
                     if fields.iter().any(|f| f.1 == role) {
                         return Err(at(p.line, format!("vertex property {} given twice", p.name)));
@@ -684,7 +697,8 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
                 let normals = has(Role::Nx) && has(Role::Ny) && has(Role::Nz);
                 let colors = has(Role::R) && has(Role::G) && has(Role::B);
                 let partial_normals = !normals && (has(Role::Nx) || has(Role::Ny) || has(Role::Nz));
-                let partial_colors = !colors && (has(Role::R) || has(Role::G) || has(Role::B) || has(Role::A));
+                let partial_colors =
+                    !colors && (has(Role::R) || has(Role::G) || has(Role::B) || has(Role::A));
                 if partial_normals || partial_colors {
                     tracing::warn!(
                         "{}: vertex normals or colours are incomplete (need nx ny nz, red green blue); ignored",
@@ -709,8 +723,11 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
                     return Err(at(el.line, "a second \"face\" element is not supported".into()));
                 }
                 face_at = Some(ei);
-                let Some((prop, p)) =
-                    el.props.iter().enumerate().find(|(_, p)| p.name == "vertex_indices" || p.name == "vertex_index")
+                let Some((prop, p)) = el
+                    .props
+                    .iter()
+                    .enumerate()
+                    .find(|(_, p)| p.name == "vertex_indices" || p.name == "vertex_index")
                 else {
                     return Err(at(el.line, "the face element has no list \"vertex_indices\"".into()));
                 };
@@ -724,7 +741,10 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
             }
             _ => {
                 if el.name == "tristrips" && el.count > 0 {
-                    tracing::warn!("{}: element \"tristrips\" is not read; its triangles are skipped", path.display());
+                    tracing::warn!(
+                        "{}: element \"tristrips\" is not read; its triangles are skipped",
+                        path.display()
+                    );
                 }
             }
         }
@@ -1163,7 +1183,8 @@ impl Body<'_> {
             }
             rd.consume(used);
             if index < el.count {
-                let got = rd.fill_more().map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?;
+                let got =
+                    rd.fill_more().map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?;
                 if got == 0 {
                     return Err(truncated(path, rd, el, index));
                 }
@@ -1222,11 +1243,17 @@ impl Body<'_> {
         result
     }
 
-    fn binary_skip(&mut self, rd: &mut ByteReader, el: &Element, sink: &mut dyn TriangleSink) -> Result<(), ImportError> {
+    fn binary_skip(
+        &mut self,
+        rd: &mut ByteReader,
+        el: &Element,
+        sink: &mut dyn TriangleSink,
+    ) -> Result<(), ImportError> {
         let mut offsets = vec![0usize; el.props.len()];
         if let Some(size) = fixed_layout(&el.props, &mut offsets) {
             let bytes = el.count.saturating_mul(size as u64);
-            let skipped = rd.skip(bytes).map_err(|e| ImportError::io(self.path, Position::Byte(rd.position()), e))?;
+            let skipped =
+                rd.skip(bytes).map_err(|e| ImportError::io(self.path, Position::Byte(rd.position()), e))?;
             if skipped < bytes {
                 return Err(truncated(self.path, rd, el, skipped / size as u64));
             }
@@ -1267,7 +1294,11 @@ impl Body<'_> {
                         ))
                     }
                     Line::TooLong => {
-                        return Err(ImportError::parse(path, pos, format!("line longer than {MAX_ASCII_LINE} bytes")))
+                        return Err(ImportError::parse(
+                            path,
+                            pos,
+                            format!("line longer than {MAX_ASCII_LINE} bytes"),
+                        ))
                     }
                 }
             };
@@ -1343,7 +1374,12 @@ impl Body<'_> {
         result
     }
 
-    fn ascii_skip(&mut self, rd: &mut ByteReader, el: &Element, sink: &mut dyn TriangleSink) -> Result<(), ImportError> {
+    fn ascii_skip(
+        &mut self,
+        rd: &mut ByteReader,
+        el: &Element,
+        sink: &mut dyn TriangleSink,
+    ) -> Result<(), ImportError> {
         self.ascii_records(rd, el, sink, |tokens, _, _| {
             for p in &el.props {
                 skip_ascii_property(tokens, p, MAX_SKIPPED_LIST)?;
@@ -1364,7 +1400,9 @@ fn truncated(path: &Path, rd: &ByteReader, el: &Element, index: u64) -> ImportEr
 
 #[inline]
 fn next_token<'a>(tokens: &mut Tokens<'a>, p: &Property) -> Result<&'a [u8], RecordError> {
-    tokens.next().ok_or_else(|| RecordError::Bad(format!("fewer values than the header declares (no {})", p.name)))
+    tokens
+        .next()
+        .ok_or_else(|| RecordError::Bad(format!("fewer values than the header declares (no {})", p.name)))
 }
 
 fn bad_number(t: &[u8], p: &Property) -> RecordError {
@@ -1431,7 +1469,11 @@ mod tests {
         enc.finish().unwrap()
     }
 
-    fn run_opts(name: &str, bytes: &[u8], options: &ImportOptions) -> Result<(Collect, SourceSummary), ImportError> {
+    fn run_opts(
+        name: &str,
+        bytes: &[u8],
+        options: &ImportOptions,
+    ) -> Result<(Collect, SourceSummary), ImportError> {
         let dir = tempfile::tempdir().unwrap();
         let p = dir.path().join(name);
         std::fs::write(&p, bytes).unwrap();
@@ -1552,14 +1594,16 @@ mod tests {
 
     #[test]
     fn crlf_header_and_blank_body_lines() {
-        let text = String::from_utf8(square("ascii")).unwrap().replace('\n', "\r\n").replace("4 0 1", "\r\n4 0 1");
+        let text =
+            String::from_utf8(square("ascii")).unwrap().replace('\n', "\r\n").replace("4 0 1", "\r\n4 0 1");
         let (c, _) = run("crlf.ply", text.as_bytes()).unwrap();
         assert_eq!(positions(&c), square_triangles());
     }
 
     #[test]
     fn normals_and_uchar_colours_per_vertex() {
-        let header = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+        let header =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
                       property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
                       property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha\n\
                       element face 1\nproperty list uchar uint vertex_indices\nend_header\n";
@@ -1575,7 +1619,10 @@ mod tests {
         assert_eq!(t.positions, [[0.0, 0.0, 0.0], [1.0, 0.0, 0.5], [2.0, 0.0, 1.0]]);
         // A NaN normal becomes zero rather than an error.
         assert_eq!(t.normals, Some([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 0.0]]));
-        assert_eq!(t.colors, Some([Rgba8([0, 20, 30, 255]), Rgba8([10, 20, 30, 254]), Rgba8([20, 20, 30, 253])]));
+        assert_eq!(
+            t.colors,
+            Some([Rgba8([0, 20, 30, 255]), Rgba8([10, 20, 30, 254]), Rgba8([20, 20, 30, 253])])
+        );
     }
 
     #[test]
@@ -1587,7 +1634,10 @@ mod tests {
         let (c, _) = run("c.ply", text.as_bytes()).unwrap();
         let t = c.tris[0];
         assert_eq!(t.positions, [[1000000.125, 2.0, 3.0], [4.0, 5.0, 6.0], [7.0, 8.0, 90.0]]);
-        assert_eq!(t.colors, Some([Rgba8([255, 0, 128, 255]), Rgba8([0, 255, 0, 255]), Rgba8([0, 0, 255, 255])]));
+        assert_eq!(
+            t.colors,
+            Some([Rgba8([255, 0, 128, 255]), Rgba8([0, 255, 0, 255]), Rgba8([0, 0, 255, 255])])
+        );
         assert_eq!(t.normals, None);
     }
 
@@ -1651,17 +1701,21 @@ mod tests {
 
     #[test]
     fn polygons_are_fanned_and_short_faces_skipped() {
-        let text = "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n\
+        let text =
+            "ply\nformat ascii 1.0\nelement vertex 5\nproperty float x\nproperty float y\nproperty float z\n\
                     element face 4\nproperty list uchar int vertex_indices\nend_header\n\
                     0 0 0\n1 0 0\n2 1 0\n1 2 0\n0 1 0\n5 0 1 2 3 4\n2 0 1\n0\n1 4\n";
         let (c, _) = run("fan.ply", text.as_bytes()).unwrap();
-        let v = |i: usize| [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]][i];
+        let v = |i: usize| {
+            [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]][i]
+        };
         assert_eq!(positions(&c), vec![[v(0), v(1), v(2)], [v(0), v(2), v(3)], [v(0), v(3), v(4)]]);
     }
 
     #[test]
     fn point_cloud_without_faces_announces_the_object() {
-        let text = "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
+        let text =
+            "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\nproperty float z\n\
                     end_header\n1 2 3\nnan 0 0\n";
         let (c, s) = run("cloud.ply", text.as_bytes()).unwrap();
         assert_eq!(c.objects.len(), 1);
@@ -1671,7 +1725,8 @@ mod tests {
 
     #[test]
     fn zero_faces_declared() {
-        let text = "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
+        let text =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
                     property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
         let (c, s) = run("empty.ply", text.as_bytes()).unwrap();
         assert_eq!((c.objects.len(), c.tris.len(), s.objects), (1, 0, 1));
@@ -1692,7 +1747,7 @@ mod tests {
             w.f32(i as f32).f32((i % 7) as f32).f32(-(i as f32)).u8(i as u8).u8(1).u8(2);
         }
         // Every 64th face refers to a far-away vertex, so that spilled blocks are read back.
-        let far = |i: u32| if i % 64 == 0 { (i * 7919) % n } else { i };
+        let far = |i: u32| if i.is_multiple_of(64) { (i * 7919) % n } else { i };
         for i in 0..n - 2 {
             w.u8(3).i32(far(i) as i32).i32(far(i + 1) as i32).i32(far(i + 2) as i32);
         }
@@ -1725,7 +1780,11 @@ mod tests {
     fn garbage_bytes() {
         assert_err(&err("g.ply", b"\x00\x9f\x13garbage\n\x01"), Position::Line(1), "not a PLY file");
         assert_err(&err("g.ply", b"ply\n\xff\xfe\xfd\n"), Position::Line(2), "not text");
-        assert_err(&err("g.ply", b"ply\nformat ascii 1.0\nelephant 3\n"), Position::Line(3), "unknown header line");
+        assert_err(
+            &err("g.ply", b"ply\nformat ascii 1.0\nelephant 3\n"),
+            Position::Line(3),
+            "unknown header line",
+        );
     }
 
     #[test]
@@ -1736,7 +1795,11 @@ mod tests {
 
     #[test]
     fn unknown_format_and_version() {
-        assert_err(&err("f.ply", b"ply\nformat binary_middle_endian 1.0\nend_header\n"), Position::Line(2), "unknown format");
+        assert_err(
+            &err("f.ply", b"ply\nformat binary_middle_endian 1.0\nend_header\n"),
+            Position::Line(2),
+            "unknown format",
+        );
         assert_err(&err("f.ply", b"ply\nformat ascii 2.0\nend_header\n"), Position::Line(2), "version 2.0");
         assert_err(&err("f.ply", b"ply\nend_header\n"), Position::Line(2), "no \"format\" line");
     }
@@ -1751,7 +1814,8 @@ mod tests {
 
     #[test]
     fn missing_z() {
-        let text = b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n";
+        let text =
+            b"ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\nend_header\n1 2\n";
         assert_err(&err("z.ply", text), Position::Line(3), "no property \"z\"");
     }
 
@@ -1818,7 +1882,8 @@ mod tests {
 
     #[test]
     fn absurd_list_count() {
-        let header = "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+        let header =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
                       property float z\nelement face 1\nproperty list uint int vertex_indices\nend_header\n";
         let mut w = W::new(header, false);
         for _ in 0..9 {
@@ -1836,13 +1901,14 @@ mod tests {
 
     #[test]
     fn index_out_of_range_or_negative() {
-        for (bad, what) in [(4, "index 4 out of range"), (-1, "index -1 out of range")] {
+        for (bad, what) in [(4i32, "index 4 out of range"), (-1, "index -1 out of range")] {
             let mut bytes = square("binary_little_endian");
             let n = bytes.len();
-            bytes[n - 4..].copy_from_slice(&(bad as i32).to_le_bytes());
+            bytes[n - 4..].copy_from_slice(&bad.to_le_bytes());
             let face1 = (n - 13) as u64;
             assert_err(&err("r.ply", &bytes), Position::Byte(face1), &format!("face 1: vertex {what}"));
-            let text = String::from_utf8(square("ascii")).unwrap().replace("3 3 2 1", &format!("3 3 2 {bad}"));
+            let text =
+                String::from_utf8(square("ascii")).unwrap().replace("3 3 2 1", &format!("3 3 2 {bad}"));
             assert_err(&err("r.ply", text.as_bytes()), Position::Line(17), what);
         }
     }
@@ -1866,11 +1932,31 @@ mod tests {
     #[test]
     fn ascii_value_count_and_number_errors() {
         let text = String::from_utf8(square("ascii")).unwrap();
-        assert_err(&err("v.ply", text.replace("1 1 0", "1 1").as_bytes()), Position::Line(14), "fewer values");
-        assert_err(&err("v.ply", text.replace("1 1 0", "1 1 0 9").as_bytes()), Position::Line(14), "more values");
-        assert_err(&err("v.ply", text.replace("1 1 0", "1 1x 0").as_bytes()), Position::Line(14), "invalid number \"1x\"");
-        assert_err(&err("v.ply", text.replace("3 3 2 1", "3 3 2").as_bytes()), Position::Line(17), "fewer values");
-        assert_err(&err("v.ply", text.replace("3 3 2 1", "3 3 2 1.5").as_bytes()), Position::Line(17), "invalid number");
+        assert_err(
+            &err("v.ply", text.replace("1 1 0", "1 1").as_bytes()),
+            Position::Line(14),
+            "fewer values",
+        );
+        assert_err(
+            &err("v.ply", text.replace("1 1 0", "1 1 0 9").as_bytes()),
+            Position::Line(14),
+            "more values",
+        );
+        assert_err(
+            &err("v.ply", text.replace("1 1 0", "1 1x 0").as_bytes()),
+            Position::Line(14),
+            "invalid number \"1x\"",
+        );
+        assert_err(
+            &err("v.ply", text.replace("3 3 2 1", "3 3 2").as_bytes()),
+            Position::Line(17),
+            "fewer values",
+        );
+        assert_err(
+            &err("v.ply", text.replace("3 3 2 1", "3 3 2 1.5").as_bytes()),
+            Position::Line(17),
+            "invalid number",
+        );
     }
 
     #[test]

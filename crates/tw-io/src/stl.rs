@@ -93,7 +93,9 @@ fn is_ascii(head: &[u8], size: Option<u64>) -> bool {
         return whole_file && !text.iter().any(|&b| b.is_ascii_control() && !b.is_ascii_whitespace());
     };
     let next = text[nl + 1..].trim_ascii_start();
-    starts_with_keyword(next, b"facet") || starts_with_keyword(next, b"endsolid") || (next.is_empty() && whole_file)
+    starts_with_keyword(next, b"facet")
+        || starts_with_keyword(next, b"endsolid")
+        || (next.is_empty() && whole_file)
 }
 
 fn starts_with_keyword(text: &[u8], keyword: &[u8]) -> bool {
@@ -142,7 +144,9 @@ impl TriangleSource for BinaryStl {
             let avail = rd.available();
             let n = ((count - index) as usize).min(avail.len() / RECORD);
             for (k, rec) in avail[..n * RECORD].chunks_exact(RECORD).enumerate() {
-                let f = |i: usize| f32::from_le_bytes([rec[4 * i], rec[4 * i + 1], rec[4 * i + 2], rec[4 * i + 3]]);
+                let f = |i: usize| {
+                    f32::from_le_bytes([rec[4 * i], rec[4 * i + 1], rec[4 * i + 2], rec[4 * i + 3]])
+                };
                 let v = |i: usize| [f(3 + 3 * i) as f64, f(4 + 3 * i) as f64, f(5 + 3 * i) as f64];
                 let positions = [v(0), v(1), v(2)];
                 if !positions.iter().flatten().all(|c| c.is_finite()) {
@@ -261,7 +265,10 @@ impl TriangleSource for AsciiStl {
         loop {
             line_no += 1;
             let err = |msg: String| ImportError::parse(&path, Position::Line(line_no), msg);
-            let range = match rd.read_line(MAX_LINE).map_err(|e| ImportError::io(&path, Position::Line(line_no), e))? {
+            let range = match rd
+                .read_line(MAX_LINE)
+                .map_err(|e| ImportError::io(&path, Position::Line(line_no), e))?
+            {
                 Line::Text(r) => r,
                 Line::Eof => break,
                 Line::TooLong => return Err(err(format!("line longer than {MAX_LINE} bytes"))),
@@ -272,7 +279,10 @@ impl TriangleSource for AsciiStl {
             match state {
                 State::Outside if keyword(word, "solid") => {
                     let name = line.trim_ascii_start()[5..].trim_ascii();
-                    sink.object(objects, &ObjectInfo { name: String::from_utf8_lossy(name).into_owned(), color: None })?;
+                    sink.object(
+                        objects,
+                        &ObjectInfo { name: String::from_utf8_lossy(name).into_owned(), color: None },
+                    )?;
                     objects += 1;
                     state = State::Solid;
                     continue;
@@ -288,7 +298,12 @@ impl TriangleSource for AsciiStl {
                             let n = three(&mut tokens, "the facet normal").map_err(err)?;
                             facet_normals(n.map(|c| c as f32))
                         }
-                        Some(t) => return Err(err(format!("expected \"normal\" after \"facet\", found \"{}\"", show(t)))),
+                        Some(t) => {
+                            return Err(err(format!(
+                                "expected \"normal\" after \"facet\", found \"{}\"",
+                                show(t)
+                            )))
+                        }
                     };
                     state = State::Facet;
                 }
@@ -301,7 +316,9 @@ impl TriangleSource for AsciiStl {
                 }
                 State::Loop(n) if keyword(word, "vertex") => {
                     if n == 3 {
-                        return Err(err("a facet with more than 3 vertices (STL facets are triangles)".into()));
+                        return Err(err(
+                            "a facet with more than 3 vertices (STL facets are triangles)".into()
+                        ));
                     }
                     let v = three(&mut tokens, "the vertex").map_err(err)?;
                     if !v.iter().all(|c| c.is_finite()) {
@@ -318,7 +335,12 @@ impl TriangleSource for AsciiStl {
                     state = State::EndLoop;
                 }
                 State::EndLoop if keyword(word, "endfacet") => {
-                    sink.triangle(&Triangle { positions: corners, normals, colors: None, object: objects - 1 })?;
+                    sink.triangle(&Triangle {
+                        positions: corners,
+                        normals,
+                        colors: None,
+                        object: objects - 1,
+                    })?;
                     triangles += 1;
                     state = State::Solid;
                 }
@@ -466,10 +488,10 @@ mod tests {
             let bytes = if zipped { gz(ASCII.as_bytes()) } else { ASCII.as_bytes().to_vec() };
             let (c, s) = run("a.stl", &bytes).unwrap();
             assert_eq!(c.objects, vec![(0, "pump casing".to_string()), (1, "Valve".to_string())]);
-            assert_eq!(c.tris.iter().map(|t| (t.positions, t.object)).collect::<Vec<_>>(), vec![
-                (f64s(T0), 0),
-                (f64s(T1), 1)
-            ]);
+            assert_eq!(
+                c.tris.iter().map(|t| (t.positions, t.object)).collect::<Vec<_>>(),
+                vec![(f64s(T0), 0), (f64s(T1), 1)]
+            );
             assert_eq!(c.tris[0].normals, Some([[0.0, 0.0, 1.0]; 3]));
             assert_eq!(c.tris[1].normals, None);
             assert_eq!(s.objects, 2);
@@ -499,8 +521,16 @@ mod tests {
     #[test]
     fn binary_absurd_count() {
         let bytes = binary(b"x", &[([0.0; 3], T0)], u32::MAX);
-        assert_err(&err("a.stl", &bytes), Position::Byte(bytes.len() as u64), "declares 4294967295 triangles");
-        assert_err(&err("a.stl", &gz(&bytes)), Position::Byte(bytes.len() as u64), "ends in triangle 1 of 4294967295");
+        assert_err(
+            &err("a.stl", &bytes),
+            Position::Byte(bytes.len() as u64),
+            "declares 4294967295 triangles",
+        );
+        assert_err(
+            &err("a.stl", &gz(&bytes)),
+            Position::Byte(bytes.len() as u64),
+            "ends in triangle 1 of 4294967295",
+        );
     }
 
     #[test]
@@ -539,7 +569,11 @@ mod tests {
         let text = ASCII.replace("vertex 1 0 0", "vertex 1 -inf 0");
         assert_err(&err("b.stl", text.as_bytes()), Position::Line(5), "non-finite");
         let text = ASCII.replace("facet normal 0 0 1", "facet normal 0 zero 1");
-        assert_err(&err("b.stl", text.as_bytes()), Position::Line(2), "invalid number \"zero\" in the facet normal");
+        assert_err(
+            &err("b.stl", text.as_bytes()),
+            Position::Line(2),
+            "invalid number \"zero\" in the facet normal",
+        );
     }
 
     #[test]
@@ -567,7 +601,11 @@ mod tests {
         let text = ASCII.replace("endloop", "endloop now");
         assert_err(&err("g.stl", text.as_bytes()), Position::Line(7), "unexpected \"now\"");
         let text = ASCII.to_string() + "garbage\n";
-        assert_err(&err("g.stl", text.as_bytes()), Position::Line(19), "expected \"solid\", found \"garbage\"");
+        assert_err(
+            &err("g.stl", text.as_bytes()),
+            Position::Line(19),
+            "expected \"solid\", found \"garbage\"",
+        );
     }
 
     #[test]
