@@ -1746,8 +1746,8 @@ mod tests {
         for i in 0..n {
             w.f32(i as f32).f32((i % 7) as f32).f32(-(i as f32)).u8(i as u8).u8(1).u8(2);
         }
-        // Every 64th face refers to a far-away vertex, so that spilled blocks are read back.
-        let far = |i: u32| if i.is_multiple_of(64) { (i * 7919) % n } else { i };
+        // Every 1024th face refers to a far-away vertex, so that spilled blocks are read back.
+        let far = |i: u32| if i.is_multiple_of(1024) { (i * 7919) % n } else { i };
         for i in 0..n - 2 {
             w.u8(3).i32(far(i) as i32).i32(far(i + 1) as i32).i32(far(i + 2) as i32);
         }
