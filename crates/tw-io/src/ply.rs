@@ -15,16 +15,19 @@
 //!   skipped.
 //!
 //! The file is one object (id 0) named after the file. Stages:
-//! 1. [`open`] reads the header ([`read_header`]) and checks that a binary file is long enough
+//! 1. [`open`] reads the header (`read_header`) and checks that a binary file is long enough
 //!    for its declared counts, so that a broken file fails before any work.
 //! 2. [`PlySource::stream`] walks the elements in file order: vertex records go into
 //!    [`VertexStore`]s (positions, and normals and colours when present) under the memory budget
-//!    of [`ImportOptions::vertex_memory`], spilling to disk beyond it; face records are resolved
+//!    of [`ImportOptions::vertex_memory`], spilling to disk beyond it; positions are kept as `f32`
+//!    when the file's coordinate types convert to `f32` exactly (the usual `float x y z`), which
+//!    halves memory and spilling, and as `f64` otherwise. Face records are resolved
 //!    through the stores and streamed as triangles; other elements are skipped.
 //!
-//! Binary records are decoded straight out of the read buffer ([`ByteReader`]): a record of a
+//! Binary records are decoded straight out of the read buffer (`ByteReader`): a record of a
 //! fixed layout is a constant set of offsets, a record with lists is measured once and decoded in
-//! place; no per-record allocation or virtual call. ASCII records are one line each.
+//! place, with no per-record allocation and no reads through a trait object. ASCII records are
+//! one line each.
 //!
 //! Limits and choices: faces must come after vertices (the usual order; the other order would
 //! need the faces held until the vertices arrive); lists in vertex and face records hold at most
