@@ -4,11 +4,11 @@
 //! 10^10 triangles.
 //!
 //! The models are hard for the same reasons the real ones are: objects of wildly different sizes
-//! (2 cm bolts and anchor bolts of 36–94 triangles, one piping network of 20–25 % of all triangles spanning the
-//! whole site), high depth complexity (closed multi-storey buildings with corridors, rooms,
-//! slabs and grating floors above each other, so that from inside most of the plant is hidden),
-//! and a large extent with small details (a site of ~300 m at 10^7 triangles holding 1 cm
-//! features).
+//! (2 cm bolts and anchor bolts of 36–94 triangles; one piping network of 22–26 % of all
+//! triangles spanning the whole site; about one object per 250 triangles at 10^7 and per 700 at
+//! 10^9), high depth complexity (closed multi-storey buildings with corridors, rooms, slabs and
+//! grating floors above each other: from a corridor under 1 % of the objects are visible), and a
+//! large extent with small details (a 320 m site at 10^7 triangles holding 1 cm features).
 //!
 //! # Layout
 //!
@@ -29,18 +29,18 @@
 //! - a **yard** with storage tanks (ladder, roof railing, roof nozzle); block 0 also has a 55 m
 //!   chimney.
 //!
-//! One **piping network** object, emitted last, runs through everything (see [`pipes`]): rack
+//! One **piping network** object, emitted last, runs through everything (see `pipes.rs`): rack
 //! pipes, headers from the rack into every storey's corridor ceiling, pipes up onto every storage
 //! tank and a branch down to every piece of equipment with a nozzle; bent elbows at every corner.
 //!
 //! # How N maps to the plant
 //!
 //! 1. Blocks: `B = max(1, round(16 · (N / 10^7)^(2/3)))` on a near-square grid
-//!    ([`plant::SitePlan`]): 1 block at 10^4–10^5, 3 at 10^6, 16 (a 320 m site) at 10^7, 74 at
+//!    (`plant::SitePlan`): 1 block at 10^4–10^5, 3 at 10^6, 16 (a 320 m site) at 10^7, 74 at
 //!    10^8, ~345 (a 1.5 km site) at 10^9. The extent grows as N^(1/3) and so does the density,
 //!    since each block gets `N / B ∝ N^(1/3)` triangles.
 //! 2. Each block gets `0.78 · N / B` triangles for its building, equipment and yard. The block
-//!    layout ([`plant::Layout::new`]) first drops storeys while even the coarsest building would
+//!    layout (`plant::Layout::new`) first drops storeys while even the coarsest building would
 //!    not leave room for equipment, then picks the highest detail level (0–48: cylinder sides
 //!    6–48, dome rings, bolt sides, grating pitch, structural detail, then 0–27 small valves per
 //!    slot) whose building plus expected equipment fits, then the fill probability of the slots,
