@@ -1,1 +1,38 @@
-fn main() {}
+//! `terawalk`: the command-line program. Glue only: it parses arguments and wires the library
+//! crates together (tw-io for input and generation, tw-preview for images). Exit codes: 0 success,
+//! 1 failure (bad input, I/O), 2 bad usage (clap).
+
+mod cli;
+mod commands;
+mod progress;
+mod units;
+
+use clap::Parser;
+
+fn main() {
+    let cli = cli::Cli::parse();
+    init_logging(cli.verbose, cli.quiet);
+    let result = match cli.command {
+        cli::Command::Stats(a) => commands::stats::run(a),
+        cli::Command::Generate(a) => commands::generate::run(a),
+        cli::Command::Preview(a) => commands::preview::run(a),
+        cli::Command::Demo(a) => commands::demo::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn init_logging(verbose: u8, quiet: bool) {
+    let level = match (quiet, verbose) {
+        (true, _) => "error",
+        (false, 0) => "warn",
+        (false, 1) => "info",
+        (false, 2) => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("TERAWALK_LOG")
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+    tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).init();
+}

@@ -25,6 +25,7 @@
 
 pub mod error;
 pub mod format;
+pub mod fuzz;
 pub mod generate;
 pub mod gltf;
 pub mod input;

@@ -653,7 +653,11 @@ fn read_header(rd: &mut ByteReader, path: &Path) -> Result<Header, ImportError> 
                 element.props.push(Property { name: name.to_string(), kind, line: line_no });
             }
             "end_header" => break,
-            _ => return Err(err(format!("unknown header line \"{}\"", show(keyword.as_bytes())))),
+            // Real exporters write stray lines (Blender 2.47: "Created by Blender3D ..." without
+            // "comment"); readers such as trimesh and assimp skip them, and so do we.
+            _ => {
+                tracing::warn!("{}: line {line_no}: skipping unknown header line", path.display());
+            }
         }
     }
     let Some(encoding) = encoding else {
@@ -1783,11 +1787,19 @@ mod tests {
     fn garbage_bytes() {
         assert_err(&err("g.ply", b"\x00\x9f\x13garbage\n\x01"), Position::Line(1), "not a PLY file");
         assert_err(&err("g.ply", b"ply\n\xff\xfe\xfd\n"), Position::Line(2), "not text");
-        assert_err(
-            &err("g.ply", b"ply\nformat ascii 1.0\nelephant 3\n"),
-            Position::Line(3),
-            "unknown header line",
-        );
+    }
+
+    #[test]
+    fn stray_header_lines_are_skipped() {
+        // As Blender 2.47 writes them (assimp's Wuson.ply).
+        let (c, _) = run(
+            "w.ply",
+            b"ply\nformat ascii 1.0\nCreated by Blender3D 247\nelement vertex 3\nproperty float x\n\
+              property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+              end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n",
+        )
+        .unwrap();
+        assert_eq!(c.tris.len(), 1);
     }
 
     #[test]

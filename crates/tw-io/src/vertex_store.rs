@@ -268,7 +268,7 @@ mod tests {
     fn interleaved_push_and_get_keep_the_filling_block() {
         let mut s = VertexStore::<Rgba8>::new(0, None);
         for i in 0..(5 * BLOCK_LEN as u32) {
-            s.push(Rgba8((i as u32).to_le_bytes())).unwrap();
+            s.push(Rgba8(i.to_le_bytes())).unwrap();
             if i % 1000 == 999 {
                 assert_eq!(s.get(0).unwrap(), Rgba8([0, 0, 0, 0]));
                 assert_eq!(s.get(i as u64).unwrap(), Rgba8(i.to_le_bytes()));

@@ -275,6 +275,17 @@ mod tests {
     }
 
     #[test]
+    fn every_object_has_triangles() {
+        // An object announced without geometry would be lost by formats that name objects only
+        // where their faces are (OBJ), and is noise everywhere else.
+        for n in [10_000, 20_000, 100_000, 1_000_000] {
+            let r = record(params(n, 1));
+            let empty = r.objects.iter().filter(|o| o.1 == 0).count();
+            assert_eq!(empty, 0, "N = {n}: {empty} of {} objects are empty", r.objects.len());
+        }
+    }
+
+    #[test]
     fn same_seed_same_plant_different_seed_different_plant() {
         let a = record(params(100_000, 1));
         let b = record(params(100_000, 1));

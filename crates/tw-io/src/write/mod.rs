@@ -599,7 +599,6 @@ mod tests {
 #[cfg(test)]
 mod round_trip {
     //! Writes the test scene in every format and reads it back through [`crate::open_source`].
-    //! Ignored until the importers (written in parallel) are merged; remove the `#[ignore]`s then.
     use super::*;
     use crate::format::{open_source, ImportOptions};
     use crate::{Triangle, TriangleSink};
@@ -648,7 +647,6 @@ mod round_trip {
     }
 
     #[test]
-    #[ignore = "needs the PLY importer"]
     fn ply_round_trip() {
         for name in ["a.ply", "a.ply.gz"] {
             assert_same_geometry(name, &read_back(name));
@@ -656,7 +654,6 @@ mod round_trip {
     }
 
     #[test]
-    #[ignore = "needs the OBJ importer"]
     fn obj_round_trip_keeps_objects_and_colours() {
         for name in ["a.obj", "a.obj.gz"] {
             let got = read_back(name);
@@ -669,7 +666,6 @@ mod round_trip {
     }
 
     #[test]
-    #[ignore = "needs the STL importer"]
     fn stl_round_trip() {
         for name in ["a.stl", "a.stl.gz"] {
             assert_same_geometry(name, &read_back(name));
@@ -677,7 +673,6 @@ mod round_trip {
     }
 
     #[test]
-    #[ignore = "needs the glTF importer"]
     fn glb_round_trip_keeps_objects() {
         let got = read_back("a.glb");
         // GLB groups an object's triangles (its two runs become two primitives of one mesh), so

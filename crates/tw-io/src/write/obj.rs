@@ -119,6 +119,8 @@ impl ObjWriter {
             write!(self.mtl, "\nnewmtl {material}\nKd {} {} {}\nd {}\n", c[0], c[1], c[2], c[3])
                 .map_err(io_err(&mtl_target))?;
         }
+        // Geometry of the previous object may still sit in the line buffer: write it first.
+        self.flush_line(true)?;
         write!(self.out, "o {name}\nusemtl {material}\n").map_err(io_err(&target))?;
         self.current = Some(id);
         Ok(())

@@ -1,0 +1,191 @@
+//! Command-line arguments.
+
+use std::path::PathBuf;
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+
+use crate::units::{parse_bytes, parse_count};
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "terawalk",
+    version,
+    about = "Walk through 3D models of billions of triangles, with or without a GPU",
+    long_about = "terawalk reads OBJ, PLY, STL and glTF/GLB models (optionally .gz) of any size in \
+                  bounded memory, generates procedural power plants for testing, and (as the \
+                  project grows) preprocesses them into an out-of-core store for interactive \
+                  walkthroughs.",
+    after_help = "Examples:\n  terawalk demo\n  terawalk stats dragon.ply.gz engine.glb\n  \
+                  terawalk generate plant --triangles 10M -o plant.ply\n  \
+                  terawalk preview plant.ply -o plant.png --view iso"
+)]
+pub struct Cli {
+    /// More log output (-v info, -vv debug, -vvv trace); TERAWALK_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    pub verbose: u8,
+    /// Only errors.
+    #[arg(short, long, global = true)]
+    pub quiet: bool,
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Stream model files and print triangles, vertices, objects, bounds and read speed.
+    #[command(after_help = "Examples:\n  terawalk stats model.obj\n  \
+                            terawalk stats part1.ply part2.stl.gz scene.glb --json")]
+    Stats(StatsArgs),
+    /// Generate a procedural scene (a power plant) into a model file.
+    #[command(after_help = "Examples:\n  terawalk generate plant --triangles 10M -o plant.ply\n  \
+                            terawalk generate plant --triangles 1e9 --seed 7 -o big.ply\n  \
+                            terawalk generate plant --triangles 200k -o small.glb")]
+    Generate(GenerateArgs),
+    /// Render a quick preview image of model files on the CPU (streaming; any size).
+    #[command(after_help = "Examples:\n  terawalk preview plant.ply -o plant.png\n  \
+                            terawalk preview dragon.ply.gz -o dragon.png --view front --size 800x800\n  \
+                            terawalk preview plant.ply -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"")]
+    Preview(PreviewArgs),
+    /// The main job: generate a plant (cached), read it back, render views, print a summary.
+    #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
+    Demo(DemoArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ImportArgs {
+    /// Memory that vertex tables of OBJ/PLY files may use before spilling to disk.
+    #[arg(long, default_value = "192M", value_parser = parse_bytes)]
+    pub vertex_memory: u64,
+    /// Directory for spill files (default: the system's temp dir).
+    #[arg(long)]
+    pub spill_dir: Option<PathBuf>,
+}
+
+impl ImportArgs {
+    pub fn options(&self) -> tw_io::format::ImportOptions {
+        tw_io::format::ImportOptions {
+            vertex_memory: self.vertex_memory.min(usize::MAX as u64) as usize,
+            spill_dir: self.spill_dir.clone(),
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct StatsArgs {
+    /// Model files (.obj .ply .stl .gltf .glb, each optionally .gz). Several files form one scene.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Print the figures as JSON on stdout.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub import: ImportArgs,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub enum SceneKind {
+    /// A power plant: buildings with floors, steel frames, tanks, equipment, a piping network.
+    Plant,
+}
+
+#[derive(Args, Debug)]
+pub struct GenerateArgs {
+    /// What to generate.
+    #[arg(value_enum)]
+    pub kind: SceneKind,
+    /// Triangles to generate (within 1 %): 1000000, 1M, 1e6 or 10^6.
+    #[arg(short, long, default_value = "1M", value_parser = parse_count)]
+    pub triangles: u64,
+    /// Random seed: the same seed gives the same scene.
+    #[arg(short, long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output file; the format follows the extension: .ply .obj .stl .glb (.ply/.obj/.stl may add .gz).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum View {
+    /// From above at an angle, the whole model in view.
+    Iso,
+    /// Straight down.
+    Top,
+    /// Along the +Y axis, from the front.
+    Front,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coloring {
+    /// Object colours from the file (materials), grey otherwise.
+    Material,
+    /// A distinct colour per object.
+    Object,
+}
+
+#[derive(Args, Debug)]
+pub struct PreviewArgs {
+    /// Model files, as for `stats`.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Camera preset framing the model's bounds (ignored with --camera).
+    #[arg(long, value_enum, default_value = "iso")]
+    pub view: View,
+    /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees".
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// How to colour objects.
+    #[arg(long, value_enum, default_value = "material")]
+    pub color: Coloring,
+    /// Up axis of the model, for the presets.
+    #[arg(long, default_value = "z", value_parser = ["x", "y", "z"])]
+    pub up: String,
+    #[command(flatten)]
+    pub import: ImportArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct DemoArgs {
+    /// Size of the generated plant.
+    #[arg(short, long, default_value = "5M", value_parser = parse_count)]
+    pub triangles: u64,
+    /// Seed of the generated plant.
+    #[arg(short, long, default_value_t = 1)]
+    pub seed: u64,
+    /// Cache directory for the generated model and the outputs.
+    #[arg(long, default_value = ".terawalk-cache")]
+    pub dir: PathBuf,
+}
+
+pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+    let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size must be WIDTHxHEIGHT, got {s:?}"))?;
+    let w: u32 = w.trim().parse().map_err(|_| format!("bad width in {s:?}"))?;
+    let h: u32 = h.trim().parse().map_err(|_| format!("bad height in {s:?}"))?;
+    if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
+        return Err(format!("size {w}x{h} out of range (1..=16384 per side)"));
+    }
+    Ok((w, h))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn sizes() {
+        assert_eq!(parse_size("1280x720"), Ok((1280, 720)));
+        assert!(parse_size("0x10").is_err());
+        assert!(parse_size("big").is_err());
+    }
+}

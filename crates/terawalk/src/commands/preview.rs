@@ -1,0 +1,145 @@
+//! `terawalk preview`: a CPU-rasterized image of any input, streaming (memory = image size).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use tw_core::Aabb;
+use tw_io::{Scene, SceneOptions, SceneStats};
+use tw_preview::{Camera, ColorMode, Preview};
+
+use crate::cli::{Coloring, PreviewArgs, View};
+use crate::progress;
+use crate::units::fmt_count;
+
+/// Parses "x,y,z;x,y,z;x,y,z;fovy" (eye; target; up; vertical field of view in degrees).
+pub fn parse_camera(s: &str) -> Result<Camera> {
+    let parts: Vec<&str> = s.split(';').map(str::trim).collect();
+    if parts.len() != 4 {
+        bail!("camera must be \"eye;target;up;fovy\" with eye/target/up as x,y,z, got {s:?}");
+    }
+    let vec3 = |p: &str, what: &str| -> Result<[f64; 3]> {
+        let v: Vec<f64> = p
+            .split(',')
+            .map(|c| c.trim().parse::<f64>())
+            .collect::<Result<_, _>>()
+            .with_context(|| format!("bad {what} {p:?} in camera"))?;
+        match v.as_slice() {
+            [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
+            _ => bail!("{what} must be three finite numbers x,y,z, got {p:?}"),
+        }
+    };
+    let fovy: f64 = parts[3].parse().with_context(|| format!("bad fovy {:?} in camera", parts[3]))?;
+    if !(1.0..=179.0).contains(&fovy) {
+        bail!("fovy must be between 1 and 179 degrees, got {fovy}");
+    }
+    let cam = Camera {
+        eye: vec3(parts[0], "eye")?,
+        target: vec3(parts[1], "target")?,
+        up: vec3(parts[2], "up")?,
+        fovy_deg: fovy,
+    };
+    if cam.eye == cam.target {
+        bail!("camera eye and target are the same point");
+    }
+    Ok(cam)
+}
+
+/// The view direction (from the model towards the eye) of a preset, for a model with `up` axis.
+fn preset_direction(view: View, up: usize) -> ([f64; 3], [f64; 3]) {
+    // Directions in a Z-up frame, then the axes permuted so that Z becomes `up`.
+    let (dir, upv) = match view {
+        View::Iso => ([-0.55, -0.75, 0.55], [0.0, 0.0, 1.0]),
+        View::Top => ([0.0, 0.0, 1.0], [0.0, 1.0, 0.0]),
+        View::Front => ([0.0, -1.0, 0.08], [0.0, 0.0, 1.0]),
+    };
+    let permute = |v: [f64; 3]| match up {
+        0 => [v[2], v[0], v[1]],
+        1 => [v[0], v[2], -v[1]],
+        _ => v,
+    };
+    (permute(dir), permute(upv))
+}
+
+/// Streams `files` once to find their bounds (needed to frame a preset view).
+pub fn scene_bounds(files: &[PathBuf], options: &SceneOptions) -> Result<Aabb> {
+    let mut stats = SceneStats::default();
+    Scene::open(files, options.clone())?.stream(&mut stats)?;
+    if stats.bounds.is_empty() {
+        bail!("the input holds no triangles");
+    }
+    Ok(stats.bounds)
+}
+
+/// Renders `files` from `camera` into `output`; returns the triangles streamed.
+pub fn render(
+    files: &[PathBuf],
+    options: &SceneOptions,
+    camera: Camera,
+    size: (u32, u32),
+    coloring: Coloring,
+    output: &Path,
+) -> Result<u64> {
+    let mode = match coloring {
+        Coloring::Material => ColorMode::Object,
+        Coloring::Object => ColorMode::HashObject,
+    };
+    let mut preview = Preview::new(size.0, size.1, camera)?.with_color_mode(mode);
+    let scene = Scene::open(files, options.clone())?;
+    let pb = progress::bytes(0, "rendering");
+    let summary = scene.stream_with_progress(&mut preview, &mut |p| {
+        if let Some(t) = p.total {
+            pb.set_length(t);
+        }
+        pb.set_position(p.done)
+    })?;
+    pb.finish_and_clear();
+    preview.write_png(output).with_context(|| format!("cannot write {}", output.display()))?;
+    Ok(summary.triangles)
+}
+
+pub fn run(args: PreviewArgs) -> Result<()> {
+    let start = Instant::now();
+    let options = SceneOptions { import: args.import.options() };
+    let camera = match &args.camera {
+        Some(c) => parse_camera(c)?,
+        None => {
+            let bounds = scene_bounds(&args.files, &options)?;
+            let up = match args.up.as_str() {
+                "x" => 0,
+                "y" => 1,
+                _ => 2,
+            };
+            let (dir, upv) = preset_direction(args.view, up);
+            Camera::look_at_bounds_up(&bounds, dir, upv)
+        }
+    };
+    let n = render(&args.files, &options, camera, args.size, args.color, &args.output)?;
+    println!(
+        "wrote {} ({}x{}): {} triangles in {:.1} s",
+        args.output.display(),
+        args.size.0,
+        args.size.1,
+        fmt_count(n),
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn camera_strings() {
+        let c = parse_camera("1,2,3; 4,5,6; 0,0,1; 60").unwrap();
+        assert_eq!(c.eye, [1.0, 2.0, 3.0]);
+        assert_eq!(c.target, [4.0, 5.0, 6.0]);
+        assert_eq!(c.fovy_deg, 60.0);
+        assert!(parse_camera("1,2,3;4,5,6;0,0,1").is_err());
+        assert!(parse_camera("1,2;4,5,6;0,0,1;60").is_err());
+        assert!(parse_camera("1,2,3;4,5,6;0,0,1;0").is_err());
+        assert!(parse_camera("1,2,3;1,2,3;0,0,1;60").is_err());
+        assert!(parse_camera("nan,2,3;4,5,6;0,0,1;60").is_err());
+    }
+}

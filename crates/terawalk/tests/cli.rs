@@ -1,0 +1,99 @@
+//! The `terawalk` program end to end: help, stats, generate, preview, demo, and bad input.
+
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn terawalk(args: &[&str], dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_terawalk")).args(args).current_dir(dir).output().expect("runs")
+}
+
+fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn help_lists_subcommands_and_each_has_an_example() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["--help"], dir.path());
+    assert!(o.status.success());
+    for sub in ["stats", "generate", "preview", "demo"] {
+        assert!(stdout(&o).contains(sub), "--help lacks {sub}");
+        let h = terawalk(&[sub, "--help"], dir.path());
+        assert!(h.status.success(), "{sub} --help failed");
+        assert!(stdout(&h).contains("Examples:"), "{sub} --help has no example");
+    }
+}
+
+#[test]
+fn stats_counts_a_small_obj_and_reports_json() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("q.obj"), "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\nf 1 1 2\n")
+        .unwrap();
+    let o = terawalk(&["stats", "q.obj", "--json"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(v["files"][0]["triangles"], 2);
+    assert_eq!(v["files"][0]["degenerate_dropped"], 1);
+    assert_eq!(v["files"][0]["vertices"], 4);
+    assert_eq!(v["total"]["bounds"]["max"][0], 1.0);
+}
+
+#[test]
+fn bad_input_names_the_file_and_line_and_exits_nonzero() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("bad.obj"), "v 0 0 0\nv 1 0 0\nf 1 2 7\n").unwrap();
+    let o = terawalk(&["stats", "bad.obj"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    let e = stderr(&o);
+    assert!(e.contains("bad.obj") && e.contains("line 3"), "{e}");
+    assert!(!e.contains("panicked"), "{e}");
+
+    let o = terawalk(&["stats", "missing.ply"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("missing.ply"));
+
+    std::fs::write(dir.path().join("empty.stl"), "").unwrap();
+    let o = terawalk(&["stats", "empty.stl"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("empty.stl: empty file"), "{}", stderr(&o));
+
+    let o = terawalk(&["generate", "plant", "--triangles", "lots", "-o", "x.ply"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "bad usage is exit code 2");
+}
+
+#[test]
+fn generate_then_stats_then_preview_round_trip() {
+    let dir = tempfile::tempdir().unwrap();
+    for name in ["p.ply", "p.obj", "p.stl", "p.glb", "p.ply.gz"] {
+        let o = terawalk(&["generate", "plant", "--triangles", "20k", "--seed", "3", "-o", name], dir.path());
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let o = terawalk(&["stats", name, "--json"], dir.path());
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let tris = v["files"][0]["triangles"].as_u64().unwrap();
+        assert!((19_800..=20_200).contains(&tris), "{name}: {tris} triangles");
+        assert_eq!(v["files"][0]["degenerate_dropped"], 0, "{name}");
+    }
+    let o = terawalk(&["preview", "p.ply", "-o", "p.png", "--size", "160x90"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let png = std::fs::read(dir.path().join("p.png")).unwrap();
+    assert!(png.starts_with(b"\x89PNG"));
+}
+
+#[test]
+fn demo_runs_on_a_small_plant_and_reuses_its_cache() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("generated"), "{out}");
+    assert!(dir.path().join("cache/plant-outside.png").exists());
+    assert!(dir.path().join("cache/plant-inside.png").exists());
+    let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("cached"), "{}", stdout(&o));
+}
