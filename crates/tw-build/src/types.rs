@@ -1,0 +1,187 @@
+//! Plain data handed between the build phases.
+
+/// The scene-wide quantization grid. Every position after ingest is a `[u32; 3]` grid point;
+/// scene space (f32, what the runtime uses) is `grid * step`, relative to `origin`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Grid {
+    /// Input coordinates of grid point (0, 0, 0): the scene bounds' minimum.
+    pub origin: [f64; 3],
+    /// Size of one grid step in input units; longest extent / (2^24 - 1).
+    pub step: f64,
+}
+
+/// Number of grid steps across the longest extent: coordinates fit in 24 bits, exact in f32.
+pub const GRID_STEPS: u32 = (1 << 24) - 1;
+
+impl Grid {
+    /// The grid for scene bounds `min..max` (input coordinates, f64).
+    pub fn for_bounds(min: [f64; 3], max: [f64; 3]) -> Grid {
+        let extent = (0..3).map(|i| max[i] - min[i]).fold(0.0f64, f64::max);
+        let step = if extent > 0.0 { extent / GRID_STEPS as f64 } else { 1.0 };
+        Grid { origin: min, step }
+    }
+
+    /// The grid point nearest to an input position (clamped to the grid).
+    pub fn quantize(&self, p: [f64; 3]) -> [u32; 3] {
+        let q = |i: usize| ((p[i] - self.origin[i]) / self.step).round().clamp(0.0, GRID_STEPS as f64) as u32;
+        [q(0), q(1), q(2)]
+    }
+
+    /// Scene-space position (f32, relative to the origin) of a grid point.
+    pub fn to_scene(&self, g: [u32; 3]) -> [f32; 3] {
+        [(g[0] as f64 * self.step) as f32, (g[1] as f64 * self.step) as f32, (g[2] as f64 * self.step) as f32]
+    }
+
+    /// Input coordinates of a grid point.
+    pub fn to_input(&self, g: [u32; 3]) -> [f64; 3] {
+        [
+            self.origin[0] + g[0] as f64 * self.step,
+            self.origin[1] + g[1] as f64 * self.step,
+            self.origin[2] + g[2] as f64 * self.step,
+        ]
+    }
+}
+
+/// An axis-aligned box in grid coordinates (inclusive).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct GridBox {
+    pub min: [u32; 3],
+    pub max: [u32; 3],
+}
+
+impl GridBox {
+    pub const EMPTY: GridBox = GridBox { min: [u32::MAX; 3], max: [0; 3] };
+
+    pub fn is_empty(&self) -> bool {
+        (0..3).any(|i| self.min[i] > self.max[i])
+    }
+
+    pub fn grow(&mut self, p: [u32; 3]) {
+        for (i, v) in p.into_iter().enumerate() {
+            self.min[i] = self.min[i].min(v);
+            self.max[i] = self.max[i].max(v);
+        }
+    }
+
+    pub fn union(&self, o: &GridBox) -> GridBox {
+        let mut b = *self;
+        for i in 0..3 {
+            b.min[i] = b.min[i].min(o.min[i]);
+            b.max[i] = b.max[i].max(o.max[i]);
+        }
+        b
+    }
+
+    pub fn contains(&self, o: &GridBox) -> bool {
+        (0..3).all(|i| self.min[i] <= o.min[i] && o.max[i] <= self.max[i])
+    }
+}
+
+/// One input object, as ingest saw it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectRecord {
+    pub name: String,
+    /// sRGB colour with alpha; `None` when the file gave none.
+    pub color: Option<[u8; 4]>,
+    pub triangles: u64,
+    pub bounds: GridBox,
+}
+
+/// The indexed mesh of one cell (a redefined object: a hierarchy leaf), read back from the
+/// working files. Vertices are deduplicated by exact grid position within the cell, so that
+/// simplification sees connectivity.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CellMesh {
+    pub positions: Vec<[u32; 3]>,
+    /// Three indices per triangle into `positions`.
+    pub indices: Vec<u32>,
+    /// The input object id of each triangle (`indices.len() / 3` entries).
+    pub objects: Vec<u32>,
+}
+
+impl CellMesh {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+}
+
+/// A bounding sphere in scene space (f32, relative to the grid origin).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Sphere {
+    pub center: [f32; 3],
+    pub radius: f32,
+}
+
+/// One cluster of the LOD DAG: ≤ 128 triangles, ≤ 255 vertices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LodCluster {
+    /// Grid positions of the cluster's vertices.
+    pub positions: Vec<[u32; 3]>,
+    /// Three local indices per triangle.
+    pub indices: Vec<u8>,
+    /// Input object id per triangle.
+    pub objects: Vec<u32>,
+    /// Error (scene units) of the simplification that produced this cluster: 0 for input clusters.
+    pub self_error: f32,
+    /// Where `self_error` is measured from (the sphere of the group this cluster was made from;
+    /// for input clusters, the cluster's own bounding sphere).
+    pub self_sphere: Sphere,
+    /// Index of the group this cluster belongs to (in the same [`LodDag`]).
+    pub group: u32,
+    /// 0 for full-resolution clusters, +1 per simplification step (HLOD continues the count).
+    pub level: u8,
+}
+
+/// One group of the LOD DAG: clusters simplified together.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LodGroup {
+    /// Error (scene units) of the coarser clusters that replace this group; `f32::INFINITY` for a
+    /// root group (nothing replaces it). Always ≥ the `self_error` of each member cluster.
+    pub error: f32,
+    /// Bounds the group's geometry; contains the member clusters' `self_sphere`s.
+    pub sphere: Sphere,
+    /// Member clusters (indices into [`LodDag::clusters`]).
+    pub clusters: Vec<u32>,
+    /// The simplification level of the member clusters (the max if mixed).
+    pub level: u8,
+}
+
+/// A cluster DAG: the LOD of one cell, or of an HLOD node together with what it was built from.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct LodDag {
+    pub clusters: Vec<LodCluster>,
+    pub groups: Vec<LodGroup>,
+}
+
+/// The render rule, in object space: cluster `c` is part of the cut for error threshold `tau`
+/// (scene units) when `self_error <= tau < group.error`. (The runtime uses the projected form.)
+pub fn in_cut(dag: &LodDag, cluster: usize, tau: f32) -> bool {
+    let c = &dag.clusters[cluster];
+    c.self_error <= tau && tau < dag.groups[c.group as usize].error
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grid_quantizes_exactly_and_round_trips() {
+        let g = Grid::for_bounds([-10.0, 0.0, 5.0], [290.0, 100.0, 20.0]);
+        assert_eq!(g.quantize([-10.0, 0.0, 5.0]), [0, 0, 0]);
+        assert_eq!(g.quantize([290.0, 0.0, 5.0])[0], GRID_STEPS);
+        let p = [12.345678, 55.5, 7.25];
+        let q = g.quantize(p);
+        let back = g.to_input(q);
+        for i in 0..3 {
+            assert!((back[i] - p[i]).abs() <= g.step * 0.5 + 1e-12);
+        }
+        assert_eq!(g.quantize(p), g.quantize(back), "quantization is idempotent");
+    }
+
+    #[test]
+    fn degenerate_bounds_get_a_unit_step() {
+        let g = Grid::for_bounds([1.0; 3], [1.0; 3]);
+        assert_eq!(g.step, 1.0);
+        assert_eq!(g.quantize([1.0; 3]), [0, 0, 0]);
+    }
+}
