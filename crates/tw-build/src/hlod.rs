@@ -117,7 +117,17 @@ impl HlodNode {
 }
 
 /// Builds the HLOD clusters of one hierarchy node from its children's roots. Deterministic.
-pub fn build_hlod(children: &[Roots], grid: &Grid, params: &HlodParams) -> HlodNode {
+///
+/// `external(p)` tells whether grid point `p` is shared with a cell outside this node's subtree
+/// (see [`seam_positions`]); such vertices on the merged mesh's open edges are locked, so that a
+/// cut that is coarse here and fine in a neighbouring subtree does not crack. Everything else,
+/// open object borders included, may be simplified.
+pub fn build_hlod(
+    children: &[Roots],
+    grid: &Grid,
+    params: &HlodParams,
+    external: &dyn Fn([u32; 3]) -> bool,
+) -> HlodNode {
     let max_triangles = (params.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4;
     let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
 
@@ -169,13 +179,32 @@ pub fn build_hlod(children: &[Roots], grid: &Grid, params: &HlodParams) -> HlodN
         .min(params.max_node_triangles)
         .max(1);
     let mut error_local = 0.0f32;
+    let locks: Vec<bool> = crate::lod::open_boundary_vertices(positions.len(), &indices)
+        .into_iter()
+        .zip(&positions)
+        .map(|(open, &p)| open && external(p))
+        .collect();
     let mut simplified = if target < tri_count {
         let options = SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
-        let mut out =
-            meshopt::simplify(&indices, &vertices, target * 3, f32::MAX, options, Some(&mut error_local));
+        let mut out = meshopt::simplify_with_locks(
+            &indices,
+            &vertices,
+            &locks,
+            target * 3,
+            f32::MAX,
+            options,
+            Some(&mut error_local),
+        );
         if out.len() / 3 > target + target / 8 {
             let mut rel = 0.0f32;
-            let sloppy = meshopt::simplify_sloppy(&indices, &vertices, target * 3, f32::MAX, Some(&mut rel));
+            let sloppy = meshopt::simplify_sloppy_with_locks(
+                &indices,
+                &vertices,
+                &locks,
+                target * 3,
+                f32::MAX,
+                Some(&mut rel),
+            );
             if !sloppy.is_empty() && sloppy.len() < out.len() {
                 out = sloppy;
                 error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
@@ -222,6 +251,30 @@ pub fn build_hlod(children: &[Roots], grid: &Grid, params: &HlodParams) -> HlodN
         dag.clusters.push(cluster);
     }
     HlodNode { dag, replaced, error, sphere }
+}
+
+/// The positions on open (or non-manifold) edges of at least two of the given cells, sorted:
+/// the seams of split objects. A node's `external` predicate can test membership (it is
+/// conservative to use the scene-wide set for every node: only vertices on the merged mesh's
+/// own open edges are locked).
+pub fn seam_positions(cells: &[&crate::types::CellMesh]) -> Vec<[u32; 3]> {
+    let mut all: Vec<[u32; 3]> = Vec::new();
+    for m in cells {
+        let (indices, _) = crate::lod::clean_triangles(m);
+        let mut open: Vec<[u32; 3]> = crate::lod::open_boundary_vertices(m.positions.len(), &indices)
+            .into_iter()
+            .zip(&m.positions)
+            .filter(|(o, _)| *o)
+            .map(|(_, &p)| p)
+            .collect();
+        open.sort_unstable();
+        open.dedup();
+        all.extend(open);
+    }
+    all.sort_unstable();
+    let mut seams: Vec<[u32; 3]> = all.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+    seams.dedup();
+    seams
 }
 
 /// A sphere containing all `spheres` (meshopt's estimate, grown to contain each exactly).
@@ -292,4 +345,196 @@ pub fn append_node(scene: &mut LodDag, node: &HlodNode) -> u32 {
         scene.groups.push(LodGroup { clusters: g.clusters.iter().map(|c| c + cbase).collect(), ..g.clone() });
     }
     gbase
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cut::fixtures::{cell, grid_for, icosphere, mesh_triangles, plant, torus, Soup};
+    use crate::cut::*;
+    use crate::lod::{build_cell_lod, LodParams};
+    use crate::types::CellMesh;
+
+    /// Builds the scene-wide DAG of `cells` under a balanced binary hierarchy, bottom-up keeping
+    /// only the current roots (as the pipeline does). Returns the scene DAG and the root's
+    /// triangle count.
+    fn build_scene(cells: &[CellMesh], grid: &Grid, params: &HlodParams) -> Scene {
+        let seams = seam_positions(&cells.iter().collect::<Vec<_>>());
+        let external = |p: [u32; 3]| seams.binary_search(&p).is_ok();
+        let mut node_borders = Vec::new();
+        let mut scene = LodDag::default();
+        let mut level: Vec<Roots> = cells
+            .iter()
+            .map(|m| {
+                let dag = build_cell_lod(m, grid, &LodParams::default());
+                let base = append_cell(&mut scene, &dag);
+                roots_of(&dag, base)
+            })
+            .collect();
+        while level.len() > 1 {
+            let mut next = Vec::new();
+            for pair in level.chunks(2) {
+                if pair.len() == 1 {
+                    next.push(pair[0].clone());
+                    continue;
+                }
+                let node = build_hlod(pair, grid, params, &external);
+                let tris: Vec<GridTriangle> =
+                    node.dag.clusters.iter().flat_map(|c| cluster_triangles(c).map(|t| t.0)).collect();
+                node_borders.extend(boundary_edges(&tris));
+                assert!(
+                    node.error
+                        >= pair
+                            .iter()
+                            .flat_map(|r| &r.dag.clusters)
+                            .map(|c| c.self_error)
+                            .fold(0.0, f32::max)
+                );
+                let base = append_node(&mut scene, &node);
+                next.push(node.roots(base));
+            }
+            level = next;
+        }
+        let root_tris = level[0].triangle_count();
+        node_borders.sort_unstable();
+        node_borders.dedup();
+        Scene { dag: scene, root_tris, node_borders }
+    }
+
+    #[derive(Debug, PartialEq)]
+    struct Scene {
+        dag: LodDag,
+        root_tris: usize,
+        /// Boundary edges of each HLOD node's own mesh (simplified open borders).
+        node_borders: Vec<([u32; 3], [u32; 3])>,
+    }
+
+    fn taus(dag: &LodDag) -> Vec<f32> {
+        let mut e: Vec<f32> = dag.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
+        e.sort_by(f32::total_cmp);
+        e.dedup();
+        let mut t = vec![0.0];
+        let step = (e.len() / 12).max(1);
+        for &x in e.iter().step_by(step) {
+            t.push(x * 0.999);
+            t.push(x);
+        }
+        if let Some(&x) = e.last() {
+            t.push(x);
+            t.push(x * 1.001);
+        }
+        t
+    }
+
+    /// All checks on a scene: validity, τ = 0 is the input, complete crack-free cuts.
+    /// On closed inputs (`closed`) no boundary edge may appear at all; on open inputs, an HLOD
+    /// node may simplify object borders, so its own mesh's boundary edges are allowed too.
+    fn check_scene(cells: &[CellMesh], grid: &Grid, s: &Scene, closed: bool) {
+        let scene = &s.dag;
+        check_dag(scene, Some(grid)).unwrap();
+        let input: Vec<(GridTriangle, u32)> = cells.iter().flat_map(mesh_triangles).collect();
+        let cut0 = extract_cut(scene, 0.0);
+        assert_eq!(triangle_multiset(&cut_triangles(scene, &cut0)), triangle_multiset(&input));
+        let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
+        let mut allowed = open_edges(&input_tris);
+        if closed {
+            assert!(allowed.is_empty(), "closed input");
+        } else {
+            allowed.extend(s.node_borders.iter().copied());
+            allowed.sort_unstable();
+        }
+        for tau in taus(scene) {
+            check_complete(scene, tau).unwrap();
+            let cut: Vec<GridTriangle> =
+                cut_triangles(scene, &extract_cut(scene, tau)).into_iter().map(|t| t.0).collect();
+            check_no_cracks(&cut, &allowed).unwrap_or_else(|e| panic!("tau {tau}: {e}"));
+        }
+        let top = extract_cut(scene, f32::MAX);
+        assert!(top
+            .iter()
+            .all(|&c| scene.groups[scene.clusters[c as usize].group as usize].error.is_infinite()));
+    }
+
+    fn cells_of(soups: &[Soup]) -> (Vec<CellMesh>, Grid) {
+        let grid = grid_for(&soups.iter().collect::<Vec<_>>());
+        (soups.iter().map(|s| cell(s, &grid)).collect(), grid)
+    }
+
+    #[test]
+    fn four_spheres_merge_into_a_few_root_clusters() {
+        let soups: Vec<Soup> =
+            (0..4).map(|i| icosphere([i as f64 * 25.0, (i % 2) as f64 * 5.0, 0.0], 10.0, 5, i)).collect();
+        let (cells, grid) = cells_of(&soups);
+        let s = build_scene(&cells, &grid, &HlodParams::default());
+        check_scene(&cells, &grid, &s, true);
+        let (scene, root_tris) = (&s.dag, s.root_tris);
+        let roots: Vec<&LodGroup> = scene.groups.iter().filter(|g| g.error.is_infinite()).collect();
+        let root_clusters: usize = roots.iter().map(|g| g.clusters.len()).sum();
+        assert!(root_clusters <= 8 && root_tris <= 1024, "{root_clusters} clusters, {root_tris} triangles");
+        assert!(scene.clusters.iter().any(|c| c.level > 8), "HLOD levels continue the count");
+    }
+
+    #[test]
+    fn torus_split_in_two_cells_does_not_crack() {
+        let soups = vec![torus(96, 48, 0..48, 1), torus(96, 48, 48..96, 2)];
+        let (cells, grid) = cells_of(&soups);
+        let input: Vec<GridTriangle> = cells.iter().flat_map(mesh_triangles).map(|t| t.0).collect();
+        assert!(open_edges(&input).is_empty(), "the two halves form a closed torus");
+        check_scene(&cells, &grid, &build_scene(&cells, &grid, &HlodParams::default()), true);
+    }
+
+    #[test]
+    fn torus_in_four_cells_does_not_crack_between_levels() {
+        // Quarters 0+1 and 2+3 become sibling HLOD nodes; each is coarsened while the other
+        // subtree is still fine at some τ, so their shared seams must stay locked.
+        let soups: Vec<Soup> = (0..4).map(|q| torus(96, 48, q * 24..(q + 1) * 24, q as u32)).collect();
+        let (cells, grid) = cells_of(&soups);
+        assert_eq!(seam_positions(&cells.iter().collect::<Vec<_>>()).len(), 4 * 48);
+        check_scene(&cells, &grid, &build_scene(&cells, &grid, &HlodParams::default()), true);
+    }
+
+    #[test]
+    fn plant_split_by_object_into_cells() {
+        let soup = plant(20_000, 11);
+        let grid = grid_for(&[&soup]);
+        let mut by_cell: Vec<Soup> = vec![Vec::new(); 4];
+        for t in &soup {
+            by_cell[(t.1 % 4) as usize].push(*t);
+        }
+        let cells: Vec<CellMesh> = by_cell.iter().map(|s| cell(s, &grid)).collect();
+        let s = build_scene(&cells, &grid, &HlodParams::default());
+        check_scene(&cells, &grid, &s, false);
+        assert!(s.root_tris <= 1024, "{} root triangles", s.root_tris);
+    }
+
+    #[test]
+    fn hlod_is_deterministic() {
+        let soups: Vec<Soup> = (0..3).map(|i| icosphere([i as f64 * 25.0, 0.0, 0.0], 10.0, 4, i)).collect();
+        let (cells, grid) = cells_of(&soups);
+        let a = build_scene(&cells, &grid, &HlodParams::default());
+        let b = build_scene(&cells, &grid, &HlodParams::default());
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn node_of_no_children_is_empty() {
+        let grid = Grid::for_bounds([0.0; 3], [1.0; 3]);
+        let node = build_hlod(&[], &grid, &HlodParams::default(), &|_| false);
+        assert!(node.dag.clusters.is_empty() && node.replaced.is_empty());
+    }
+
+    #[test]
+    fn roots_of_keeps_only_infinite_groups() {
+        let soup = icosphere([0.0; 3], 1.0, 3, 0);
+        let grid = grid_for(&[&soup]);
+        let dag = build_cell_lod(&cell(&soup, &grid), &grid, &LodParams::default());
+        let r = roots_of(&dag, 100);
+        assert!(!r.dag.groups.is_empty());
+        assert!(r.dag.groups.iter().all(|g| g.error.is_infinite()));
+        for (g, &id) in r.dag.groups.iter().zip(&r.group_ids) {
+            assert_eq!(dag.groups[(id - 100) as usize].sphere, g.sphere);
+            assert!(g.clusters.iter().all(|&c| r.dag.clusters[c as usize].group as usize
+                == r.dag.groups.iter().position(|x| x == g).unwrap()));
+        }
+    }
 }

@@ -176,7 +176,7 @@ pub fn build_cell_lod(mesh: &CellMesh, grid: &Grid, params: &LodParams) -> LodDa
 }
 
 /// Non-degenerate, in-range triangles and their objects.
-fn clean_triangles(mesh: &CellMesh) -> (Vec<u32>, Vec<u32>) {
+pub(crate) fn clean_triangles(mesh: &CellMesh) -> (Vec<u32>, Vec<u32>) {
     let n = mesh.positions.len() as u32;
     let mut indices = Vec::with_capacity(mesh.indices.len());
     let mut objects = Vec::with_capacity(mesh.indices.len() / 3);
