@@ -107,7 +107,7 @@ pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
         if g.clusters.is_empty() {
             return Err(format!("group {gi} is empty"));
         }
-        if g.error.is_nan() || !(g.sphere.radius >= 0.0) {
+        if g.error.is_nan() || g.sphere.radius.is_nan() || g.sphere.radius < 0.0 {
             return Err(format!("group {gi} has a NaN error or bad sphere"));
         }
         for &c in &g.clusters {
@@ -135,7 +135,7 @@ pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
             return Err(format!("cluster {ci}: group {} does not list it", c.group));
         }
         let g = &dag.groups[c.group as usize];
-        if !(g.error >= c.self_error) {
+        if c.self_error.is_nan() || g.error < c.self_error {
             return Err(format!("cluster {ci}: self error {} > group error {}", c.self_error, g.error));
         }
         let tol = |r: f32| r as f64 * 1e-6;
@@ -147,13 +147,8 @@ pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
         ) {
             return Err(format!("cluster {ci}: self sphere not inside group {}'s sphere", c.group));
         }
-        if c.refined_from.is_empty() {
-            if c.self_error != 0.0 || c.level != 0 {
-                return Err(format!(
-                    "cluster {ci}: input cluster with error {} level {}",
-                    c.self_error, c.level
-                ));
-            }
+        if c.refined_from.is_empty() && (c.self_error != 0.0 || c.level != 0) {
+            return Err(format!("cluster {ci}: input cluster with error {} level {}", c.self_error, c.level));
         }
         for &r in &c.refined_from {
             let src =

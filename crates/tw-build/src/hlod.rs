@@ -8,9 +8,11 @@
 //! 1. merges the children's root clusters into one indexed mesh (vertices deduplicated by grid
 //!    position);
 //! 2. simplifies it across object and cell borders to `min(ratio × triangles, max_node_triangles)`
-//!    triangles with meshopt's regular simplifier (no locks; small disconnected parts may be
-//!    pruned), falling back to `simplify_sloppy` (error × 2, as clusterlod does) when the regular
-//!    simplifier stalls above the target;
+//!    triangles with meshopt's regular simplifier (small disconnected parts may be pruned; object
+//!    borders and borders between the children are free), falling back to `simplify_sloppy`
+//!    (error × 2, as clusterlod does) when the regular simplifier stalls above the target. Only
+//!    the seams shared with cells outside the node (split objects) are locked, so that a cut that
+//!    is coarse here and finer next door does not crack;
 //! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
@@ -471,6 +473,7 @@ mod tests {
         let roots: Vec<&LodGroup> = scene.groups.iter().filter(|g| g.error.is_infinite()).collect();
         let root_clusters: usize = roots.iter().map(|g| g.clusters.len()).sum();
         assert!(root_clusters <= 8 && root_tris <= 1024, "{root_clusters} clusters, {root_tris} triangles");
+        println!("spheres: root {root_clusters} clusters, {root_tris} triangles");
         assert!(scene.clusters.iter().any(|c| c.level > 8), "HLOD levels continue the count");
     }
 
@@ -505,6 +508,12 @@ mod tests {
         let s = build_scene(&cells, &grid, &HlodParams::default());
         check_scene(&cells, &grid, &s, false);
         assert!(s.root_tris <= 1024, "{} root triangles", s.root_tris);
+        println!(
+            "plant: {} root triangles, {} clusters, {} groups",
+            s.root_tris,
+            s.dag.clusters.len(),
+            s.dag.groups.len()
+        );
     }
 
     #[test]
