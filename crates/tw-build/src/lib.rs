@@ -8,4 +8,7 @@
 //! 5. pages: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically.
 
+pub mod cut;
+pub mod hlod;
+pub mod lod;
 pub mod types;

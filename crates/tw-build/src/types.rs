@@ -128,6 +128,11 @@ pub struct LodCluster {
     pub self_sphere: Sphere,
     /// Index of the group this cluster belongs to (in the same [`LodDag`]).
     pub group: u32,
+    /// The groups whose simplification produced this cluster (their `error`/`sphere` equal this
+    /// cluster's `self_error`/`self_sphere`): empty for input clusters, one group inside a cell,
+    /// every root group of the node's children for an HLOD cluster. Indices into the same
+    /// [`LodDag`] (for HLOD clusters: the caller's scene-wide group ids, see `hlod`).
+    pub refined_from: Vec<u32>,
     /// 0 for full-resolution clusters, +1 per simplification step (HLOD continues the count).
     pub level: u8,
 }

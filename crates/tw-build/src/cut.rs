@@ -1,0 +1,527 @@
+//! Cut extraction and the checks of ISSUE3's "Cluster DAG model" (used by tests of the build
+//! and of the runtime): DAG validity (cluster limits, indices, monotone errors, nested spheres,
+//! `refined_from` consistency), completeness of a cut (every input cluster is represented exactly
+//! once) and cracks (boundary edges of the cut mesh must be boundary edges of the input).
+//!
+//! The render rule is [`crate::types::in_cut`] in object space (scene units).
+
+use crate::types::{in_cut, Grid, LodCluster, LodDag, Sphere};
+
+/// A triangle as three grid positions.
+pub type GridTriangle = [[u32; 3]; 3];
+
+/// The clusters in the cut for threshold `tau` (scene units), in index order.
+pub fn extract_cut(dag: &LodDag, tau: f32) -> Vec<u32> {
+    (0..dag.clusters.len()).filter(|&c| in_cut(dag, c, tau)).map(|c| c as u32).collect()
+}
+
+/// A cluster's triangles as grid positions with their object ids (invalid indices skipped).
+pub fn cluster_triangles(c: &LodCluster) -> impl Iterator<Item = (GridTriangle, u32)> + '_ {
+    c.indices.chunks_exact(3).enumerate().filter_map(|(t, tri)| {
+        let p = |k: usize| c.positions.get(tri[k] as usize).copied();
+        Some(([p(0)?, p(1)?, p(2)?], c.objects.get(t).copied().unwrap_or(u32::MAX)))
+    })
+}
+
+/// All triangles of the given clusters.
+pub fn cut_triangles(dag: &LodDag, cut: &[u32]) -> Vec<(GridTriangle, u32)> {
+    cut.iter().filter_map(|&c| dag.clusters.get(c as usize)).flat_map(cluster_triangles).collect()
+}
+
+/// The triangle rotated so that its smallest vertex comes first (winding kept).
+pub fn canonical(t: GridTriangle) -> GridTriangle {
+    let k = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
+    [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+}
+
+/// A sorted multiset of canonical triangles (with objects), for comparing meshes exactly.
+pub fn triangle_multiset(tris: &[(GridTriangle, u32)]) -> Vec<(GridTriangle, u32)> {
+    let mut v: Vec<_> = tris.iter().map(|&(t, o)| (canonical(t), o)).collect();
+    v.sort_unstable();
+    v
+}
+
+/// Undirected edges (by grid position, deduplicated triangles) used by exactly one triangle; sorted.
+pub fn boundary_edges(tris: &[GridTriangle]) -> Vec<([u32; 3], [u32; 3])> {
+    edges_where(tris, |n| n == 1)
+}
+
+/// Undirected edges not used by exactly two triangles (open or non-manifold); sorted. On a
+/// closed manifold input this is empty.
+pub fn open_edges(tris: &[GridTriangle]) -> Vec<([u32; 3], [u32; 3])> {
+    edges_where(tris, |n| n != 2)
+}
+
+fn edges_where(tris: &[GridTriangle], keep: impl Fn(usize) -> bool) -> Vec<([u32; 3], [u32; 3])> {
+    let mut unique: Vec<GridTriangle> = tris.iter().map(|&t| canonical(t)).collect();
+    unique.sort_unstable();
+    unique.dedup();
+    let mut edges: Vec<([u32; 3], [u32; 3])> = Vec::with_capacity(unique.len() * 3);
+    for t in &unique {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            edges.push(if a < b { (a, b) } else { (b, a) });
+        }
+    }
+    edges.sort_unstable();
+    let mut out = Vec::new();
+    let mut i = 0;
+    while i < edges.len() {
+        let mut j = i + 1;
+        while j < edges.len() && edges[j] == edges[i] {
+            j += 1;
+        }
+        if keep(j - i) {
+            out.push(edges[i]);
+        }
+        i = j;
+    }
+    out
+}
+
+/// Crack check: every boundary edge of `cut` must be an allowed edge: on a closed input, none;
+/// in general the input's [`open_edges`] (its boundary, and non-manifold edges, which the
+/// simplifier keeps but may leave with fewer triangles when an attached part is simplified
+/// away). Returns the number of offending edges in the error.
+pub fn check_no_cracks(cut: &[GridTriangle], allowed: &[([u32; 3], [u32; 3])]) -> Result<(), String> {
+    let bad: Vec<_> = boundary_edges(cut).into_iter().filter(|e| allowed.binary_search(e).is_err()).collect();
+    match bad.first() {
+        None => Ok(()),
+        Some(e) => Err(format!("{} crack edges in the cut, e.g. {:?}", bad.len(), e)),
+    }
+}
+
+fn contains(outer: &Sphere, inner_center: [f64; 3], inner_radius: f64, tol: f64) -> bool {
+    let d = (0..3).map(|i| (inner_center[i] - outer.center[i] as f64).powi(2)).sum::<f64>().sqrt();
+    d + inner_radius <= outer.radius as f64 + tol
+}
+
+/// Structural checks of a DAG: cluster limits and indices, group membership, monotone errors,
+/// nested spheres, `refined_from` consistency (the cluster's self error/sphere are exactly its
+/// source groups' error/sphere), every finite-error group replaced by some cluster, and (with
+/// `grid`) every vertex inside its cluster's self sphere and its group's sphere.
+pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
+    let ng = dag.groups.len();
+    let mut member_of = vec![u32::MAX; dag.clusters.len()];
+    for (gi, g) in dag.groups.iter().enumerate() {
+        if g.clusters.is_empty() {
+            return Err(format!("group {gi} is empty"));
+        }
+        if g.error.is_nan() || g.sphere.radius.is_nan() || g.sphere.radius < 0.0 {
+            return Err(format!("group {gi} has a NaN error or bad sphere"));
+        }
+        for &c in &g.clusters {
+            let slot =
+                member_of.get_mut(c as usize).ok_or(format!("group {gi} lists missing cluster {c}"))?;
+            if *slot != u32::MAX {
+                return Err(format!("cluster {c} is in two groups"));
+            }
+            *slot = gi as u32;
+        }
+    }
+    let mut replaced = vec![false; ng];
+    for (ci, c) in dag.clusters.iter().enumerate() {
+        let tris = c.indices.len() / 3;
+        if c.indices.len() % 3 != 0 || tris == 0 || tris > 128 || c.positions.len() > 255 {
+            return Err(format!("cluster {ci}: {} indices, {} vertices", c.indices.len(), c.positions.len()));
+        }
+        if c.objects.len() != tris {
+            return Err(format!("cluster {ci}: {} objects for {tris} triangles", c.objects.len()));
+        }
+        if c.indices.iter().any(|&i| i as usize >= c.positions.len()) {
+            return Err(format!("cluster {ci}: local index out of range"));
+        }
+        if member_of[ci] != c.group {
+            return Err(format!("cluster {ci}: group {} does not list it", c.group));
+        }
+        let g = &dag.groups[c.group as usize];
+        if c.self_error.is_nan() || g.error < c.self_error {
+            return Err(format!("cluster {ci}: self error {} > group error {}", c.self_error, g.error));
+        }
+        let tol = |r: f32| r as f64 * 1e-6;
+        if !contains(
+            &g.sphere,
+            c.self_sphere.center.map(|v| v as f64),
+            c.self_sphere.radius as f64,
+            tol(g.sphere.radius),
+        ) {
+            return Err(format!("cluster {ci}: self sphere not inside group {}'s sphere", c.group));
+        }
+        if c.refined_from.is_empty() && (c.self_error != 0.0 || c.level != 0) {
+            return Err(format!("cluster {ci}: input cluster with error {} level {}", c.self_error, c.level));
+        }
+        for &r in &c.refined_from {
+            let src =
+                dag.groups.get(r as usize).ok_or(format!("cluster {ci}: refined from missing group {r}"))?;
+            if src.error != c.self_error || src.sphere != c.self_sphere {
+                return Err(format!(
+                    "cluster {ci}: self error/sphere {} {:?} differ from source group {r}: {} {:?}",
+                    c.self_error, c.self_sphere, src.error, src.sphere
+                ));
+            }
+            if r == c.group {
+                return Err(format!("cluster {ci} is refined from its own group"));
+            }
+            replaced[r as usize] = true;
+        }
+        if let Some(grid) = grid {
+            for &p in &c.positions {
+                let s = grid.to_scene(p).map(|v| v as f64);
+                let t = grid.step * 2.0;
+                if !contains(&c.self_sphere, s, 0.0, t + tol(c.self_sphere.radius))
+                    || !contains(&g.sphere, s, 0.0, t + tol(g.sphere.radius))
+                {
+                    return Err(format!("cluster {ci}: vertex {p:?} outside its spheres"));
+                }
+            }
+        }
+    }
+    for (gi, g) in dag.groups.iter().enumerate() {
+        if g.error.is_finite() != replaced[gi] {
+            return Err(format!("group {gi}: error {} but replaced = {}", g.error, replaced[gi]));
+        }
+    }
+    Ok(())
+}
+
+/// Completeness of the cut for `tau`: replays the simplification steps. Start from the input
+/// clusters (empty `refined_from`); every group that the cut coarsens (`tau >= error`) must be
+/// replaceable, i.e. all of its member clusters present exactly once, and is replaced by the
+/// clusters made from it (a cluster made from several groups appears when all of them are
+/// replaced). The clusters left must be exactly [`extract_cut`]'s, each once. So every input
+/// triangle is represented exactly once, at the granularity of simplification steps.
+pub fn check_complete(dag: &LodDag, tau: f32) -> Result<(), String> {
+    let ng = dag.groups.len();
+    let mut made_from: Vec<Vec<u32>> = vec![Vec::new(); ng];
+    let mut sources_left: Vec<usize> = Vec::with_capacity(dag.clusters.len());
+    for (ci, c) in dag.clusters.iter().enumerate() {
+        for &r in &c.refined_from {
+            made_from
+                .get_mut(r as usize)
+                .ok_or(format!("cluster {ci}: bad refined_from {r}"))?
+                .push(ci as u32);
+        }
+        sources_left.push(c.refined_from.len());
+    }
+    let coarsened = |g: usize| tau >= dag.groups[g].error;
+    let mut present = vec![0u32; dag.clusters.len()];
+    let mut members_present = vec![0usize; ng];
+    let mut done = vec![false; ng];
+    let mut ready: Vec<u32> = Vec::new();
+    let add = |c: usize, present: &mut Vec<u32>, members_present: &mut Vec<usize>, ready: &mut Vec<u32>| {
+        present[c] += 1;
+        let g = dag.clusters[c].group as usize;
+        members_present[g] += 1;
+        if members_present[g] == dag.groups[g].clusters.len() && coarsened(g) {
+            ready.push(g as u32);
+        }
+    };
+    for (ci, c) in dag.clusters.iter().enumerate() {
+        if c.refined_from.is_empty() {
+            add(ci, &mut present, &mut members_present, &mut ready);
+        }
+    }
+    while let Some(g) = ready.pop() {
+        let g = g as usize;
+        if done[g] {
+            return Err(format!("group {g} replaced twice at tau {tau}"));
+        }
+        done[g] = true;
+        for &m in &dag.groups[g].clusters {
+            if present[m as usize] != 1 {
+                return Err(format!(
+                    "group {g}: member {m} present {} times at tau {tau}",
+                    present[m as usize]
+                ));
+            }
+            present[m as usize] = 0;
+        }
+        for &p in &made_from[g] {
+            sources_left[p as usize] -= 1;
+            if sources_left[p as usize] == 0 {
+                add(p as usize, &mut present, &mut members_present, &mut ready);
+            }
+        }
+    }
+    if let Some(g) = (0..ng).find(|&g| coarsened(g) && !done[g]) {
+        return Err(format!("group {g} is coarsened at tau {tau} but not all its clusters are drawn"));
+    }
+    for (ci, &n) in present.iter().enumerate() {
+        let cut = in_cut(dag, ci, tau);
+        if n > 1 || (n == 1) != cut {
+            return Err(format!("cluster {ci}: present {n} times, in cut {cut}, at tau {tau}"));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+pub(crate) mod fixtures {
+    //! Meshes for the LOD tests: closed spheres and tori, cells built from triangle soups.
+    use crate::types::{CellMesh, Grid};
+    use std::collections::HashMap;
+
+    pub type Soup = Vec<([[f64; 3]; 3], u32)>;
+
+    /// An icosphere with `20 × 4^level` triangles.
+    pub fn icosphere(center: [f64; 3], r: f64, level: u32, object: u32) -> Soup {
+        let t = (1.0 + 5f64.sqrt()) / 2.0;
+        let mut v: Vec<[f64; 3]> = vec![
+            [-1.0, t, 0.0],
+            [1.0, t, 0.0],
+            [-1.0, -t, 0.0],
+            [1.0, -t, 0.0],
+            [0.0, -1.0, t],
+            [0.0, 1.0, t],
+            [0.0, -1.0, -t],
+            [0.0, 1.0, -t],
+            [t, 0.0, -1.0],
+            [t, 0.0, 1.0],
+            [-t, 0.0, -1.0],
+            [-t, 0.0, 1.0],
+        ];
+        let mut f: Vec<[usize; 3]> = vec![
+            [0, 11, 5],
+            [0, 5, 1],
+            [0, 1, 7],
+            [0, 7, 10],
+            [0, 10, 11],
+            [1, 5, 9],
+            [5, 11, 4],
+            [11, 10, 2],
+            [10, 7, 6],
+            [7, 1, 8],
+            [3, 9, 4],
+            [3, 4, 2],
+            [3, 2, 6],
+            [3, 6, 8],
+            [3, 8, 9],
+            [4, 9, 5],
+            [2, 4, 11],
+            [6, 2, 10],
+            [8, 6, 7],
+            [9, 8, 1],
+        ];
+        let norm = |p: [f64; 3]| {
+            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+            p.map(|x| x / l)
+        };
+        v.iter_mut().for_each(|p| *p = norm(*p));
+        for _ in 0..level {
+            let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
+            let mut nf = Vec::with_capacity(f.len() * 4);
+            for tri in &f {
+                let mut m = [0usize; 3];
+                for e in 0..3 {
+                    let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                    let key = (a.min(b), a.max(b));
+                    m[e] = *mid.entry(key).or_insert_with(|| {
+                        let p = norm([
+                            (v[a][0] + v[b][0]) / 2.0,
+                            (v[a][1] + v[b][1]) / 2.0,
+                            (v[a][2] + v[b][2]) / 2.0,
+                        ]);
+                        v.push(p);
+                        v.len() - 1
+                    });
+                }
+                nf.push([tri[0], m[0], m[2]]);
+                nf.push([tri[1], m[1], m[0]]);
+                nf.push([tri[2], m[2], m[1]]);
+                nf.push([m[0], m[1], m[2]]);
+            }
+            f = nf;
+        }
+        let p = |i: usize| [center[0] + v[i][0] * r, center[1] + v[i][1] * r, center[2] + v[i][2] * r];
+        f.iter().map(|t| ([p(t[0]), p(t[1]), p(t[2])], object)).collect()
+    }
+
+    /// A torus of `2 × nu × nv` triangles; only the quads with `u` in `us` (to split it).
+    pub fn torus(nu: usize, nv: usize, us: std::ops::Range<usize>, object: u32) -> Soup {
+        let (rr, r) = (10.0, 3.0);
+        let p = |u: usize, v: usize| {
+            let a = (u % nu) as f64 / nu as f64 * std::f64::consts::TAU;
+            let b = (v % nv) as f64 / nv as f64 * std::f64::consts::TAU;
+            [(rr + r * b.cos()) * a.cos(), (rr + r * b.cos()) * a.sin(), r * b.sin()]
+        };
+        let mut out = Vec::new();
+        for u in us {
+            for v in 0..nv {
+                let (a, b, c, d) = (p(u, v), p(u + 1, v), p(u + 1, v + 1), p(u, v + 1));
+                out.push(([a, b, c], object));
+                out.push(([a, c, d], object));
+            }
+        }
+        out
+    }
+
+    /// The grid of a set of soups.
+    pub fn grid_for(soups: &[&Soup]) -> Grid {
+        let (mut lo, mut hi) = ([f64::MAX; 3], [f64::MIN; 3]);
+        for s in soups {
+            for (t, _) in s.iter() {
+                for p in t {
+                    for i in 0..3 {
+                        lo[i] = lo[i].min(p[i]);
+                        hi[i] = hi[i].max(p[i]);
+                    }
+                }
+            }
+        }
+        Grid::for_bounds(lo, hi)
+    }
+
+    /// Quantizes and deduplicates (by grid position, first-seen order) into a cell mesh.
+    pub fn cell(soup: &Soup, grid: &Grid) -> CellMesh {
+        let mut map: HashMap<[u32; 3], u32> = HashMap::new();
+        let mut m = CellMesh::default();
+        for (t, o) in soup {
+            for p in t {
+                let q = grid.quantize(*p);
+                let n = map.len() as u32;
+                let i = *map.entry(q).or_insert_with(|| {
+                    m.positions.push(q);
+                    n
+                });
+                m.indices.push(i);
+            }
+            m.objects.push(*o);
+        }
+        m
+    }
+
+    /// The generated plant as a triangle soup.
+    pub fn plant(triangles: u64, seed: u64) -> Soup {
+        use tw_io::generate::{PlantParams, PlantSource};
+        use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink, TriangleSource};
+        struct Collect(Soup);
+        impl TriangleSink for Collect {
+            fn object(&mut self, _id: ObjectId, _info: &ObjectInfo) -> Result<(), ImportError> {
+                Ok(())
+            }
+            fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+                self.0.push((t.positions, t.object));
+                Ok(())
+            }
+        }
+        let mut sink = Collect(Vec::new());
+        let src = PlantSource::new(PlantParams { triangles, seed }).expect("plant params");
+        Box::new(src).stream(&mut sink).expect("plant streams");
+        sink.0
+    }
+
+    /// A mesh's non-degenerate triangles as grid positions with objects.
+    pub fn mesh_triangles(m: &CellMesh) -> Vec<(super::GridTriangle, u32)> {
+        m.indices
+            .chunks_exact(3)
+            .zip(&m.objects)
+            .filter(|(t, _)| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+            .map(|(t, &o)| ([t[0], t[1], t[2]].map(|i| m.positions[i as usize]), o))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::types::LodGroup;
+
+    fn sphere(c: [f32; 3], r: f32) -> Sphere {
+        Sphere { center: c, radius: r }
+    }
+
+    /// Two input clusters (one triangle each, a closed "sandwich" is not needed here) in one group,
+    /// replaced by one coarser cluster in a root group.
+    fn tiny_dag() -> LodDag {
+        let tri = |o: u32, lvl: u8, err: f32, s: Sphere, group: u32, from: Vec<u32>| LodCluster {
+            positions: vec![[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+            indices: vec![0, 1, 2],
+            objects: vec![o],
+            self_error: err,
+            self_sphere: s,
+            group,
+            level: lvl,
+            refined_from: from,
+        };
+        let s0 = sphere([0.0; 3], 2.0);
+        let s1 = sphere([0.0; 3], 3.0);
+        LodDag {
+            clusters: vec![
+                tri(0, 0, 0.0, s0, 0, vec![]),
+                tri(1, 0, 0.0, s0, 0, vec![]),
+                tri(0, 1, 0.5, s1, 1, vec![0]),
+            ],
+            groups: vec![
+                LodGroup { error: 0.5, sphere: s1, clusters: vec![0, 1], level: 0 },
+                LodGroup { error: f32::INFINITY, sphere: s1, clusters: vec![2], level: 1 },
+            ],
+        }
+    }
+
+    #[test]
+    fn tiny_dag_is_valid_and_complete() {
+        let d = tiny_dag();
+        check_dag(&d, None).unwrap();
+        for tau in [0.0, 0.4, 0.5, 10.0] {
+            check_complete(&d, tau).unwrap();
+        }
+        assert_eq!(extract_cut(&d, 0.0), vec![0, 1]);
+        assert_eq!(extract_cut(&d, 0.5), vec![2]);
+    }
+
+    #[test]
+    fn non_monotone_error_is_reported() {
+        let mut d = tiny_dag();
+        d.groups[0].error = 0.1; // below nothing, but now differs from the coarse cluster's self error
+        assert!(check_dag(&d, None).is_err());
+        let mut d = tiny_dag();
+        d.clusters[0].self_error = 1.0;
+        assert!(check_dag(&d, None).is_err());
+    }
+
+    #[test]
+    fn escaping_sphere_is_reported() {
+        let mut d = tiny_dag();
+        d.clusters[0].self_sphere = sphere([5.0, 0.0, 0.0], 1.0);
+        assert!(check_dag(&d, None).unwrap_err().contains("sphere"));
+    }
+
+    #[test]
+    fn unreplaced_finite_group_is_reported() {
+        let mut d = tiny_dag();
+        d.clusters[2].refined_from.clear();
+        d.clusters[2].self_error = 0.0;
+        d.clusters[2].level = 0;
+        assert!(check_dag(&d, None).unwrap_err().contains("replaced"));
+    }
+
+    #[test]
+    fn double_coverage_is_reported() {
+        let mut d = tiny_dag();
+        d.clusters[2].self_error = 0.0; // coarse cluster now also drawn at tau 0
+        assert!(check_complete(&d, 0.0).unwrap_err().contains("in cut true"));
+        let mut d = tiny_dag();
+        d.groups[1].error = 0.2; // nothing drawn at tau 0.3
+        assert!(check_complete(&d, 0.3).is_err());
+    }
+
+    #[test]
+    fn crack_is_detected() {
+        // A closed tetrahedron has no boundary; removing one face leaves three boundary edges.
+        let p = [[0, 0, 0], [9, 0, 0], [0, 9, 0], [0, 0, 9]];
+        let tet: Vec<GridTriangle> =
+            vec![[p[0], p[2], p[1]], [p[0], p[1], p[3]], [p[1], p[2], p[3]], [p[0], p[3], p[2]]];
+        assert!(boundary_edges(&tet).is_empty());
+        check_no_cracks(&tet, &[]).unwrap();
+        let err = check_no_cracks(&tet[1..], &[]).unwrap_err();
+        assert!(err.starts_with("3 crack edges"), "{err}");
+    }
+
+    #[test]
+    fn canonical_keeps_winding() {
+        let t = [[2, 0, 0], [0, 0, 0], [1, 0, 0]];
+        assert_eq!(canonical(t), [[0, 0, 0], [1, 0, 0], [2, 0, 0]]);
+        let u = [[2, 0, 0], [1, 0, 0], [0, 0, 0]];
+        assert_eq!(canonical(u), [[0, 0, 0], [2, 0, 0], [1, 0, 0]]);
+    }
+}

@@ -1,0 +1,549 @@
+//! Phase 4b: HLOD above the cells — merging the coarsest clusters of sibling subtrees.
+//!
+//! Extends the cluster DAG of [`crate::lod`] across the hierarchy (Nanite-style cluster DAG,
+//! Erikson's HLOD; ISSUE3 "Cluster DAG model"). The hierarchy is processed bottom-up; each
+//! subtree is represented only by its current [`Roots`] (its root groups, error = ∞, and their
+//! clusters). At a node, [`build_hlod`]:
+//!
+//! 1. merges the children's root clusters into one indexed mesh (vertices deduplicated by grid
+//!    position);
+//! 2. simplifies it across object and cell borders to `min(ratio × triangles, max_node_triangles)`
+//!    triangles with meshopt's regular simplifier (small disconnected parts may be pruned; object
+//!    borders and borders between the children are free), falling back to `simplify_sloppy`
+//!    (error × 2, as clusterlod does) when the regular simplifier stalls above the target. Only
+//!    the seams shared with cells outside the node (split objects) are locked, so that a cut that
+//!    is coarse here and finer next door does not crack;
+//! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
+//!
+//! All of the children's root groups are replaced by the node's clusters as one simplification
+//! step: they get the same finite `error` (= the new clusters' `self_error`, ≥ every child
+//! cluster's `self_error`) and the same `sphere` (= the new clusters' `self_sphere`, containing
+//! every child root group's sphere). The caller applies that to its stored groups
+//! ([`HlodNode::replaced`]). The node's new groups are roots until the parent node is built.
+//!
+//! Memory: a node holds only its children's roots, so a bottom-up pass needs
+//! O(depth × fanout × root size). Triangles of a node's roots are at most `max_node_triangles`.
+//!
+//! Object ids of simplified triangles follow the rule of [`crate::lod`] (the object of a vertex's
+//! first incident triangle in the merged mesh, majority of the three vertices).
+
+use crate::lod::{
+    adapter, grow_sphere, round_up, sphere_center64, triangle_object, vertex_objects, Frame,
+    MAX_CLUSTER_TRIANGLES, MAX_CLUSTER_VERTICES, MIN_ERROR,
+};
+use crate::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
+use meshopt::SimplifyOptions;
+
+/// Parameters of [`build_hlod`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HlodParams {
+    /// Target triangles of a node relative to its children's root triangles.
+    pub ratio: f32,
+    /// Most triangles a node may keep (so the tree's root ends with a few clusters).
+    pub max_node_triangles: usize,
+    /// Triangles per cluster, 4..=128.
+    pub max_triangles: usize,
+    /// Vertices per cluster, 3..=255.
+    pub max_vertices: usize,
+    /// Most clusters per new group.
+    pub group_clusters: usize,
+}
+
+impl Default for HlodParams {
+    fn default() -> HlodParams {
+        HlodParams {
+            ratio: 0.5,
+            max_node_triangles: 1024,
+            max_triangles: MAX_CLUSTER_TRIANGLES,
+            max_vertices: MAX_CLUSTER_VERTICES,
+            group_clusters: 16,
+        }
+    }
+}
+
+/// The current top of a subtree: its root groups (error = ∞) and their clusters.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Roots {
+    /// Only root groups; clusters' `group` indexes `dag.groups`.
+    pub dag: LodDag,
+    /// The caller's (scene-wide) id of each group in `dag.groups`.
+    pub group_ids: Vec<u32>,
+}
+
+impl Roots {
+    pub fn triangle_count(&self) -> usize {
+        self.dag.clusters.iter().map(|c| c.indices.len() / 3).sum()
+    }
+}
+
+/// The roots of `dag` (its groups with infinite error); `group_base` is the caller's id of
+/// `dag.groups[0]` (ids are `group_base + index`).
+pub fn roots_of(dag: &LodDag, group_base: u32) -> Roots {
+    let mut roots = Roots::default();
+    for (gi, g) in dag.groups.iter().enumerate() {
+        if g.error != f32::INFINITY {
+            continue;
+        }
+        let new_g = roots.dag.groups.len() as u32;
+        let mut members = Vec::with_capacity(g.clusters.len());
+        for &ci in &g.clusters {
+            if let Some(c) = dag.clusters.get(ci as usize) {
+                members.push(roots.dag.clusters.len() as u32);
+                roots.dag.clusters.push(LodCluster { group: new_g, ..c.clone() });
+            }
+        }
+        roots.dag.groups.push(LodGroup { clusters: members, ..g.clone() });
+        roots.group_ids.push(group_base + gi as u32);
+    }
+    roots
+}
+
+/// What [`build_hlod`] made at one node.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HlodNode {
+    /// The node's clusters and groups; the groups are roots (error = ∞). The clusters'
+    /// `refined_from` holds the caller's ids of the replaced groups (`replaced`).
+    pub dag: LodDag,
+    /// The children's root groups (caller's ids) that the node's clusters replace.
+    pub replaced: Vec<u32>,
+    /// The error and sphere to give every replaced group.
+    pub error: f32,
+    pub sphere: Sphere,
+}
+
+impl HlodNode {
+    /// The node's roots, for its parent; `group_base` is the caller's id of `dag.groups[0]`.
+    pub fn roots(&self, group_base: u32) -> Roots {
+        roots_of(&self.dag, group_base)
+    }
+}
+
+/// Builds the HLOD clusters of one hierarchy node from its children's roots. Deterministic.
+///
+/// `external(p)` tells whether grid point `p` is shared with a cell outside this node's subtree
+/// (see [`seam_positions`]); such vertices on the merged mesh's open edges are locked, so that a
+/// cut that is coarse here and fine in a neighbouring subtree does not crack. Everything else,
+/// open object borders included, may be simplified.
+pub fn build_hlod(
+    children: &[Roots],
+    grid: &Grid,
+    params: &HlodParams,
+    external: &dyn Fn([u32; 3]) -> bool,
+) -> HlodNode {
+    let max_triangles = (params.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4;
+    let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
+
+    // 1. Merge: positions deduplicated by grid point.
+    let mut positions: Vec<[u32; 3]> = children
+        .iter()
+        .flat_map(|r| r.dag.clusters.iter().flat_map(|c| c.positions.iter().copied()))
+        .collect();
+    positions.sort_unstable();
+    positions.dedup();
+    let index_of = |p: &[u32; 3]| positions.binary_search(p).map(|i| i as u32).unwrap_or(0);
+    let mut indices: Vec<u32> = Vec::new();
+    let mut objects: Vec<u32> = Vec::new();
+    let mut child_error = 0.0f32;
+    let mut level = 0u8;
+    let mut replaced = Vec::new();
+    let mut spheres: Vec<Sphere> = Vec::new();
+    for r in children {
+        for c in &r.dag.clusters {
+            child_error = child_error.max(c.self_error);
+            level = level.max(c.level);
+            for (t, tri) in c.indices.chunks_exact(3).enumerate() {
+                let p = |k: usize| c.positions.get(tri[k] as usize);
+                let (Some(a), Some(b), Some(d)) = (p(0), p(1), p(2)) else { continue };
+                let tri = [index_of(a), index_of(b), index_of(d)];
+                if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                    continue;
+                }
+                indices.extend_from_slice(&tri);
+                objects.push(c.objects.get(t).copied().unwrap_or(0));
+            }
+        }
+        for (g, &id) in r.dag.groups.iter().zip(&r.group_ids) {
+            replaced.push(id);
+            spheres.push(g.sphere);
+        }
+    }
+    let sphere = enclosing_sphere(&spheres);
+    if indices.is_empty() {
+        return HlodNode { dag: LodDag::default(), replaced, error: child_error.max(MIN_ERROR), sphere };
+    }
+
+    // 2. Simplify across borders.
+    let frame = Frame::new(&positions, grid);
+    let local = frame.local_positions(&positions);
+    let vertices = adapter(&local);
+    let tri_count = indices.len() / 3;
+    let target = ((tri_count as f64 * params.ratio.clamp(0.0, 1.0) as f64).ceil() as usize)
+        .min(params.max_node_triangles)
+        .max(1);
+    let mut error_local = 0.0f32;
+    let locks: Vec<bool> = crate::lod::open_boundary_vertices(positions.len(), &indices)
+        .into_iter()
+        .zip(&positions)
+        .map(|(open, &p)| open && external(p))
+        .collect();
+    let mut simplified = if target < tri_count {
+        let options = SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
+        let mut out = meshopt::simplify_with_locks(
+            &indices,
+            &vertices,
+            &locks,
+            target * 3,
+            f32::MAX,
+            options,
+            Some(&mut error_local),
+        );
+        if out.len() / 3 > target + target / 8 {
+            let mut rel = 0.0f32;
+            let sloppy = meshopt::simplify_sloppy_with_locks(
+                &indices,
+                &vertices,
+                &locks,
+                target * 3,
+                f32::MAX,
+                Some(&mut rel),
+            );
+            if !sloppy.is_empty() && sloppy.len() < out.len() {
+                out = sloppy;
+                error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
+            }
+        }
+        out
+    } else {
+        indices.clone()
+    };
+    if simplified.is_empty() {
+        simplified = indices[..3].to_vec();
+    }
+    let error = child_error.max(round_up(error_local as f64 * frame.step)).max(MIN_ERROR);
+
+    // 3. Re-cluster and group.
+    let vertex_object = vertex_objects(positions.len(), &indices, &objects);
+    let meshlets = meshopt::build_meshlets(&simplified, &vertices, max_vertices, max_triangles, 0.0);
+    let mut dag = LodDag::default();
+    let level = level.saturating_add(1);
+    for m in meshlets.iter() {
+        let group_clusters = params.group_clusters.max(1);
+        if dag.groups.last().is_none_or(|g: &LodGroup| g.clusters.len() >= group_clusters) {
+            dag.groups.push(LodGroup { error: f32::INFINITY, sphere, clusters: Vec::new(), level });
+        }
+        let gi = dag.groups.len() - 1;
+        let cluster = LodCluster {
+            positions: m.vertices.iter().map(|&v| positions[v as usize]).collect(),
+            indices: m.triangles.to_vec(),
+            objects: m
+                .triangles
+                .chunks_exact(3)
+                .map(|t| {
+                    let tri = [t[0], t[1], t[2]].map(|k| m.vertices[k as usize]);
+                    triangle_object(&vertex_object, tri)
+                })
+                .collect(),
+            self_error: error,
+            self_sphere: sphere,
+            group: gi as u32,
+            level,
+            refined_from: replaced.clone(),
+        };
+        dag.groups[gi].clusters.push(dag.clusters.len() as u32);
+        dag.clusters.push(cluster);
+    }
+    HlodNode { dag, replaced, error, sphere }
+}
+
+/// The positions on open (or non-manifold) edges of at least two of the given cells, sorted:
+/// the seams of split objects. A node's `external` predicate can test membership (it is
+/// conservative to use the scene-wide set for every node: only vertices on the merged mesh's
+/// own open edges are locked).
+pub fn seam_positions(cells: &[&crate::types::CellMesh]) -> Vec<[u32; 3]> {
+    let mut all: Vec<[u32; 3]> = Vec::new();
+    for m in cells {
+        let (indices, _) = crate::lod::clean_triangles(m);
+        let mut open: Vec<[u32; 3]> = crate::lod::open_boundary_vertices(m.positions.len(), &indices)
+            .into_iter()
+            .zip(&m.positions)
+            .filter(|(o, _)| *o)
+            .map(|(_, &p)| p)
+            .collect();
+        open.sort_unstable();
+        open.dedup();
+        all.extend(open);
+    }
+    all.sort_unstable();
+    let mut seams: Vec<[u32; 3]> = all.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+    seams.dedup();
+    seams
+}
+
+/// A sphere containing all `spheres` (meshopt's estimate, grown to contain each exactly).
+fn enclosing_sphere(spheres: &[Sphere]) -> Sphere {
+    let Some(first) = spheres.first() else { return Sphere::default() };
+    let packed: Vec<[f32; 4]> =
+        spheres.iter().map(|s| [s.center[0], s.center[1], s.center[2], s.radius]).collect();
+    let bytes = meshopt::typed_to_bytes(&packed);
+    let est = meshopt::compute_sphere_bounds(
+        meshopt::PositionDataAdapter {
+            data: bytes,
+            position_count: packed.len(),
+            position_stride: 16,
+            position_offset: 0,
+        },
+        Some(meshopt::RadiusDataAdapter {
+            data: bytes,
+            radius_count: packed.len(),
+            radius_stride: 16,
+            radius_offset: 12,
+        }),
+    );
+    let mut s = if est.center.iter().all(|v| v.is_finite()) && est.radius.is_finite() {
+        Sphere { center: est.center, radius: est.radius.max(0.0) }
+    } else {
+        *first
+    };
+    for o in spheres {
+        grow_sphere(&mut s, sphere_center64(o), o.radius as f64);
+    }
+    s
+}
+
+/// Appends a cell's DAG to a scene-wide DAG (reindexing its groups and `refined_from`);
+/// returns the scene id of the cell's group 0.
+pub fn append_cell(scene: &mut LodDag, cell: &LodDag) -> u32 {
+    let gbase = scene.groups.len() as u32;
+    let cbase = scene.clusters.len() as u32;
+    for c in &cell.clusters {
+        scene.clusters.push(LodCluster {
+            group: c.group + gbase,
+            refined_from: c.refined_from.iter().map(|r| r + gbase).collect(),
+            ..c.clone()
+        });
+    }
+    for g in &cell.groups {
+        scene.groups.push(LodGroup { clusters: g.clusters.iter().map(|c| c + cbase).collect(), ..g.clone() });
+    }
+    gbase
+}
+
+/// Applies an HLOD node to a scene-wide DAG: the replaced groups get the node's error and
+/// sphere, and the node's clusters and groups are appended (their `refined_from` already holds
+/// scene ids). Returns the scene id of the node's group 0.
+pub fn append_node(scene: &mut LodDag, node: &HlodNode) -> u32 {
+    for &id in &node.replaced {
+        if let Some(g) = scene.groups.get_mut(id as usize) {
+            g.error = node.error;
+            g.sphere = node.sphere;
+        }
+    }
+    let gbase = scene.groups.len() as u32;
+    let cbase = scene.clusters.len() as u32;
+    for c in &node.dag.clusters {
+        scene.clusters.push(LodCluster { group: c.group + gbase, ..c.clone() });
+    }
+    for g in &node.dag.groups {
+        scene.groups.push(LodGroup { clusters: g.clusters.iter().map(|c| c + cbase).collect(), ..g.clone() });
+    }
+    gbase
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cut::fixtures::{cell, grid_for, icosphere, mesh_triangles, plant, torus, Soup};
+    use crate::cut::*;
+    use crate::lod::{build_cell_lod, LodParams};
+    use crate::types::CellMesh;
+
+    /// Builds the scene-wide DAG of `cells` under a balanced binary hierarchy, bottom-up keeping
+    /// only the current roots (as the pipeline does). Returns the scene DAG and the root's
+    /// triangle count.
+    fn build_scene(cells: &[CellMesh], grid: &Grid, params: &HlodParams) -> Scene {
+        let seams = seam_positions(&cells.iter().collect::<Vec<_>>());
+        let external = |p: [u32; 3]| seams.binary_search(&p).is_ok();
+        let mut node_borders = Vec::new();
+        let mut scene = LodDag::default();
+        let mut level: Vec<Roots> = cells
+            .iter()
+            .map(|m| {
+                let dag = build_cell_lod(m, grid, &LodParams::default());
+                let base = append_cell(&mut scene, &dag);
+                roots_of(&dag, base)
+            })
+            .collect();
+        while level.len() > 1 {
+            let mut next = Vec::new();
+            for pair in level.chunks(2) {
+                if pair.len() == 1 {
+                    next.push(pair[0].clone());
+                    continue;
+                }
+                let node = build_hlod(pair, grid, params, &external);
+                let tris: Vec<GridTriangle> =
+                    node.dag.clusters.iter().flat_map(|c| cluster_triangles(c).map(|t| t.0)).collect();
+                node_borders.extend(boundary_edges(&tris));
+                assert!(
+                    node.error
+                        >= pair
+                            .iter()
+                            .flat_map(|r| &r.dag.clusters)
+                            .map(|c| c.self_error)
+                            .fold(0.0, f32::max)
+                );
+                let base = append_node(&mut scene, &node);
+                next.push(node.roots(base));
+            }
+            level = next;
+        }
+        let root_tris = level[0].triangle_count();
+        node_borders.sort_unstable();
+        node_borders.dedup();
+        Scene { dag: scene, root_tris, node_borders }
+    }
+
+    #[derive(Debug, PartialEq)]
+    struct Scene {
+        dag: LodDag,
+        root_tris: usize,
+        /// Boundary edges of each HLOD node's own mesh (simplified open borders).
+        node_borders: Vec<([u32; 3], [u32; 3])>,
+    }
+
+    fn taus(dag: &LodDag) -> Vec<f32> {
+        let mut e: Vec<f32> = dag.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
+        e.sort_by(f32::total_cmp);
+        e.dedup();
+        let mut t = vec![0.0];
+        let step = (e.len() / 12).max(1);
+        for &x in e.iter().step_by(step) {
+            t.push(x * 0.999);
+            t.push(x);
+        }
+        if let Some(&x) = e.last() {
+            t.push(x);
+            t.push(x * 1.001);
+        }
+        t
+    }
+
+    /// All checks on a scene: validity, τ = 0 is the input, complete crack-free cuts.
+    /// On closed inputs (`closed`) no boundary edge may appear at all; on open inputs, an HLOD
+    /// node may simplify object borders, so its own mesh's boundary edges are allowed too.
+    fn check_scene(cells: &[CellMesh], grid: &Grid, s: &Scene, closed: bool) {
+        let scene = &s.dag;
+        check_dag(scene, Some(grid)).unwrap();
+        let input: Vec<(GridTriangle, u32)> = cells.iter().flat_map(mesh_triangles).collect();
+        let cut0 = extract_cut(scene, 0.0);
+        assert_eq!(triangle_multiset(&cut_triangles(scene, &cut0)), triangle_multiset(&input));
+        let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
+        let mut allowed = open_edges(&input_tris);
+        if closed {
+            assert!(allowed.is_empty(), "closed input");
+        } else {
+            allowed.extend(s.node_borders.iter().copied());
+            allowed.sort_unstable();
+        }
+        for tau in taus(scene) {
+            check_complete(scene, tau).unwrap();
+            let cut: Vec<GridTriangle> =
+                cut_triangles(scene, &extract_cut(scene, tau)).into_iter().map(|t| t.0).collect();
+            check_no_cracks(&cut, &allowed).unwrap_or_else(|e| panic!("tau {tau}: {e}"));
+        }
+        let top = extract_cut(scene, f32::MAX);
+        assert!(top
+            .iter()
+            .all(|&c| scene.groups[scene.clusters[c as usize].group as usize].error.is_infinite()));
+    }
+
+    fn cells_of(soups: &[Soup]) -> (Vec<CellMesh>, Grid) {
+        let grid = grid_for(&soups.iter().collect::<Vec<_>>());
+        (soups.iter().map(|s| cell(s, &grid)).collect(), grid)
+    }
+
+    #[test]
+    fn four_spheres_merge_into_a_few_root_clusters() {
+        let soups: Vec<Soup> =
+            (0..4).map(|i| icosphere([i as f64 * 25.0, (i % 2) as f64 * 5.0, 0.0], 10.0, 5, i)).collect();
+        let (cells, grid) = cells_of(&soups);
+        let s = build_scene(&cells, &grid, &HlodParams::default());
+        check_scene(&cells, &grid, &s, true);
+        let (scene, root_tris) = (&s.dag, s.root_tris);
+        let roots: Vec<&LodGroup> = scene.groups.iter().filter(|g| g.error.is_infinite()).collect();
+        let root_clusters: usize = roots.iter().map(|g| g.clusters.len()).sum();
+        assert!(root_clusters <= 8 && root_tris <= 1024, "{root_clusters} clusters, {root_tris} triangles");
+        println!("spheres: root {root_clusters} clusters, {root_tris} triangles");
+        assert!(scene.clusters.iter().any(|c| c.level > 8), "HLOD levels continue the count");
+    }
+
+    #[test]
+    fn torus_split_in_two_cells_does_not_crack() {
+        let soups = vec![torus(96, 48, 0..48, 1), torus(96, 48, 48..96, 2)];
+        let (cells, grid) = cells_of(&soups);
+        let input: Vec<GridTriangle> = cells.iter().flat_map(mesh_triangles).map(|t| t.0).collect();
+        assert!(open_edges(&input).is_empty(), "the two halves form a closed torus");
+        check_scene(&cells, &grid, &build_scene(&cells, &grid, &HlodParams::default()), true);
+    }
+
+    #[test]
+    fn torus_in_four_cells_does_not_crack_between_levels() {
+        // Quarters 0+1 and 2+3 become sibling HLOD nodes; each is coarsened while the other
+        // subtree is still fine at some τ, so their shared seams must stay locked.
+        let soups: Vec<Soup> = (0..4).map(|q| torus(96, 48, q * 24..(q + 1) * 24, q as u32)).collect();
+        let (cells, grid) = cells_of(&soups);
+        assert_eq!(seam_positions(&cells.iter().collect::<Vec<_>>()).len(), 4 * 48);
+        check_scene(&cells, &grid, &build_scene(&cells, &grid, &HlodParams::default()), true);
+    }
+
+    #[test]
+    fn plant_split_by_object_into_cells() {
+        let soup = plant(20_000, 11);
+        let grid = grid_for(&[&soup]);
+        let mut by_cell: Vec<Soup> = vec![Vec::new(); 4];
+        for t in &soup {
+            by_cell[(t.1 % 4) as usize].push(*t);
+        }
+        let cells: Vec<CellMesh> = by_cell.iter().map(|s| cell(s, &grid)).collect();
+        let s = build_scene(&cells, &grid, &HlodParams::default());
+        check_scene(&cells, &grid, &s, false);
+        assert!(s.root_tris <= 1024, "{} root triangles", s.root_tris);
+        println!(
+            "plant: {} root triangles, {} clusters, {} groups",
+            s.root_tris,
+            s.dag.clusters.len(),
+            s.dag.groups.len()
+        );
+    }
+
+    #[test]
+    fn hlod_is_deterministic() {
+        let soups: Vec<Soup> = (0..3).map(|i| icosphere([i as f64 * 25.0, 0.0, 0.0], 10.0, 4, i)).collect();
+        let (cells, grid) = cells_of(&soups);
+        let a = build_scene(&cells, &grid, &HlodParams::default());
+        let b = build_scene(&cells, &grid, &HlodParams::default());
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn node_of_no_children_is_empty() {
+        let grid = Grid::for_bounds([0.0; 3], [1.0; 3]);
+        let node = build_hlod(&[], &grid, &HlodParams::default(), &|_| false);
+        assert!(node.dag.clusters.is_empty() && node.replaced.is_empty());
+    }
+
+    #[test]
+    fn roots_of_keeps_only_infinite_groups() {
+        let soup = icosphere([0.0; 3], 1.0, 3, 0);
+        let grid = grid_for(&[&soup]);
+        let dag = build_cell_lod(&cell(&soup, &grid), &grid, &LodParams::default());
+        let r = roots_of(&dag, 100);
+        assert!(!r.dag.groups.is_empty());
+        assert!(r.dag.groups.iter().all(|g| g.error.is_infinite()));
+        for (g, &id) in r.dag.groups.iter().zip(&r.group_ids) {
+            assert_eq!(dag.groups[(id - 100) as usize].sphere, g.sphere);
+            assert!(g.clusters.iter().all(|&c| r.dag.clusters[c as usize].group as usize
+                == r.dag.groups.iter().position(|x| x == g).unwrap()));
+        }
+    }
+}

@@ -1,0 +1,528 @@
+//! Phase 4a: the cluster LOD DAG of one cell.
+//!
+//! Follows meshoptimizer's clusterlod (`demo/clusterlod.h`, called through `meshopt::clod_build`),
+//! itself after Nanite (Karis 2021): the cell is split into clusters of ≤ 128 triangles; clusters
+//! are partitioned into groups, each group is simplified to about half its triangles with the
+//! group's outer boundary locked, and the result is split into new clusters; repeat until one
+//! cluster is left or simplification is stuck. The output is mapped onto the model of
+//! [`crate::types`] (see ISSUE3 "Cluster DAG model"):
+//!
+//! * every meshopt group becomes a [`LodGroup`]: `error` = the group's simplified error in scene
+//!   units (`f32::INFINITY` for terminal groups), `sphere` = its simplified bounds;
+//! * every meshopt cluster becomes a [`LodCluster`]: `self_error`/`self_sphere` are exactly the
+//!   `error`/`sphere` of the group it was simplified from (`refined_from`), or 0 and its own
+//!   bounding sphere for input clusters.
+//!
+//! Monotonicity is enforced after the fact (group error ≥ member self errors, group sphere
+//! contains member self spheres, finite errors ≥ [`MIN_ERROR`] so that τ = 0 selects exactly the
+//! input clusters), in group order, so that the equalities above still hold.
+//!
+//! Geometry: meshopt works on cell-local grid coordinates as f32 (exact: they fit in 24 bits);
+//! errors and spheres are converted to scene units (`grid * step`). Simplification only keeps
+//! existing vertices, so every output vertex is an input grid point (checked). Vertices on the
+//! cell's open boundary (edges used by one triangle, or by more than two) are locked at every
+//! level, so a cut that mixes levels across cells does not crack; only HLOD ([`crate::hlod`])
+//! simplifies them.
+//!
+//! Object ids: level-0 triangles keep their input object. Simplified triangles get the object
+//! of a nearby input triangle: each vertex's object is the object of its first incident input
+//! triangle (lowest triangle index); a triangle takes the object shared by at least two of its
+//! vertices, or else its first vertex's. Deterministic, but not exact at object borders.
+//!
+//! Degenerate triangles (an index repeated; the mesh is deduplicated by grid position, so this
+//! is also a repeated position) and triangles with out-of-range indices are dropped.
+
+use crate::types::{CellMesh, Grid, GridBox, LodCluster, LodDag, LodGroup, Sphere};
+use meshopt::{ClodMesh, SimplifyVertex, VertexDataAdapter};
+
+/// The smallest finite group error (scene units): a lossless simplification still gets a
+/// positive error so that τ = 0 renders exactly the input clusters.
+pub const MIN_ERROR: f32 = f32::MIN_POSITIVE;
+
+/// Hard limits of the cluster format: local indices are u8.
+pub const MAX_CLUSTER_TRIANGLES: usize = 128;
+pub const MAX_CLUSTER_VERTICES: usize = 255;
+
+/// Parameters of [`build_cell_lod`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LodParams {
+    /// Triangles per cluster, 4..=128 (a multiple of 4).
+    pub max_triangles: usize,
+    /// Vertices per cluster, 3..=255.
+    pub max_vertices: usize,
+}
+
+impl Default for LodParams {
+    fn default() -> LodParams {
+        LodParams { max_triangles: MAX_CLUSTER_TRIANGLES, max_vertices: MAX_CLUSTER_VERTICES }
+    }
+}
+
+impl LodParams {
+    fn clamped(&self) -> LodParams {
+        LodParams {
+            max_triangles: (self.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4,
+            max_vertices: self.max_vertices.clamp(3, MAX_CLUSTER_VERTICES),
+        }
+    }
+}
+
+/// Builds the cluster DAG of one cell. Deterministic; memory is proportional to the cell.
+pub fn build_cell_lod(mesh: &CellMesh, grid: &Grid, params: &LodParams) -> LodDag {
+    let params = params.clamped();
+    let n = mesh.positions.len();
+    let (indices, objects) = clean_triangles(mesh);
+    if indices.is_empty() {
+        return LodDag::default();
+    }
+    let frame = Frame::new(&mesh.positions, grid);
+    let local = frame.local_positions(&mesh.positions);
+    let vertex_object = vertex_objects(n, &indices, &objects);
+    let locks: Vec<SimplifyVertex> = open_boundary_vertices(n, &indices)
+        .into_iter()
+        .map(|b| if b { SimplifyVertex::Lock } else { SimplifyVertex::None })
+        .collect();
+    let mut originals = OriginalTriangles::new(&indices, &objects);
+
+    let adapter = adapter(&local);
+    let mut config = meshopt::clod_default_config(params.max_triangles);
+    config.max_vertices = params.max_vertices;
+    config.optimize_bounds = false;
+    let clod_mesh = ClodMesh { vertex_lock: Some(&locks), ..ClodMesh::new(&indices, &adapter) };
+
+    // Raw output, in meshopt's local units; converted and made monotone below.
+    struct RawGroup {
+        error: f32,
+        sphere: Sphere,
+        clusters: Vec<u32>,
+    }
+    let mut raw_groups: Vec<RawGroup> = Vec::new();
+    let mut refined: Vec<i32> = Vec::new();
+    let mut clusters: Vec<LodCluster> = Vec::new();
+    meshopt::clod_build(config, &clod_mesh, |group, out| {
+        let id = raw_groups.len() as u32;
+        let mut members = Vec::with_capacity(out.len());
+        for c in out {
+            let (verts, tris) = meshopt::clod_local_indices(c.indices);
+            debug_assert!(tris.len() / 3 <= params.max_triangles && verts.len() <= params.max_vertices);
+            let positions: Vec<[u32; 3]> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
+            let objects: Vec<u32> = tris
+                .chunks_exact(3)
+                .map(|t| {
+                    let tri = [verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]];
+                    if c.refined < 0 {
+                        originals.take(tri).unwrap_or_else(|| triangle_object(&vertex_object, tri))
+                    } else {
+                        triangle_object(&vertex_object, tri)
+                    }
+                })
+                .collect();
+            let b = c.bounds;
+            members.push(clusters.len() as u32);
+            refined.push(c.refined);
+            clusters.push(LodCluster {
+                positions,
+                indices: tris,
+                objects,
+                self_error: b.error,
+                self_sphere: frame.sphere(b.center, b.radius),
+                group: id,
+                ..LodCluster::default()
+            });
+        }
+        let s = group.simplified;
+        raw_groups.push(RawGroup {
+            error: if s.error >= f32::MAX { f32::INFINITY } else { s.error * frame.step as f32 },
+            sphere: frame.sphere(s.center, s.radius),
+            clusters: members,
+        });
+        id as i32
+    });
+
+    // Map onto the model, in group order (a cluster's source group precedes its own group).
+    let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
+    for raw in raw_groups {
+        let mut g = LodGroup { error: raw.error, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
+        for &ci in &g.clusters {
+            let c = &mut clusters[ci as usize];
+            match u32::try_from(refined[ci as usize]) {
+                Ok(r) if (r as usize) < groups.len() => {
+                    let src = &groups[r as usize];
+                    c.self_error = src.error;
+                    c.self_sphere = src.sphere;
+                    c.refined_from = vec![r];
+                    c.level = src.level.saturating_add(1);
+                }
+                _ => {
+                    c.self_error = 0.0;
+                    c.refined_from.clear();
+                    c.level = 0;
+                    for &p in &c.positions {
+                        grow_sphere(&mut c.self_sphere, frame.scene64(p), 0.0);
+                    }
+                }
+            }
+            g.error = g.error.max(c.self_error);
+            g.level = g.level.max(c.level);
+            grow_sphere(&mut g.sphere, sphere_center64(&c.self_sphere), c.self_sphere.radius as f64);
+        }
+        if g.error.is_finite() {
+            g.error = g.error.max(MIN_ERROR);
+        }
+        groups.push(g);
+    }
+    debug_assert!(originals.all_taken());
+    LodDag { clusters, groups }
+}
+
+/// Non-degenerate, in-range triangles and their objects.
+pub(crate) fn clean_triangles(mesh: &CellMesh) -> (Vec<u32>, Vec<u32>) {
+    let n = mesh.positions.len() as u32;
+    let mut indices = Vec::with_capacity(mesh.indices.len());
+    let mut objects = Vec::with_capacity(mesh.indices.len() / 3);
+    for (t, tri) in mesh.indices.chunks_exact(3).enumerate() {
+        let (a, b, c) = (tri[0], tri[1], tri[2]);
+        if a >= n || b >= n || c >= n || a == b || b == c || a == c {
+            continue;
+        }
+        indices.extend_from_slice(tri);
+        objects.push(mesh.objects.get(t).copied().unwrap_or(0));
+    }
+    (indices, objects)
+}
+
+/// A coordinate frame for meshopt: local grid coordinates (exact in f32) relative to the
+/// minimum of the positions, and the conversion to scene space.
+pub(crate) struct Frame {
+    pub base: [u32; 3],
+    pub step: f64,
+}
+
+impl Frame {
+    pub fn new(positions: &[[u32; 3]], grid: &Grid) -> Frame {
+        let mut b = GridBox::EMPTY;
+        for &p in positions {
+            b.grow(p);
+        }
+        let base = if b.is_empty() { [0; 3] } else { b.min };
+        Frame { base, step: grid.step }
+    }
+
+    pub fn local_positions(&self, positions: &[[u32; 3]]) -> Vec<[f32; 3]> {
+        positions.iter().map(|p| std::array::from_fn(|i| (p[i] - self.base[i]) as f32)).collect()
+    }
+
+    /// Scene-space position of a grid point, in f64.
+    pub fn scene64(&self, p: [u32; 3]) -> [f64; 3] {
+        std::array::from_fn(|i| p[i] as f64 * self.step)
+    }
+
+    /// A sphere in local units to scene space.
+    pub fn sphere(&self, c: [f32; 3], r: f32) -> Sphere {
+        Sphere {
+            center: std::array::from_fn(|i| ((c[i] as f64 + self.base[i] as f64) * self.step) as f32),
+            radius: round_up(r as f64 * self.step),
+        }
+    }
+}
+
+pub(crate) fn adapter(local: &[[f32; 3]]) -> VertexDataAdapter<'_> {
+    // The stride is 12 and the length a multiple of it: this cannot fail.
+    VertexDataAdapter::new(meshopt::typed_to_bytes(local), 12, 0).expect("f32x3 vertex data")
+}
+
+/// The smallest f32 ≥ `x` (x ≥ 0).
+pub(crate) fn round_up(x: f64) -> f32 {
+    let f = x as f32;
+    if (f as f64) < x {
+        f.next_up()
+    } else {
+        f
+    }
+}
+
+pub(crate) fn sphere_center64(s: &Sphere) -> [f64; 3] {
+    s.center.map(|v| v as f64)
+}
+
+/// Grows `s` (keeping its centre) to contain the sphere (`c`, `r`), in f64, rounding up.
+pub(crate) fn grow_sphere(s: &mut Sphere, c: [f64; 3], r: f64) {
+    let sc = sphere_center64(s);
+    let d = ((0..3).map(|i| (c[i] - sc[i]) * (c[i] - sc[i])).sum::<f64>()).sqrt() + r;
+    if d > s.radius as f64 {
+        s.radius = round_up(d);
+    }
+}
+
+/// Each vertex's object: the object of its first incident triangle (`u32::MAX` if unused).
+pub(crate) fn vertex_objects(n: usize, indices: &[u32], objects: &[u32]) -> Vec<u32> {
+    let mut table = vec![u32::MAX; n];
+    for (tri, &o) in indices.chunks_exact(3).zip(objects) {
+        for &v in tri {
+            if table[v as usize] == u32::MAX {
+                table[v as usize] = o;
+            }
+        }
+    }
+    table
+}
+
+/// The object of a simplified triangle: the one shared by two of its vertices, else the first's.
+pub(crate) fn triangle_object(vertex_object: &[u32], tri: [u32; 3]) -> u32 {
+    let [a, b, c] = tri.map(|v| vertex_object.get(v as usize).copied().unwrap_or(u32::MAX));
+    let o = if a == b || a == c {
+        a
+    } else if b == c {
+        b
+    } else {
+        a
+    };
+    if o == u32::MAX {
+        0
+    } else {
+        o
+    }
+}
+
+/// Marks vertices on edges that are not interior: an interior edge is used by exactly two
+/// triangles in opposite directions. Open, non-manifold and inconsistently wound edges look like
+/// borders to the simplifier, which may slide their vertices along one side; they are locked.
+pub(crate) fn open_boundary_vertices(n: usize, indices: &[u32]) -> Vec<bool> {
+    // (undirected key << 1) | direction bit
+    let mut edges: Vec<u64> = Vec::with_capacity(indices.len());
+    for t in indices.chunks_exact(3) {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            let key = (a.min(b) as u64) << 32 | a.max(b) as u64;
+            edges.push(key << 1 | (a > b) as u64);
+        }
+    }
+    edges.sort_unstable();
+    let mut open = vec![false; n];
+    let mut i = 0;
+    while i < edges.len() {
+        let key = edges[i] >> 1;
+        let mut j = i + 1;
+        while j < edges.len() && edges[j] >> 1 == key {
+            j += 1;
+        }
+        let interior = j - i == 2 && edges[i] & 1 == 0 && edges[i + 1] & 1 == 1;
+        if !interior {
+            // The vertex indices fit in 31 bits here (they index a Vec of positions < 2^31).
+            open[(key >> 32) as usize] = true;
+            open[(key & 0xffff_ffff) as usize] = true;
+        }
+        i = j;
+    }
+    open
+}
+
+/// Input triangles by their sorted vertex triple, to give level-0 clusters their exact objects.
+struct OriginalTriangles {
+    keys: Vec<([u32; 3], u32)>,
+    objects: Vec<u32>,
+    taken: Vec<bool>,
+}
+
+impl OriginalTriangles {
+    fn new(indices: &[u32], objects: &[u32]) -> OriginalTriangles {
+        let mut keys: Vec<([u32; 3], u32)> = indices
+            .chunks_exact(3)
+            .enumerate()
+            .map(|(t, tri)| (sorted3([tri[0], tri[1], tri[2]]), t as u32))
+            .collect();
+        keys.sort_unstable();
+        OriginalTriangles { taken: vec![false; keys.len()], keys, objects: objects.to_vec() }
+    }
+
+    /// The object of the first not-yet-taken input triangle with these vertices.
+    fn take(&mut self, tri: [u32; 3]) -> Option<u32> {
+        let k = sorted3(tri);
+        let mut i = self.keys.partition_point(|e| e.0 < k);
+        while i < self.keys.len() && self.keys[i].0 == k {
+            if !self.taken[i] {
+                self.taken[i] = true;
+                return self.objects.get(self.keys[i].1 as usize).copied();
+            }
+            i += 1;
+        }
+        None
+    }
+
+    fn all_taken(&self) -> bool {
+        self.taken.iter().all(|&t| t)
+    }
+}
+
+fn sorted3(mut t: [u32; 3]) -> [u32; 3] {
+    t.sort_unstable();
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cut::fixtures::{cell, grid_for, icosphere, mesh_triangles, plant, torus};
+    use crate::cut::*;
+
+    fn build(mesh: &CellMesh, grid: &Grid) -> LodDag {
+        build_cell_lod(mesh, grid, &LodParams::default())
+    }
+
+    fn grid_tris(dag: &LodDag, cut: &[u32]) -> Vec<GridTriangle> {
+        cut_triangles(dag, cut).into_iter().map(|(t, _)| t).collect()
+    }
+
+    /// τ values from 0 to above the largest finite error.
+    fn taus(dag: &LodDag) -> Vec<f32> {
+        let mut e: Vec<f32> = dag.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).collect();
+        e.sort_by(f32::total_cmp);
+        let mut t = vec![0.0];
+        for q in [0.1, 0.3, 0.5, 0.7, 0.9, 1.0] {
+            if let Some(&x) = e.get(((e.len() as f64 * q) as usize).min(e.len().saturating_sub(1))) {
+                t.push(x * 0.999);
+                t.push(x);
+            }
+        }
+        t.push(f32::MAX);
+        t
+    }
+
+    /// Every check of the DAG model on one cell: validity, τ = 0 is the input, complete cuts
+    /// without cracks at several τ.
+    fn check_cell(mesh: &CellMesh, grid: &Grid, dag: &LodDag) {
+        check_dag(dag, Some(grid)).unwrap();
+        let input = mesh_triangles(mesh);
+        let cut0 = extract_cut(dag, 0.0);
+        assert!(cut0.iter().all(|&c| dag.clusters[c as usize].level == 0));
+        assert_eq!(
+            triangle_multiset(&cut_triangles(dag, &cut0)),
+            triangle_multiset(&input),
+            "τ = 0 is the input"
+        );
+        let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
+        let boundary = open_edges(&input_tris);
+        for tau in taus(dag) {
+            check_complete(dag, tau).unwrap();
+            let cut = extract_cut(dag, tau);
+            check_no_cracks(&grid_tris(dag, &cut), &boundary).unwrap_or_else(|e| panic!("tau {tau}: {e}"));
+        }
+    }
+
+    #[test]
+    fn sphere_dag_is_valid_complete_and_crack_free() {
+        let soup = icosphere([0.0; 3], 10.0, 5, 7);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build(&mesh, &grid);
+        assert!(dag.clusters.iter().any(|c| c.level >= 4), "several levels");
+        let roots: Vec<_> = dag.groups.iter().filter(|g| g.error.is_infinite()).collect();
+        assert_eq!(roots.len(), 1, "a closed sphere simplifies to one root group");
+        assert_eq!(roots[0].clusters.len(), 1);
+        assert!(dag.clusters.iter().all(|c| c.objects.iter().all(|&o| o == 7)));
+        assert!(open_edges(&mesh_triangles(&mesh).into_iter().map(|t| t.0).collect::<Vec<_>>()).is_empty());
+        check_cell(&mesh, &grid, &dag);
+        let total: usize = dag.clusters.iter().map(|c| c.indices.len() / 3).sum();
+        let ratio = total as f64 / mesh.triangle_count() as f64;
+        assert!((1.5..2.5).contains(&ratio), "all levels / input = {ratio}");
+    }
+
+    #[test]
+    fn torus_dag_is_valid_complete_and_crack_free() {
+        let soup = torus(96, 48, 0..96, 1);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        check_cell(&mesh, &grid, &build(&mesh, &grid));
+    }
+
+    #[test]
+    fn open_border_is_locked_at_every_level() {
+        // Half a torus: its two seam rings are open and must survive in every cut.
+        let soup = torus(96, 48, 0..48, 1);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build(&mesh, &grid);
+        check_cell(&mesh, &grid, &dag);
+        let input: Vec<GridTriangle> = mesh_triangles(&mesh).into_iter().map(|t| t.0).collect();
+        let border = boundary_edges(&input);
+        assert_eq!(border.len(), 2 * 48);
+        for tau in taus(&dag) {
+            let cut = extract_cut(&dag, tau);
+            assert_eq!(boundary_edges(&grid_tris(&dag, &cut)), border, "tau {tau}");
+        }
+    }
+
+    #[test]
+    fn plant_cell_dag_is_valid_complete_and_crack_free() {
+        let soup = plant(20_000, 3);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        assert!(mesh.objects.iter().any(|&o| o != mesh.objects[0]), "several objects");
+        let dag = build(&mesh, &grid);
+        check_cell(&mesh, &grid, &dag);
+        let objects: std::collections::BTreeSet<u32> = mesh.objects.iter().copied().collect();
+        assert!(dag.clusters.iter().all(|c| c.objects.iter().all(|o| objects.contains(o))));
+    }
+
+    #[test]
+    fn build_is_deterministic() {
+        let soup = plant(20_000, 5);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        assert_eq!(build(&mesh, &grid), build(&mesh, &grid));
+    }
+
+    #[test]
+    fn empty_mesh_gives_empty_dag() {
+        let grid = Grid::for_bounds([0.0; 3], [1.0; 3]);
+        assert_eq!(build(&CellMesh::default(), &grid), LodDag::default());
+    }
+
+    #[test]
+    fn degenerate_and_out_of_range_triangles_are_dropped() {
+        let grid = Grid::for_bounds([0.0; 3], [1.0; 3]);
+        let mesh = CellMesh {
+            positions: vec![[0, 0, 0], [10, 0, 0], [0, 10, 0]],
+            indices: vec![0, 1, 2, 0, 0, 1, 0, 1, 99],
+            objects: vec![4, 5], // one short: the missing object reads as 0
+        };
+        let dag = build(&mesh, &grid);
+        check_dag(&dag, Some(&grid)).unwrap();
+        let tris = cut_triangles(&dag, &extract_cut(&dag, 0.0));
+        assert_eq!(tris.len(), 1);
+        assert_eq!(tris[0].1, 4);
+    }
+
+    #[test]
+    fn small_clusters_respect_params() {
+        let soup = icosphere([0.0; 3], 1.0, 4, 0);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build_cell_lod(&mesh, &grid, &LodParams { max_triangles: 64, max_vertices: 64 });
+        assert!(dag.clusters.iter().all(|c| c.indices.len() <= 64 * 3 && c.positions.len() <= 64));
+        check_cell(&mesh, &grid, &dag);
+    }
+
+    /// Throughput on a ~1.3M-triangle sphere; run with
+    /// `cargo test --release -p tw-build lod_throughput -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn lod_throughput() {
+        let soup = icosphere([0.0; 3], 10.0, 8, 0);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        drop(soup);
+        let t = std::time::Instant::now();
+        let dag = build(&mesh, &grid);
+        let s = t.elapsed().as_secs_f64();
+        let total: usize = dag.clusters.iter().map(|c| c.indices.len() / 3).sum();
+        println!(
+            "build_cell_lod: {} triangles in {s:.2} s = {:.2} M tri/s; {} clusters, {} groups; all levels / input = {:.3}",
+            mesh.triangle_count(),
+            mesh.triangle_count() as f64 / s / 1e6,
+            dag.clusters.len(),
+            dag.groups.len(),
+            total as f64 / mesh.triangle_count() as f64
+        );
+    }
+}
