@@ -9,3 +9,5 @@
 //! 6. write: the store file, atomically.
 
 pub mod types;
+pub mod error;
+pub mod ingest;
