@@ -24,6 +24,9 @@ pub enum BuildError {
     /// too far apart for the working format, too many objects).
     #[error("{0}")]
     Limit(String),
+    /// A build parameter is out of range.
+    #[error("invalid parameter: {0}")]
+    Param(String),
     /// A working file does not hold what this build wrote into it (changed on disk meanwhile).
     #[error("{}: working file is corrupt: {message}", path.display())]
     Corrupt { path: PathBuf, message: String },

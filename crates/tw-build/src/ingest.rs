@@ -249,9 +249,9 @@ impl IngestSink {
         };
         acc.triangles += 1;
         for v in &p {
-            for i in 0..3 {
-                acc.min[i] = acc.min[i].min(v[i]);
-                acc.max[i] = acc.max[i].max(v[i]);
+            for (i, &x) in v.iter().enumerate() {
+                acc.min[i] = acc.min[i].min(x);
+                acc.max[i] = acc.max[i].max(x);
             }
         }
         for i in 0..3 {
@@ -331,7 +331,10 @@ pub(crate) mod tests {
     use tw_io::{SourceSummary, TriangleSource};
 
     /// A source from a list of objects, each a name, a colour and its triangles.
-    pub(crate) struct ListSource(pub Vec<(String, Option<[u8; 4]>, Vec<[[f64; 3]; 3]>)>);
+    /// An object of a [`ListSource`]: name, colour, triangles.
+    pub(crate) type ListObject = (String, Option<[u8; 4]>, Vec<[[f64; 3]; 3]>);
+
+    pub(crate) struct ListSource(pub Vec<ListObject>);
 
     impl TriangleSource for ListSource {
         fn name(&self) -> String {
@@ -352,16 +355,13 @@ pub(crate) mod tests {
         }
     }
 
-    pub(crate) fn ingest_list(
-        dir: &Path,
-        objects: Vec<(String, Option<[u8; 4]>, Vec<[[f64; 3]; 3]>)>,
-    ) -> Ingested {
+    pub(crate) fn ingest_list(dir: &Path, objects: Vec<ListObject>) -> Ingested {
         ingest(Scene::from_sources(vec![Box::new(ListSource(objects))]), dir, &mut |_| {}).unwrap()
     }
 
     pub(crate) fn ingest_plant(dir: &Path, triangles: u64) -> Ingested {
-        let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles, seed: 7 })
-            .unwrap();
+        let src =
+            tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles, seed: 7 }).unwrap();
         ingest(Scene::from_sources(vec![Box::new(src)]), dir, &mut |_| {}).unwrap()
     }
 
@@ -457,7 +457,10 @@ pub(crate) mod tests {
         let src = ListSource(vec![(
             "huge".into(),
             None,
-            vec![[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], [[1e300, 0.0, 0.0], [0.0; 3], [0.0, 1.0, 1.0]]],
+            vec![
+                [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                [[1e300, 0.0, 0.0], [0.0; 3], [0.0, 1.0, 1.0]],
+            ],
         )]);
         let r = ingest(Scene::from_sources(vec![Box::new(src)]), dir.path(), &mut |_| {});
         assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");

@@ -8,6 +8,8 @@
 //! 5. pages: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically.
 
-pub mod types;
 pub mod error;
+pub mod hierarchy;
 pub mod ingest;
+pub mod redefine;
+pub mod types;
