@@ -8,6 +8,7 @@
 //! 5. pages: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically.
 
+pub mod cells;
 pub mod error;
 pub mod hierarchy;
 pub mod ingest;
