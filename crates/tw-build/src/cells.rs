@@ -546,4 +546,71 @@ mod tests {
         std::fs::write(path, &bytes[..100]).unwrap();
         assert!(matches!(files.read_bucket(0), Err(BuildError::Corrupt { .. })));
     }
+
+    /// Phase timings on a generated plant: `TW_MEASURE_TRIANGLES=10000000 cargo test --release
+    /// -p tw-build measure_phases -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn measure_phases() {
+        use std::time::Instant;
+        let n: u64 =
+            std::env::var("TW_MEASURE_TRIANGLES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000_000);
+        let budget: u64 =
+            std::env::var("TW_MEASURE_BUDGET").ok().and_then(|v| v.parse().ok()).unwrap_or(256 << 20);
+        let dir = tempfile::tempdir().unwrap();
+        let mb = |b: Option<u64>| b.unwrap_or(0) as f64 / (1 << 20) as f64;
+        let rate = |s: f64| n as f64 / s / 1e6;
+        let t = Instant::now();
+        let ing = ingest_plant(dir.path(), n);
+        let t_ingest = t.elapsed().as_secs_f64();
+        println!(
+            "ingest        {t_ingest:7.2} s  {:6.2} M tri/s  peak RSS {:7.1} MB",
+            rate(t_ingest),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        let t_redefine = t.elapsed().as_secs_f64();
+        println!(
+            "redefine      {t_redefine:7.2} s  {:6.2} M tri/s  peak RSS {:7.1} MB",
+            rate(t_redefine),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let h = r.order_by_hierarchy();
+        let t_h = t.elapsed().as_secs_f64();
+        println!("hierarchy     {t_h:7.3} s  {} nodes, depth {}", h.nodes.len(), h.depth());
+        let t = Instant::now();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), budget).unwrap();
+        let t_dist = t.elapsed().as_secs_f64();
+        println!(
+            "distribute    {t_dist:7.2} s  {:6.2} M tri/s  {} buckets, peak RSS {:7.1} MB",
+            rate(t_dist),
+            files.bucket_count(),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let (mut tris, mut verts) = (0u64, 0u64);
+        files
+            .for_each_cell(|_, m| {
+                tris += m.triangle_count() as u64;
+                verts += m.positions.len() as u64;
+                Ok(())
+            })
+            .unwrap();
+        let t_read = t.elapsed().as_secs_f64();
+        println!(
+            "read cells    {t_read:7.2} s  {:6.2} M tri/s  {verts} vertices, peak RSS {:7.1} MB",
+            rate(t_read),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        assert_eq!(tris, n);
+        let total = t_ingest + t_redefine + t_h + t_dist + t_read;
+        println!("total         {total:7.2} s  {:6.2} M tri/s", rate(total));
+        println!("{:?}", r.report);
+        let mut sizes: Vec<u64> = r.cells.iter().map(|c| c.triangles).collect();
+        sizes.sort_unstable();
+        let q = |f: f64| sizes[((sizes.len() - 1) as f64 * f) as usize];
+        println!("cell triangles: p10 {} p50 {} p90 {} max {}", q(0.1), q(0.5), q(0.9), q(1.0));
+    }
 }

@@ -52,6 +52,10 @@
 //!   number of *triangles* in `C`: with `K` = 1500, a cluster under 1 500 triangles accepts any
 //!   neighbour within `D`, one of 15 000 only neighbours within `D/10` (plus `I(C)`); this is what
 //!   makes clusters stop growing at a useful size whatever the object granularity of the input.
+//! - Felzenszwalb–Huttenlocher's post-pass is added: a cluster under `min_cell_triangles` joins
+//!   its nearest neighbour (edges again in ascending order) regardless of `K`, within
+//!   `max_cell_triangles` and twice `V`. Without it, `V` strands small objects next to full
+//!   clusters (a bolt beside a full room): a tenth of the cells had under 100 triangles.
 //! - Box volumes clamp each extent to at least 10⁻³ of the scene's largest extent, so flat boxes
 //!   still have a volume and `V` still limits them.
 //! - Partition-II splits at the centre of mass; when that leaves less than a quarter of the
@@ -61,13 +65,15 @@
 //! # Cell size
 //!
 //! The renderer wants cells of roughly 1k–64k triangles (128-triangle clusters need bulk for good
-//! LOD; larger cells cull worse). Partition-I cuts big objects into pieces of ≥ `t1` = 1 000
-//! triangles (it stops at `t1`) that are no longer than `s1`; clustering glues pieces and small
-//! objects until `K/|C|` or `V` stops it, and never beyond `max_cell_triangles`; partition-II
-//! cuts clusters above `t2` = 10 000 triangles that are not compact (aspect > 1.25) or are
-//! larger than `s2`, and every cluster above `max_cell_triangles` (default 65 536). Cells under
-//! 1k triangles remain only where objects are isolated (nothing within `D`). Because plans come
-//! from samples, a cell can exceed `max_cell_triangles` by the sampling error; the report gives
+//! LOD; larger cells cull worse). Partition-I cuts big uneven objects into pieces no longer than
+//! `s1` (it stops below `t1`, so a piece has at least about `t1`/2 triangles); clustering glues
+//! pieces and small objects until `K/|C|` or `V` stops it, never beyond `max_cell_triangles`,
+//! and its post-pass folds clusters under `min_cell_triangles` (1 024) into a neighbour;
+//! partition-II cuts clusters above `t2` = 10 000 triangles that are not compact (aspect > 1.25)
+//! or are larger than `s2`, and every cluster above `max_cell_triangles` (default 65 536), into
+//! halves of at least a quarter each. Cells under 1k triangles remain only where objects are
+//! isolated (nothing within `D`) or boxed in by `2 V`. Because plans come from samples, a cell
+//! can exceed `max_cell_triangles` by the sampling error; the report gives the smallest and
 //! the largest cell.
 
 use rayon::prelude::*;
@@ -101,6 +107,10 @@ pub struct RedefineParams {
     pub r2: f64,
     /// No cluster grows beyond this and partition-II splits every cell above it.
     pub max_cell_triangles: u64,
+    /// Clustering's post-pass (Felzenszwalb–Huttenlocher's minimum component size): a cluster
+    /// under this many triangles joins its nearest neighbour within `D` regardless of `K`, as
+    /// long as the result stays within `max_cell_triangles` and twice `V`. 0 disables it.
+    pub min_cell_triangles: u64,
     /// Clustering: each piece is joined to at most this many nearest pieces within `D`.
     pub neighbours: usize,
     /// Centroid samples kept in memory for planning splits (16 bytes each), at most, plus
@@ -131,6 +141,7 @@ impl RedefineParams {
             s2: 0.2,
             r2: 1.25,
             max_cell_triangles: 1 << 16,
+            min_cell_triangles: 1024,
             neighbours: 10,
             max_samples: 2_000_000,
             min_samples_per_object: 64,
@@ -786,27 +797,45 @@ fn cluster_pieces(
         }
         x
     }
-    for &(d2, a, b) in &edges {
-        let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
-        if ra == rb {
-            continue;
+    // Main pass (FH), then FH's post-pass: components under `min_cell_triangles` join their
+    // nearest neighbour whatever K says, within `max_cell_triangles` and 2 V.
+    for small_pass in [false, true] {
+        if small_pass && p.min_cell_triangles == 0 {
+            break;
         }
-        let (ua, ub) = (ra as usize, rb as usize);
-        let w = if scale.d > 0.0 { (d2 as f64).sqrt() * scale.step / scale.d } else { 0.0 };
-        let ta = internal[ua] + p.k / tris[ua] as f64;
-        let tb = internal[ub] + p.k / tris[ub] as f64;
-        if w > ta.min(tb) || tris[ua] + tris[ub] > p.max_cell_triangles {
-            continue;
+        for &(d2, a, b) in &edges {
+            let (ra, rb) = (find(&mut parent, a), find(&mut parent, b));
+            if ra == rb {
+                continue;
+            }
+            let (ua, ub) = (ra as usize, rb as usize);
+            if tris[ua] + tris[ub] > p.max_cell_triangles {
+                continue;
+            }
+            let w = if scale.d > 0.0 { (d2 as f64).sqrt() * scale.step / scale.d } else { 0.0 };
+            let volume_limit = if small_pass {
+                if tris[ua] >= p.min_cell_triangles && tris[ub] >= p.min_cell_triangles {
+                    continue;
+                }
+                2.0 * scale.v
+            } else {
+                let ta = internal[ua] + p.k / tris[ua] as f64;
+                let tb = internal[ub] + p.k / tris[ub] as f64;
+                if w > ta.min(tb) {
+                    continue;
+                }
+                scale.v
+            };
+            let merged = bounds[ua].union(&bounds[ub]);
+            if scale.volume(&merged) > volume_limit {
+                continue;
+            }
+            let (root, child) = if (tris[ub], ua) > (tris[ua], ub) { (ub, ua) } else { (ua, ub) };
+            parent[child] = root as u32;
+            tris[root] = tris[ua] + tris[ub];
+            internal[root] = internal[ua].max(internal[ub]).max(w);
+            bounds[root] = merged;
         }
-        let merged = bounds[ua].union(&bounds[ub]);
-        if scale.volume(&merged) > scale.v {
-            continue;
-        }
-        let (root, child) = if (tris[ub], ua) > (tris[ua], ub) { (ub, ua) } else { (ua, ub) };
-        parent[child] = root as u32;
-        tris[root] = tris[ua] + tris[ub];
-        internal[root] = internal[ua].max(internal[ub]).max(w);
-        bounds[root] = merged;
     }
 
     // Number clusters in order of their first piece.
@@ -1215,11 +1244,22 @@ mod tests {
         let unlimited = redefine(&ing, &RedefineParams { v: 1.0, ..Default::default() }).unwrap();
         assert_eq!(unlimited.report.clusters, 2, "{:?}", unlimited.report);
         // ... and with V = 1.5e-4 (9.6 m³) at most 9 boxes of 1 m³.
-        let limited = redefine(&ing, &RedefineParams { v: 1.5e-4, ..Default::default() }).unwrap();
+        let params = RedefineParams { v: 1.5e-4, min_cell_triangles: 0, ..Default::default() };
+        let limited = redefine(&ing, &params).unwrap();
         assert!(limited.report.clusters >= 5, "{:?}", limited.report);
-        let scale = Scale::new(&ing, &RedefineParams { v: 1.5e-4, ..Default::default() });
+        let scale = Scale::new(&ing, &params);
         for c in &limited.cells {
             assert!(scale.volume(&c.bounds) <= scale.v * 1.01, "cell volume {}", scale.volume(&c.bounds));
+        }
+        // The small-cluster post-pass may go up to 2 V.
+        let relaxed = redefine(&ing, &RedefineParams { min_cell_triangles: 1000, ..params }).unwrap();
+        assert!(relaxed.report.clusters < limited.report.clusters, "{:?}", relaxed.report);
+        for c in &relaxed.cells {
+            assert!(
+                scale.volume(&c.bounds) <= 2.0 * scale.v * 1.01,
+                "cell volume {}",
+                scale.volume(&c.bounds)
+            );
         }
     }
 
