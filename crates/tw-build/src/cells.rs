@@ -56,12 +56,13 @@ struct Rec {
 }
 
 impl Rec {
-    fn encode(&self, out: &mut Vec<u8>) {
-        for v in self.q.iter().flatten() {
-            out.extend_from_slice(&v.to_le_bytes());
+    fn encode(&self) -> [u8; RECORD_BYTES] {
+        let mut out = [0u8; RECORD_BYTES];
+        let words = self.q.iter().flatten().chain([&self.object, &self.cell]);
+        for (o, v) in out.chunks_exact_mut(4).zip(words) {
+            o.copy_from_slice(&v.to_le_bytes());
         }
-        out.extend_from_slice(&self.object.to_le_bytes());
-        out.extend_from_slice(&self.cell.to_le_bytes());
+        out
     }
 
     fn decode(b: &[u8]) -> Rec {
@@ -255,7 +256,6 @@ fn write_group(
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
     let mut recs: Vec<Option<Rec>> = Vec::new();
-    let mut bytes = Vec::with_capacity(RECORD_BYTES);
     ing.work.scan(|_, tris| {
         recs.clear();
         recs.resize(tris.len(), None);
@@ -271,9 +271,7 @@ fn write_group(
         });
         for r in recs.iter().flatten() {
             let b = bucket_of[r.cell as usize] as usize - first;
-            bytes.clear();
-            r.encode(&mut bytes);
-            writers[b].write_all(&bytes).map_err(|e| BuildError::io(&paths[b], e))?;
+            writers[b].write_all(&r.encode()).map_err(|e| BuildError::io(&paths[b], e))?;
         }
         Ok(())
     })?;
