@@ -1,14 +1,19 @@
 //! terawalk build: turns triangle inputs into a paged, out-of-core store (see docs/FORMAT.md).
 //!
 //! Pipeline (GigaWalk §4, Yoon 2003 §4, Manocha §2), one module per phase:
-//! 1. [`ingest`]: stream inputs into on-disk working files, compute the scene [`grid::Grid`].
+//! 1. [`ingest`]: stream inputs into on-disk working files, compute the scene [`types::Grid`].
 //! 2. [`redefine`]: GigaWalk's partition → MST clustering → partition of objects into cells.
 //! 3. [`hierarchy`]: AABB tree over the cells.
 //! 4. [`lod`] and [`hlod`]: cluster DAG inside each cell, HLOD groups above the cells.
 //! 5. pages: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically.
 
+pub mod cells;
 pub mod cut;
+pub mod error;
+pub mod hierarchy;
 pub mod hlod;
+pub mod ingest;
 pub mod lod;
+pub mod redefine;
 pub mod types;

@@ -1,0 +1,614 @@
+//! Distributing the triangles into their cells, out of core (terawalk issue #3, phases 2–3: the
+//! working files that the LOD phase reads; the bucketing follows the usual external
+//! distribution sort).
+//!
+//! 1. [`CellFiles::distribute`]: one streaming pass over the working file gives every triangle
+//!    its cell ([`Redefined::cell_of`]) and its grid position ([`WorkFile::quantize`]), and
+//!    appends it to a *bucket* file. A bucket is a contiguous range of cells (in cell order, i.e.
+//!    hierarchy leaf order once [`Redefined::order_by_hierarchy`] ran) sized so that reading it
+//!    fits the memory budget. At most [`MAX_OPEN_BUCKETS`] bucket files are written per pass;
+//!    a tiny budget over a huge input takes several passes rather than more open files.
+//! 2. [`CellFiles::read_bucket`]: reads one bucket, groups its triangles by cell (a counting
+//!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
+//!    [`CellMesh`], its vertices deduplicated by exact grid position (sort based, first-occurrence
+//!    order: deterministic, no hash maps). `mesh` takes `&self`, so cells of a bucket can be built
+//!    in parallel. [`CellFiles::for_each_cell`] hands out every cell in cell order.
+//!
+//! Bucket record, 44 bytes little endian: nine `u32` grid coordinates, the object id, the cell.
+//!
+//! Memory: reading a bucket holds its records and a sort index, [`BUCKET_BYTES_PER_TRIANGLE`]
+//! bytes per triangle, plus the mesh being built (at most [`CELL_BYTES_PER_TRIANGLE`] per
+//! triangle of the cell). Buckets are sized so that both together stay within the budget; a
+//! single cell that cannot fit is an error naming the cell (cells are capped at
+//! `RedefineParams::max_cell_triangles`, 65 536 triangles, about 9.4 MB, by default).
+//! Triangles that quantization makes degenerate are kept: every input triangle is in exactly one
+//! cell.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::ops::Range;
+use std::path::Path;
+
+use rayon::prelude::*;
+use tempfile::TempPath;
+
+use crate::error::BuildError;
+use crate::ingest::Ingested;
+use crate::redefine::Redefined;
+use crate::types::{CellMesh, GRID_STEPS};
+
+/// Bytes per triangle in a bucket file.
+pub const RECORD_BYTES: usize = 44;
+/// Memory per triangle of a bucket being read: the decoded record and its sort index.
+pub const BUCKET_BYTES_PER_TRIANGLE: u64 = RECORD_BYTES as u64 + 4;
+/// Memory per triangle of the cell whose mesh is being built (sort keys, positions, indices,
+/// object ids, the output).
+pub const CELL_BYTES_PER_TRIANGLE: u64 = 3 * 16 + 3 * 8 + 3 * 12 + 12 + 4;
+/// Bucket files written at once.
+pub const MAX_OPEN_BUCKETS: usize = 256;
+
+/// One triangle of a bucket.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct Rec {
+    q: [[u32; 3]; 3],
+    object: u32,
+    cell: u32,
+}
+
+impl Rec {
+    fn encode(&self) -> [u8; RECORD_BYTES] {
+        let mut out = [0u8; RECORD_BYTES];
+        let words = self.q.iter().flatten().chain([&self.object, &self.cell]);
+        for (o, v) in out.chunks_exact_mut(4).zip(words) {
+            o.copy_from_slice(&v.to_le_bytes());
+        }
+        out
+    }
+
+    fn decode(b: &[u8]) -> Rec {
+        let u = |k: usize| u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
+        Rec { q: [[u(0), u(1), u(2)], [u(3), u(4), u(5)], [u(6), u(7), u(8)]], object: u(9), cell: u(10) }
+    }
+}
+
+struct BucketFile {
+    path: TempPath,
+    cells: Range<u32>,
+    triangles: u64,
+}
+
+/// The triangles of every cell, in bucket files on disk (deleted when dropped).
+pub struct CellFiles {
+    buckets: Vec<BucketFile>,
+    /// Triangles per cell.
+    cell_triangles: Vec<u64>,
+    objects: u32,
+    memory_budget: u64,
+}
+
+impl CellFiles {
+    /// Writes every triangle of `ing` to the bucket of its cell. `memory_budget` (bytes) bounds
+    /// what reading one bucket and building one of its cells takes (see the module docs).
+    pub fn distribute(
+        ing: &Ingested,
+        cells: &Redefined,
+        work_dir: &Path,
+        memory_budget: u64,
+    ) -> Result<CellFiles, BuildError> {
+        let cell_triangles: Vec<u64> = cells.cells.iter().map(|c| c.triangles).collect();
+        let largest = cell_triangles.iter().copied().max().unwrap_or(0);
+        let per_cell = largest * CELL_BYTES_PER_TRIANGLE;
+        let per_bucket = |t: u64| t * BUCKET_BYTES_PER_TRIANGLE;
+        if per_bucket(largest) + per_cell > memory_budget {
+            let c = cell_triangles.iter().position(|&t| t == largest).unwrap_or(0);
+            return Err(BuildError::Limit(format!(
+                "cell {c} has {largest} triangles and needs {} MB to read, more than the memory budget \
+                 of {} MB: raise the budget or lower the largest cell size",
+                (per_bucket(largest) + per_cell).div_ceil(1 << 20),
+                memory_budget >> 20
+            )));
+        }
+        let limit = (memory_budget - per_cell) / BUCKET_BYTES_PER_TRIANGLE;
+        // Greedy: consecutive cells while the bucket fits.
+        let mut ranges: Vec<(Range<u32>, u64)> = Vec::new();
+        let mut start = 0u32;
+        let mut sum = 0u64;
+        for (c, &t) in cell_triangles.iter().enumerate() {
+            if sum + t > limit && sum > 0 {
+                ranges.push((start..c as u32, sum));
+                start = c as u32;
+                sum = 0;
+            }
+            sum += t;
+        }
+        if sum > 0 || ranges.is_empty() {
+            ranges.push((start..cell_triangles.len() as u32, sum));
+        }
+        let mut bucket_of = vec![0u32; cell_triangles.len()];
+        for (b, (r, _)) in ranges.iter().enumerate() {
+            for c in r.clone() {
+                bucket_of[c as usize] = b as u32;
+            }
+        }
+        let mut buckets = Vec::with_capacity(ranges.len());
+        for group in ranges.chunks(MAX_OPEN_BUCKETS) {
+            let first = buckets.len();
+            buckets.extend(write_group(ing, cells, work_dir, memory_budget, &bucket_of, first, group)?);
+        }
+        tracing::debug!(buckets = buckets.len(), cells = cell_triangles.len(), "distributed triangles");
+        Ok(CellFiles { buckets, cell_triangles, objects: ing.objects.len() as u32, memory_budget })
+    }
+
+    pub fn bucket_count(&self) -> usize {
+        self.buckets.len()
+    }
+
+    /// The cells of bucket `b`.
+    pub fn bucket_cells(&self, b: usize) -> Range<u32> {
+        self.buckets[b].cells.clone()
+    }
+
+    /// Triangles in bucket `b`.
+    pub fn bucket_triangles(&self, b: usize) -> u64 {
+        self.buckets[b].triangles
+    }
+
+    pub fn cell_count(&self) -> usize {
+        self.cell_triangles.len()
+    }
+
+    pub fn memory_budget(&self) -> u64 {
+        self.memory_budget
+    }
+
+    /// Reads bucket `b` and groups its triangles by cell.
+    pub fn read_bucket(&self, b: usize) -> Result<Bucket, BuildError> {
+        let bf = &self.buckets[b];
+        let path: &Path = &bf.path;
+        let corrupt = |message: String| BuildError::Corrupt { path: path.to_path_buf(), message };
+        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+        let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+        if len != bf.triangles * RECORD_BYTES as u64 {
+            return Err(corrupt(format!("{len} bytes, expected {} triangles", bf.triangles)));
+        }
+        let mut reader = BufReader::with_capacity(1 << 20, file);
+        let n = bf.triangles as usize;
+        let mut recs = Vec::with_capacity(n);
+        let mut buf = vec![0u8; 4096 * RECORD_BYTES];
+        while recs.len() < n {
+            let k = (n - recs.len()).min(4096);
+            let bytes = &mut buf[..k * RECORD_BYTES];
+            reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
+            recs.extend(bytes.chunks_exact(RECORD_BYTES).map(Rec::decode));
+        }
+        // Counting sort by cell: stable, so input order within each cell.
+        let cells = bf.cells.clone();
+        let mut start = vec![0usize; cells.len() + 1];
+        for (i, r) in recs.iter().enumerate() {
+            if !cells.contains(&r.cell) {
+                return Err(corrupt(format!("triangle {i} has cell {} outside {cells:?}", r.cell)));
+            }
+            if r.object >= self.objects || r.q.iter().flatten().any(|&v| v > GRID_STEPS) {
+                return Err(corrupt(format!("triangle {i} has a bad object id or grid position")));
+            }
+            start[(r.cell - cells.start) as usize + 1] += 1;
+        }
+        for k in 0..cells.len() {
+            start[k + 1] += start[k];
+            let c = cells.start as usize + k;
+            if (start[k + 1] - start[k]) as u64 != self.cell_triangles[c] {
+                return Err(corrupt(format!(
+                    "cell {c} has {} triangles, expected {}",
+                    start[k + 1] - start[k],
+                    self.cell_triangles[c]
+                )));
+            }
+        }
+        let mut fill = start.clone();
+        let mut order = vec![0u32; n];
+        for (i, r) in recs.iter().enumerate() {
+            let k = (r.cell - cells.start) as usize;
+            order[fill[k]] = i as u32;
+            fill[k] += 1;
+        }
+        Ok(Bucket { cells, recs, order, start })
+    }
+
+    /// Calls `f` with every cell's mesh, in cell order. Memory: one bucket and one cell.
+    pub fn for_each_cell(
+        &self,
+        mut f: impl FnMut(u32, CellMesh) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        for b in 0..self.buckets.len() {
+            let bucket = self.read_bucket(b)?;
+            for c in bucket.cells() {
+                f(c, bucket.mesh(c))?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Writes the buckets of one group (at most [`MAX_OPEN_BUCKETS`]) in one pass.
+fn write_group(
+    ing: &Ingested,
+    cells: &Redefined,
+    work_dir: &Path,
+    memory_budget: u64,
+    bucket_of: &[u32],
+    first: usize,
+    group: &[(Range<u32>, u64)],
+) -> Result<Vec<BucketFile>, BuildError> {
+    // Write buffers share a quarter of the budget, 64 KiB to 1 MiB each.
+    let buf_size = (memory_budget / 4 / group.len() as u64).clamp(64 << 10, 1 << 20) as usize;
+    let mut writers = Vec::with_capacity(group.len());
+    let mut paths = Vec::with_capacity(group.len());
+    for _ in group {
+        let f = tempfile::Builder::new()
+            .prefix("tw-bucket-")
+            .suffix(".work")
+            .tempfile_in(work_dir)
+            .map_err(|e| BuildError::io(work_dir, e))?;
+        let (file, path) = f.into_parts();
+        writers.push(BufWriter::with_capacity(buf_size, file));
+        paths.push(path);
+    }
+    let end = first + group.len();
+    let (work, grid) = (&ing.work, &ing.grid);
+    let mut recs: Vec<Option<Rec>> = Vec::new();
+    ing.work.scan(|_, tris| {
+        recs.clear();
+        recs.resize(tris.len(), None);
+        recs.par_chunks_mut(4096).zip(tris.par_chunks(4096)).for_each(|(out, tris)| {
+            for (o, t) in out.iter_mut().zip(tris) {
+                let cell = cells.cell_of(t);
+                let b = bucket_of.get(cell as usize).map_or(usize::MAX, |&b| b as usize);
+                if (first..end).contains(&b) {
+                    let q = t.p.map(|v| work.quantize(grid, v));
+                    *o = Some(Rec { q, object: t.object, cell });
+                }
+            }
+        });
+        for r in recs.iter().flatten() {
+            let b = bucket_of[r.cell as usize] as usize - first;
+            writers[b].write_all(&r.encode()).map_err(|e| BuildError::io(&paths[b], e))?;
+        }
+        Ok(())
+    })?;
+    let mut out = Vec::with_capacity(group.len());
+    for ((w, path), (cells, triangles)) in writers.into_iter().zip(paths).zip(group) {
+        w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
+        out.push(BucketFile { path, cells: cells.clone(), triangles: *triangles });
+    }
+    Ok(out)
+}
+
+/// One bucket in memory, its triangles grouped by cell.
+pub struct Bucket {
+    cells: Range<u32>,
+    recs: Vec<Rec>,
+    /// Record indices in cell order; cell `cells.start + k` is `order[start[k]..start[k + 1]]`.
+    order: Vec<u32>,
+    start: Vec<usize>,
+}
+
+impl Bucket {
+    /// The cells of the bucket.
+    pub fn cells(&self) -> Range<u32> {
+        self.cells.clone()
+    }
+
+    /// Triangles of `cell` (a cell of this bucket).
+    pub fn triangles(&self, cell: u32) -> usize {
+        let k = (cell - self.cells.start) as usize;
+        self.start[k + 1] - self.start[k]
+    }
+
+    /// The indexed mesh of `cell` (a cell of this bucket): triangles in input order, vertices
+    /// deduplicated by grid position, numbered in order of first use.
+    pub fn mesh(&self, cell: u32) -> CellMesh {
+        assert!(self.cells.contains(&cell), "cell {cell} is not in bucket {:?}", self.cells);
+        let k = (cell - self.cells.start) as usize;
+        let tris = &self.order[self.start[k]..self.start[k + 1]];
+        // (position, corner) sorted: equal positions become adjacent, first corner first.
+        let mut corners: Vec<([u32; 3], u32)> = Vec::with_capacity(3 * tris.len());
+        for (t, &i) in tris.iter().enumerate() {
+            let r = &self.recs[i as usize];
+            for (v, q) in r.q.iter().enumerate() {
+                corners.push((*q, (3 * t + v) as u32));
+            }
+        }
+        corners.sort_unstable();
+        // Each distinct position's first corner, in corner order, gives the vertex order.
+        let mut group_of_corner = vec![0u32; corners.len()];
+        let mut firsts: Vec<(u32, u32)> = Vec::new();
+        for (i, &(q, corner)) in corners.iter().enumerate() {
+            if i == 0 || corners[i - 1].0 != q {
+                firsts.push((corner, firsts.len() as u32));
+            }
+            group_of_corner[corner as usize] = firsts.len() as u32 - 1;
+        }
+        firsts.sort_unstable();
+        let mut vertex_of_group = vec![0u32; firsts.len()];
+        let mut positions = Vec::with_capacity(firsts.len());
+        for (v, &(corner, group)) in firsts.iter().enumerate() {
+            vertex_of_group[group as usize] = v as u32;
+            let (t, c) = (corner as usize / 3, corner as usize % 3);
+            positions.push(self.recs[tris[t] as usize].q[c]);
+        }
+        let indices = group_of_corner.iter().map(|&g| vertex_of_group[g as usize]).collect();
+        let objects = tris.iter().map(|&i| self.recs[i as usize].object).collect();
+        CellMesh { positions, indices, objects }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ingest::tests::{ingest_list, ingest_plant};
+    use crate::redefine::{redefine, RedefineParams};
+    use crate::types::Grid;
+
+    /// Every triangle as three grid points (from the mesh), sorted: a multiset.
+    fn mesh_triangles(files: &CellFiles) -> Vec<([[u32; 3]; 3], u32)> {
+        let mut v = Vec::new();
+        let mut next = 0;
+        files
+            .for_each_cell(|c, m| {
+                assert_eq!(c, next, "cells in order");
+                next += 1;
+                assert_eq!(m.objects.len(), m.triangle_count());
+                for (t, &o) in m.indices.chunks_exact(3).zip(&m.objects) {
+                    v.push(([t[0], t[1], t[2]].map(|i| m.positions[i as usize]), o));
+                }
+                Ok(())
+            })
+            .unwrap();
+        v.sort_unstable();
+        v
+    }
+
+    fn direct_triangles(ing: &Ingested) -> Vec<([[u32; 3]; 3], u32)> {
+        let mut v = Vec::new();
+        ing.work
+            .scan(|_, tris| {
+                v.extend(tris.iter().map(|t| (t.p.map(|p| ing.work.quantize(&ing.grid, p)), t.object)));
+                Ok(())
+            })
+            .unwrap();
+        v.sort_unstable();
+        v
+    }
+
+    #[test]
+    fn every_triangle_lands_in_exactly_one_cell() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 200_000);
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        r.order_by_hierarchy();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 4 << 20).unwrap();
+        assert!(files.bucket_count() > 1);
+        let got = mesh_triangles(&files);
+        assert_eq!(got.len(), 200_000);
+        assert_eq!(got, direct_triangles(&ing));
+    }
+
+    #[test]
+    fn meshes_share_vertices_and_match_cell_info() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 50_000);
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        r.order_by_hierarchy();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 64 << 20).unwrap();
+        files
+            .for_each_cell(|c, m| {
+                let info = r.cells[c as usize];
+                assert_eq!(m.triangle_count() as u64, info.triangles);
+                let mut seen = m.positions.clone();
+                seen.sort_unstable();
+                seen.dedup();
+                assert_eq!(seen.len(), m.positions.len(), "cell {c}: duplicate vertices");
+                // Generated meshes are indexed: far fewer vertices than corners.
+                assert!(m.positions.len() < m.indices.len());
+                // First-use order: the first index is 0, and each new index is the next one.
+                let mut next = 0;
+                for &i in &m.indices {
+                    assert!(i <= next);
+                    next = next.max(i + 1);
+                }
+                for p in &m.positions {
+                    let b = info.bounds;
+                    assert!((0..3).all(|k| b.min[k] <= p[k] && p[k] <= b.max[k]));
+                }
+                Ok(())
+            })
+            .unwrap();
+    }
+
+    #[test]
+    fn distribution_is_deterministic() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 60_000);
+        let run = || {
+            let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+            r.order_by_hierarchy();
+            let files = CellFiles::distribute(&ing, &r, dir.path(), 1 << 20).unwrap();
+            let mut all = Vec::new();
+            files
+                .for_each_cell(|c, m| {
+                    all.push((c, m));
+                    Ok(())
+                })
+                .unwrap();
+            all
+        };
+        let a = run();
+        assert_eq!(a, run());
+        // Reading the same files twice gives the same meshes too.
+    }
+
+    #[test]
+    fn buckets_honour_the_memory_budget() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 100_000);
+        let params = RedefineParams { max_cell_triangles: 4096, ..Default::default() };
+        let mut r = redefine(&ing, &params).unwrap();
+        r.order_by_hierarchy();
+        let largest = r.cells.iter().map(|c| c.triangles).max().unwrap();
+        for budget in [1u64 << 20, 3 << 20] {
+            let files = CellFiles::distribute(&ing, &r, dir.path(), budget).unwrap();
+            let mut covered = 0;
+            for b in 0..files.bucket_count() {
+                let t = files.bucket_triangles(b);
+                assert!(t * BUCKET_BYTES_PER_TRIANGLE + largest * CELL_BYTES_PER_TRIANGLE <= budget);
+                let cells = files.bucket_cells(b);
+                assert_eq!(cells.start, covered, "buckets are consecutive cell ranges");
+                covered = cells.end;
+                let sum: u64 = cells.map(|c| r.cells[c as usize].triangles).sum();
+                assert_eq!(sum, t);
+            }
+            assert_eq!(covered as usize, r.cells.len());
+            assert!(files.bucket_count() as u64 >= 100_000 * BUCKET_BYTES_PER_TRIANGLE / budget);
+        }
+    }
+
+    #[test]
+    fn a_cell_larger_than_the_budget_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 50_000);
+        let r = redefine(&ing, &RedefineParams::default()).unwrap();
+        let e = CellFiles::distribute(&ing, &r, dir.path(), 1000).err().unwrap();
+        assert!(matches!(e, BuildError::Limit(_)));
+        assert!(e.to_string().contains("memory budget"), "{e}");
+    }
+
+    #[test]
+    fn more_buckets_than_open_files_take_several_passes() {
+        let dir = tempfile::tempdir().unwrap();
+        // 600 tiny far-apart objects: 600 cells; a budget of ~2 cells per bucket gives > 256.
+        let objs = (0..600)
+            .map(|i| {
+                let x = i as f64 * 100.0;
+                (format!("o{i}"), None, vec![[[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]])
+            })
+            .collect();
+        let ing = ingest_list(dir.path(), objs);
+        let r = redefine(&ing, &RedefineParams { neighbours: 0, ..Default::default() }).unwrap();
+        assert_eq!(r.cells.len(), 600);
+        let budget = 2 * BUCKET_BYTES_PER_TRIANGLE + CELL_BYTES_PER_TRIANGLE;
+        let files = CellFiles::distribute(&ing, &r, dir.path(), budget).unwrap();
+        assert_eq!(files.bucket_count(), 300);
+        assert_eq!(mesh_triangles(&files), direct_triangles(&ing));
+    }
+
+    #[test]
+    fn grid_quantization_is_consistent_across_cells() {
+        let dir = tempfile::tempdir().unwrap();
+        // Two far-apart objects sharing an awkward vertex coordinate pattern: the shared border
+        // point of two triangles in different cells lands on one grid point.
+        let s = [0.1234567891, 0.3333333333, 0.7777777777];
+        let objs = vec![
+            ("a".into(), None, vec![[s, [-500.0, 0.0, 0.0], [-500.0, 1.0, 0.0]]]),
+            ("b".into(), None, vec![[[500.0, 0.0, 0.0], s, [500.0, 1.0, 0.0]]]),
+        ];
+        let ing = ingest_list(dir.path(), objs);
+        let r = redefine(&ing, &RedefineParams { neighbours: 0, ..Default::default() }).unwrap();
+        assert_eq!(r.cells.len(), 2);
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 1 << 20).unwrap();
+        let mut shared = Vec::new();
+        files
+            .for_each_cell(|_, m| {
+                shared
+                    .extend(m.positions.iter().copied().filter(|p| p[0] > 1000 && p[0] < GRID_STEPS - 1000));
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(shared.len(), 2);
+        assert_eq!(shared[0], shared[1]);
+        let g: Grid = ing.grid;
+        let direct = g.quantize(s);
+        assert!((0..3).all(|i| shared[0][i].abs_diff(direct[i]) <= 1));
+    }
+
+    #[test]
+    fn a_corrupted_bucket_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 10_000);
+        let r = redefine(&ing, &RedefineParams::default()).unwrap();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 64 << 20).unwrap();
+        let path: &Path = &files.buckets[0].path;
+        let mut bytes = std::fs::read(path).unwrap();
+        bytes[40..44].copy_from_slice(&u32::MAX.to_le_bytes());
+        std::fs::write(path, &bytes).unwrap();
+        assert!(matches!(files.read_bucket(0), Err(BuildError::Corrupt { .. })));
+        std::fs::write(path, &bytes[..100]).unwrap();
+        assert!(matches!(files.read_bucket(0), Err(BuildError::Corrupt { .. })));
+    }
+
+    /// Phase timings on a generated plant: `TW_MEASURE_TRIANGLES=10000000 cargo test --release
+    /// -p tw-build measure_phases -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn measure_phases() {
+        use std::time::Instant;
+        let n: u64 =
+            std::env::var("TW_MEASURE_TRIANGLES").ok().and_then(|v| v.parse().ok()).unwrap_or(10_000_000);
+        let budget: u64 =
+            std::env::var("TW_MEASURE_BUDGET").ok().and_then(|v| v.parse().ok()).unwrap_or(256 << 20);
+        let dir = tempfile::tempdir().unwrap();
+        let mb = |b: Option<u64>| b.unwrap_or(0) as f64 / (1 << 20) as f64;
+        let rate = |s: f64| n as f64 / s / 1e6;
+        let t = Instant::now();
+        let ing = ingest_plant(dir.path(), n);
+        let t_ingest = t.elapsed().as_secs_f64();
+        println!(
+            "ingest        {t_ingest:7.2} s  {:6.2} M tri/s  peak RSS {:7.1} MB",
+            rate(t_ingest),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        let t_redefine = t.elapsed().as_secs_f64();
+        println!(
+            "redefine      {t_redefine:7.2} s  {:6.2} M tri/s  peak RSS {:7.1} MB",
+            rate(t_redefine),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let h = r.order_by_hierarchy();
+        let t_h = t.elapsed().as_secs_f64();
+        println!("hierarchy     {t_h:7.3} s  {} nodes, depth {}", h.nodes.len(), h.depth());
+        let t = Instant::now();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), budget).unwrap();
+        let t_dist = t.elapsed().as_secs_f64();
+        println!(
+            "distribute    {t_dist:7.2} s  {:6.2} M tri/s  {} buckets, peak RSS {:7.1} MB",
+            rate(t_dist),
+            files.bucket_count(),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        let t = Instant::now();
+        let (mut tris, mut verts) = (0u64, 0u64);
+        files
+            .for_each_cell(|_, m| {
+                tris += m.triangle_count() as u64;
+                verts += m.positions.len() as u64;
+                Ok(())
+            })
+            .unwrap();
+        let t_read = t.elapsed().as_secs_f64();
+        println!(
+            "read cells    {t_read:7.2} s  {:6.2} M tri/s  {verts} vertices, peak RSS {:7.1} MB",
+            rate(t_read),
+            mb(tw_core::mem::peak_rss_bytes())
+        );
+        assert_eq!(tris, n);
+        let total = t_ingest + t_redefine + t_h + t_dist + t_read;
+        println!("total         {total:7.2} s  {:6.2} M tri/s", rate(total));
+        println!("{:?}", r.report);
+        let mut sizes: Vec<u64> = r.cells.iter().map(|c| c.triangles).collect();
+        sizes.sort_unstable();
+        let q = |f: f64| sizes[((sizes.len() - 1) as f64 * f) as usize];
+        println!("cell triangles: p10 {} p50 {} p90 {} max {}", q(0.1), q(0.5), q(0.9), q(1.0));
+    }
+}

@@ -1,0 +1,495 @@
+//! Phase 1, ingest: streams every input triangle into one on-disk working file and computes the
+//! scene bounds, the scene-wide [`Grid`] and one [`ObjectRecord`] per input object
+//! (GigaWalk §4.2 starts from "the objects in the initial database"; terawalk issue #3, phase 1).
+//!
+//! # Working file
+//!
+//! One record of [`RECORD_BYTES`] = 40 bytes per triangle, in input order, little endian:
+//! three vertices of three `f32` each, relative to a *provisional origin* (the first vertex of the
+//! scene, kept in f64), then the `u32` object id. Nothing else of a triangle is kept (no normals,
+//! no per-vertex colours: see the shared decisions of issue #3).
+//!
+//! # Precision, and why borders still never crack
+//!
+//! Every later phase sees a vertex as `origin + (offset as f64)`, the *reconstructed* position,
+//! and quantizes that to the grid. The reconstruction differs from the input by at most half an
+//! f32 ulp of the offset (about 2^-25 of the scene extent, half a grid step at worst). What
+//! matters for crack-free borders is that equal input coordinates give equal grid points, and
+//! they do: the same f64 always gives the same f32 offset, hence the same reconstruction and the
+//! same grid point, in whichever object or cell it appears. The scene bounds, the grid and the
+//! object bounds are computed from the reconstructed positions too, so an object's
+//! [`GridBox`] contains every quantized vertex of its triangles exactly (quantization is
+//! monotone).
+//!
+//! Memory: O(objects) (one record per object); the triangles go to disk as they arrive.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::{Path, PathBuf};
+
+use tempfile::TempPath;
+use tw_io::scene::SceneProgress;
+use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleSink};
+
+use crate::error::BuildError;
+use crate::types::{Grid, GridBox, ObjectRecord};
+
+/// Bytes per triangle in the working file: 9 × f32 + u32 object id.
+pub const RECORD_BYTES: usize = 40;
+
+/// Triangles decoded per chunk by [`WorkFile::scan`] (2.5 MiB of records).
+pub const SCAN_CHUNK: usize = 1 << 16;
+
+/// One triangle of the working file: positions relative to [`WorkFile::origin`] (input units).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct WorkTri {
+    pub p: [[f32; 3]; 3],
+    pub object: u32,
+}
+
+impl WorkTri {
+    /// The centroid, computed the one way every phase uses (split plans compare it to planes,
+    /// so plan building and triangle assignment must agree bit for bit).
+    #[inline]
+    pub fn centroid(&self) -> [f32; 3] {
+        let [a, b, c] = self.p;
+        [(a[0] + b[0] + c[0]) / 3.0, (a[1] + b[1] + c[1]) / 3.0, (a[2] + b[2] + c[2]) / 3.0]
+    }
+
+    fn encode(&self, out: &mut [u8; RECORD_BYTES]) {
+        for (k, v) in self.p.iter().flatten().enumerate() {
+            out[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+        }
+        out[36..40].copy_from_slice(&self.object.to_le_bytes());
+    }
+
+    #[inline]
+    fn decode(b: &[u8]) -> WorkTri {
+        let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
+        WorkTri {
+            p: [[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]],
+            object: u32::from_le_bytes([b[36], b[37], b[38], b[39]]),
+        }
+    }
+}
+
+/// The working file of all triangles (deleted when dropped).
+#[derive(Debug)]
+pub struct WorkFile {
+    path: TempPath,
+    /// The provisional origin: every stored position is relative to it.
+    pub origin: [f64; 3],
+    /// Number of triangle records.
+    pub triangles: u64,
+}
+
+impl WorkFile {
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The reconstructed input position of a stored offset.
+    #[inline]
+    pub fn position(&self, off: [f32; 3]) -> [f64; 3] {
+        [self.origin[0] + off[0] as f64, self.origin[1] + off[1] as f64, self.origin[2] + off[2] as f64]
+    }
+
+    /// The grid point of a stored offset: the same offset always gives the same point.
+    #[inline]
+    pub fn quantize(&self, grid: &Grid, off: [f32; 3]) -> [u32; 3] {
+        grid.quantize(self.position(off))
+    }
+
+    /// Reads every record in order, handing out chunks of up to [`SCAN_CHUNK`] triangles with the
+    /// index of the chunk's first triangle. Memory: one chunk.
+    pub fn scan(
+        &self,
+        mut f: impl FnMut(u64, &[WorkTri]) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        let path: &Path = &self.path;
+        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+        let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+        if len != self.triangles * RECORD_BYTES as u64 {
+            return Err(BuildError::Corrupt {
+                path: path.to_path_buf(),
+                message: format!("{len} bytes, expected {} triangles", self.triangles),
+            });
+        }
+        let mut reader = BufReader::with_capacity(1 << 20, file);
+        let mut bytes = vec![0u8; SCAN_CHUNK * RECORD_BYTES];
+        let mut tris = Vec::with_capacity(SCAN_CHUNK);
+        let mut done = 0u64;
+        while done < self.triangles {
+            let n = (self.triangles - done).min(SCAN_CHUNK as u64) as usize;
+            let buf = &mut bytes[..n * RECORD_BYTES];
+            reader.read_exact(buf).map_err(|e| BuildError::io(path, e))?;
+            tris.clear();
+            tris.extend(buf.chunks_exact(RECORD_BYTES).map(WorkTri::decode));
+            f(done, &tris)?;
+            done += n as u64;
+        }
+        Ok(())
+    }
+}
+
+/// What ingest produced: the working file, the grid, the objects.
+#[derive(Debug)]
+pub struct Ingested {
+    pub work: WorkFile,
+    /// Scene bounds (reconstructed input coordinates; see the module docs).
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    pub grid: Grid,
+    /// One record per input object, indexed by object id (objects whose triangles were all
+    /// degenerate have 0 triangles and [`GridBox::EMPTY`] bounds).
+    pub objects: Vec<ObjectRecord>,
+    /// Triangles in the working file.
+    pub triangles: u64,
+    /// What streaming the inputs found (files, degenerate triangles dropped, bytes read).
+    pub summary: SceneSummary,
+}
+
+/// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
+/// called now and then with how far the reading has got.
+pub fn ingest(
+    scene: Scene,
+    work_dir: &Path,
+    progress: &mut dyn FnMut(SceneProgress),
+) -> Result<Ingested, BuildError> {
+    let file = tempfile::Builder::new()
+        .prefix("tw-triangles-")
+        .suffix(".work")
+        .tempfile_in(work_dir)
+        .map_err(|e| BuildError::io(work_dir, e))?;
+    let (file, path) = file.into_parts();
+    let mut sink = IngestSink {
+        out: BufWriter::with_capacity(1 << 20, file),
+        path: path.to_path_buf(),
+        origin: None,
+        objects: Vec::new(),
+        triangles: 0,
+        min: [f32::INFINITY; 3],
+        max: [f32::NEG_INFINITY; 3],
+        failure: None,
+        scratch: Vec::new(),
+    };
+    let streamed = scene.stream_with_progress(&mut sink, progress);
+    if let Some(e) = sink.failure.take() {
+        return Err(e);
+    }
+    let summary = streamed?;
+    sink.out.flush().map_err(|e| BuildError::io(&sink.path, e))?;
+    drop(sink.out);
+    let Some(origin) = sink.origin else { return Err(BuildError::Empty) };
+    let work = WorkFile { path, origin, triangles: sink.triangles };
+    let (min, max) = (work.position(sink.min), work.position(sink.max));
+    let grid = Grid::for_bounds(min, max);
+    let objects = sink
+        .objects
+        .into_iter()
+        .map(|o| ObjectRecord {
+            name: o.name,
+            color: o.color,
+            triangles: o.triangles,
+            bounds: if o.triangles == 0 {
+                GridBox::EMPTY
+            } else {
+                GridBox { min: work.quantize(&grid, o.min), max: work.quantize(&grid, o.max) }
+            },
+        })
+        .collect();
+    Ok(Ingested { triangles: work.triangles, work, min, max, grid, objects, summary })
+}
+
+struct ObjectAcc {
+    name: String,
+    color: Option<[u8; 4]>,
+    triangles: u64,
+    min: [f32; 3],
+    max: [f32; 3],
+}
+
+struct IngestSink {
+    out: BufWriter<File>,
+    path: PathBuf,
+    origin: Option<[f64; 3]>,
+    objects: Vec<ObjectAcc>,
+    triangles: u64,
+    min: [f32; 3],
+    max: [f32; 3],
+    /// The real error behind an [`ImportError::Sink`] we returned (an I/O error on our file).
+    failure: Option<BuildError>,
+    scratch: Vec<[f32; 3]>,
+}
+
+impl IngestSink {
+    fn fail(&mut self, e: BuildError) -> ImportError {
+        let msg = e.to_string();
+        self.failure = Some(e);
+        ImportError::Sink(msg)
+    }
+
+    #[inline]
+    fn offset(&mut self, p: [f64; 3]) -> Result<[f32; 3], ImportError> {
+        let o = *self.origin.get_or_insert(p);
+        let off = [(p[0] - o[0]) as f32, (p[1] - o[1]) as f32, (p[2] - o[2]) as f32];
+        if off.iter().any(|v| !v.is_finite()) {
+            let msg = format!(
+                "vertex {p:?} is too far from the scene's first vertex {o:?} for the working format (f32)"
+            );
+            return Err(self.fail(BuildError::Limit(msg)));
+        }
+        Ok(off)
+    }
+
+    #[inline]
+    fn push(&mut self, p: [[f32; 3]; 3], object: ObjectId) -> Result<(), ImportError> {
+        let Some(acc) = self.objects.get_mut(object as usize) else {
+            return Err(ImportError::Sink(format!("triangle of unannounced object {object}")));
+        };
+        acc.triangles += 1;
+        for v in &p {
+            for (i, &x) in v.iter().enumerate() {
+                acc.min[i] = acc.min[i].min(x);
+                acc.max[i] = acc.max[i].max(x);
+            }
+        }
+        for i in 0..3 {
+            self.min[i] = self.min[i].min(acc.min[i]);
+            self.max[i] = self.max[i].max(acc.max[i]);
+        }
+        let mut rec = [0u8; RECORD_BYTES];
+        WorkTri { p, object }.encode(&mut rec);
+        if let Err(e) = self.out.write_all(&rec) {
+            let e = BuildError::io(&self.path, e);
+            return Err(self.fail(e));
+        }
+        self.triangles += 1;
+        Ok(())
+    }
+}
+
+impl TriangleSink for IngestSink {
+    fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
+        if id as usize != self.objects.len() {
+            return Err(ImportError::Sink(format!(
+                "object {id} announced out of order (expected {})",
+                self.objects.len()
+            )));
+        }
+        self.objects.push(ObjectAcc {
+            name: info.name.clone(),
+            color: info.color.map(|c| c.0),
+            triangles: 0,
+            min: [f32::INFINITY; 3],
+            max: [f32::NEG_INFINITY; 3],
+        });
+        Ok(())
+    }
+
+    fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+        let p = [self.offset(t.positions[0])?, self.offset(t.positions[1])?, self.offset(t.positions[2])?];
+        self.push(p, t.object)
+    }
+
+    fn mesh(&mut self, chunk: &MeshChunk<'_>) -> Result<(), ImportError> {
+        // Convert each shared vertex once.
+        let mut scratch = std::mem::take(&mut self.scratch);
+        scratch.clear();
+        for &p in chunk.positions {
+            match self.offset(p) {
+                Ok(o) => scratch.push(o),
+                Err(e) => {
+                    self.scratch = scratch;
+                    return Err(e);
+                }
+            }
+        }
+        let mut result = Ok(());
+        for t in chunk.indices.chunks_exact(3) {
+            let v = |i: u32| scratch.get(i as usize).copied();
+            let (Some(a), Some(b), Some(c)) = (v(t[0]), v(t[1]), v(t[2])) else {
+                result = Err(ImportError::Sink(format!(
+                    "mesh chunk of object {} has an index out of range",
+                    chunk.object
+                )));
+                break;
+            };
+            result = self.push([a, b, c], chunk.object);
+            if result.is_err() {
+                break;
+            }
+        }
+        self.scratch = scratch;
+        result
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use tw_io::{SourceSummary, TriangleSource};
+
+    /// A source from a list of objects, each a name, a colour and its triangles.
+    /// An object of a [`ListSource`]: name, colour, triangles.
+    pub(crate) type ListObject = (String, Option<[u8; 4]>, Vec<[[f64; 3]; 3]>);
+
+    pub(crate) struct ListSource(pub Vec<ListObject>);
+
+    impl TriangleSource for ListSource {
+        fn name(&self) -> String {
+            "list".into()
+        }
+        fn progress_total(&self) -> Option<u64> {
+            None
+        }
+        fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
+            let n = self.0.len() as u32;
+            for (id, (name, color, tris)) in self.0.into_iter().enumerate() {
+                sink.object(id as u32, &ObjectInfo { name, color: color.map(tw_core::Rgba8) })?;
+                for t in tris {
+                    sink.triangle(&Triangle::new(t, id as u32))?;
+                }
+            }
+            Ok(SourceSummary { objects: n, vertices: 0, bytes: 0 })
+        }
+    }
+
+    pub(crate) fn ingest_list(dir: &Path, objects: Vec<ListObject>) -> Ingested {
+        ingest(Scene::from_sources(vec![Box::new(ListSource(objects))]), dir, &mut |_| {}).unwrap()
+    }
+
+    pub(crate) fn ingest_plant(dir: &Path, triangles: u64) -> Ingested {
+        let src =
+            tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles, seed: 7 }).unwrap();
+        ingest(Scene::from_sources(vec![Box::new(src)]), dir, &mut |_| {}).unwrap()
+    }
+
+    fn all(work: &WorkFile) -> Vec<WorkTri> {
+        let mut v = Vec::new();
+        work.scan(|first, c| {
+            assert_eq!(first, v.len() as u64);
+            v.extend_from_slice(c);
+            Ok(())
+        })
+        .unwrap();
+        v
+    }
+
+    #[test]
+    fn ingest_round_trip_keeps_triangles_objects_and_bounds() {
+        let dir = tempfile::tempdir().unwrap();
+        let t = |x: f64| [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 2.0, 3.0]];
+        let degenerate = [[5.0, 5.0, 5.0], [5.0, 5.0, 5.0], [6.0, 6.0, 6.0]];
+        let ing = ingest_list(
+            dir.path(),
+            vec![
+                ("a".into(), Some([1, 2, 3, 4]), vec![t(10.0), t(20.0)]),
+                ("only degenerate".into(), None, vec![degenerate]),
+                ("b".into(), None, vec![t(-5.0)]),
+            ],
+        );
+        assert_eq!(ing.triangles, 3);
+        assert_eq!(ing.summary.degenerate, 1);
+        assert_eq!(ing.min, [-5.0, 0.0, 0.0]);
+        assert_eq!(ing.max, [21.0, 2.0, 3.0]);
+        assert_eq!(ing.grid, Grid::for_bounds([-5.0, 0.0, 0.0], [21.0, 2.0, 3.0]));
+        assert_eq!(ing.objects.len(), 3);
+        assert_eq!(ing.objects[0].name, "a");
+        assert_eq!(ing.objects[0].color, Some([1, 2, 3, 4]));
+        assert_eq!(ing.objects[0].triangles, 2);
+        assert_eq!(ing.objects[0].bounds.min, ing.grid.quantize([10.0, 0.0, 0.0]));
+        assert_eq!(ing.objects[0].bounds.max, ing.grid.quantize([21.0, 2.0, 3.0]));
+        assert_eq!(ing.objects[1].triangles, 0);
+        assert!(ing.objects[1].bounds.is_empty());
+        assert_eq!(ing.objects[2].color, None);
+        let tris = all(&ing.work);
+        assert_eq!(tris.len(), 3);
+        assert_eq!(tris.iter().map(|t| t.object).collect::<Vec<_>>(), vec![0, 0, 2]);
+        // Small integers survive the f32 offsets exactly.
+        assert_eq!(ing.work.position(tris[1].p[1]), [21.0, 0.0, 0.0]);
+        assert_eq!(std::fs::metadata(ing.work.path()).unwrap().len(), 3 * RECORD_BYTES as u64);
+    }
+
+    #[test]
+    fn equal_input_coordinates_quantize_to_equal_grid_points() {
+        let dir = tempfile::tempdir().unwrap();
+        // An awkward shared vertex, far from the provisional origin, used by two objects.
+        let shared = [1234.567891234, -0.000123456789, 98.7654321];
+        let ing = ingest_list(
+            dir.path(),
+            vec![
+                ("o".into(), None, vec![[[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]]),
+                ("a".into(), None, vec![[shared, [1500.0, 0.0, 0.0], [1400.0, 50.0, 0.0]]]),
+                ("b".into(), None, vec![[[1300.0, 9.0, 0.0], shared, [1400.0, -50.0, 20.0]]]),
+            ],
+        );
+        let tris = all(&ing.work);
+        let qa = ing.work.quantize(&ing.grid, tris[1].p[0]);
+        let qb = ing.work.quantize(&ing.grid, tris[2].p[1]);
+        assert_eq!(qa, qb);
+        // ... and within a grid step of the direct quantization of the input.
+        let direct = ing.grid.quantize(shared);
+        for i in 0..3 {
+            assert!(qa[i].abs_diff(direct[i]) <= 1, "{qa:?} vs {direct:?}");
+        }
+        // Object bounds contain their quantized vertices.
+        for t in &tris {
+            let b = ing.objects[t.object as usize].bounds;
+            for v in t.p {
+                let q = ing.work.quantize(&ing.grid, v);
+                assert!(b.contains(&GridBox { min: q, max: q }));
+            }
+        }
+    }
+
+    #[test]
+    fn empty_scene_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let src = ListSource(vec![("nothing".into(), None, vec![])]);
+        let r = ingest(Scene::from_sources(vec![Box::new(src)]), dir.path(), &mut |_| {});
+        assert!(matches!(r, Err(BuildError::Empty)));
+    }
+
+    #[test]
+    fn coordinates_beyond_f32_offsets_are_a_limit_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let src = ListSource(vec![(
+            "huge".into(),
+            None,
+            vec![
+                [[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+                [[1e300, 0.0, 0.0], [0.0; 3], [0.0, 1.0, 1.0]],
+            ],
+        )]);
+        let r = ingest(Scene::from_sources(vec![Box::new(src)]), dir.path(), &mut |_| {});
+        assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");
+    }
+
+    #[test]
+    fn generated_mesh_chunks_are_ingested_whole() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 20_000);
+        assert_eq!(ing.triangles, 20_000);
+        let per_object: u64 = ing.objects.iter().map(|o| o.triangles).sum();
+        assert_eq!(per_object, 20_000);
+        let tris = all(&ing.work);
+        for t in &tris {
+            let b = ing.objects[t.object as usize].bounds;
+            for v in t.p {
+                let q = ing.work.quantize(&ing.grid, v);
+                assert!(b.contains(&GridBox { min: q, max: q }));
+            }
+        }
+    }
+
+    #[test]
+    fn a_truncated_working_file_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 10_000);
+        let f = std::fs::OpenOptions::new().write(true).open(ing.work.path()).unwrap();
+        f.set_len(100).unwrap();
+        let r = ing.work.scan(|_, _| Ok(()));
+        assert!(matches!(r, Err(BuildError::Corrupt { .. })), "{r:?}");
+    }
+}
