@@ -818,4 +818,36 @@ mod tests {
             assert!((auto as f64 / tris as f64) < 6.0, "{line}");
         }
     }
+
+    /// Encode and decode speed: `cargo test --release -p tw-store codec_throughput -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn codec_throughput() {
+        let cs = grid_clusters(1000, 500, 37, [123_456, 654_321, 1_000], 2);
+        let tris: usize = cs.iter().map(|c| c.triangle_count()).sum();
+        let t0 = std::time::Instant::now();
+        let mut bytes = Vec::new();
+        for page in cs.chunks(64) {
+            encode_page(page, &mut bytes).unwrap();
+        }
+        let enc = t0.elapsed().as_secs_f64();
+        let t0 = std::time::Instant::now();
+        let mut pos = 0;
+        let mut n = 0;
+        for page in cs.chunks(64) {
+            let mut one = Vec::new();
+            let s = encode_page(page, &mut one).unwrap();
+            let back = decode_page(&bytes[pos..pos + s.encoded_len], page.len()).unwrap();
+            n += back.len();
+            pos += s.encoded_len;
+        }
+        let dec = t0.elapsed().as_secs_f64() - enc; // the loop re-encodes to find page lengths
+        assert_eq!(n, cs.len());
+        println!(
+            "{tris} triangles, {:.2} B/tri: encode {:.1} M tri/s, decode ~{:.1} M tri/s",
+            bytes.len() as f64 / tris as f64,
+            tris as f64 / enc / 1e6,
+            tris as f64 / dec.max(1e-9) / 1e6
+        );
+    }
 }

@@ -6,7 +6,7 @@
 //! to the nodes of a spatial hierarchy (the *skeleton*), and paged: clusters are packed into
 //! compressed, checksummed pages that can be loaded and decoded independently.
 //!
-//! - [`format`]: the on-disk structures (header, object table, nodes, groups, page table) and
+//! - [`format`](mod@format): the on-disk structures (header, object table, nodes, groups, page table) and
 //!   their structural invariants.
 //! - [`codec`]: encoding and decoding of one page ([`PageCluster`]s).
 //! - [`StoreWriter`]: streams pages to disk, then writes the tables; atomic and deterministic.

@@ -543,3 +543,28 @@ fn store_size_per_triangle() {
     assert!(per_tri < 6.0);
     Store::open(&path).unwrap().verify(|_, _| {}).unwrap();
 }
+
+/// Writes the test scene as a seed for the `store` fuzz target:
+/// `cargo test -p tw-store --test store -- --ignored write_fuzz_seed`.
+#[test]
+#[ignore]
+fn write_fuzz_seed() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/store");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("seed-scene.tw"), store_bytes(&scene())).unwrap();
+    let mut s = scene();
+    s.pages.truncate(1);
+    s.pages[0].1 = true;
+    s.groups.truncate(1);
+    s.groups[0].node = 0;
+    s.groups[0].error = f32::INFINITY;
+    s.nodes = vec![Node {
+        child_count: 0,
+        first_child: 0,
+        first_group: 0,
+        group_count: 1,
+        max_error: f32::INFINITY,
+        ..s.nodes[1]
+    }];
+    std::fs::write(dir.join("seed-one-page.tw"), store_bytes(&s)).unwrap();
+}
