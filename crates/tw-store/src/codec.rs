@@ -1,0 +1,853 @@
+//! Page codec: a page is a list of clusters, each encoded as described in docs/FORMAT.md
+//! ("Page encoding").
+//!
+//! Per cluster: a 40-byte header (counts, level, modes, group, self error and sphere, position
+//! origin), then the positions (grid coordinates relative to the origin, bit-packed with the
+//! minimal width per axis, absolute or as deltas, or through meshoptimizer's vertex codec: the
+//! encoder picks the smallest), then the triangles through meshoptimizer's meshlet codec, then
+//! the object ids (one varint when the cluster has one object, else a sorted id table and a
+//! bit-packed index per triangle).
+//!
+//! The encoder stores a cluster in *canonical form* ([`PageCluster::canonical`]): vertices in
+//! order of first use, each triangle rotated so that its index triple is lexicographically
+//! smallest (winding and triangle order are kept). `decode(encode(c)) == c.canonical()`.
+//!
+//! The decoder never trusts the bytes: every count, length and index is checked before it is
+//! used (including the sizes the meshoptimizer decoders assert on) and errors carry the byte
+//! offset within the page.
+
+use crate::error::CodecError;
+
+/// Most triangles in one cluster.
+pub const MAX_TRIANGLES: usize = 128;
+/// Most vertices in one cluster (local indices are `u8`).
+pub const MAX_VERTICES: usize = 255;
+/// Size of the fixed cluster header.
+pub const CLUSTER_HEADER_LEN: usize = 40;
+/// A lower bound on the encoded size of any cluster (header, 3 width bytes, a 1-byte length and
+/// the 16-byte minimum of the meshlet codec, a 1-byte object id).
+pub const MIN_CLUSTER_BYTES: usize = CLUSTER_HEADER_LEN + 3 + 1 + 16 + 1;
+/// Decoded size of the largest cluster (see [`decoded_len`]).
+pub const MAX_DECODED_CLUSTER: usize = 12 * MAX_VERTICES + 7 * MAX_TRIANGLES;
+
+/// Mode bits of the cluster header byte 3.
+const POS_MODE_MASK: u8 = 0b11;
+const MULTI_OBJECT: u8 = 0b100;
+
+/// How a cluster's positions are stored.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PositionMode {
+    /// Bit-packed offsets from the origin (the cluster's minimum corner).
+    Packed = 0,
+    /// Bit-packed zigzag deltas from the previous vertex; the origin is the first vertex.
+    Delta = 1,
+    /// meshoptimizer vertex codec (version 1) over `[u32; 3]` offsets from the origin.
+    Meshopt = 2,
+}
+
+/// One decoded cluster: ≤ 128 triangles over ≤ 255 grid-point vertices.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct PageCluster {
+    /// Grid coordinates of the vertices.
+    pub positions: Vec<[u32; 3]>,
+    /// Three local indices per triangle.
+    pub indices: Vec<u8>,
+    /// Input object id per triangle.
+    pub objects: Vec<u32>,
+    /// Error (scene units) of the simplification that produced this cluster; 0 at level 0.
+    pub self_error: f32,
+    /// Sphere (scene space: centre xyz, radius) `self_error` is measured from.
+    pub self_sphere: [f32; 4],
+    /// Global index of the group this cluster belongs to.
+    pub group: u32,
+    /// 0 for full resolution, +1 per simplification step.
+    pub level: u8,
+}
+
+impl PageCluster {
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// Checks the limits the codec relies on; the message says what is wrong.
+    pub fn validate(&self) -> Result<(), String> {
+        let t = self.indices.len() / 3;
+        if !self.indices.len().is_multiple_of(3) || t == 0 || t > MAX_TRIANGLES {
+            return Err(format!(
+                "{} indices: need 3 per triangle, 1..={MAX_TRIANGLES} triangles",
+                self.indices.len()
+            ));
+        }
+        let v = self.positions.len();
+        if v > MAX_VERTICES {
+            return Err(format!("{v} vertices, at most {MAX_VERTICES}"));
+        }
+        if let Some(i) = self.indices.iter().find(|&&i| i as usize >= v) {
+            return Err(format!("index {i} out of range ({v} vertices)"));
+        }
+        if self.objects.len() != t {
+            return Err(format!("{} object ids for {t} triangles", self.objects.len()));
+        }
+        if !(self.self_error.is_finite() && self.self_error >= 0.0) {
+            return Err(format!("self error {} is not finite and ≥ 0", self.self_error));
+        }
+        if self.self_sphere.iter().any(|x| !x.is_finite()) || self.self_sphere[3] < 0.0 {
+            return Err(format!("invalid self sphere {:?}", self.self_sphere));
+        }
+        Ok(())
+    }
+
+    /// The same cluster in canonical form: vertices in order of first use (unused vertices last,
+    /// in their order), each triangle rotated to its lexicographically smallest rotation.
+    pub fn canonical(&self) -> PageCluster {
+        let mut remap = [u8::MAX; 256];
+        let mut positions = Vec::with_capacity(self.positions.len());
+        for &i in &self.indices {
+            if remap[i as usize] == u8::MAX {
+                remap[i as usize] = positions.len() as u8;
+                positions.push(self.positions.get(i as usize).copied().unwrap_or_default());
+            }
+        }
+        for (i, p) in self.positions.iter().enumerate() {
+            if remap[i] == u8::MAX {
+                remap[i] = positions.len() as u8;
+                positions.push(*p);
+            }
+        }
+        let mut indices: Vec<u8> = self.indices.iter().map(|&i| remap[i as usize]).collect();
+        rotate_triangles(&mut indices);
+        PageCluster { positions, indices, ..self.clone() }
+    }
+}
+
+/// Rotates each triangle to its lexicographically smallest rotation (keeps the winding).
+fn rotate_triangles(indices: &mut [u8]) {
+    for t in indices.chunks_exact_mut(3) {
+        let r = [[t[0], t[1], t[2]], [t[1], t[2], t[0]], [t[2], t[0], t[1]]];
+        let best = r.into_iter().min().unwrap_or([t[0], t[1], t[2]]);
+        t.copy_from_slice(&best);
+    }
+}
+
+/// Decoded size of a cluster: 12 bytes per vertex, 3 index bytes and a 4-byte object id per
+/// triangle. The page table's `uncompressed_len` is the sum over the page.
+pub fn decoded_len(vertices: usize, triangles: usize) -> usize {
+    12 * vertices + 7 * triangles
+}
+
+/// What [`encode_page`] appended.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PageSummary {
+    pub encoded_len: usize,
+    pub decoded_len: usize,
+    pub triangles: usize,
+    pub level_min: u8,
+    pub level_max: u8,
+}
+
+/// Appends the encoding of `clusters` to `out`. Fails (with the cluster index) on a cluster that
+/// breaks the limits of [`PageCluster::validate`].
+pub fn encode_page(clusters: &[PageCluster], out: &mut Vec<u8>) -> Result<PageSummary, String> {
+    encode_page_with(clusters, out, None)
+}
+
+pub(crate) fn encode_page_with(
+    clusters: &[PageCluster],
+    out: &mut Vec<u8>,
+    force: Option<PositionMode>,
+) -> Result<PageSummary, String> {
+    if clusters.is_empty() {
+        return Err("a page needs at least one cluster".into());
+    }
+    let start = out.len();
+    let mut s = PageSummary { level_min: u8::MAX, ..Default::default() };
+    for (i, c) in clusters.iter().enumerate() {
+        c.validate().map_err(|m| format!("cluster {i} of the page: {m}"))?;
+        encode_cluster(&c.canonical(), out, force)?;
+        s.decoded_len += decoded_len(c.positions.len(), c.triangle_count());
+        s.triangles += c.triangle_count();
+        s.level_min = s.level_min.min(c.level);
+        s.level_max = s.level_max.max(c.level);
+    }
+    s.encoded_len = out.len() - start;
+    Ok(s)
+}
+
+fn bits32(x: u32) -> u32 {
+    32 - x.leading_zeros()
+}
+
+fn bits64(x: u64) -> u32 {
+    64 - x.leading_zeros()
+}
+
+fn zigzag(d: i64) -> u64 {
+    ((d << 1) ^ (d >> 63)) as u64
+}
+
+fn unzigzag(z: u64) -> i64 {
+    ((z >> 1) as i64) ^ -((z & 1) as i64)
+}
+
+fn packed_len(count: usize, bits_each: u32) -> usize {
+    (count * bits_each as usize).div_ceil(8)
+}
+
+fn encode_cluster(c: &PageCluster, out: &mut Vec<u8>, force: Option<PositionMode>) -> Result<(), String> {
+    let t = c.triangle_count();
+    let v = c.positions.len();
+    let mut min = [u32::MAX; 3];
+    let mut max = [0u32; 3];
+    for p in &c.positions {
+        for a in 0..3 {
+            min[a] = min[a].min(p[a]);
+            max[a] = max[a].max(p[a]);
+        }
+    }
+    if v == 0 {
+        min = [0; 3];
+    }
+
+    // Candidate position encodings; the smallest wins (ties: the lower mode number).
+    let packed_w: [u32; 3] = std::array::from_fn(|a| bits32(max[a] - min[a]));
+    let packed_size = 3 + packed_len(v, packed_w.iter().sum());
+    let mut delta_w = [0u32; 3];
+    for w in c.positions.windows(2) {
+        for a in 0..3 {
+            delta_w[a] = delta_w[a].max(bits64(zigzag(w[1][a] as i64 - w[0][a] as i64)));
+        }
+    }
+    let delta_size = 3 + packed_len(v.saturating_sub(1), delta_w.iter().sum());
+    let rel: Vec<[u32; 3]> =
+        c.positions.iter().map(|p| [p[0] - min[0], p[1] - min[1], p[2] - min[2]]).collect();
+    let meshopt_bytes = match force {
+        None | Some(PositionMode::Meshopt) if v > 0 => Some(
+            meshopt::encode_vertex_buffer_level(&rel, 2, Some(1)).map_err(|e| format!("meshopt: {e:?}"))?,
+        ),
+        _ => None,
+    };
+    let meshopt_size = meshopt_bytes.as_ref().map(|b| varint_len(b.len() as u32) + b.len());
+    let mode = force.unwrap_or_else(|| {
+        let mut best = (packed_size, PositionMode::Packed);
+        if delta_size < best.0 && v > 0 {
+            best = (delta_size, PositionMode::Delta);
+        }
+        if let Some(m) = meshopt_size.filter(|&m| m < best.0) {
+            best = (m, PositionMode::Meshopt);
+        }
+        best.1
+    });
+    let mode = if v == 0 { PositionMode::Packed } else { mode };
+
+    let mut objects: Vec<u32> = c.objects.clone();
+    objects.sort_unstable();
+    objects.dedup();
+    let multi = objects.len() > 1;
+
+    out.push(t as u8);
+    out.push(v as u8);
+    out.push(c.level);
+    out.push(mode as u8 | if multi { MULTI_OBJECT } else { 0 });
+    out.extend_from_slice(&c.group.to_le_bytes());
+    out.extend_from_slice(&c.self_error.to_le_bytes());
+    for x in c.self_sphere {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+    let origin = if mode == PositionMode::Delta { c.positions[0] } else { min };
+    for x in origin {
+        out.extend_from_slice(&x.to_le_bytes());
+    }
+
+    match mode {
+        PositionMode::Packed => {
+            out.extend(packed_w.iter().map(|&w| w as u8));
+            let mut bw = BitWriter::new(out);
+            for p in &rel {
+                for a in 0..3 {
+                    bw.put(p[a] as u64, packed_w[a]);
+                }
+            }
+            bw.finish();
+        }
+        PositionMode::Delta => {
+            out.extend(delta_w.iter().map(|&w| w as u8));
+            let mut bw = BitWriter::new(out);
+            for w in c.positions.windows(2) {
+                for a in 0..3 {
+                    bw.put(zigzag(w[1][a] as i64 - w[0][a] as i64), delta_w[a]);
+                }
+            }
+            bw.finish();
+        }
+        PositionMode::Meshopt => {
+            let b = meshopt_bytes.ok_or("meshopt vertex encoding missing")?;
+            put_varint(out, b.len() as u32);
+            out.extend_from_slice(&b);
+        }
+    }
+
+    let tri = meshopt::encode_meshlet(meshopt::Meshlet { vertices: &[], triangles: &c.indices })
+        .map_err(|e| format!("meshopt: {e:?}"))?;
+    if tri.len() < 16 {
+        return Err(format!("meshlet codec produced {} bytes, expected at least 16", tri.len()));
+    }
+    put_varint(out, tri.len() as u32);
+    out.extend_from_slice(&tri);
+
+    if multi {
+        put_varint(out, objects.len() as u32);
+        put_varint(out, objects[0]);
+        for w in objects.windows(2) {
+            put_varint(out, w[1] - w[0] - 1);
+        }
+        let width = bits32(objects.len() as u32 - 1);
+        let mut bw = BitWriter::new(out);
+        for o in &c.objects {
+            // `objects` holds every id of `c.objects`, so the search succeeds.
+            let k = objects.binary_search(o).unwrap_or(0);
+            bw.put(k as u64, width);
+        }
+        bw.finish();
+    } else {
+        put_varint(out, objects[0]);
+    }
+    Ok(())
+}
+
+/// Decodes a page of `cluster_count` clusters. `bytes` must be exactly the page's bytes.
+pub fn decode_page(bytes: &[u8], cluster_count: usize) -> Result<Vec<PageCluster>, CodecError> {
+    // Each cluster takes at least MIN_CLUSTER_BYTES: this bounds the allocation.
+    if cluster_count.saturating_mul(MIN_CLUSTER_BYTES) > bytes.len() {
+        return Err(CodecError::new(
+            0,
+            format!("{cluster_count} clusters cannot fit in {} bytes", bytes.len()),
+        ));
+    }
+    let mut clusters = Vec::with_capacity(cluster_count);
+    let mut pos = 0usize;
+    for k in 0..cluster_count {
+        let (c, next) = decode_cluster(bytes, pos)
+            .map_err(|e| CodecError { msg: format!("cluster {k}: {}", e.msg), ..e })?;
+        clusters.push(c);
+        pos = next;
+    }
+    if pos != bytes.len() {
+        return Err(CodecError::new(pos, format!("{} bytes after the last cluster", bytes.len() - pos)));
+    }
+    Ok(clusters)
+}
+
+struct Cursor<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+}
+
+impl<'a> Cursor<'a> {
+    fn take(&mut self, n: usize) -> Result<&'a [u8], CodecError> {
+        match self.pos.checked_add(n).filter(|&e| e <= self.bytes.len()) {
+            Some(end) => {
+                let s = &self.bytes[self.pos..end];
+                self.pos = end;
+                Ok(s)
+            }
+            None => Err(CodecError::new(
+                self.pos,
+                format!("{n} bytes needed, {} left in the page", self.bytes.len() - self.pos),
+            )),
+        }
+    }
+
+    fn u8(&mut self) -> Result<u8, CodecError> {
+        Ok(self.take(1)?[0])
+    }
+
+    fn u32(&mut self) -> Result<u32, CodecError> {
+        let b = self.take(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn f32(&mut self) -> Result<f32, CodecError> {
+        self.u32().map(f32::from_bits)
+    }
+
+    fn varint(&mut self) -> Result<u32, CodecError> {
+        let at = self.pos;
+        let mut v: u64 = 0;
+        for i in 0..5 {
+            let b = self.u8()?;
+            v |= ((b & 0x7f) as u64) << (7 * i);
+            if b & 0x80 == 0 {
+                return u32::try_from(v).map_err(|_| CodecError::new(at, "varint overflows u32"));
+            }
+        }
+        Err(CodecError::new(at, "varint longer than 5 bytes"))
+    }
+}
+
+fn decode_cluster(bytes: &[u8], start: usize) -> Result<(PageCluster, usize), CodecError> {
+    let mut r = Cursor { bytes, pos: start };
+    let t = r.u8()? as usize;
+    let v = r.u8()? as usize;
+    if t == 0 || t > MAX_TRIANGLES {
+        return Err(CodecError::new(start, format!("{t} triangles, expected 1..={MAX_TRIANGLES}")));
+    }
+    let level = r.u8()?;
+    let modes = r.u8()?;
+    if modes & !(POS_MODE_MASK | MULTI_OBJECT) != 0 {
+        return Err(CodecError::new(start + 3, format!("unknown mode bits {modes:#x}")));
+    }
+    let group = r.u32()?;
+    let self_error = r.f32()?;
+    let self_sphere = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
+    if !(self_error.is_finite() && self_error >= 0.0) {
+        return Err(CodecError::new(start + 8, format!("self error {self_error} is not finite and ≥ 0")));
+    }
+    if self_sphere.iter().any(|x| !x.is_finite()) || self_sphere[3] < 0.0 {
+        return Err(CodecError::new(start + 12, format!("invalid self sphere {self_sphere:?}")));
+    }
+    let origin = [r.u32()?, r.u32()?, r.u32()?];
+
+    let pos_at = r.pos;
+    let mut positions = Vec::with_capacity(v);
+    let offset_err = || CodecError::new(pos_at, "vertex position outside the u32 grid");
+    match modes & POS_MODE_MASK {
+        0 | 1 => {
+            let delta = modes & POS_MODE_MASK == 1;
+            let w = r.take(3)?;
+            let w = [w[0] as u32, w[1] as u32, w[2] as u32];
+            let limit = if delta { 33 } else { 32 };
+            if w.iter().any(|&x| x > limit) {
+                return Err(CodecError::new(pos_at, format!("position bit widths {w:?} exceed {limit}")));
+            }
+            let count = if delta { v.saturating_sub(1) } else { v };
+            let data = r.take(packed_len(count, w.iter().sum()))?;
+            let mut br = BitReader::new(data);
+            if delta && v > 0 {
+                positions.push(origin);
+            }
+            for _ in 0..count {
+                let mut p = [0u32; 3];
+                for a in 0..3 {
+                    let x = br.get(w[a]);
+                    let value = if delta {
+                        positions.last().map_or(0, |q: &[u32; 3]| q[a] as i64) + unzigzag(x)
+                    } else {
+                        origin[a] as i64 + x as i64
+                    };
+                    p[a] = u32::try_from(value).map_err(|_| offset_err())?;
+                }
+                positions.push(p);
+            }
+        }
+        2 => {
+            let len = r.varint()? as usize;
+            let data = r.take(len)?;
+            if v == 0 {
+                return Err(CodecError::new(pos_at, "vertex codec used for a cluster without vertices"));
+            }
+            let rel: Vec<[u32; 3]> = meshopt::decode_vertex_buffer(data, v)
+                .map_err(|e| CodecError::new(pos_at, format!("vertex codec: {e:?}")))?;
+            for q in rel {
+                let mut p = [0u32; 3];
+                for a in 0..3 {
+                    p[a] = origin[a].checked_add(q[a]).ok_or_else(offset_err)?;
+                }
+                positions.push(p);
+            }
+        }
+        m => return Err(CodecError::new(start + 3, format!("unknown position mode {m}"))),
+    }
+
+    let idx_at = r.pos;
+    let len = r.varint()? as usize;
+    let data = r.take(len)?;
+    // meshopt_decodeMeshlet asserts that the buffer holds codes (+ control) + gap ≥ 16 bytes.
+    if len < 16.max(t.div_ceil(2)) {
+        return Err(CodecError::new(
+            idx_at,
+            format!("{len}-byte triangle block is too short for {t} triangles"),
+        ));
+    }
+    let (_, mut indices) = meshopt::decode_meshlet(data, 0, t)
+        .map_err(|e| CodecError::new(idx_at, format!("meshlet codec: {e:?}")))?;
+    if indices.len() != 3 * t {
+        return Err(CodecError::new(idx_at, "meshlet codec returned the wrong number of indices"));
+    }
+    if let Some(i) = indices.iter().find(|&&i| i as usize >= v) {
+        return Err(CodecError::new(idx_at, format!("index {i} out of range ({v} vertices)")));
+    }
+    rotate_triangles(&mut indices);
+
+    let obj_at = r.pos;
+    let objects = if modes & MULTI_OBJECT != 0 {
+        let n = r.varint()? as usize;
+        if n < 2 || n > t {
+            return Err(CodecError::new(obj_at, format!("{n} distinct objects for {t} triangles")));
+        }
+        let mut table = Vec::with_capacity(n);
+        table.push(r.varint()?);
+        for _ in 1..n {
+            let at = r.pos;
+            let d = r.varint()?;
+            let prev = table.last().copied().unwrap_or(0);
+            let next = prev.checked_add(d).and_then(|x| x.checked_add(1));
+            table.push(next.ok_or_else(|| CodecError::new(at, "object id overflows u32"))?);
+        }
+        let width = bits32(n as u32 - 1);
+        let data = r.take(packed_len(t, width))?;
+        let mut br = BitReader::new(data);
+        let mut objects = Vec::with_capacity(t);
+        for _ in 0..t {
+            let k = br.get(width) as usize;
+            objects.push(
+                *table.get(k).ok_or_else(|| CodecError::new(obj_at, format!("object slot {k} of {n}")))?,
+            );
+        }
+        objects
+    } else {
+        vec![r.varint()?; t]
+    };
+
+    Ok((PageCluster { positions, indices, objects, self_error, self_sphere, group, level }, r.pos))
+}
+
+fn varint_len(v: u32) -> usize {
+    (bits32(v).max(1) as usize).div_ceil(7)
+}
+
+fn put_varint(out: &mut Vec<u8>, mut v: u32) {
+    while v >= 0x80 {
+        out.push((v as u8) | 0x80);
+        v >>= 7;
+    }
+    out.push(v as u8);
+}
+
+/// LSB-first bit packing; values are at most 33 bits wide.
+struct BitWriter<'a> {
+    out: &'a mut Vec<u8>,
+    acc: u64,
+    n: u32,
+}
+
+impl<'a> BitWriter<'a> {
+    fn new(out: &'a mut Vec<u8>) -> Self {
+        BitWriter { out, acc: 0, n: 0 }
+    }
+
+    fn put(&mut self, v: u64, width: u32) {
+        debug_assert!(width <= 33 && (width == 64 || v >> width == 0));
+        self.acc |= v << self.n;
+        self.n += width;
+        while self.n >= 8 {
+            self.out.push(self.acc as u8);
+            self.acc >>= 8;
+            self.n -= 8;
+        }
+    }
+
+    fn finish(self) {
+        if self.n > 0 {
+            self.out.push(self.acc as u8);
+        }
+    }
+}
+
+/// Reads what [`BitWriter`] wrote; the caller sized `bytes` for every read (missing bytes read
+/// as zero).
+struct BitReader<'a> {
+    bytes: &'a [u8],
+    pos: usize,
+    acc: u64,
+    n: u32,
+}
+
+impl<'a> BitReader<'a> {
+    fn new(bytes: &'a [u8]) -> Self {
+        BitReader { bytes, pos: 0, acc: 0, n: 0 }
+    }
+
+    fn get(&mut self, width: u32) -> u64 {
+        if width == 0 {
+            return 0;
+        }
+        while self.n < width {
+            let b = self.bytes.get(self.pos).copied().unwrap_or(0);
+            self.pos += 1;
+            self.acc |= (b as u64) << self.n;
+            self.n += 8;
+        }
+        let v = self.acc & ((1u64 << width) - 1);
+        self.acc >>= width;
+        self.n -= width;
+        v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `w`×`h` grid of quads (2 triangles each) at grid spacing `step`, starting at `base`,
+    /// split into clusters of ≤ 128 triangles (8×8 quads each), object id per row band.
+    pub(crate) fn grid_clusters(
+        w: u32,
+        h: u32,
+        step: u32,
+        base: [u32; 3],
+        objects_per_cluster: u32,
+    ) -> Vec<PageCluster> {
+        let mut out = Vec::new();
+        for by in (0..h).step_by(8) {
+            for bx in (0..w).step_by(8) {
+                let (nx, ny) = ((w - bx).min(8), (h - by).min(8));
+                let mut c = PageCluster {
+                    self_sphere: [1.0, 2.0, 3.0, 4.0],
+                    group: out.len() as u32,
+                    ..Default::default()
+                };
+                for y in 0..=ny {
+                    for x in 0..=nx {
+                        let gx = (bx + x) * step;
+                        let gy = (by + y) * step;
+                        // A gentle height field so z varies too.
+                        let gz = ((gx / 7 + gy / 5) % 97) * step / 4;
+                        c.positions.push([base[0] + gx, base[1] + gy, base[2] + gz]);
+                    }
+                }
+                for y in 0..ny {
+                    for x in 0..nx {
+                        let i = (y * (nx + 1) + x) as u8;
+                        let j = i + 1;
+                        let k = i + nx as u8 + 1;
+                        let l = k + 1;
+                        let o = 7 + (y * objects_per_cluster / ny.max(1));
+                        c.indices.extend_from_slice(&[i, j, l, i, l, k]);
+                        c.objects.extend_from_slice(&[o, o]);
+                    }
+                }
+                out.push(c);
+            }
+        }
+        out
+    }
+
+    fn round_trip(clusters: &[PageCluster], force: Option<PositionMode>) -> usize {
+        let mut bytes = Vec::new();
+        let s = encode_page_with(clusters, &mut bytes, force).unwrap();
+        assert_eq!(s.encoded_len, bytes.len());
+        let back = decode_page(&bytes, clusters.len()).unwrap();
+        for (a, b) in clusters.iter().zip(&back) {
+            assert_eq!(&a.canonical(), b);
+        }
+        bytes.len()
+    }
+
+    #[test]
+    fn every_position_mode_round_trips() {
+        let cs = grid_clusters(24, 16, 3, [1000, 2000, 3000], 3);
+        for mode in [PositionMode::Packed, PositionMode::Delta, PositionMode::Meshopt] {
+            round_trip(&cs, Some(mode));
+        }
+        round_trip(&cs, None);
+    }
+
+    #[test]
+    fn extreme_coordinates_round_trip() {
+        let c = PageCluster {
+            positions: vec![[0, u32::MAX, 5], [u32::MAX, 0, 5], [7, 7, u32::MAX]],
+            indices: vec![0, 1, 2, 2, 1, 0],
+            objects: vec![u32::MAX, 0],
+            self_error: 0.5,
+            self_sphere: [0.0; 4],
+            group: u32::MAX,
+            level: 255,
+        };
+        for mode in [PositionMode::Packed, PositionMode::Delta, PositionMode::Meshopt] {
+            round_trip(std::slice::from_ref(&c), Some(mode));
+        }
+    }
+
+    #[test]
+    fn degenerate_and_unused_vertices_round_trip() {
+        let c = PageCluster {
+            positions: vec![[1, 1, 1], [9, 9, 9], [2, 3, 4], [5, 5, 5]],
+            indices: vec![2, 2, 0, 0, 2, 3],
+            objects: vec![4, 4],
+            ..Default::default()
+        };
+        let canon = c.canonical();
+        assert_eq!(canon.positions, vec![[2, 3, 4], [1, 1, 1], [5, 5, 5], [9, 9, 9]]);
+        assert_eq!(canon.indices, vec![0, 0, 1, 0, 2, 1]);
+        round_trip(&[c], None);
+    }
+
+    #[test]
+    fn canonical_keeps_winding_and_triangle_order() {
+        let c = PageCluster {
+            positions: vec![[0; 3], [1, 0, 0], [0, 1, 0], [1, 1, 0]],
+            indices: vec![3, 1, 2, 2, 1, 0],
+            objects: vec![1, 2],
+            ..Default::default()
+        };
+        let k = c.canonical();
+        for t in 0..2 {
+            let orig: Vec<[u32; 3]> = (0..3).map(|i| c.positions[c.indices[3 * t + i] as usize]).collect();
+            let new: Vec<[u32; 3]> = (0..3).map(|i| k.positions[k.indices[3 * t + i] as usize]).collect();
+            let rotations: Vec<Vec<[u32; 3]>> =
+                (0..3).map(|r| (0..3).map(|i| orig[(i + r) % 3]).collect()).collect();
+            assert!(rotations.contains(&new), "triangle {t}: {new:?} is not a rotation of {orig:?}");
+        }
+        assert_eq!(k.objects, vec![1, 2]);
+    }
+
+    #[test]
+    fn encoder_rejects_invalid_clusters() {
+        let ok = PageCluster {
+            positions: vec![[0; 3]; 3],
+            indices: vec![0, 1, 2],
+            objects: vec![0],
+            ..Default::default()
+        };
+        let mut out = Vec::new();
+        let cases: Vec<(&str, PageCluster)> = vec![
+            ("no triangles", PageCluster { indices: vec![], objects: vec![], ..ok.clone() }),
+            ("index range", PageCluster { indices: vec![0, 1, 3], ..ok.clone() }),
+            ("objects", PageCluster { objects: vec![], ..ok.clone() }),
+            ("too many", PageCluster { indices: vec![0; 3 * 129], objects: vec![0; 129], ..ok.clone() }),
+            ("vertices", PageCluster { positions: vec![[0; 3]; 256], ..ok.clone() }),
+            ("nan error", PageCluster { self_error: f32::NAN, ..ok.clone() }),
+            ("inf error", PageCluster { self_error: f32::INFINITY, ..ok.clone() }),
+            ("sphere", PageCluster { self_sphere: [0.0, 0.0, 0.0, -1.0], ..ok.clone() }),
+        ];
+        for (name, c) in cases {
+            assert!(encode_page(&[c], &mut out).is_err(), "{name} accepted");
+        }
+        assert!(encode_page(&[], &mut out).is_err());
+        assert!(encode_page(&[ok], &mut out).is_ok());
+    }
+
+    #[test]
+    fn decoder_rejects_short_trailing_and_overcounted_pages() {
+        let cs = grid_clusters(16, 8, 1, [0; 3], 1);
+        let mut bytes = Vec::new();
+        encode_page(&cs, &mut bytes).unwrap();
+        for len in 0..bytes.len() {
+            assert!(decode_page(&bytes[..len], cs.len()).is_err(), "{len}-byte prefix decoded");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(decode_page(&longer, cs.len()).unwrap_err().msg.contains("after the last cluster"));
+        assert!(decode_page(&bytes, cs.len() + 1).is_err());
+        assert!(decode_page(&bytes, 1_000_000_000).is_err());
+    }
+
+    #[test]
+    fn decoder_never_panics_on_flipped_bytes() {
+        let mut cs = grid_clusters(16, 8, 5, [77, 0, 9], 4);
+        cs[0].positions.iter_mut().for_each(|p| p[0] += 1 << 20);
+        let mut bytes = Vec::new();
+        encode_page(&cs, &mut bytes).unwrap();
+        for i in 0..bytes.len() {
+            for bit in [0x01, 0x80, 0xff] {
+                let mut b = bytes.clone();
+                b[i] ^= bit;
+                if let Ok(back) = decode_page(&b, cs.len()) {
+                    for c in &back {
+                        c.validate().unwrap();
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn decoder_reports_out_of_range_indices_and_bad_modes() {
+        let c = PageCluster {
+            positions: vec![[0; 3]; 3],
+            indices: vec![0, 1, 2],
+            objects: vec![0],
+            ..Default::default()
+        };
+        let mut bytes = Vec::new();
+        encode_page(&[c], &mut bytes).unwrap();
+        let mut b = bytes.clone();
+        b[1] = 2; // claim 2 vertices: index 2 is now out of range (and the position block shrinks)
+        assert!(decode_page(&b, 1).is_err());
+        let mut b = bytes.clone();
+        b[3] = 3;
+        assert!(decode_page(&b, 1).unwrap_err().msg.contains("position mode"));
+        let mut b = bytes;
+        b[0] = 200;
+        assert!(decode_page(&b, 1).unwrap_err().msg.contains("triangles"));
+    }
+
+    #[test]
+    fn varints_round_trip() {
+        for v in [0, 1, 127, 128, 16383, 16384, u32::MAX] {
+            let mut b = Vec::new();
+            put_varint(&mut b, v);
+            assert_eq!(b.len(), varint_len(v));
+            assert_eq!(Cursor { bytes: &b, pos: 0 }.varint().unwrap(), v);
+        }
+        assert!(Cursor { bytes: &[0xff, 0xff, 0xff, 0xff, 0x7f], pos: 0 }.varint().is_err());
+        assert!(Cursor { bytes: &[0x80; 6], pos: 0 }.varint().is_err());
+    }
+
+    /// Bytes per triangle of each position mode on a 10k-triangle height-field grid, at two grid
+    /// spacings (dense scan-like and sparse CAD-like). Run with `--nocapture` to see the numbers.
+    #[test]
+    fn compression_size_per_triangle() {
+        for (step, label) in [(1u32, "spacing 1"), (37, "spacing 37"), (1021, "spacing 1021")] {
+            let cs = grid_clusters(100, 50, step, [123_456, 654_321, 1_000], 1);
+            let tris: usize = cs.iter().map(|c| c.triangle_count()).sum();
+            assert_eq!(tris, 10_000);
+            let mut line = format!("{label}: {} clusters", cs.len());
+            let mut auto = 0;
+            for (name, mode) in [
+                ("packed", Some(PositionMode::Packed)),
+                ("delta", Some(PositionMode::Delta)),
+                ("meshopt", Some(PositionMode::Meshopt)),
+                ("auto", None),
+            ] {
+                let len = round_trip(&cs, mode);
+                line += &format!(", {name} {:.2} B/tri", len as f64 / tris as f64);
+                auto = len;
+            }
+            println!("{line}");
+            assert!((auto as f64 / tris as f64) < 6.0, "{line}");
+        }
+    }
+
+    /// Encode and decode speed: `cargo test --release -p tw-store codec_throughput -- --ignored --nocapture`.
+    #[test]
+    #[ignore]
+    fn codec_throughput() {
+        let cs = grid_clusters(1000, 500, 37, [123_456, 654_321, 1_000], 2);
+        let tris: usize = cs.iter().map(|c| c.triangle_count()).sum();
+        let t0 = std::time::Instant::now();
+        let mut bytes = Vec::new();
+        for page in cs.chunks(64) {
+            encode_page(page, &mut bytes).unwrap();
+        }
+        let enc = t0.elapsed().as_secs_f64();
+        let t0 = std::time::Instant::now();
+        let mut pos = 0;
+        let mut n = 0;
+        for page in cs.chunks(64) {
+            let mut one = Vec::new();
+            let s = encode_page(page, &mut one).unwrap();
+            let back = decode_page(&bytes[pos..pos + s.encoded_len], page.len()).unwrap();
+            n += back.len();
+            pos += s.encoded_len;
+        }
+        let dec = t0.elapsed().as_secs_f64() - enc; // the loop re-encodes to find page lengths
+        assert_eq!(n, cs.len());
+        println!(
+            "{tris} triangles, {:.2} B/tri: encode {:.1} M tri/s, decode ~{:.1} M tri/s",
+            bytes.len() as f64 / tris as f64,
+            tris as f64 / enc / 1e6,
+            tris as f64 / dec.max(1e-9) / 1e6
+        );
+    }
+}

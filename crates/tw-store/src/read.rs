@@ -1,0 +1,483 @@
+//! [`Store`]: opens a store (memory-mapped, or from a byte buffer), validates it and decodes
+//! pages on demand; [`Store::verify`] checks a whole store (docs/FORMAT.md, "Invariants").
+//!
+//! `open` reads only the header and the tables (O(objects + nodes + groups + pages)) and checks
+//! their checksums and structural invariants, so a store that opens can be traversed without
+//! further checks; `page` checks the page's checksum and decodes it; `verify` decodes every page
+//! and checks the invariants that need the clusters.
+
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use crate::codec::{self, PageCluster};
+use crate::error::StoreError;
+use crate::format::{
+    checksum, str_at, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Reader, SectionKind,
+    Tables, FORMAT_VERSION, GROUP_LEN, HEADER_LEN, MAGIC, NODE_LEN, OBJECT_LEN, PAGE_ENTRY_LEN,
+    SECTION_ALIGN,
+};
+use crate::write::{Object, TABLE_ORDER};
+
+/// Checksums are skipped only when fuzzing, so that the fuzzer reaches the parsers behind them.
+const CHECK_CRC: bool = !cfg!(fuzzing);
+
+enum Data {
+    Mmap(memmap2::Mmap),
+    Vec(Vec<u8>),
+}
+
+impl Data {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            Data::Mmap(m) => m,
+            Data::Vec(v) => v,
+        }
+    }
+}
+
+/// An open store. Cheap to query; pages are decoded on demand.
+pub struct Store {
+    path: PathBuf,
+    data: Data,
+    header: Header,
+    units: String,
+    build_options: String,
+    objects: Vec<Object>,
+    nodes: Vec<Node>,
+    groups: Vec<Group>,
+    pages: Vec<PageEntry>,
+}
+
+/// What [`Store::verify`] found.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VerifyReport {
+    pub file_bytes: u64,
+    pub page_bytes: u64,
+    pub pages: u32,
+    pub root_pages: u32,
+    pub nodes: u32,
+    pub groups: u32,
+    pub objects: u32,
+    pub clusters: u64,
+    /// Triangles over all levels.
+    pub triangles: u64,
+    /// Triangles of level-0 (full-resolution) clusters.
+    pub level0_triangles: u64,
+    /// Highest cluster level.
+    pub max_level: u8,
+    /// File bytes per input triangle (the header's count; 0 when there is none).
+    pub bytes_per_input_triangle: f64,
+}
+
+impl std::fmt::Debug for Store {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Store")
+            .field("path", &self.path)
+            .field("bytes", &self.data.bytes().len())
+            .field("pages", &self.pages.len())
+            .field("nodes", &self.nodes.len())
+            .field("groups", &self.groups.len())
+            .finish()
+    }
+}
+
+impl Store {
+    /// Opens and validates the store at `path` (memory-mapped).
+    pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
+        let path = path.as_ref().to_path_buf();
+        let io = |source| StoreError::Io { path: path.clone(), source };
+        let file = File::open(&path).map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let data = if len < HEADER_LEN as u64 {
+            // Too small to be a store (and zero-length maps fail on some systems): read it for
+            // the error message.
+            Data::Vec(std::fs::read(&path).map_err(io)?)
+        } else {
+            // SAFETY: the map is read-only and every byte is read through checked accessors, so
+            // any content is safe to read. As with any mmap, another process truncating the file
+            // while it is open can fault the reader; stores are written once and renamed into
+            // place, never modified.
+            #[allow(unsafe_code)]
+            let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
+            Data::Mmap(map)
+        };
+        Store::parse(path, data)
+    }
+
+    /// Opens and validates a store held in memory (tests, fuzzing, embedded stores).
+    pub fn from_bytes(bytes: Vec<u8>) -> Result<Store, StoreError> {
+        Store::parse(PathBuf::from("<memory>"), Data::Vec(bytes))
+    }
+
+    fn parse(path: PathBuf, data: Data) -> Result<Store, StoreError> {
+        let bytes = data.bytes();
+        let len = bytes.len() as u64;
+        let corrupt = |(offset, msg): (u64, String)| StoreError::Corrupt { path: path.clone(), offset, msg };
+        let truncated = |what: &str, needed: u64| StoreError::Truncated {
+            path: path.clone(),
+            what: what.into(),
+            needed,
+            len,
+        };
+
+        let n = bytes.len().min(MAGIC.len());
+        if bytes[..n] != MAGIC[..n] {
+            return Err(StoreError::NotAStore { path });
+        }
+        if bytes.len() < 12 {
+            return Err(truncated("the header", HEADER_LEN as u64));
+        }
+        let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+        if version != FORMAT_VERSION {
+            return Err(StoreError::Version { path, found: version });
+        }
+        if bytes.len() < HEADER_LEN {
+            return Err(truncated("the header", HEADER_LEN as u64));
+        }
+        let header = Header::parse(&bytes[..HEADER_LEN], CHECK_CRC).map_err(corrupt)?;
+
+        // Section directory: canonical layout, table lengths matching the counts.
+        let h = &header;
+        let fixed = [
+            (SectionKind::Objects, h.object_count, OBJECT_LEN),
+            (SectionKind::Nodes, h.node_count, NODE_LEN),
+            (SectionKind::Groups, h.group_count, GROUP_LEN),
+            (SectionKind::PageTable, h.page_count, PAGE_ENTRY_LEN),
+        ];
+        let dir_at = |k: SectionKind| 160 + 24 * k as u64;
+        for (kind, count, size) in fixed {
+            if h.section(kind).length != count as u64 * size as u64 {
+                return Err(corrupt((
+                    dir_at(kind),
+                    format!(
+                        "{} is {} bytes, expected {count} entries of {size}",
+                        kind.name(),
+                        h.section(kind).length
+                    ),
+                )));
+            }
+        }
+        let strings_len = h.section(SectionKind::Strings).length;
+        if strings_len > u32::MAX as u64 {
+            return Err(corrupt((dir_at(SectionKind::Strings), "string table over 4 GiB".into())));
+        }
+        let pages = h.section(SectionKind::Pages);
+        if pages.offset != HEADER_LEN as u64 || pages.checksum != 0 {
+            return Err(corrupt((
+                dir_at(SectionKind::Pages),
+                format!(
+                    "pages region at byte {} with checksum {}, expected {HEADER_LEN} and 0",
+                    pages.offset, pages.checksum
+                ),
+            )));
+        }
+        // Every length is bounded by what the fixed sizes allow (≤ 2^32 · 48), so this cannot
+        // overflow unless the pages region is absurd; check that first.
+        if pages.length > len {
+            return Err(truncated("the pages region", pages.offset.saturating_add(pages.length)));
+        }
+        let mut pos = pages.end();
+        for kind in TABLE_ORDER {
+            let s = h.section(kind);
+            let offset = pos.next_multiple_of(SECTION_ALIGN);
+            if s.offset != offset {
+                return Err(corrupt((
+                    dir_at(kind),
+                    format!("{} at byte {}, expected {offset}", kind.name(), s.offset),
+                )));
+            }
+            pos = s.end();
+        }
+        if pos > len {
+            return Err(truncated("the tables", pos));
+        }
+        if pos < len {
+            return Err(corrupt((pos, format!("{} unexpected bytes after the last table", len - pos))));
+        }
+        let mut prev_end = pages.end();
+        for kind in TABLE_ORDER {
+            let s = h.section(kind);
+            if let Some(i) = bytes[prev_end as usize..s.offset as usize].iter().position(|&b| b != 0) {
+                return Err(corrupt((prev_end + i as u64, "padding byte is not zero".into())));
+            }
+            prev_end = s.end();
+            let body = &bytes[s.offset as usize..s.end() as usize];
+            let actual = checksum(body);
+            if CHECK_CRC && actual != s.checksum {
+                return Err(corrupt((
+                    s.offset,
+                    format!(
+                        "{} checksum mismatch (stored {:#010x}, computed {actual:#010x})",
+                        kind.name(),
+                        s.checksum
+                    ),
+                )));
+            }
+        }
+
+        let section = |k: SectionKind| {
+            let s = h.section(k);
+            Reader::new(&bytes[s.offset as usize..s.end() as usize], s.offset)
+        };
+        let mut r = section(SectionKind::Objects);
+        let object_entries = (0..h.object_count)
+            .map(|_| ObjectEntry::parse(&mut r))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(corrupt)?;
+        let mut r = section(SectionKind::Nodes);
+        let nodes =
+            (0..h.node_count).map(|_| Node::parse(&mut r)).collect::<Result<Vec<_>, _>>().map_err(corrupt)?;
+        let mut r = section(SectionKind::Groups);
+        let groups = (0..h.group_count)
+            .map(|_| Group::parse(&mut r))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(corrupt)?;
+        let mut r = section(SectionKind::PageTable);
+        let page_entries = (0..h.page_count)
+            .map(|_| PageEntry::parse(&mut r))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(corrupt)?;
+        let s = h.section(SectionKind::Strings);
+        let strings = &bytes[s.offset as usize..s.end() as usize];
+
+        validate_tables(&Tables {
+            header: h,
+            objects: &object_entries,
+            nodes: &nodes,
+            groups: &groups,
+            pages: &page_entries,
+            strings,
+        })
+        .map_err(corrupt)?;
+
+        // Validated above: these cannot fail.
+        let text = |r| str_at(strings, r).unwrap_or_default().to_owned();
+        let units = text(h.units);
+        let build_options = text(h.build_options);
+        let objects = object_entries
+            .iter()
+            .map(|o| Object { name: text(o.name), color: o.color, triangles: o.triangles })
+            .collect();
+        Ok(Store { path, data, header, units, build_options, objects, nodes, groups, pages: page_entries })
+    }
+
+    /// The file this store was opened from (`<memory>` for [`from_bytes`](Self::from_bytes)).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    pub fn units(&self) -> &str {
+        &self.units
+    }
+
+    pub fn build_options(&self) -> &str {
+        &self.build_options
+    }
+
+    pub fn objects(&self) -> &[Object] {
+        &self.objects
+    }
+
+    /// The skeleton; node 0 is the root.
+    pub fn nodes(&self) -> &[Node] {
+        &self.nodes
+    }
+
+    pub fn groups(&self) -> &[Group] {
+        &self.groups
+    }
+
+    pub fn pages(&self) -> &[PageEntry] {
+        &self.pages
+    }
+
+    /// Size of the store in bytes.
+    pub fn file_len(&self) -> u64 {
+        self.data.bytes().len() as u64
+    }
+
+    fn page_entry(&self, index: u32) -> Result<&PageEntry, StoreError> {
+        self.pages.get(index as usize).ok_or_else(|| StoreError::Page {
+            path: self.path.clone(),
+            page: index,
+            offset: 0,
+            msg: format!("no such page (the store has {})", self.pages.len()),
+        })
+    }
+
+    /// The encoded bytes of page `index`, after checking its checksum.
+    pub fn page_bytes(&self, index: u32) -> Result<&[u8], StoreError> {
+        let p = self.page_entry(index)?;
+        // In bounds: open checked that the pages fill the pages region, inside the file.
+        let start = p.offset as usize;
+        let bytes = self.data.bytes().get(start..start + p.compressed_len as usize).unwrap_or_default();
+        let actual = checksum(bytes);
+        if CHECK_CRC && actual != p.checksum {
+            return Err(StoreError::Page {
+                path: self.path.clone(),
+                page: index,
+                offset: p.offset,
+                msg: format!("checksum mismatch (stored {:#010x}, computed {actual:#010x})", p.checksum),
+            });
+        }
+        Ok(bytes)
+    }
+
+    /// Decodes page `index` (checksum, then every cluster; see [`codec::decode_page`]) and
+    /// checks it against its page table entry.
+    pub fn page(&self, index: u32) -> Result<Vec<PageCluster>, StoreError> {
+        let bytes = self.page_bytes(index)?;
+        let p = self.page_entry(index)?;
+        let err =
+            |offset: u64, msg: String| StoreError::Page { path: self.path.clone(), page: index, offset, msg };
+        let clusters = codec::decode_page(bytes, p.cluster_count as usize)
+            .map_err(|e| err(p.offset + e.offset as u64, e.msg))?;
+        let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
+        let decoded: usize =
+            clusters.iter().map(|c| codec::decoded_len(c.positions.len(), c.triangle_count())).sum();
+        let lmin = clusters.iter().map(|c| c.level).min().unwrap_or(0);
+        let lmax = clusters.iter().map(|c| c.level).max().unwrap_or(0);
+        if triangles != p.triangle_count as usize
+            || decoded != p.uncompressed_len as usize
+            || (lmin, lmax) != (p.level_min, p.level_max)
+        {
+            return Err(err(
+                p.offset,
+                format!(
+                    "decoded {triangles} triangles / {decoded} bytes / levels {lmin}..={lmax}, the page table \
+                     says {} / {} / {}..={}",
+                    p.triangle_count, p.uncompressed_len, p.level_min, p.level_max
+                ),
+            ));
+        }
+        Ok(clusters)
+    }
+
+    /// Checks every page (checksum, decoding) and the invariants that need the clusters: each
+    /// cluster's group lists it (same page, within the group's cluster range) and the group's
+    /// counts match; `self_error ≤ group.error`; the self sphere lies in the group's sphere;
+    /// the cluster's level ≤ the group's level; positions lie in the group's node bounds; each
+    /// node's `max_error` ≥ the errors of the groups in its subtree. `progress(done, total)` is
+    /// called after each page. Stops at the first problem.
+    pub fn verify(&self, mut progress: impl FnMut(u32, u32)) -> Result<VerifyReport, StoreError> {
+        let invariant = |msg: String| StoreError::Invariant { path: self.path.clone(), msg };
+        let mut rep = VerifyReport {
+            file_bytes: self.file_len(),
+            page_bytes: self.header.section(SectionKind::Pages).length,
+            pages: self.pages.len() as u32,
+            nodes: self.nodes.len() as u32,
+            groups: self.groups.len() as u32,
+            objects: self.objects.len() as u32,
+            ..Default::default()
+        };
+        let mut claimed = vec![0u32; self.groups.len()];
+        let mut group_tris = vec![0u64; self.groups.len()];
+        let total = self.pages.len() as u32;
+        for (pi, p) in self.pages.iter().enumerate() {
+            let pi = pi as u32;
+            let clusters = self.page(pi)?;
+            rep.root_pages += p.is_root() as u32;
+            for (k, c) in clusters.iter().enumerate() {
+                let at = format!("page {pi} cluster {k}");
+                let g = self.groups.get(c.group as usize).ok_or_else(|| {
+                    invariant(format!("{at}: group {} beyond {} groups", c.group, self.groups.len()))
+                })?;
+                let k = k as u64;
+                if g.page != pi
+                    || k < g.first_cluster as u64
+                    || k >= g.first_cluster as u64 + g.cluster_count as u64
+                {
+                    return Err(invariant(format!(
+                        "{at}: says group {}, which lists clusters {}..{} of page {}",
+                        c.group,
+                        g.first_cluster,
+                        g.first_cluster as u64 + g.cluster_count as u64,
+                        g.page
+                    )));
+                }
+                claimed[c.group as usize] += 1;
+                group_tris[c.group as usize] += c.triangle_count() as u64;
+                if c.self_error > g.error {
+                    return Err(invariant(format!(
+                        "{at}: self error {} > error {} of its group {}",
+                        c.self_error, g.error, c.group
+                    )));
+                }
+                if !sphere_contains(g.sphere, c.self_sphere) {
+                    return Err(invariant(format!(
+                        "{at}: self sphere {:?} not inside the sphere {:?} of its group {}",
+                        c.self_sphere, g.sphere, c.group
+                    )));
+                }
+                if c.level > g.level {
+                    return Err(invariant(format!(
+                        "{at}: level {} > level {} of its group",
+                        c.level, g.level
+                    )));
+                }
+                // group.node < nodes.len(): checked at open.
+                let node = &self.nodes[g.node as usize];
+                if let Some(q) =
+                    c.positions.iter().find(|q| (0..3).any(|a| q[a] < node.min[a] || q[a] > node.max[a]))
+                {
+                    return Err(invariant(format!(
+                        "{at}: vertex {q:?} outside the bounds {:?}..={:?} of node {} (its group's node)",
+                        node.min, node.max, g.node
+                    )));
+                }
+                rep.clusters += 1;
+                rep.triangles += c.triangle_count() as u64;
+                if c.level == 0 {
+                    rep.level0_triangles += c.triangle_count() as u64;
+                }
+                rep.max_level = rep.max_level.max(c.level);
+            }
+            progress(pi + 1, total);
+        }
+        for (i, g) in self.groups.iter().enumerate() {
+            if claimed[i] != g.cluster_count || group_tris[i] != g.triangles as u64 {
+                return Err(invariant(format!(
+                    "group {i} lists {} clusters / {} triangles, its clusters are {} / {}",
+                    g.cluster_count, g.triangles, claimed[i], group_tris[i]
+                )));
+            }
+        }
+        // Children come after their parent (checked at open): one backward pass.
+        let mut subtree = vec![0f32; self.nodes.len()];
+        for i in (0..self.nodes.len()).rev() {
+            let n = &self.nodes[i];
+            let mut m = 0f32;
+            let groups = n.first_group as usize..n.first_group as usize + n.group_count as usize;
+            for g in self.groups.get(groups).unwrap_or_default() {
+                m = m.max(g.error);
+            }
+            let children = n.first_child as usize..n.first_child as usize + n.child_count as usize;
+            for &c in subtree.get(children).unwrap_or_default() {
+                m = m.max(c);
+            }
+            if n.max_error < m {
+                return Err(invariant(format!(
+                    "node {i}: max error {} < {m}, the largest group error in its subtree",
+                    n.max_error
+                )));
+            }
+            subtree[i] = m;
+        }
+        if self.header.input_triangles > 0 {
+            rep.bytes_per_input_triangle = rep.file_bytes as f64 / self.header.input_triangles as f64;
+        }
+        Ok(rep)
+    }
+}
+
+/// `inner` lies in `outer`, with a relative tolerance for f32 rounding.
+fn sphere_contains(outer: [f32; 4], inner: [f32; 4]) -> bool {
+    let d = (0..3).map(|a| (outer[a] as f64 - inner[a] as f64).powi(2)).sum::<f64>().sqrt();
+    let scale =
+        (0..3).map(|a| (outer[a] as f64).abs().max((inner[a] as f64).abs())).fold(outer[3] as f64, f64::max);
+    d + inner[3] as f64 <= outer[3] as f64 + 1e-5 * scale + 1e-30
+}

@@ -1,0 +1,265 @@
+//! [`StoreWriter`]: writes a store atomically, streaming pages as they come (docs/FORMAT.md).
+//!
+//! Layout written: a zeroed header placeholder, then each page as it is added (the pages
+//! region), then on [`StoreWriter::finish`] the tables (objects, nodes, groups, page table,
+//! strings), then the header is patched in place. Everything goes to a temporary file in the
+//! destination directory, which is fsynced and renamed over the destination only when `finish`
+//! succeeds; a writer dropped before that leaves nothing behind. The bytes depend only on the
+//! input (no timestamps, no hash-map order).
+
+use std::fs::File;
+use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
+
+use crate::codec::{self, PageCluster};
+use crate::error::StoreError;
+use crate::format::{
+    checksum, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Section, SectionKind, StrRef,
+    Tables, FORMAT_VERSION, HEADER_LEN, PAGE_ROOT, SECTION_ALIGN,
+};
+
+/// Scene-wide facts for the header.
+#[derive(Clone, Debug, PartialEq)]
+pub struct StoreInfo {
+    /// Scene bounds in input coordinates.
+    pub bounds_min: [f64; 3],
+    pub bounds_max: [f64; 3],
+    /// The quantization grid: input coordinates of grid point 0 and the step.
+    pub grid_origin: [f64; 3],
+    pub grid_step: f64,
+    /// Units of the input coordinates (free text, e.g. "m"; may be empty).
+    pub units: String,
+    /// 0 x, 1 y, 2 z.
+    pub up_axis: u8,
+    /// Build options as `key=value` lines (for `terawalk info` and reproducibility).
+    pub build_options: String,
+    /// Input triangles (after degenerate filtering).
+    pub input_triangles: u64,
+}
+
+/// One input object.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Object {
+    pub name: String,
+    /// sRGB colour with alpha; `None` when the input gave none.
+    pub color: Option<[u8; 4]>,
+    /// Input triangles of this object.
+    pub triangles: u64,
+}
+
+/// What [`StoreWriter::finish`] wrote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct WriteSummary {
+    pub file_bytes: u64,
+    pub page_bytes: u64,
+    pub pages: u32,
+    pub clusters: u64,
+    pub triangles: u64,
+}
+
+/// Writes one store file; see the module documentation.
+pub struct StoreWriter {
+    path: PathBuf,
+    out: BufWriter<tempfile::NamedTempFile>,
+    pos: u64,
+    pages: Vec<PageEntry>,
+    scratch: Vec<u8>,
+}
+
+impl StoreWriter {
+    /// Starts a store that will appear at `path` when [`finish`](Self::finish) succeeds.
+    pub fn create(path: impl AsRef<Path>) -> Result<StoreWriter, StoreError> {
+        let path = path.as_ref().to_path_buf();
+        let io = |source| StoreError::Io { path: path.clone(), source };
+        let dir = match path.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+            _ => PathBuf::from("."),
+        };
+        let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let tmp = tempfile::Builder::new().prefix(&format!(".{name}.tmp")).tempfile_in(&dir).map_err(io)?;
+        let mut out = BufWriter::with_capacity(1 << 20, tmp);
+        out.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
+        Ok(StoreWriter { path, out, pos: HEADER_LEN as u64, pages: Vec::new(), scratch: Vec::new() })
+    }
+
+    fn io(&self, source: std::io::Error) -> StoreError {
+        StoreError::Io { path: self.path.clone(), source }
+    }
+
+    /// Encodes `clusters` as the next page and writes it; returns its index. `root` marks a page
+    /// of the coarsest levels that the runtime keeps resident.
+    pub fn add_page(&mut self, clusters: &[PageCluster], root: bool) -> Result<u32, StoreError> {
+        let index =
+            u32::try_from(self.pages.len()).map_err(|_| StoreError::Invalid("too many pages".into()))?;
+        self.scratch.clear();
+        let s = codec::encode_page(clusters, &mut self.scratch)
+            .map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
+        let too_big = || StoreError::Invalid(format!("page {index}: more than 4 GiB"));
+        let entry = PageEntry {
+            offset: self.pos,
+            compressed_len: u32::try_from(s.encoded_len).map_err(|_| too_big())?,
+            uncompressed_len: u32::try_from(s.decoded_len).map_err(|_| too_big())?,
+            cluster_count: clusters.len() as u32,
+            triangle_count: s.triangles as u32,
+            checksum: checksum(&self.scratch),
+            level_min: s.level_min,
+            level_max: s.level_max,
+            flags: if root { PAGE_ROOT } else { 0 },
+        };
+        if let Err(e) = self.out.write_all(&self.scratch) {
+            return Err(self.io(e));
+        }
+        self.pos += s.encoded_len as u64;
+        self.pages.push(entry);
+        Ok(index)
+    }
+
+    /// Pages added so far.
+    pub fn page_count(&self) -> u32 {
+        self.pages.len() as u32
+    }
+
+    /// Writes the tables and the header, fsyncs and renames the file into place. Fails without
+    /// leaving a file when the tables break an invariant of docs/FORMAT.md (the error says
+    /// which). Node 0 is the root; children must come after their parent.
+    pub fn finish(
+        mut self,
+        info: &StoreInfo,
+        objects: &[Object],
+        nodes: &[Node],
+        groups: &[Group],
+    ) -> Result<WriteSummary, StoreError> {
+        let count = |n: usize, what: &str| {
+            u32::try_from(n).map_err(|_| StoreError::Invalid(format!("{n} {what}: more than 2^32")))
+        };
+        let mut strings = Vec::new();
+        let mut add_str = |s: &str| -> Result<StrRef, StoreError> {
+            let r = StrRef {
+                offset: count(strings.len(), "string bytes")?,
+                len: count(s.len(), "string bytes")?,
+            };
+            strings.extend_from_slice(s.as_bytes());
+            Ok(r)
+        };
+        let units = add_str(&info.units)?;
+        let build_options = add_str(&info.build_options)?;
+        let mut object_entries = Vec::with_capacity(objects.len());
+        for o in objects {
+            object_entries.push(ObjectEntry {
+                name: add_str(&o.name)?,
+                color: o.color,
+                triangles: o.triangles,
+            });
+        }
+        count(strings.len(), "string bytes")?;
+
+        let mut bodies: [Vec<u8>; 6] = Default::default();
+        object_entries.iter().for_each(|o| o.write(&mut bodies[SectionKind::Objects as usize]));
+        nodes.iter().for_each(|n| n.write(&mut bodies[SectionKind::Nodes as usize]));
+        groups.iter().for_each(|g| g.write(&mut bodies[SectionKind::Groups as usize]));
+        self.pages.iter().for_each(|p| p.write(&mut bodies[SectionKind::PageTable as usize]));
+        bodies[SectionKind::Strings as usize] = strings;
+
+        let sections = layout_sections(
+            self.pos - HEADER_LEN as u64,
+            |k| bodies[k as usize].len() as u64,
+            |k| checksum(&bodies[k as usize]),
+        );
+        let header = Header {
+            version: FORMAT_VERSION,
+            flags: 0,
+            up_axis: info.up_axis,
+            bounds_min: info.bounds_min,
+            bounds_max: info.bounds_max,
+            grid_origin: info.grid_origin,
+            grid_step: info.grid_step,
+            units,
+            build_options,
+            object_count: count(objects.len(), "objects")?,
+            node_count: count(nodes.len(), "nodes")?,
+            group_count: count(groups.len(), "groups")?,
+            page_count: self.page_count(),
+            input_triangles: info.input_triangles,
+            cluster_count: self.pages.iter().map(|p| p.cluster_count as u64).sum(),
+            triangle_count: self.pages.iter().map(|p| p.triangle_count as u64).sum(),
+            sections,
+        };
+        let header_bytes = header.to_bytes();
+        // The reader's checks, run before anything is written.
+        Header::parse(&header_bytes, true).map_err(|(_, m)| StoreError::Invalid(format!("header: {m}")))?;
+        let tables = Tables {
+            header: &header,
+            objects: &object_entries,
+            nodes,
+            groups,
+            pages: &self.pages,
+            strings: &bodies[SectionKind::Strings as usize],
+        };
+        validate_tables(&tables).map_err(|(_, m)| StoreError::Invalid(m))?;
+
+        for kind in TABLE_ORDER {
+            let s = header.section(kind);
+            let pad = (s.offset - self.pos) as usize;
+            let res = self
+                .out
+                .write_all(&[0u8; SECTION_ALIGN as usize][..pad])
+                .and_then(|_| self.out.write_all(&bodies[kind as usize]));
+            res.map_err(|e| self.io(e))?;
+            self.pos = s.end();
+        }
+        let file_bytes = self.pos;
+        let page_bytes = header.section(SectionKind::Pages).length;
+        let path = self.path.clone();
+        let io = |source| StoreError::Io { path: path.clone(), source };
+        let mut tmp = self.out.into_inner().map_err(|e| io(e.into_error()))?;
+        let f: &mut File = tmp.as_file_mut();
+        f.seek(SeekFrom::Start(0)).map_err(io)?;
+        f.write_all(&header_bytes).map_err(io)?;
+        f.sync_all().map_err(io)?;
+        tmp.persist(&path).map_err(|e| io(e.error))?;
+        #[cfg(unix)]
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            // Make the rename durable; failure here does not undo a complete, renamed store.
+            if let Err(e) = File::open(dir).and_then(|d| d.sync_all()) {
+                tracing::warn!("{}: could not fsync the directory: {e}", dir.display());
+            }
+        }
+        tracing::debug!("{}: wrote {file_bytes} bytes, {} pages", path.display(), header.page_count);
+        Ok(WriteSummary {
+            file_bytes,
+            page_bytes,
+            pages: header.page_count,
+            clusters: header.cluster_count,
+            triangles: header.triangle_count,
+        })
+    }
+}
+
+/// Tables in file order, after the pages region.
+pub(crate) const TABLE_ORDER: [SectionKind; 5] = [
+    SectionKind::Objects,
+    SectionKind::Nodes,
+    SectionKind::Groups,
+    SectionKind::PageTable,
+    SectionKind::Strings,
+];
+
+/// The canonical section layout: the pages region right after the header, then the tables in
+/// [`TABLE_ORDER`], each at the next multiple of [`SECTION_ALIGN`].
+pub(crate) fn layout_sections(
+    pages_len: u64,
+    len: impl Fn(SectionKind) -> u64,
+    crc: impl Fn(SectionKind) -> u32,
+) -> [Section; 6] {
+    let mut sections = [Section::default(); 6];
+    sections[SectionKind::Pages as usize] =
+        Section { offset: HEADER_LEN as u64, length: pages_len, checksum: 0 };
+    let mut pos = HEADER_LEN as u64 + pages_len;
+    for kind in TABLE_ORDER {
+        let offset = pos.next_multiple_of(SECTION_ALIGN);
+        let length = len(kind);
+        sections[kind as usize] = Section { offset, length, checksum: crc(kind) };
+        pos = offset + length;
+    }
+    sections
+}

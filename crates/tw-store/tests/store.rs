@@ -1,0 +1,570 @@
+//! Store round trips, determinism, atomic writes, and every kind of damage: flipped bytes (with
+//! and without fixed-up checksums), truncation, wrong magic and version, broken references and
+//! broken tree structure. None of them may panic.
+
+use std::path::Path;
+
+use tw_store::format::{
+    checksum, Header, PageEntry, Reader, SectionKind, GROUP_LEN, HEADER_CRC_AT, HEADER_LEN, NODE_LEN,
+    PAGE_ENTRY_LEN,
+};
+use tw_store::{Group, Node, Object, PageCluster, Store, StoreError, StoreInfo, StoreWriter};
+
+fn info(input_triangles: u64) -> StoreInfo {
+    StoreInfo {
+        bounds_min: [-5.0, -5.0, 0.0],
+        bounds_max: [5.0, 5.0, 1.0],
+        grid_origin: [-5.0, -5.0, 0.0],
+        grid_step: 10.0 / 16777215.0,
+        units: "m".into(),
+        up_axis: 2,
+        build_options: "memory=2G\nthreads=2".into(),
+        input_triangles,
+    }
+}
+
+/// A strip of `n` quads starting at grid x = `x0`, as one cluster of 2n triangles.
+fn strip(x0: u32, n: u32, group: u32, level: u8, self_error: f32, object: u32) -> PageCluster {
+    let mut c =
+        PageCluster { self_error, self_sphere: [1.0, 1.0, 0.0, 0.5], group, level, ..Default::default() };
+    for i in 0..=n {
+        c.positions.push([x0 + 10 * i, 100, 3]);
+        c.positions.push([x0 + 10 * i, 110, 4]);
+    }
+    for i in 0..n as u8 {
+        let (a, b, d, e) = (2 * i, 2 * i + 1, 2 * i + 2, 2 * i + 3);
+        c.indices.extend_from_slice(&[a, d, b, b, d, e]);
+        c.objects.extend_from_slice(&[object, object + i as u32 % 2]);
+    }
+    c
+}
+
+type Edit = Box<dyn Fn(&mut Scene)>;
+
+struct Scene {
+    pages: Vec<(Vec<PageCluster>, bool)>,
+    objects: Vec<Object>,
+    nodes: Vec<Node>,
+    groups: Vec<Group>,
+}
+
+/// Root node 0 with leaves 1 and 2. Leaf groups 0 and 1 (level 0, pages 0 and 1), root group 2
+/// (level 1, error ∞, root page 2).
+fn scene() -> Scene {
+    let big = [1.0, 1.0, 0.0, 100.0];
+    let pages = vec![
+        (vec![strip(0, 4, 0, 0, 0.0, 0), strip(40, 5, 0, 0, 0.0, 1)], false),
+        (vec![strip(1000, 3, 1, 0, 0.0, 2), strip(1030, 6, 1, 0, 0.0, 2)], false),
+        (vec![strip(0, 2, 2, 1, 0.75, 0), strip(1000, 2, 2, 1, 0.75, 2)], true),
+    ];
+    let tris = |p: usize| pages[p].0.iter().map(|c| c.triangle_count() as u32).sum::<u32>();
+    let groups = vec![
+        Group {
+            sphere: big,
+            error: 0.75,
+            node: 1,
+            level: 0,
+            page: 0,
+            first_cluster: 0,
+            cluster_count: 2,
+            triangles: tris(0),
+        },
+        Group {
+            sphere: big,
+            error: 0.75,
+            node: 2,
+            level: 0,
+            page: 1,
+            first_cluster: 0,
+            cluster_count: 2,
+            triangles: tris(1),
+        },
+        Group {
+            sphere: big,
+            error: f32::INFINITY,
+            node: 0,
+            level: 1,
+            page: 2,
+            first_cluster: 0,
+            cluster_count: 2,
+            triangles: tris(2),
+        },
+    ];
+    let nodes = vec![
+        Node {
+            min: [0, 100, 3],
+            max: [1100, 110, 4],
+            first_child: 1,
+            child_count: 2,
+            first_group: 2,
+            group_count: 1,
+            max_error: f32::INFINITY,
+        },
+        Node {
+            min: [0, 100, 3],
+            max: [90, 110, 4],
+            first_child: 0,
+            child_count: 0,
+            first_group: 0,
+            group_count: 1,
+            max_error: 0.75,
+        },
+        Node {
+            min: [1000, 100, 3],
+            max: [1090, 110, 4],
+            first_child: 0,
+            child_count: 0,
+            first_group: 1,
+            group_count: 1,
+            max_error: 0.75,
+        },
+    ];
+    let objects = vec![
+        Object { name: "wall".into(), color: Some([255, 0, 0, 255]), triangles: 10 },
+        Object { name: "door ü".into(), color: None, triangles: 8 },
+        Object { name: String::new(), color: Some([1, 2, 3, 4]), triangles: 18 },
+    ];
+    Scene { pages, objects, nodes, groups }
+}
+
+fn write(path: &Path, s: &Scene) -> Result<tw_store::WriteSummary, StoreError> {
+    let mut w = StoreWriter::create(path)?;
+    for (i, (clusters, root)) in s.pages.iter().enumerate() {
+        assert_eq!(w.add_page(clusters, *root)?, i as u32);
+    }
+    w.finish(&info(36), &s.objects, &s.nodes, &s.groups)
+}
+
+fn store_bytes(s: &Scene) -> Vec<u8> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.tw");
+    write(&path, s).unwrap();
+    std::fs::read(path).unwrap()
+}
+
+/// Recomputes every checksum (pages, tables, header) of a store whose bytes were edited, so
+/// that the structural checks behind them are exercised. Leaves bytes it cannot parse alone.
+fn refresh_checksums(b: &mut [u8]) {
+    if b.len() < HEADER_LEN {
+        return;
+    }
+    let Ok(h) = Header::parse(&b[..HEADER_LEN], false) else { return };
+    let pt = *h.section(SectionKind::PageTable);
+    if pt.end() <= b.len() as u64 {
+        for i in 0..h.page_count as usize {
+            let at = pt.offset as usize + i * PAGE_ENTRY_LEN;
+            let Some(entry) = b.get(at..at + PAGE_ENTRY_LEN) else { break };
+            let Ok(p) = PageEntry::parse(&mut Reader::new(entry, 0)) else { continue };
+            let Some(page) = b.get(p.offset as usize..(p.offset + p.compressed_len as u64) as usize) else {
+                continue;
+            };
+            let crc = checksum(page);
+            b[at + 24..at + 28].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+    for kind in SectionKind::ALL {
+        if kind == SectionKind::Pages {
+            continue;
+        }
+        let s = h.section(kind);
+        if let Some(body) = b.get(s.offset as usize..s.end() as usize) {
+            let crc = checksum(body);
+            let at = 160 + 24 * kind as usize + 16;
+            b[at..at + 4].copy_from_slice(&crc.to_le_bytes());
+        }
+    }
+    let crc = checksum(&b[..HEADER_CRC_AT]);
+    b[HEADER_CRC_AT..HEADER_LEN].copy_from_slice(&crc.to_le_bytes());
+}
+
+/// Opens, verifies and decodes every page; `Err` with the first error.
+fn check(bytes: Vec<u8>) -> Result<(), StoreError> {
+    let store = Store::from_bytes(bytes)?;
+    store.verify(|_, _| {})?;
+    for i in 0..store.pages().len() as u32 {
+        store.page(i)?;
+    }
+    Ok(())
+}
+
+fn section_offset(bytes: &[u8], kind: SectionKind) -> usize {
+    Header::parse(&bytes[..HEADER_LEN], true).unwrap().section(kind).offset as usize
+}
+
+fn patch_u32(bytes: &mut [u8], at: usize, v: u32) {
+    bytes[at..at + 4].copy_from_slice(&v.to_le_bytes());
+    refresh_checksums(bytes);
+}
+
+#[test]
+fn round_trip_of_a_few_pages() {
+    let s = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.tw");
+    let summary = write(&path, &s).unwrap();
+    assert_eq!(summary.pages, 3);
+    assert_eq!(summary.clusters, 6);
+    assert_eq!(summary.file_bytes, std::fs::metadata(&path).unwrap().len());
+
+    let store = Store::open(&path).unwrap();
+    let h = store.header();
+    assert_eq!((h.up_axis, h.input_triangles, h.grid_step), (2, 36, 10.0 / 16777215.0));
+    assert_eq!(
+        h.triangle_count,
+        s.pages.iter().flat_map(|p| &p.0).map(|c| c.triangle_count() as u64).sum::<u64>()
+    );
+    assert_eq!(store.units(), "m");
+    assert_eq!(store.build_options(), "memory=2G\nthreads=2");
+    assert_eq!(store.objects(), &s.objects[..]);
+    assert_eq!(store.nodes(), &s.nodes[..]);
+    assert_eq!(store.groups(), &s.groups[..]);
+    assert!(store.pages()[2].is_root() && !store.pages()[0].is_root());
+    for (i, (clusters, _)) in s.pages.iter().enumerate() {
+        let back = store.page(i as u32).unwrap();
+        let expected: Vec<PageCluster> = clusters.iter().map(|c| c.canonical()).collect();
+        assert_eq!(back, expected, "page {i}");
+    }
+    let mut calls = Vec::new();
+    let rep = store.verify(|d, t| calls.push((d, t))).unwrap();
+    assert_eq!(calls, vec![(1, 3), (2, 3), (3, 3)]);
+    assert_eq!((rep.pages, rep.root_pages, rep.clusters, rep.max_level), (3, 1, 6, 1));
+    assert_eq!(rep.triangles, h.triangle_count);
+    assert_eq!(rep.level0_triangles, 36);
+    assert!(matches!(store.page(3), Err(StoreError::Page { page: 3, .. })));
+
+    // The mmap reader and the in-memory reader agree.
+    let mem = Store::from_bytes(std::fs::read(&path).unwrap()).unwrap();
+    assert_eq!(mem.groups(), store.groups());
+    assert_eq!(mem.page(1).unwrap(), store.page(1).unwrap());
+}
+
+#[test]
+fn identical_input_gives_identical_bytes() {
+    assert_eq!(store_bytes(&scene()), store_bytes(&scene()));
+}
+
+#[test]
+fn an_unfinished_writer_leaves_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.tw");
+    {
+        let mut w = StoreWriter::create(&path).unwrap();
+        w.add_page(&scene().pages[0].0, false).unwrap();
+    }
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+
+    // A finish that fails validation leaves nothing either, and keeps an existing store.
+    std::fs::write(&path, b"old").unwrap();
+    let mut s = scene();
+    s.groups[0].page = 99;
+    assert!(matches!(write(&path, &s), Err(StoreError::Invalid(m)) if m.contains("page 99 beyond")));
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+    assert_eq!(std::fs::read(&path).unwrap(), b"old");
+}
+
+#[test]
+fn writer_rejects_bad_clusters_and_tables() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("scene.tw");
+    let mut w = StoreWriter::create(&path).unwrap();
+    let mut bad = strip(0, 1, 0, 0, 0.0, 0);
+    bad.indices[0] = 200;
+    assert!(matches!(w.add_page(&[bad], false), Err(StoreError::Invalid(m)) if m.contains("page 0")));
+    assert!(w.add_page(&[], false).is_err());
+
+    let cases: Vec<(&str, Edit)> = vec![
+        ("cycle", Box::new(|s| s.nodes[2] = Node { first_child: 0, child_count: 1, ..s.nodes[2] })),
+        ("self loop", Box::new(|s| s.nodes[1] = Node { first_child: 1, child_count: 1, ..s.nodes[1] })),
+        ("two parents", Box::new(|s| s.nodes[1] = Node { first_child: 2, child_count: 1, ..s.nodes[1] })),
+        ("child out of range", Box::new(|s| s.nodes[0].child_count = 3)),
+        ("bounds", Box::new(|s| s.nodes[1].max[0] = 5000)),
+        ("unlisted group", Box::new(|s| s.nodes[1].group_count = 0)),
+        ("group node", Box::new(|s| s.groups[0].node = 2)),
+        ("cluster range", Box::new(|s| s.groups[0].first_cluster = 1)),
+        ("nan error", Box::new(|s| s.groups[0].error = f32::NAN)),
+        ("group level", Box::new(|s| s.groups[0].level = 5)),
+        ("no nodes", Box::new(|s| s.nodes.clear())),
+        ("bad up axis", Box::new(|_| {})),
+    ];
+    for (name, f) in cases {
+        let mut s = scene();
+        f(&mut s);
+        let mut w = StoreWriter::create(&path).unwrap();
+        for (c, root) in &s.pages {
+            w.add_page(c, *root).unwrap();
+        }
+        let mut i = info(36);
+        if name == "bad up axis" {
+            i.up_axis = 3;
+        }
+        let r = w.finish(&i, &s.objects, &s.nodes, &s.groups);
+        assert!(matches!(r, Err(StoreError::Invalid(_))), "{name}: {r:?}");
+        assert!(!path.exists(), "{name}");
+    }
+}
+
+#[test]
+fn every_flipped_byte_is_detected_without_panic() {
+    let bytes = store_bytes(&scene());
+    for i in 0..bytes.len() {
+        for bit in [0x01u8, 0xff] {
+            let mut b = bytes.clone();
+            b[i] ^= bit;
+            assert!(check(b).is_err(), "flipping byte {i} by {bit:#x} went unnoticed");
+        }
+    }
+}
+
+/// With the checksums recomputed after the flip, the structural checks must still either reject
+/// the store or give a store that verifies, and never panic.
+#[test]
+fn flipped_bytes_behind_fixed_checksums_never_panic() {
+    let bytes = store_bytes(&scene());
+    let (mut rejected, mut accepted) = (0, 0);
+    for i in 0..bytes.len() {
+        for bit in [0x01u8, 0x10, 0x80, 0xff] {
+            let mut b = bytes.clone();
+            b[i] ^= bit;
+            refresh_checksums(&mut b);
+            match check(b) {
+                Ok(()) => accepted += 1,
+                Err(_) => rejected += 1,
+            }
+        }
+    }
+    println!("{} bytes: {rejected} flips rejected, {accepted} accepted (harmless values)", bytes.len());
+    assert!(rejected > accepted);
+}
+
+#[test]
+fn every_truncation_is_an_error() {
+    let bytes = store_bytes(&scene());
+    for len in 0..bytes.len() {
+        let e = check(bytes[..len].to_vec()).unwrap_err();
+        if len >= 8 {
+            assert!(matches!(e, StoreError::Truncated { .. }), "length {len}: {e}");
+        }
+    }
+    // Through the mmap path too, including an empty file.
+    let dir = tempfile::tempdir().unwrap();
+    for len in [0, 5, 12, HEADER_LEN - 1, HEADER_LEN, bytes.len() - 1] {
+        let path = dir.path().join("t.tw");
+        std::fs::write(&path, &bytes[..len]).unwrap();
+        let e = Store::open(&path).unwrap_err();
+        assert!(e.to_string().contains("t.tw"), "{e}");
+        if len > 0 {
+            assert!(matches!(e, StoreError::Truncated { .. }), "length {len}: {e}");
+        }
+    }
+    let mut longer = bytes.clone();
+    longer.push(0);
+    assert!(matches!(Store::from_bytes(longer), Err(StoreError::Corrupt { .. })));
+}
+
+#[test]
+fn wrong_magic_is_not_a_store() {
+    let mut bytes = store_bytes(&scene());
+    bytes[3] = b'x';
+    assert!(matches!(Store::from_bytes(bytes), Err(StoreError::NotAStore { .. })));
+    assert!(matches!(Store::from_bytes(b"solid cube\n".to_vec()), Err(StoreError::NotAStore { .. })));
+}
+
+#[test]
+fn wrong_version_says_rebuild() {
+    let mut bytes = store_bytes(&scene());
+    bytes[8] = 2;
+    let e = Store::from_bytes(bytes).unwrap_err();
+    assert!(matches!(e, StoreError::Version { found: 2, .. }));
+    assert!(e.to_string().contains("store version 2, this terawalk reads version 1; rebuild it"), "{e}");
+    // The version is checked before the rest of the header, even if that is cut short.
+    let mut short = store_bytes(&scene())[..16].to_vec();
+    short[8] = 7;
+    assert!(matches!(Store::from_bytes(short), Err(StoreError::Version { found: 7, .. })));
+}
+
+#[test]
+fn group_pointing_beyond_the_pages_is_rejected() {
+    let mut bytes = store_bytes(&scene());
+    let at = section_offset(&bytes, SectionKind::Groups) + GROUP_LEN + 24;
+    patch_u32(&mut bytes, at, 3);
+    let e = Store::from_bytes(bytes).unwrap_err();
+    assert!(matches!(&e, StoreError::Corrupt { msg, .. } if msg.contains("page 3 beyond 3 pages")), "{e}");
+}
+
+#[test]
+fn node_cycles_are_rejected() {
+    let base = store_bytes(&scene());
+    let nodes = section_offset(&base, SectionKind::Nodes);
+    // Leaf 2 claims the root as its child: a child before its parent.
+    let mut bytes = base.clone();
+    patch_u32(&mut bytes, nodes + 2 * NODE_LEN + 24, 0);
+    patch_u32(&mut bytes, nodes + 2 * NODE_LEN + 28, 1);
+    let e = Store::from_bytes(bytes).unwrap_err();
+    assert!(e.to_string().contains("must lie after the node"), "{e}");
+    // A node as its own child.
+    let mut bytes = base.clone();
+    patch_u32(&mut bytes, nodes + NODE_LEN + 24, 1);
+    patch_u32(&mut bytes, nodes + NODE_LEN + 28, 1);
+    assert!(Store::from_bytes(bytes).is_err());
+    // Leaf 1 claims leaf 2 too: two parents (a DAG, not a tree).
+    let mut bytes = base;
+    patch_u32(&mut bytes, nodes + NODE_LEN + 24, 2);
+    patch_u32(&mut bytes, nodes + NODE_LEN + 28, 1);
+    let e = Store::from_bytes(bytes).unwrap_err();
+    assert!(e.to_string().contains("child 2") || e.to_string().contains("2 parents"), "{e}");
+}
+
+#[test]
+fn verify_finds_cluster_level_invariant_violations() {
+    let cases: Vec<(&str, Edit, &str)> = vec![
+        ("cluster in the wrong group", Box::new(|s| s.pages[0].0[1].group = 1), "lists clusters"),
+        ("self error above group error", Box::new(|s| s.pages[0].0[0].self_error = 1.0), "self error"),
+        ("max error too small", Box::new(|s| s.nodes[1].max_error = 0.5), "max error"),
+        ("root max error too small", Box::new(|s| s.nodes[0].max_error = 1.0), "max error"),
+        ("group triangles", Box::new(|s| s.groups[1].triangles += 1), "triangles"),
+        ("sphere not nested", Box::new(|s| s.groups[0].sphere[3] = 0.1), "sphere"),
+        ("vertex outside node", Box::new(|s| s.nodes[1].max[0] = 80), "outside the bounds"),
+        (
+            "cluster level above group",
+            Box::new(|s| {
+                s.pages[1].0[0].level = 1;
+                s.groups[1].level = 0;
+            }),
+            "level",
+        ),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (name, f, expect) in cases {
+        let mut s = scene();
+        f(&mut s);
+        let path = dir.path().join("v.tw");
+        match write(&path, &s) {
+            Ok(_) => {
+                let store = Store::open(&path).unwrap();
+                let e = store.verify(|_, _| {}).expect_err(name);
+                assert!(matches!(e, StoreError::Invariant { .. }), "{name}: {e}");
+                assert!(e.to_string().contains(expect), "{name}: {e}");
+            }
+            // Some are already caught by the writer's table checks.
+            Err(e) => assert!(e.to_string().contains(expect), "{name}: {e}"),
+        }
+    }
+}
+
+#[test]
+fn corrupt_page_reports_page_and_offset() {
+    let mut bytes = store_bytes(&scene());
+    let store = Store::from_bytes(bytes.clone()).unwrap();
+    let p = store.pages()[1];
+    bytes[p.offset as usize + 5] ^= 0x40;
+    let store = Store::from_bytes(bytes).unwrap();
+    assert!(store.page(0).is_ok());
+    let e = store.page(1).unwrap_err();
+    assert!(matches!(e, StoreError::Page { page: 1, offset, .. } if offset == p.offset), "{e}");
+    assert!(e.to_string().contains("checksum"), "{e}");
+    let e = store.verify(|_, _| {}).unwrap_err();
+    assert!(matches!(e, StoreError::Page { page: 1, .. }), "{e}");
+}
+
+#[test]
+fn empty_scene_stores_and_opens() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("empty.tw");
+    let w = StoreWriter::create(&path).unwrap();
+    w.finish(&info(0), &[], &[Node::default()], &[]).unwrap();
+    let rep = Store::open(&path).unwrap().verify(|_, _| {}).unwrap();
+    assert_eq!((rep.pages, rep.triangles, rep.nodes), (0, 0, 1));
+}
+
+/// The whole store for a 10k-triangle grid-like scene: bytes per triangle over everything
+/// (header, tables, pages). Run with `--nocapture` to see the number.
+#[test]
+fn store_size_per_triangle() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("grid.tw");
+    let mut w = StoreWriter::create(&path).unwrap();
+    let (mut groups, mut tris) = (Vec::new(), 0u64);
+    // 100×50 quads on a height field, 8×8 quads per cluster, 8 clusters per group and page.
+    let mut clusters = Vec::new();
+    for by in (0..50u32).step_by(8) {
+        for bx in (0..100u32).step_by(8) {
+            let (nx, ny) = ((100 - bx).min(8), (50 - by).min(8));
+            let mut c = PageCluster { self_sphere: [0.0, 0.0, 0.0, 1.0], ..Default::default() };
+            for y in 0..=ny {
+                for x in 0..=nx {
+                    let (gx, gy) = ((bx + x) * 1021 + 5_000_000, (by + y) * 1021 + 7_000_000);
+                    let gz = 2_000_000
+                        + ((gx as f64 * 1e-4).sin() * 3000.0 + (gy as f64 * 2e-4).cos() * 2000.0) as u32;
+                    c.positions.push([gx, gy, gz]);
+                }
+            }
+            for y in 0..ny {
+                for x in 0..nx {
+                    let i = (y * (nx + 1) + x) as u8;
+                    let k = i + nx as u8 + 1;
+                    c.indices.extend_from_slice(&[i, i + 1, k + 1, i, k + 1, k]);
+                    c.objects.extend_from_slice(&[0, 0]);
+                }
+            }
+            clusters.push(c);
+        }
+    }
+    for (p, chunk) in clusters.chunks_mut(8).enumerate() {
+        let t: usize = chunk.iter().map(|c| c.triangle_count()).sum();
+        for c in chunk.iter_mut() {
+            c.group = p as u32;
+        }
+        let page = w.add_page(chunk, false).unwrap();
+        groups.push(Group {
+            sphere: [0.0, 0.0, 0.0, 10.0],
+            error: f32::INFINITY,
+            page,
+            cluster_count: chunk.len() as u32,
+            triangles: t as u32,
+            ..Default::default()
+        });
+        tris += t as u64;
+    }
+    assert_eq!(tris, 10_000);
+    let nodes = [Node {
+        min: [0; 3],
+        max: [u32::MAX; 3],
+        group_count: groups.len() as u32,
+        max_error: f32::INFINITY,
+        ..Default::default()
+    }];
+    let s = w.finish(&info(tris), &[Object::default()], &nodes, &groups).unwrap();
+    let per_tri = s.file_bytes as f64 / tris as f64;
+    println!(
+        "{tris} triangles: {} bytes in the store, {per_tri:.2} bytes/triangle (pages {:.2})",
+        s.file_bytes,
+        s.page_bytes as f64 / tris as f64
+    );
+    assert!(per_tri < 6.0);
+    Store::open(&path).unwrap().verify(|_, _| {}).unwrap();
+}
+
+/// Writes the test scene as a seed for the `store` fuzz target:
+/// `cargo test -p tw-store --test store -- --ignored write_fuzz_seed`.
+#[test]
+#[ignore]
+fn write_fuzz_seed() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus/store");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("seed-scene.tw"), store_bytes(&scene())).unwrap();
+    let mut s = scene();
+    s.pages.truncate(1);
+    s.pages[0].1 = true;
+    s.groups.truncate(1);
+    s.groups[0].node = 0;
+    s.groups[0].error = f32::INFINITY;
+    s.nodes = vec![Node {
+        child_count: 0,
+        first_child: 0,
+        first_group: 0,
+        group_count: 1,
+        max_error: f32::INFINITY,
+        ..s.nodes[1]
+    }];
+    std::fs::write(dir.join("seed-one-page.tw"), store_bytes(&s)).unwrap();
+}
