@@ -46,6 +46,14 @@ pub enum Command {
                             terawalk preview dragon.ply.gz -o dragon.png --view front --size 800x800\n  \
                             terawalk preview plant.ply -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"")]
     Preview(PreviewArgs),
+    /// Preprocess inputs into a store file for walkthroughs (out of core, bounded memory).
+    #[command(after_help = "Examples:\n  terawalk build plant.ply -o plant.tw\n  \
+                            terawalk build part1.obj part2.glb -o site.tw --memory 1G --threads 2\n  \
+                            terawalk build scan.ply.gz -o scan.tw --up y")]
+    Build(BuildArgs),
+    /// Describe a store file; `--verify` checks every checksum and invariant.
+    #[command(after_help = "Examples:\n  terawalk info plant.tw\n  terawalk info plant.tw --verify")]
+    Info(InfoArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
@@ -188,4 +196,40 @@ mod tests {
         assert!(parse_size("0x10").is_err());
         assert!(parse_size("big").is_err());
     }
+}
+
+#[derive(Args, Debug)]
+pub struct BuildArgs {
+    /// Model files (.obj .ply .stl .gltf .glb, each optionally .gz); several form one scene.
+    #[arg(required = true)]
+    pub inputs: Vec<PathBuf>,
+    /// The store file to write (conventionally .tw).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Memory budget for the whole build (peak resident memory).
+    #[arg(long, default_value = "2G", value_parser = parse_bytes)]
+    pub memory: u64,
+    /// Worker threads (default: all cores). The output is the same for any count.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Up axis of the model.
+    #[arg(long, default_value = "z", value_parser = ["x", "y", "z"])]
+    pub up: String,
+    /// Units of the input coordinates, recorded in the store (e.g. m, mm).
+    #[arg(long, default_value = "")]
+    pub units: String,
+    /// Directory for working files (default: next to the output).
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub import: ImportArgs,
+}
+
+#[derive(Args, Debug)]
+pub struct InfoArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// Check every page checksum and structural invariant; report the first bad page.
+    #[arg(long)]
+    pub verify: bool,
 }

@@ -16,6 +16,8 @@ fn main() {
         cli::Command::Stats(a) => commands::stats::run(a),
         cli::Command::Generate(a) => commands::generate::run(a),
         cli::Command::Preview(a) => commands::preview::run(a),
+        cli::Command::Build(a) => commands::build::run(a, cli.quiet),
+        cli::Command::Info(a) => commands::info::run(a),
         cli::Command::Demo(a) => commands::demo::run(a),
     };
     if let Err(e) = result {

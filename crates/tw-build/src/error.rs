@@ -27,6 +27,9 @@ pub enum BuildError {
     /// A build parameter is out of range.
     #[error("invalid parameter: {0}")]
     Param(String),
+    /// Writing the store failed.
+    #[error(transparent)]
+    Store(#[from] tw_store::StoreError),
     /// A working file does not hold what this build wrote into it (changed on disk meanwhile).
     #[error("{}: working file is corrupt: {message}", path.display())]
     Corrupt { path: PathBuf, message: String },
@@ -35,5 +38,9 @@ pub enum BuildError {
 impl BuildError {
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> BuildError {
         BuildError::Io { path: path.into(), source }
+    }
+
+    pub fn store(e: tw_store::StoreError) -> BuildError {
+        BuildError::Store(e)
     }
 }

@@ -5,8 +5,8 @@
 //! 2. [`redefine`]: GigaWalk's partition → MST clustering → partition of objects into cells.
 //! 3. [`hierarchy`]: AABB tree over the cells.
 //! 4. [`lod`] and [`hlod`]: cluster DAG inside each cell, HLOD groups above the cells.
-//! 5. pages: clusters packed into compressed, checksummed pages.
-//! 6. write: the store file, atomically.
+//! 5. [`pages`]: clusters packed into compressed, checksummed pages.
+//! 6. write: the store file, atomically; [`pipeline::build`] runs all phases.
 
 pub mod cells;
 pub mod cut;
@@ -15,5 +15,10 @@ pub mod hierarchy;
 pub mod hlod;
 pub mod ingest;
 pub mod lod;
+pub mod pages;
+pub mod pipeline;
 pub mod redefine;
 pub mod types;
+
+pub use error::BuildError;
+pub use pipeline::{build, BuildOptions, BuildProgress, BuildReport, NoProgress};

@@ -1,6 +1,8 @@
 //! One module per subcommand.
 
+pub mod build;
 pub mod demo;
 pub mod generate;
+pub mod info;
 pub mod preview;
 pub mod stats;

@@ -196,7 +196,8 @@ impl Seek for AtomicFile {
 /// The main output of a writer: an [`AtomicFile`], gzip'ed or not.
 pub(crate) enum Output {
     Plain(AtomicFile),
-    Gzip(GzEncoder<AtomicFile>),
+    // Boxed: the encoder state is large, the plain variant small.
+    Gzip(Box<GzEncoder<AtomicFile>>),
 }
 
 impl Output {
@@ -204,7 +205,7 @@ impl Output {
         let file = AtomicFile::create(path)?;
         Ok(if gzip {
             // Level 1: model data compresses little better at higher levels, and much slower.
-            Output::Gzip(GzEncoder::new(file, flate2::Compression::fast()))
+            Output::Gzip(Box::new(GzEncoder::new(file, flate2::Compression::fast())))
         } else {
             Output::Plain(file)
         })

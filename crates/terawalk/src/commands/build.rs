@@ -1,0 +1,111 @@
+//! `terawalk build`: inputs → store file (tw-build), with a progress bar per phase and a summary.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
+use tw_build::{BuildOptions, BuildProgress};
+use tw_io::{Scene, SceneOptions};
+
+use crate::cli::BuildArgs;
+use crate::progress;
+use crate::units::{fmt_bytes, fmt_count};
+
+/// Progress bars for the build's phases.
+struct Bars {
+    bar: Option<ProgressBar>,
+    quiet: bool,
+}
+
+impl BuildProgress for Bars {
+    fn phase(&mut self, name: &str, total: u64, unit: &str) {
+        if self.quiet {
+            return;
+        }
+        let pb = match unit {
+            "bytes" => progress::bytes(total, name),
+            _ => progress::count(total, name),
+        };
+        if total == 0 {
+            pb.set_length(0);
+        }
+        self.bar = Some(pb);
+    }
+    fn advance(&mut self, done: u64) {
+        if let Some(b) = &self.bar {
+            if b.length() == Some(0) || b.length().is_some_and(|l| done > l) {
+                b.set_length(done);
+            }
+            b.set_position(done);
+        }
+    }
+    fn end_phase(&mut self) {
+        if let Some(b) = self.bar.take() {
+            b.finish_and_clear();
+        }
+    }
+}
+
+pub fn options(args: &BuildArgs) -> BuildOptions {
+    let mut o = BuildOptions { memory: args.memory, threads: args.threads, ..Default::default() };
+    o.up = match args.up.as_str() {
+        "x" => 0,
+        "y" => 1,
+        _ => 2,
+    };
+    o.units = args.units.clone();
+    o.work_dir = args.work_dir.clone();
+    o
+}
+
+pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
+    let start = Instant::now();
+    let scene = Scene::open(&args.inputs, SceneOptions { import: args.import.options() })?;
+    let opts = options(&args);
+    let mut bars = Bars { bar: None, quiet };
+    let r = tw_build::build(scene, &args.output, &opts, &mut bars)
+        .with_context(|| format!("building {}", args.output.display()))?;
+    let secs = start.elapsed().as_secs_f64();
+    println!("wrote {} ({})", args.output.display(), fmt_bytes(r.file_bytes));
+    println!(
+        "  input: {} triangles ({} degenerate dropped), {} objects",
+        fmt_count(r.input_triangles),
+        fmt_count(r.degenerate_dropped),
+        fmt_count(r.objects)
+    );
+    let d = &r.redefine;
+    println!(
+        "  objects: {} → partition I: {} pieces ({} split) → clustering: {} → partition II: {} cells ({} split)",
+        fmt_count(d.objects),
+        fmt_count(d.pieces),
+        fmt_count(d.split_objects),
+        fmt_count(d.clusters),
+        fmt_count(d.cells),
+        fmt_count(d.split_clusters)
+    );
+    println!(
+        "  hierarchy: {} nodes, depth {}; LOD: {} groups, {} clusters, {} triangles over all levels ({:.2}x input)",
+        fmt_count(r.nodes),
+        r.depth,
+        fmt_count(r.groups),
+        fmt_count(r.clusters),
+        fmt_count(r.stored_triangles),
+        r.stored_triangles as f64 / r.input_triangles.max(1) as f64
+    );
+    println!(
+        "  pages: {} ({} root), {:.2} bytes per input triangle",
+        fmt_count(r.pages as u64),
+        r.root_pages,
+        r.file_bytes as f64 / r.input_triangles.max(1) as f64
+    );
+    let phases: Vec<String> = r.phases.iter().map(|(n, s)| format!("{n} {s:.1} s")).collect();
+    println!("  phases: {}", phases.join(", "));
+    println!(
+        "done in {:.1} s: {:.2} M input triangles/s, peak memory {} (budget {})",
+        secs,
+        r.input_triangles as f64 / 1e6 / secs.max(1e-9),
+        r.peak_rss.map(fmt_bytes).unwrap_or_else(|| "unknown".into()),
+        fmt_bytes(args.memory)
+    );
+    Ok(())
+}

@@ -1,0 +1,107 @@
+//! Phase 5: packing clusters into pages (DESIGN decision 4; Manocha §5.4 for the paging idea).
+//!
+//! Groups arrive one at a time (a cell's LOD groups, then HLOD groups as the hierarchy is built
+//! bottom-up). Each group goes whole into the open page of its LOD level, so that a page holds
+//! spatially coherent clusters of one level (cells arrive in hierarchy leaf order); a page is
+//! written when it reaches [`PageParams::page_triangles`]. Groups of the top of the hierarchy go
+//! to separate "root" pages, which the runtime keeps resident. The page index and the position of
+//! each group's first cluster are reported back so that the group table can point at them.
+
+use tw_store::{PageCluster, StoreWriter};
+
+use crate::error::BuildError;
+
+/// Page sizing.
+#[derive(Clone, Copy, Debug)]
+pub struct PageParams {
+    /// A page is written once it holds this many triangles (a group is never split; a single
+    /// group larger than this gets a page of its own). 8192 triangles encode to ~40–60 KiB.
+    pub page_triangles: usize,
+}
+
+impl Default for PageParams {
+    fn default() -> Self {
+        PageParams { page_triangles: 8192 }
+    }
+}
+
+/// Where a group's clusters ended up.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct GroupPlacement {
+    pub group: u32,
+    pub page: u32,
+    pub first_cluster: u32,
+}
+
+struct OpenPage {
+    clusters: Vec<PageCluster>,
+    triangles: usize,
+    /// (group, first cluster) of every group in the page.
+    groups: Vec<(u32, u32)>,
+}
+
+/// Packs groups into pages and streams the pages to the store writer.
+pub struct PagePacker {
+    params: PageParams,
+    /// Open pages by (root, level).
+    open: Vec<Option<OpenPage>>,
+    placements: Vec<GroupPlacement>,
+    pub pages_written: u32,
+    pub root_pages: u32,
+}
+
+impl PagePacker {
+    pub fn new(params: PageParams) -> PagePacker {
+        PagePacker { params, open: Vec::new(), placements: Vec::new(), pages_written: 0, root_pages: 0 }
+    }
+
+    /// Adds one group (all its clusters, whose `group` field is already the scene-wide id).
+    pub fn add_group(
+        &mut self,
+        writer: &mut StoreWriter,
+        group: u32,
+        level: u8,
+        root: bool,
+        clusters: Vec<PageCluster>,
+    ) -> Result<(), BuildError> {
+        let slot = level as usize * 2 + root as usize;
+        if self.open.len() <= slot {
+            self.open.resize_with(slot + 1, || None);
+        }
+        let tris: usize = clusters.iter().map(|c| c.triangle_count()).sum();
+        if let Some(p) = &self.open[slot] {
+            if p.triangles > 0 && p.triangles + tris > self.params.page_triangles {
+                self.flush(writer, slot)?;
+            }
+        }
+        let page = self.open[slot].get_or_insert_with(|| OpenPage {
+            clusters: Vec::new(),
+            triangles: 0,
+            groups: Vec::new(),
+        });
+        page.groups.push((group, page.clusters.len() as u32));
+        page.triangles += tris;
+        page.clusters.extend(clusters);
+        Ok(())
+    }
+
+    fn flush(&mut self, writer: &mut StoreWriter, slot: usize) -> Result<(), BuildError> {
+        let Some(page) = self.open[slot].take() else { return Ok(()) };
+        let root = slot % 2 == 1;
+        let index = writer.add_page(&page.clusters, root).map_err(BuildError::store)?;
+        self.pages_written += 1;
+        self.root_pages += root as u32;
+        for (group, first_cluster) in page.groups {
+            self.placements.push(GroupPlacement { group, page: index, first_cluster });
+        }
+        Ok(())
+    }
+
+    /// Writes every open page; returns the placement of every group added.
+    pub fn finish(mut self, writer: &mut StoreWriter) -> Result<(Vec<GroupPlacement>, u32, u32), BuildError> {
+        for slot in 0..self.open.len() {
+            self.flush(writer, slot)?;
+        }
+        Ok((self.placements, self.pages_written, self.root_pages))
+    }
+}

@@ -1,0 +1,491 @@
+//! The build pipeline: phases 1–6 wired together, with bounded memory.
+//!
+//! 1. ingest ([`crate::ingest`]) → working file and scene grid;
+//! 2. redefine ([`crate::redefine`]) → cells; hierarchy ([`crate::hierarchy`]) over them, cells
+//!    renumbered in leaf order;
+//! 3. distribute ([`crate::cells`]) → one bucket file per range of cells;
+//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), which HLOD
+//!    must keep where a neighbouring subtree may be drawn finer ([`crate::hlod::build_hlod`]);
+//! 5. for each bucket: LOD of its cells in parallel ([`crate::lod::build_cell_lod`]); then, in
+//!    leaf order, the cells' groups go to pages ([`crate::pages`]) and their roots up the tree,
+//!    where each node whose children are complete gets its HLOD groups at once — so only the roots
+//!    of the subtrees on the current path are held in memory;
+//! 6. write: group, node and object tables, atomically ([`tw_store::StoreWriter`]).
+//!
+//! Output is byte-identical for any thread count: parallel work is collected in cell order.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+use tw_io::scene::SceneProgress;
+use tw_io::Scene;
+use tw_store::{PageCluster, StoreInfo, StoreWriter};
+
+use crate::cells::CellFiles;
+use crate::error::BuildError;
+use crate::hierarchy::Hierarchy;
+use crate::hlod::{build_hlod, roots_of, HlodParams, Roots};
+use crate::lod::{build_cell_lod, LodParams};
+use crate::pages::{PagePacker, PageParams};
+use crate::redefine::{redefine, RedefineParams, RedefineReport};
+use crate::types::{LodCluster, LodDag, LodGroup};
+
+/// Everything `terawalk build` can set.
+#[derive(Clone, Debug)]
+pub struct BuildOptions {
+    /// Memory budget in bytes for the whole build (peak RSS goal).
+    pub memory: u64,
+    /// Worker threads (None: all cores).
+    pub threads: Option<usize>,
+    /// Up axis: 0 x, 1 y, 2 z.
+    pub up: u8,
+    pub units: String,
+    /// Where working files go (None: next to the output).
+    pub work_dir: Option<PathBuf>,
+    pub redefine: RedefineParams,
+    pub lod: LodParams,
+    pub hlod: HlodParams,
+    pub pages: PageParams,
+    /// HLOD groups of nodes this deep or shallower go to root pages (kept resident at run time).
+    pub root_depth: usize,
+}
+
+impl Default for BuildOptions {
+    fn default() -> Self {
+        BuildOptions {
+            memory: 2 << 30,
+            threads: None,
+            up: 2,
+            units: String::new(),
+            work_dir: None,
+            redefine: RedefineParams::gigawalk(),
+            lod: LodParams::default(),
+            hlod: HlodParams::default(),
+            pages: PageParams::default(),
+            root_depth: 6,
+        }
+    }
+}
+
+impl BuildOptions {
+    /// The options as `key=value` lines, stored in the file's header.
+    pub fn describe(&self) -> String {
+        format!(
+            "memory={}\nup={}\nt1={}\nk={}\nmax_cell_triangles={}\ncluster_triangles={}\n\
+             hlod_ratio={}\nhlod_max_node_triangles={}\npage_triangles={}\nroot_depth={}\n",
+            self.memory,
+            self.up,
+            self.redefine.t1,
+            self.redefine.k,
+            self.redefine.max_cell_triangles,
+            self.lod.max_triangles,
+            self.hlod.ratio,
+            self.hlod.max_node_triangles,
+            self.pages.page_triangles,
+            self.root_depth
+        )
+    }
+}
+
+/// Receives progress: one phase at a time, with a total in the phase's own unit.
+pub trait BuildProgress {
+    fn phase(&mut self, name: &str, total: u64, unit: &str);
+    fn advance(&mut self, done: u64);
+    fn end_phase(&mut self);
+}
+
+/// Progress that goes nowhere (tests, library use).
+pub struct NoProgress;
+
+impl BuildProgress for NoProgress {
+    fn phase(&mut self, _: &str, _: u64, _: &str) {}
+    fn advance(&mut self, _: u64) {}
+    fn end_phase(&mut self) {}
+}
+
+/// What a build did: the figures `terawalk build` prints and BENCHMARKS.md records.
+#[derive(Clone, Debug, Default)]
+pub struct BuildReport {
+    /// (phase, seconds), in order.
+    pub phases: Vec<(String, f64)>,
+    pub input_triangles: u64,
+    pub degenerate_dropped: u64,
+    pub objects: u64,
+    pub redefine: RedefineReport,
+    pub nodes: u64,
+    pub depth: u64,
+    pub groups: u64,
+    pub clusters: u64,
+    /// Triangles over all LOD levels.
+    pub stored_triangles: u64,
+    pub pages: u32,
+    pub root_pages: u32,
+    pub file_bytes: u64,
+    pub peak_rss: Option<u64>,
+}
+
+impl BuildReport {
+    pub fn seconds(&self) -> f64 {
+        self.phases.iter().map(|p| p.1).sum()
+    }
+}
+
+struct Timer<'a> {
+    report: &'a mut BuildReport,
+    start: Instant,
+}
+
+impl Timer<'_> {
+    fn lap(&mut self, name: &str) {
+        let now = Instant::now();
+        self.report.phases.push((name.to_string(), (now - self.start).as_secs_f64()));
+        self.start = now;
+    }
+}
+
+/// Builds the store at `output` from `scene`. The file appears only when everything succeeded.
+pub fn build(
+    scene: Scene,
+    output: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+) -> Result<BuildReport, BuildError> {
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = options.threads {
+        pool = pool.num_threads(n.max(1));
+    }
+    let pool = pool.build().map_err(|e| BuildError::Param(format!("thread pool: {e}")))?;
+    build_with_pool(scene, output, options, progress, &pool)
+}
+
+/// The phases; parallel steps run on `pool` (the importers themselves need not be `Send`).
+fn build_with_pool(
+    scene: Scene,
+    output: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<BuildReport, BuildError> {
+    let mut report = BuildReport::default();
+    let work_root = match &options.work_dir {
+        Some(d) => d.clone(),
+        None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+    };
+    let work = tempfile::Builder::new()
+        .prefix(".terawalk-build-")
+        .tempdir_in(&work_root)
+        .map_err(|e| BuildError::io(&work_root, e))?;
+    let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
+    let mut t = Timer { report: &mut report, start: Instant::now() };
+
+    // 1. Ingest.
+    progress.phase("ingest", 0, "bytes");
+    let ing = crate::ingest::ingest(scene, work.path(), &mut |p: SceneProgress| {
+        progress.advance(p.done);
+    })?;
+    progress.end_phase();
+    t.lap("ingest");
+
+    // 2. Redefine objects and build the hierarchy.
+    progress.phase("redefine", 0, "");
+    let mut red = pool.install(|| redefine(&ing, &options.redefine))?;
+    let hierarchy = red.order_by_hierarchy();
+    progress.end_phase();
+    t.lap("redefine+hierarchy");
+
+    // 3. Distribute triangles to cells. A quarter of the budget for one bucket: the LOD of a
+    // bucket's cells, built in parallel, holds about as much again.
+    progress.phase("distribute", 0, "");
+    let budget = (options.memory / 4).max(16 << 20);
+    let cells = pool.install(|| CellFiles::distribute(&ing, &red, work.path(), budget))?;
+    drop(std::fs::remove_file(ing.work.path()));
+    progress.end_phase();
+    t.lap("distribute");
+
+    // 4. Seams between cells.
+    progress.phase("seams", cells.cell_count() as u64, "cells");
+    let seams = find_seams(&cells, progress, pool)?;
+    progress.end_phase();
+    t.lap("seams");
+
+    // 5. LOD, HLOD and pages.
+    progress.phase("lod", ing.triangles, "triangles");
+    let mut state = LodState::new(&hierarchy, options);
+    let grid = ing.grid;
+    let external = |p: [u32; 3]| seams.binary_search(&p).is_ok();
+    let mut done_triangles = 0u64;
+    for b in 0..cells.bucket_count() {
+        let bucket = cells.read_bucket(b)?;
+        let ids: Vec<u32> = bucket.cells().collect();
+        let dags: Vec<LodDag> = pool.install(|| {
+            ids.par_iter()
+                .map(|&c| {
+                    let mesh = bucket.mesh(c);
+                    build_cell_lod(&mesh, &grid, &options.lod)
+                })
+                .collect()
+        });
+        drop(bucket);
+        for (&cell, dag) in ids.iter().zip(dags) {
+            let leaf = state.leaf_of_cell[cell as usize];
+            state.add_cell(&mut writer, leaf, dag)?;
+            state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &external)?;
+            done_triangles += red.cells[cell as usize].triangles;
+            progress.advance(done_triangles);
+        }
+    }
+    progress.end_phase();
+    t.lap("lod+hlod+pages");
+
+    // 6. Tables and the file.
+    progress.phase("write", 0, "");
+    let LodState { packer, groups, node_groups, clusters, stored_triangles, .. } = state;
+    let (placements, pages, root_pages) = packer.finish(&mut writer)?;
+    let mut table: Vec<tw_store::Group> = groups;
+    for p in placements {
+        let g = &mut table[p.group as usize];
+        g.page = p.page;
+        g.first_cluster = p.first_cluster;
+    }
+    let nodes = store_nodes(&hierarchy, &node_groups, &table);
+    let objects: Vec<tw_store::Object> = ing
+        .objects
+        .iter()
+        .map(|o| tw_store::Object { name: o.name.clone(), color: o.color, triangles: o.triangles })
+        .collect();
+    let info = StoreInfo {
+        bounds_min: ing.min,
+        bounds_max: ing.max,
+        grid_origin: grid.origin,
+        grid_step: grid.step,
+        units: options.units.clone(),
+        up_axis: options.up,
+        build_options: options.describe(),
+        input_triangles: ing.triangles,
+    };
+    let summary = writer.finish(&info, &objects, &nodes, &table).map_err(BuildError::store)?;
+    progress.end_phase();
+    t.lap("write");
+
+    report.input_triangles = ing.triangles;
+    report.degenerate_dropped = ing.summary.degenerate;
+    report.objects = ing.objects.len() as u64;
+    report.redefine = red.report.clone();
+    report.nodes = nodes.len() as u64;
+    report.depth = hierarchy.depth() as u64;
+    report.groups = table.len() as u64;
+    report.clusters = clusters;
+    report.stored_triangles = stored_triangles;
+    report.pages = pages;
+    report.root_pages = root_pages;
+    report.file_bytes = summary.file_bytes;
+    report.peak_rss = tw_core::mem::peak_rss_bytes();
+    Ok(report)
+}
+
+/// Open-boundary vertices shared by at least two cells, sorted.
+fn find_seams(
+    cells: &CellFiles,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<Vec<[u32; 3]>, BuildError> {
+    let mut all: Vec<[u32; 3]> = Vec::new();
+    let mut done = 0u64;
+    for b in 0..cells.bucket_count() {
+        let bucket = cells.read_bucket(b)?;
+        let ids: Vec<u32> = bucket.cells().collect();
+        let per_cell: Vec<Vec<[u32; 3]>> = pool.install(|| {
+            ids.par_iter()
+                .map(|&c| {
+                    let mesh = bucket.mesh(c);
+                    let (indices, _) = crate::lod::clean_triangles(&mesh);
+                    let open = crate::lod::open_boundary_vertices(mesh.positions.len(), &indices);
+                    let mut v: Vec<[u32; 3]> =
+                        open.iter().zip(&mesh.positions).filter(|(o, _)| **o).map(|(_, &p)| p).collect();
+                    v.sort_unstable();
+                    v.dedup();
+                    v
+                })
+                .collect()
+        });
+        for v in per_cell {
+            all.extend(v);
+        }
+        done += ids.len() as u64;
+        progress.advance(done);
+    }
+    pool.install(|| all.par_sort_unstable());
+    let mut seams: Vec<[u32; 3]> = all.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+    seams.dedup();
+    Ok(seams)
+}
+
+/// The bottom-up state of phase 5.
+struct LodState<'h> {
+    hierarchy: &'h Hierarchy,
+    parent: Vec<u32>,
+    depth: Vec<u32>,
+    leaf_of_cell: Vec<u32>,
+    /// Roots of completed subtrees, by node.
+    roots: Vec<Option<Roots>>,
+    /// The group table (page references filled in at the end).
+    groups: Vec<tw_store::Group>,
+    /// The range of groups attached to each node.
+    node_groups: Vec<(u32, u32)>,
+    packer: PagePacker,
+    root_depth: usize,
+    clusters: u64,
+    stored_triangles: u64,
+}
+
+impl<'h> LodState<'h> {
+    fn new(hierarchy: &'h Hierarchy, options: &BuildOptions) -> LodState<'h> {
+        let n = hierarchy.nodes.len();
+        let mut parent = vec![u32::MAX; n];
+        let mut depth = vec![0u32; n];
+        let mut leaf_of_cell = vec![u32::MAX; hierarchy.leaf_count()];
+        for (i, node) in hierarchy.nodes.iter().enumerate() {
+            for c in node.children() {
+                parent[c] = i as u32;
+                depth[c] = depth[i] + 1;
+            }
+            if let Some(cell) = node.cell {
+                leaf_of_cell[cell as usize] = i as u32;
+            }
+        }
+        LodState {
+            hierarchy,
+            parent,
+            depth,
+            leaf_of_cell,
+            roots: vec![None; n],
+            groups: Vec::new(),
+            node_groups: vec![(0, 0); n],
+            packer: PagePacker::new(options.pages),
+            root_depth: options.root_depth,
+            clusters: 0,
+            stored_triangles: 0,
+        }
+    }
+
+    /// Gives `dag`'s groups scene ids, sends their clusters to pages and records the groups.
+    /// Returns the scene id of `dag.groups[0]`.
+    fn emit(&mut self, writer: &mut StoreWriter, node: u32, dag: &LodDag) -> Result<u32, BuildError> {
+        let base = self.groups.len() as u32;
+        let root = (self.depth[node as usize] as usize) <= self.root_depth
+            && !self.hierarchy.nodes[node as usize].is_leaf();
+        for (gi, g) in dag.groups.iter().enumerate() {
+            let id = base + gi as u32;
+            let clusters: Vec<PageCluster> =
+                g.clusters.iter().map(|&c| page_cluster(&dag.clusters[c as usize], id)).collect();
+            let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
+            self.clusters += clusters.len() as u64;
+            self.stored_triangles += triangles as u64;
+            self.groups.push(store_group(g, node, triangles as u32, clusters.len() as u32));
+            self.packer.add_group(writer, id, g.level, root, clusters)?;
+        }
+        self.node_groups[node as usize] = (base, dag.groups.len() as u32);
+        Ok(base)
+    }
+
+    fn add_cell(&mut self, writer: &mut StoreWriter, leaf: u32, dag: LodDag) -> Result<(), BuildError> {
+        let base = self.emit(writer, leaf, &dag)?;
+        self.roots[leaf as usize] = Some(roots_of(&dag, base));
+        Ok(())
+    }
+
+    /// Builds the HLOD of every ancestor of `node` whose children are all complete.
+    fn complete_upwards(
+        &mut self,
+        writer: &mut StoreWriter,
+        mut node: u32,
+        grid: &crate::types::Grid,
+        params: &HlodParams,
+        external: &dyn Fn([u32; 3]) -> bool,
+    ) -> Result<(), BuildError> {
+        loop {
+            let parent = self.parent[node as usize];
+            if parent == u32::MAX {
+                return Ok(());
+            }
+            let children = self.hierarchy.nodes[parent as usize].children();
+            if children.clone().any(|c| self.roots[c].is_none()) {
+                return Ok(());
+            }
+            let child_roots: Vec<Roots> =
+                children.map(|c| self.roots[c].take().expect("checked above")).collect();
+            let hl = build_hlod(&child_roots, grid, params, external);
+            for &g in &hl.replaced {
+                let e = &mut self.groups[g as usize];
+                e.error = hl.error;
+                e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
+            }
+            let base = self.emit(writer, parent, &hl.dag)?;
+            self.roots[parent as usize] = Some(hl.roots(base));
+            node = parent;
+        }
+    }
+}
+
+fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
+    PageCluster {
+        positions: c.positions.clone(),
+        indices: c.indices.clone(),
+        objects: c.objects.clone(),
+        self_error: c.self_error,
+        self_sphere: [
+            c.self_sphere.center[0],
+            c.self_sphere.center[1],
+            c.self_sphere.center[2],
+            c.self_sphere.radius,
+        ],
+        group,
+        level: c.level,
+    }
+}
+
+fn store_group(g: &LodGroup, node: u32, triangles: u32, cluster_count: u32) -> tw_store::Group {
+    tw_store::Group {
+        sphere: [g.sphere.center[0], g.sphere.center[1], g.sphere.center[2], g.sphere.radius],
+        error: g.error,
+        node,
+        level: g.level,
+        page: u32::MAX,
+        first_cluster: 0,
+        cluster_count,
+        triangles,
+    }
+}
+
+/// The node table: the hierarchy with each node's group range and the largest group error at
+/// or below it.
+fn store_nodes(h: &Hierarchy, node_groups: &[(u32, u32)], groups: &[tw_store::Group]) -> Vec<tw_store::Node> {
+    let mut nodes: Vec<tw_store::Node> = h
+        .nodes
+        .iter()
+        .zip(node_groups)
+        .map(|(n, &(first, count))| {
+            let max_error = groups[first as usize..(first + count) as usize]
+                .iter()
+                .map(|g| g.error)
+                .fold(0.0f32, f32::max);
+            tw_store::Node {
+                min: n.bounds.min,
+                max: n.bounds.max,
+                first_child: n.first_child,
+                child_count: n.child_count,
+                first_group: first,
+                group_count: count,
+                max_error,
+            }
+        })
+        .collect();
+    // Children come after parents: a reverse sweep sees every child before its parent.
+    for i in (0..nodes.len()).rev() {
+        let (first, count) = (nodes[i].first_child as usize, nodes[i].child_count as usize);
+        let child_max = nodes[first..first + count].iter().map(|c| c.max_error).fold(0.0f32, f32::max);
+        nodes[i].max_error = nodes[i].max_error.max(child_max);
+    }
+    nodes
+}
