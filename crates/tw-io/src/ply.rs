@@ -1072,7 +1072,7 @@ impl Objects {
     }
 
     /// The dense id of file id `raw`, announcing it to `sink` when it is new.
-    #[inline]
+    #[inline(always)]
     fn id(&mut self, raw: i64, sink: &mut dyn TriangleSink) -> Result<ObjectId, RecordError> {
         match self.last {
             Some((r, id)) if r == raw => Ok(id),
@@ -1080,6 +1080,8 @@ impl Objects {
         }
     }
 
+    #[cold]
+    #[inline(never)]
     fn lookup(&mut self, raw: i64, sink: &mut dyn TriangleSink) -> Result<ObjectId, RecordError> {
         let id = match self.ids.get(&raw) {
             Some(&id) => id,
@@ -1325,10 +1327,42 @@ impl Body<'_> {
         sink: &mut dyn TriangleSink,
     ) -> Result<(), ImportError> {
         let big = self.big;
+        let mut objects = self.objects.take();
+        // Two instances of the record loop, so that files without objects pay nothing for them.
+        // `measure` delimited the record, so the scalar at `offsets[p]` lies within it.
+        let result = match (&mut objects, layout.object) {
+            // As terawalk writes it: a loop without a dispatch on the type.
+            (Some(objects), Some((p, Scalar::U32))) if !big => {
+                self.binary_faces_with(rd, el, layout, v, sink, |rec, offsets, sink| {
+                    objects.id(u32_at(&rec[offsets[p]..], false) as i64, sink)
+                })
+            }
+            (Some(objects), Some((p, ty))) => {
+                self.binary_faces_with(rd, el, layout, v, sink, |rec, offsets, sink| {
+                    objects.id(ty.i64(&rec[offsets[p]..], big), sink)
+                })
+            }
+            _ => self.binary_faces_with(rd, el, layout, v, sink, |_, _, _| Ok(0)),
+        };
+        self.objects = objects;
+        result
+    }
+
+    /// Reads binary faces; `object_of` gives the object of a face that has triangles.
+    #[inline]
+    fn binary_faces_with(
+        &mut self,
+        rd: &mut ByteReader,
+        el: &Element,
+        layout: &FaceLayout,
+        v: &mut Vertices,
+        sink: &mut dyn TriangleSink,
+        mut object_of: impl FnMut(&[u8], &[usize], &mut dyn TriangleSink) -> Result<ObjectId, RecordError>,
+    ) -> Result<(), ImportError> {
+        let big = self.big;
         let mut faces = std::mem::replace(&mut self.faces, Faces { indices: Vec::new(), short: 0 });
         let n_vertices = v.len();
         let (csize, isize_) = (layout.count.size(), layout.item.size());
-        let mut objects = self.objects.take();
         let result = self.binary_records(rd, el, MAX_LIST, sink, |rec, offsets, _, sink| {
             let at = offsets[layout.prop];
             // `measure` checked the count and that the items are in `rec`.
@@ -1338,17 +1372,10 @@ impl Body<'_> {
             for item in items.chunks_exact(isize_) {
                 faces.add(layout.item.i64(item, big), n_vertices)?;
             }
-            let object = match (&mut objects, layout.object) {
-                // Scalars lie within the record `measure` delimited.
-                (Some(objects), Some((p, ty))) if faces.indices.len() >= 3 => {
-                    objects.id(ty.i64(&rec[offsets[p]..], big), sink)?
-                }
-                _ => 0,
-            };
+            let object = if faces.indices.len() >= 3 { object_of(rec, offsets, sink)? } else { 0 };
             faces.emit(v, object, sink)
         });
         self.faces = faces;
-        self.objects = objects;
         result
     }
 
