@@ -10,11 +10,17 @@
 //!   floats 0..1); other properties are skipped;
 //! - element `face`: the list `vertex_indices` (or `vertex_index`) of any integer types; polygons
 //!   are fan-triangulated, faces of fewer than three vertices are skipped (and counted in a
-//!   warning); other face properties are skipped;
+//!   warning); a scalar integer property `object` (or `object_id`), as terawalk's PLY writer
+//!   writes it, gives each face's object (see below); other face properties are skipped;
 //! - any other element (`edge`, `material`, `tristrips`…), before, between or after these, is
 //!   skipped.
 //!
-//! The file is one object (id 0) named after the file. Stages:
+//! Objects: without a per-face `object` property (or without faces) the file is one object (id 0)
+//! named after the file. With it, the file's ids are arbitrary integers: each new one, in order of
+//! first appearance, becomes the next dense id (0, 1, 2, …), announced as `<file name>/<id in the
+//! file>` just before its first triangle (memory grows with the number of objects, not of faces).
+//!
+//! Stages:
 //! 1. [`open`] reads the header (`read_header`) and checks that a binary file is long enough
 //!    for its declared counts, so that a broken file fails before any work.
 //! 2. [`PlySource::stream`] walks the elements in file order: vertex records go into
@@ -34,6 +40,7 @@
 //! [`MAX_LIST`] items; a file without faces (a point cloud) yields no triangles and its vertex
 //! data is skipped unread; a non-finite position is an error, a non-finite normal becomes zero.
 
+use std::collections::HashMap;
 use std::io::{self, Read};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -44,7 +51,7 @@ use crate::error::{ImportError, Position};
 use crate::format::ImportOptions;
 use crate::input::{DiskCounter, Input};
 use crate::vertex_store::VertexStore;
-use crate::{ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
+use crate::{ObjectId, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 
 /// Most items a list in a vertex or face record may hold (so a face has at most this many
 /// vertices); a longer list is an error, not an allocation.
@@ -489,12 +496,14 @@ struct VertexLayout {
     colors: bool,
 }
 
-/// Where a face keeps its indices: property index and the list's types.
+/// Where a face keeps its indices: property index and the list's types; and its object id,
+/// when it has one: property index and type.
 #[derive(Clone, Copy, Debug)]
 struct FaceLayout {
     prop: usize,
     count: Scalar,
     item: Scalar,
+    object: Option<(usize, Scalar)>,
 }
 
 #[derive(Clone, Debug)]
@@ -744,7 +753,8 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
                 if !item.is_integer() {
                     return Err(at(p.line, format!("{} must be a list of integers", p.name)));
                 }
-                el.role = ElementRole::Face(FaceLayout { prop, count, item });
+                el.role =
+                    ElementRole::Face(FaceLayout { prop, count, item, object: object_property(el, path) });
             }
             _ => {
                 if el.name == "tristrips" && el.count > 0 {
@@ -775,6 +785,26 @@ fn assign_roles(elements: &mut [Element], path: &Path) -> Result<(), ImportError
         }
     }
     Ok(())
+}
+
+/// The face property that gives each face's object: a scalar integer named `object`, else one
+/// named `object_id`. One of another type is skipped, with a warning.
+fn object_property(el: &Element, path: &Path) -> Option<(usize, Scalar)> {
+    let find = |name: &str| el.props.iter().position(|p| p.name == name);
+    let pi = find("object").or_else(|| find("object_id"))?;
+    let p = &el.props[pi];
+    match p.kind {
+        PropKind::Scalar(t) if t.is_integer() => Some((pi, t)),
+        _ => {
+            tracing::warn!(
+                "{}: line {}: face property {} is not a scalar integer; faces keep the file's single object",
+                path.display(),
+                p.line,
+                p.name
+            );
+            None
+        }
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -989,7 +1019,12 @@ impl Faces {
 
     /// Fan-triangulates the collected polygon into `sink`.
     #[inline]
-    fn emit(&mut self, v: &mut Vertices, sink: &mut dyn TriangleSink) -> Result<(), RecordError> {
+    fn emit(
+        &mut self,
+        v: &mut Vertices,
+        object: ObjectId,
+        sink: &mut dyn TriangleSink,
+    ) -> Result<(), RecordError> {
         let [first, second, rest @ ..] = self.indices.as_slice() else {
             self.short += 1;
             return Ok(());
@@ -1010,10 +1045,56 @@ impl Faces {
                 (Some(x), Some(y), Some(z)) => Some([x, y, z]),
                 _ => None,
             };
-            sink.triangle(&Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object: 0 })?;
+            sink.triangle(&Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object })?;
             b = c;
         }
         Ok(())
+    }
+}
+
+/// Per-face object ids: the file's ids, mapped to dense ids in order of first appearance.
+struct Objects {
+    /// Object name prefix: the file's name.
+    stem: String,
+    ids: HashMap<i64, ObjectId>,
+    /// The last face's file id and dense id: consecutive faces mostly share their object.
+    last: Option<(i64, ObjectId)>,
+}
+
+impl Objects {
+    fn new(stem: String) -> Objects {
+        Objects { stem, ids: HashMap::new(), last: None }
+    }
+
+    /// Objects announced.
+    fn len(&self) -> u32 {
+        self.ids.len() as u32
+    }
+
+    /// The dense id of file id `raw`, announcing it to `sink` when it is new.
+    #[inline(always)]
+    fn id(&mut self, raw: i64, sink: &mut dyn TriangleSink) -> Result<ObjectId, RecordError> {
+        match self.last {
+            Some((r, id)) if r == raw => Ok(id),
+            _ => self.lookup(raw, sink),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn lookup(&mut self, raw: i64, sink: &mut dyn TriangleSink) -> Result<ObjectId, RecordError> {
+        let id = match self.ids.get(&raw) {
+            Some(&id) => id,
+            None => {
+                let id = u32::try_from(self.ids.len())
+                    .map_err(|_| RecordError::Bad("more than 2^32 objects".into()))?;
+                sink.object(id, &ObjectInfo { name: format!("{}/{raw}", self.stem), color: None })?;
+                self.ids.insert(raw, id);
+                id
+            }
+        };
+        self.last = Some((raw, id));
+        Ok(id)
     }
 }
 
@@ -1074,7 +1155,17 @@ impl TriangleSource for PlySource {
 
     fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
         let PlySource { path, mut rd, header, options, counter, .. } = *self;
-        sink.object(0, &ObjectInfo { name: object_name(&path), color: None })?;
+        // Per-face objects when the faces have them; otherwise the file is one object.
+        let per_face_objects = header
+            .elements
+            .iter()
+            .any(|e| e.count > 0 && matches!(e.role, ElementRole::Face(FaceLayout { object: Some(_), .. })));
+        let objects = if per_face_objects {
+            Some(Objects::new(object_name(&path)))
+        } else {
+            sink.object(0, &ObjectInfo { name: object_name(&path), color: None })?;
+            None
+        };
         let faces_declared = header.count_of(|r| matches!(r, ElementRole::Face(_)));
         let vertices_declared = header.count_of(|r| matches!(r, ElementRole::Vertex(_)));
         let mut body = Body {
@@ -1084,6 +1175,7 @@ impl TriangleSource for PlySource {
             line: header.lines,
             vertices: None,
             faces: Faces { indices: Vec::new(), short: 0 },
+            objects,
         };
         for el in &header.elements {
             match (&el.role, header.encoding) {
@@ -1134,7 +1226,8 @@ impl TriangleSource for PlySource {
             }
         }
         sink.progress(counter.get());
-        Ok(SourceSummary { objects: 1, vertices: vertices_declared, bytes: counter.get() })
+        let objects = body.objects.as_ref().map_or(1, Objects::len);
+        Ok(SourceSummary { objects, vertices: vertices_declared, bytes: counter.get() })
     }
 }
 
@@ -1147,6 +1240,8 @@ struct Body<'a> {
     line: u64,
     vertices: Option<Vertices>,
     faces: Faces,
+    /// Per-face objects, when the faces have an object property.
+    objects: Option<Objects>,
 }
 
 impl Body<'_> {
@@ -1232,6 +1327,39 @@ impl Body<'_> {
         sink: &mut dyn TriangleSink,
     ) -> Result<(), ImportError> {
         let big = self.big;
+        let mut objects = self.objects.take();
+        // Two instances of the record loop, so that files without objects pay nothing for them.
+        // `measure` delimited the record, so the scalar at `offsets[p]` lies within it.
+        let result = match (&mut objects, layout.object) {
+            // As terawalk writes it: a loop without a dispatch on the type.
+            (Some(objects), Some((p, Scalar::U32))) if !big => {
+                self.binary_faces_with(rd, el, layout, v, sink, |rec, offsets, sink| {
+                    objects.id(u32_at(&rec[offsets[p]..], false) as i64, sink)
+                })
+            }
+            (Some(objects), Some((p, ty))) => {
+                self.binary_faces_with(rd, el, layout, v, sink, |rec, offsets, sink| {
+                    objects.id(ty.i64(&rec[offsets[p]..], big), sink)
+                })
+            }
+            _ => self.binary_faces_with(rd, el, layout, v, sink, |_, _, _| Ok(0)),
+        };
+        self.objects = objects;
+        result
+    }
+
+    /// Reads binary faces; `object_of` gives the object of a face that has triangles.
+    #[inline]
+    fn binary_faces_with(
+        &mut self,
+        rd: &mut ByteReader,
+        el: &Element,
+        layout: &FaceLayout,
+        v: &mut Vertices,
+        sink: &mut dyn TriangleSink,
+        mut object_of: impl FnMut(&[u8], &[usize], &mut dyn TriangleSink) -> Result<ObjectId, RecordError>,
+    ) -> Result<(), ImportError> {
+        let big = self.big;
         let mut faces = std::mem::replace(&mut self.faces, Faces { indices: Vec::new(), short: 0 });
         let n_vertices = v.len();
         let (csize, isize_) = (layout.count.size(), layout.item.size());
@@ -1244,7 +1372,8 @@ impl Body<'_> {
             for item in items.chunks_exact(isize_) {
                 faces.add(layout.item.i64(item, big), n_vertices)?;
             }
-            faces.emit(v, sink)
+            let object = if faces.indices.len() >= 3 { object_of(rec, offsets, sink)? } else { 0 };
+            faces.emit(v, object, sink)
         });
         self.faces = faces;
         result
@@ -1361,9 +1490,17 @@ impl Body<'_> {
     ) -> Result<(), ImportError> {
         let mut faces = std::mem::replace(&mut self.faces, Faces { indices: Vec::new(), short: 0 });
         let n_vertices = v.len();
+        let mut objects = self.objects.take();
+        let object_prop = layout.object.map(|(p, _)| p);
         let result = self.ascii_records(rd, el, sink, |tokens, _, sink| {
             faces.indices.clear();
+            let mut raw = 0i64;
             for (pi, p) in el.props.iter().enumerate() {
+                if Some(pi) == object_prop {
+                    let t = next_token(tokens, p)?;
+                    raw = parse_i64(t).ok_or_else(|| bad_number(t, p))?;
+                    continue;
+                }
                 if pi != layout.prop {
                     skip_ascii_property(tokens, p, MAX_SKIPPED_LIST)?;
                     continue;
@@ -1375,9 +1512,14 @@ impl Body<'_> {
                     faces.add(i, n_vertices)?;
                 }
             }
-            faces.emit(v, sink)
+            let object = match &mut objects {
+                Some(objects) if faces.indices.len() >= 3 => objects.id(raw, sink)?,
+                _ => 0,
+            };
+            faces.emit(v, object, sink)
         });
         self.faces = faces;
+        self.objects = objects;
         result
     }
 
@@ -1769,6 +1911,197 @@ mod tests {
                 assert_eq!(t.colors.unwrap()[k], Rgba8([v as u8, 1, 2, 255]));
             }
         }
+    }
+
+    // ---- per-face objects ----
+
+    /// Four vertices and four triangles with the file object ids 7, 3, 7, 100, in `property uint
+    /// object` after the indices (as terawalk's writer lays it out).
+    fn with_objects(encoding: &str) -> Vec<u8> {
+        let header = format!(
+            "ply\nformat {encoding} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+             property float z\nelement face 4\nproperty list uchar uint vertex_indices\n\
+             property uint object\nend_header\n"
+        );
+        let faces = [([0u32, 1, 2], 7u32), ([0, 2, 3], 3), ([3, 2, 1], 7), ([1, 3, 0], 100)];
+        if encoding == "ascii" {
+            let mut s = header;
+            for v in SQUARE {
+                s += &format!("{} {} {}\n", v[0], v[1], v[2]);
+            }
+            for ([a, b, c], o) in faces {
+                s += &format!("3 {a} {b} {c} {o}\n");
+            }
+            return s.into_bytes();
+        }
+        let mut w = W::new(&header, encoding == "binary_big_endian");
+        for v in SQUARE {
+            w.f32(v[0]).f32(v[1]).f32(v[2]);
+        }
+        for ([a, b, c], o) in faces {
+            w.u8(3).u32(a).u32(b).u32(c).u32(o);
+        }
+        w.out
+    }
+
+    fn object_names(c: &Collect) -> Vec<(u32, String)> {
+        c.objects.iter().map(|(id, info)| (*id, info.name.clone())).collect()
+    }
+
+    fn tri_objects(c: &Collect) -> Vec<u32> {
+        c.tris.iter().map(|t| t.object).collect()
+    }
+
+    #[test]
+    fn per_face_object_ids_become_dense_in_order_of_first_appearance() {
+        for enc in ["ascii", "binary_little_endian", "binary_big_endian"] {
+            for zipped in [false, true] {
+                let bytes = if zipped { gz(&with_objects(enc)) } else { with_objects(enc) };
+                let (c, s) = run("obj.ply", &bytes).unwrap_or_else(|e| panic!("{enc}: {e}"));
+                let names =
+                    vec![(0, "obj/7".to_string()), (1, "obj/3".to_string()), (2, "obj/100".to_string())];
+                assert_eq!(object_names(&c), names, "{enc} gzip={zipped}");
+                assert!(c.objects.iter().all(|(_, i)| i.color.is_none()));
+                assert_eq!(tri_objects(&c), vec![0, 1, 0, 2], "{enc} gzip={zipped}");
+                assert_eq!(s.objects, 3, "{enc} gzip={zipped}");
+                let v = |i: usize| SQUARE[i].map(|c| c as f64);
+                assert_eq!(c.tris[3].positions, [v(1), v(3), v(0)], "{enc}");
+            }
+        }
+    }
+
+    /// A sink that records the order of announcements and triangles.
+    #[derive(Default)]
+    struct Events(Vec<String>);
+
+    impl TriangleSink for Events {
+        fn object(&mut self, id: u32, _: &ObjectInfo) -> Result<(), ImportError> {
+            self.0.push(format!("object {id}"));
+            Ok(())
+        }
+        fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+            self.0.push(format!("triangle {}", t.object));
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn each_object_is_announced_just_before_its_first_triangle() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("o.ply");
+        std::fs::write(&p, with_objects("binary_little_endian")).unwrap();
+        let mut events = Events::default();
+        open(Input::open(&p).unwrap(), &ImportOptions::default()).unwrap().stream(&mut events).unwrap();
+        let want =
+            ["object 0", "triangle 0", "object 1", "triangle 1", "triangle 0", "object 2", "triangle 2"];
+        assert_eq!(events.0, want);
+    }
+
+    #[test]
+    fn object_id_property_signed_and_before_the_indices() {
+        // `object_id`, a signed type, before the list; a quad's two triangles share its object.
+        let header =
+            "ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+                      property float z\nelement face 3\nproperty short object_id\n\
+                      property list uchar int vertex_indices\nend_header\n";
+        let mut w = W::new(header, true);
+        for v in SQUARE {
+            w.f32(v[0]).f32(v[1]).f32(v[2]);
+        }
+        w.i16(-1).u8(4).i32(0).i32(1).i32(2).i32(3);
+        w.i16(5).u8(3).i32(3).i32(2).i32(1);
+        w.i16(-1).u8(3).i32(0).i32(1).i32(3);
+        let (c, s) = run("s.ply", &w.out).unwrap();
+        assert_eq!(object_names(&c), vec![(0, "s/-1".to_string()), (1, "s/5".to_string())]);
+        assert_eq!(tri_objects(&c), vec![0, 0, 1, 0]);
+        assert_eq!(s.objects, 2);
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 2\nproperty int object_id\nproperty list uchar int vertex_indices\nend_header\n\
+                    0 0 0\n1 0 0\n0 1 0\n-1 3 0 1 2\n42 3 2 1 0\n";
+        let (c, _) = run("s.ply", text.as_bytes()).unwrap();
+        assert_eq!(object_names(&c), vec![(0, "s/-1".to_string()), (1, "s/42".to_string())]);
+        assert_eq!(tri_objects(&c), vec![0, 1]);
+    }
+
+    #[test]
+    fn object_is_preferred_over_object_id() {
+        let text =
+            "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 1\nproperty int object_id\nproperty list uchar int vertex_indices\n\
+                    property uchar object\nend_header\n0 0 0\n1 0 0\n0 1 0\n9 3 0 1 2 4\n";
+        let (c, _) = run("p.ply", text.as_bytes()).unwrap();
+        assert_eq!(object_names(&c), vec![(0, "p/4".to_string())]);
+    }
+
+    #[test]
+    fn non_integer_object_property_is_ignored() {
+        for (decl, a, b) in [("float object", "1.5", "2"), ("list uchar int object", "1 7", "2 8 9")] {
+            let text = format!(
+                "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                 element face 2\nproperty list uchar int vertex_indices\nproperty {decl}\nend_header\n\
+                 0 0 0\n1 0 0\n0 1 0\n3 0 1 2 {a}\n3 2 1 0 {b}\n"
+            );
+            let (c, s) = run("f.ply", text.as_bytes()).unwrap();
+            assert_eq!(object_names(&c), vec![(0, "f".to_string())], "{decl}");
+            assert_eq!(tri_objects(&c), vec![0, 0]);
+            assert_eq!(s.objects, 1);
+        }
+    }
+
+    #[test]
+    fn object_property_without_faces_keeps_the_file_object() {
+        let text =
+            "ply\nformat binary_little_endian 1.0\nelement vertex 0\nproperty float x\nproperty float y\n\
+                    property float z\nelement face 0\nproperty list uchar int vertex_indices\n\
+                    property uint object\nend_header\n";
+        let (c, s) = run("e.ply", text.as_bytes()).unwrap();
+        assert_eq!(object_names(&c), vec![(0, "e".to_string())]);
+        assert_eq!(s.objects, 1);
+    }
+
+    #[test]
+    fn short_faces_announce_no_object() {
+        let text = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n\
+                    element face 3\nproperty list uchar int vertex_indices\nproperty uint object\nend_header\n\
+                    0 0 0\n1 0 0\n0 1 0\n2 0 1 5\n3 0 1 2 9\n0 6\n";
+        let (c, s) = run("s.ply", text.as_bytes()).unwrap();
+        assert_eq!(object_names(&c), vec![(0, "s/9".to_string())]);
+        assert_eq!(tri_objects(&c), vec![0]);
+        assert_eq!(s.objects, 1);
+    }
+
+    #[test]
+    fn many_objects_in_a_large_binary_file() {
+        // Runs of faces per object, ids revisited out of order: the last-id cache and the map
+        // must agree.
+        let n = 50_000u32;
+        let header = format!(
+            "ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+             property float z\nelement face {n}\nproperty list uchar int vertex_indices\n\
+             property uint object\nend_header\n"
+        );
+        let mut w = W::new(&header, false);
+        w.f32(0.0).f32(0.0).f32(0.0).f32(1.0).f32(0.0).f32(0.0).f32(0.0).f32(1.0).f32(0.0);
+        let raw = |i: u32| ((i / 3) % 1000).wrapping_mul(2_654_435_761);
+        for i in 0..n {
+            w.u8(3).i32(0).i32(1).i32(2).u32(raw(i));
+        }
+        let (c, s) = run("m.ply", &w.out).unwrap();
+        assert_eq!(s.objects, 1000);
+        assert_eq!(c.objects.len(), 1000);
+        for (i, t) in c.tris.iter().enumerate() {
+            let name = &c.objects[t.object as usize].1.name;
+            assert_eq!(*name, format!("m/{}", raw(i as u32)), "triangle {i}");
+        }
+    }
+
+    #[test]
+    fn bad_ascii_object_value() {
+        let text = String::from_utf8(with_objects("ascii")).unwrap();
+        let e = err("b.ply", text.replace("3 3 2 1 7", "3 3 2 1 seven").as_bytes());
+        assert_err(&e, Position::Line(17), "face 2: invalid number \"seven\" for object");
+        let e = err("b.ply", text.replace("3 3 2 1 7", "3 3 2 1").as_bytes());
+        assert_err(&e, Position::Line(17), "fewer values than the header declares (no object)");
     }
 
     // ---- errors ----

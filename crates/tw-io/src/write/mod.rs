@@ -648,9 +648,18 @@ mod round_trip {
     }
 
     #[test]
-    fn ply_round_trip() {
+    fn ply_round_trip_keeps_object_ids() {
         for name in ["a.ply", "a.ply.gz"] {
-            assert_same_geometry(name, &read_back(name));
+            let got = read_back(name);
+            assert_same_geometry(name, &got);
+            // PLY keeps each triangle's object id, not names or colours; the importer names
+            // objects `<file>/<id>`. Object 2 has no triangles, so it is not in the file.
+            let want: Vec<ObjectId> = expected().triangles.iter().map(|t| t.object).collect();
+            let objects: Vec<ObjectId> = got.triangles.iter().map(|t| t.object).collect();
+            assert_eq!(objects, want, "{name}");
+            let names: Vec<(ObjectId, &str)> =
+                got.objects.iter().map(|(id, i)| (*id, i.name.as_str())).collect();
+            assert_eq!(names, vec![(0, "a/0"), (1, "a/1")], "{name}");
         }
     }
 

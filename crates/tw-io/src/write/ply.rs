@@ -25,7 +25,14 @@
 //! spaces, which some readers would misread (octal, or a split on single spaces). For `.gz`
 //! output, which cannot seek, the vertices are spilled too and the file is assembled at the end.
 //!
-//! The per-face `object` property is ignored by tools that do not know it.
+//! The per-face `object` property is ignored by tools that do not know it; terawalk's PLY
+//! importer reads it back, numbering the ids densely in order of first appearance.
+//!
+//! Object names and colours are not written: they could go only in the header (as `comment
+//! object …` lines), and objects are announced while the vertices already stream out behind a
+//! header of fixed length, so adding them at the end would mean moving the vertex section, about
+//! two thirds of the file. PLY output keeps the object of every triangle; OBJ and GLB output keep
+//! names and colours too.
 
 use std::io::{Seek, SeekFrom, Write};
 use std::path::Path;
@@ -327,6 +334,44 @@ mod tests {
         let p = parse(&std::fs::read(&path).unwrap());
         assert!(p.header.contains(&"element vertex 0".to_string()));
         assert!(p.vertices.is_empty() && p.faces.is_empty());
+    }
+
+    #[test]
+    fn object_ids_read_back_densely_in_order_of_first_appearance() {
+        // Objects 0..3 announced; triangles only in 2, 0, 2 (1 is empty): the file holds the ids
+        // 2, 0, 2, which the importer numbers 0, 1, 0.
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("objs.ply");
+        let mut w = create_writer(&path).unwrap();
+        for id in 0..3 {
+            w.object(id, &ObjectInfo { name: format!("n{id}"), color: None }).unwrap();
+        }
+        w.triangle(&Triangle::new(test_scene::T1, 2)).unwrap();
+        w.mesh(&MeshChunk { object: 0, positions: &test_scene::QUAD, indices: &test_scene::QUAD_INDICES })
+            .unwrap();
+        w.triangle(&Triangle::new(test_scene::T2, 2)).unwrap();
+        assert_eq!(w.finish().unwrap().objects, 3);
+        let p = parse(&std::fs::read(&path).unwrap());
+        let file_ids: Vec<u32> = p.faces.iter().map(|f| f.1).collect();
+        assert_eq!(file_ids, vec![2, 0, 0, 2]);
+
+        #[derive(Default)]
+        struct Got(Vec<(ObjectId, String)>, Vec<ObjectId>);
+        impl TriangleSink for Got {
+            fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
+                self.0.push((id, info.name.clone()));
+                Ok(())
+            }
+            fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+                self.1.push(t.object);
+                Ok(())
+            }
+        }
+        let mut got = Got::default();
+        let source = crate::open_source(&path, &crate::format::ImportOptions::default()).unwrap();
+        assert_eq!(source.stream(&mut got).unwrap().objects, 2);
+        assert_eq!(got.0, vec![(0, "objs/2".to_string()), (1, "objs/0".to_string())]);
+        assert_eq!(got.1, vec![0, 1, 1, 0]);
     }
 
     #[test]
