@@ -20,7 +20,7 @@ fn help_lists_subcommands_and_each_has_an_example() {
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["--help"], dir.path());
     assert!(o.status.success());
-    for sub in ["stats", "generate", "preview", "demo"] {
+    for sub in ["stats", "generate", "preview", "build", "info", "demo"] {
         assert!(stdout(&o).contains(sub), "--help lacks {sub}");
         let h = terawalk(&[sub, "--help"], dir.path());
         assert!(h.status.success(), "{sub} --help failed");
@@ -93,7 +93,46 @@ fn demo_runs_on_a_small_plant_and_reuses_its_cache() {
     assert!(out.contains("generated"), "{out}");
     assert!(dir.path().join("cache/plant-outside.png").exists());
     assert!(dir.path().join("cache/plant-inside.png").exists());
+    assert!(dir.path().join("cache/plant-30000-s1.tw").exists());
+    assert!(out.contains("verified"), "{out}");
     let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).contains("cached"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("store: cached"), "{}", stdout(&o));
+}
+
+#[test]
+fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.obj"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["build", "p.obj", "-o", "p.tw", "--memory", "256M", "--threads", "2"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("bytes per input triangle"), "{}", stdout(&o));
+    let o = terawalk(&["info", "p.tw", "--verify"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(out.contains("30,000 input triangles") && out.contains("verify: OK"), "{out}");
+
+    // Flip one byte in the middle of the pages: verify names the store and fails.
+    let path = dir.path().join("p.tw");
+    let mut bytes = std::fs::read(&path).unwrap();
+    let mid = bytes.len() / 3;
+    bytes[mid] ^= 0x40;
+    std::fs::write(dir.path().join("bad.tw"), &bytes).unwrap();
+    let o = terawalk(&["info", "bad.tw", "--verify"], dir.path());
+    assert_eq!(o.status.code(), Some(1), "{}", stdout(&o));
+    assert!(stderr(&o).contains("bad.tw"), "{}", stderr(&o));
+
+    // A build from a broken input fails and leaves no store behind.
+    std::fs::write(dir.path().join("broken.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
+    let o = terawalk(&["build", "p.obj", "broken.obj", "-o", "q.tw"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("broken.obj"), "{}", stderr(&o));
+    assert!(!dir.path().join("q.tw").exists());
+    let leftovers: Vec<_> = std::fs::read_dir(dir.path())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".terawalk-build") || n.ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
 }

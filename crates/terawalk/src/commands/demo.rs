@@ -1,6 +1,7 @@
 //! `terawalk demo`: the README's main job. Generates a power plant (cached), reads it back
-//! through the importer, renders an outside and an inside view, and prints a summary.
-//! Later issues extend it to build the store and run the benchmark walkthrough.
+//! through the importer, builds the out-of-core store (cached) and verifies it, renders an
+//! outside and an inside view, and prints a summary. The runtime issue extends it with the
+//! benchmark walkthrough.
 
 use std::time::Instant;
 
@@ -42,6 +43,30 @@ pub fn run(args: DemoArgs) -> Result<()> {
         read.summary.bytes as f64 / 1e6 / read.seconds.max(1e-9)
     );
 
+    let store = args.dir.join(format!("plant-{}-s{}.tw", args.triangles, args.seed));
+    if store.exists() && tw_store::Store::open(&store).is_ok() {
+        println!("3. store: cached at {}", store.display());
+    } else {
+        let scene = tw_io::Scene::open(&[&model], options.clone())?;
+        let opts = tw_build::BuildOptions { memory: 1 << 30, ..Default::default() };
+        let r = tw_build::build(scene, &store, &opts, &mut tw_build::NoProgress)?;
+        println!(
+            "3. store: built {} in {:.1} s ({} cells, {} clusters, {:.2}x triangles over all LOD levels, {:.1} bytes per triangle)",
+            store.display(),
+            r.seconds(),
+            fmt_count(r.redefine.cells),
+            fmt_count(r.clusters),
+            r.stored_triangles as f64 / r.input_triangles.max(1) as f64,
+            r.file_bytes as f64 / r.input_triangles.max(1) as f64
+        );
+    }
+    let opened = tw_store::Store::open(&store)?;
+    let v = opened.verify(|_, _| {})?;
+    println!(
+        "   verified: {} pages, {} groups, {} nodes, every checksum and invariant OK",
+        v.pages, v.groups, v.nodes
+    );
+
     let files = [model.clone()];
     let outside = args.dir.join("plant-outside.png");
     let cam = Camera::look_at_bounds(&read.stats.bounds, [-0.55, -0.75, 0.55]);
@@ -52,7 +77,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         interior_viewpoints(&params, 1).into_iter().next().context("no interior viewpoint")?;
     let cam = Camera { eye, target, up: [0.0, 0.0, 1.0], fovy_deg: 70.0 };
     preview::render(&files, &options, cam, (1280, 720), Coloring::Material, &inside)?;
-    println!("3. views: {} and {}", outside.display(), inside.display());
+    println!("4. views: {} and {}", outside.display(), inside.display());
 
     println!(
         "done in {:.1} s, peak memory {}",
@@ -60,8 +85,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         tw_core::mem::peak_rss_bytes().map(fmt_bytes).unwrap_or_else(|| "unknown".into())
     );
     println!(
-        "next: `terawalk stats {}` or `terawalk preview {} -o view.png`",
-        model.display(),
+        "next: `terawalk info {} --verify`, `terawalk preview {} -o view.png`",
+        store.display(),
         model.display()
     );
     Ok(())
