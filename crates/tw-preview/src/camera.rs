@@ -71,6 +71,38 @@ impl Camera {
         }
     }
 
+    /// Like [`Camera::look_at_bounds_up`], but tight: moves the eye along the same direction
+    /// until the box's eight corners just fit an image of `aspect` (width / height), with a
+    /// small margin, instead of fitting the bounding sphere. Far better framing for flat scenes
+    /// (a site seen from above at an angle).
+    pub fn frame_bounds(bounds: &Aabb, direction: [f64; 3], up: [f64; 3], aspect: f64) -> Camera {
+        let mut cam = Camera::look_at_bounds_up(bounds, direction, up);
+        if bounds.is_empty() || !aspect.is_finite() || aspect <= 0.0 {
+            return cam;
+        }
+        let b = cam.basis();
+        let center = cam.target;
+        let tan_y = (cam.fovy() * 0.5).tan() * 0.95;
+        let tan_x = tan_y * aspect;
+        let mut distance: f64 = 0.0;
+        for i in 0..8 {
+            let corner = [
+                if i & 1 == 0 { bounds.min[0] } else { bounds.max[0] },
+                if i & 2 == 0 { bounds.min[1] } else { bounds.max[1] },
+                if i & 4 == 0 { bounds.min[2] } else { bounds.max[2] },
+            ];
+            let c = sub(corner, center);
+            // The eye is at center - forward * d; the corner's depth is d + c·forward.
+            let need_x = dot(c, b.right).abs() / tan_x - dot(c, b.forward);
+            let need_y = dot(c, b.up).abs() / tan_y - dot(c, b.forward);
+            distance = distance.max(need_x).max(need_y);
+        }
+        if distance.is_finite() && distance > 0.0 {
+            cam.eye = sub(center, scale(b.forward, distance));
+        }
+        cam
+    }
+
     /// Orthonormal view basis: right, up, forward (unit vectors, right-handed: right = forward ×
     /// up). Degenerate inputs fall back: eye = target looks along −Z, `up` parallel to the view
     /// direction picks another up.

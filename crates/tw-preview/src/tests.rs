@@ -220,6 +220,29 @@ fn look_at_bounds_frames_the_box() {
 }
 
 #[test]
+fn frame_bounds_fits_the_corners_tightly() {
+    let b = Aabb::from_points(&[[0.0, 0.0, 0.0], [300.0, 200.0, 40.0]]);
+    let (w, h) = (320u32, 180u32);
+    let cam = Camera::frame_bounds(&b, [-0.55, -0.75, 0.55], [0.0, 0.0, 1.0], w as f64 / h as f64);
+    let p = Preview::new(w, h, cam).unwrap();
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for k in 0..8 {
+        let corner = [0, 1, 2].map(|i| if k >> i & 1 == 1 { b.max[i] } else { b.min[i] });
+        let s = p.project(corner).unwrap();
+        assert!(s[0] >= 0.0 && s[0] <= w as f64 && s[1] >= 0.0 && s[1] <= h as f64, "{corner:?} -> {s:?}");
+        for i in 0..2 {
+            lo[i] = lo[i].min(s[i]);
+            hi[i] = hi[i].max(s[i]);
+        }
+    }
+    // Tight: one corner touches the margin, so with the target at the box centre (perspective
+    // makes the projection lopsided) the box spans well over half the image along one axis.
+    let span = ((hi[0] - lo[0]) / w as f64).max((hi[1] - lo[1]) / h as f64);
+    assert!(span > 0.65, "span {span}");
+    assert!(cam.target_distance() < Camera::look_at_bounds(&b, [-0.55, -0.75, 0.55]).target_distance());
+}
+
+#[test]
 fn invalid_sizes_are_errors() {
     for (w, h) in [(0, 10), (10, 0), (MAX_SIDE + 1, 1)] {
         let e = Preview::new(w, h, Camera::default()).err().unwrap();

@@ -69,7 +69,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
 
     let files = [model.clone()];
     let outside = args.dir.join("plant-outside.png");
-    let cam = Camera::look_at_bounds(&read.stats.bounds, [-0.55, -0.75, 0.55]);
+    let cam = Camera::frame_bounds(&read.stats.bounds, [-0.55, -0.75, 0.55], [0.0, 0.0, 1.0], 1280.0 / 720.0);
     preview::render(&files, &options, cam, (1280, 720), Coloring::Material, &outside)?;
     let inside = args.dir.join("plant-inside.png");
     let params = PlantParams { triangles: args.triangles, seed: args.seed };

@@ -111,7 +111,7 @@ pub fn run(args: PreviewArgs) -> Result<()> {
                 _ => 2,
             };
             let (dir, upv) = preset_direction(args.view, up);
-            Camera::look_at_bounds_up(&bounds, dir, upv)
+            Camera::frame_bounds(&bounds, dir, upv, args.size.0 as f64 / args.size.1 as f64)
         }
     };
     let n = render(&args.files, &options, camera, args.size, args.color, &args.output)?;
