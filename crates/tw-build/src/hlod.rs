@@ -187,16 +187,26 @@ pub fn build_hlod(
         .map(|(open, &p)| open && external(p))
         .collect();
     let mut simplified = if target < tri_count {
-        let options = SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune;
-        let mut out = meshopt::simplify_with_locks(
-            &indices,
-            &vertices,
-            &locks,
-            target * 3,
-            f32::MAX,
-            options,
-            Some(&mut error_local),
-        );
+        let simplify = |options: SimplifyOptions, error: &mut f32| {
+            meshopt::simplify_with_locks(
+                &indices,
+                &vertices,
+                &locks,
+                target * 3,
+                f32::MAX,
+                options,
+                Some(error),
+            )
+        };
+        let mut out = simplify(SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune, &mut error_local);
+        // Pruning removes whole components, locked vertices included: a pruned component on a
+        // seam would leave the finer neighbour's border open (a crack), and pruning everything
+        // would leave nothing. Then simplify again without it. (Same check for the sloppy
+        // fallback below.)
+        if out.is_empty() || keeps_seams(&indices, &out, &locks).is_err() {
+            error_local = 0.0;
+            out = simplify(SimplifyOptions::ErrorAbsolute, &mut error_local);
+        }
         if out.len() / 3 > target + target / 8 {
             let mut rel = 0.0f32;
             let sloppy = meshopt::simplify_sloppy_with_locks(
@@ -207,7 +217,10 @@ pub fn build_hlod(
                 f32::MAX,
                 Some(&mut rel),
             );
-            if !sloppy.is_empty() && sloppy.len() < out.len() {
+            if !sloppy.is_empty()
+                && sloppy.len() < out.len()
+                && keeps_seams(&indices, &sloppy, &locks).is_ok()
+            {
                 out = sloppy;
                 error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
             }
@@ -253,6 +266,36 @@ pub fn build_hlod(
         dag.clusters.push(cluster);
     }
     HlodNode { dag, replaced, error, sphere }
+}
+
+/// `Ok` when every open edge of `before` between two locked vertices (a seam with a cell outside
+/// the node) is still an edge of `after`; else the first one lost.
+fn keeps_seams(before: &[u32], after: &[u32], locks: &[bool]) -> Result<(), (u32, u32)> {
+    let locked = |v: u32| locks.get(v as usize) == Some(&true);
+    let edges = |idx: &[u32], only_locked: bool| {
+        let mut e: Vec<(u32, u32)> = idx
+            .chunks_exact(3)
+            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+            .filter(|&(a, b)| !only_locked || (locked(a) && locked(b)))
+            .map(|(a, b)| (a.min(b), a.max(b)))
+            .collect();
+        e.sort_unstable();
+        e
+    };
+    let seams = edges(before, true);
+    let kept = edges(after, false);
+    let mut i = 0;
+    while i < seams.len() {
+        let mut j = i + 1;
+        while j < seams.len() && seams[j] == seams[i] {
+            j += 1;
+        }
+        if j - i == 1 && kept.binary_search(&seams[i]).is_err() {
+            return Err(seams[i]);
+        }
+        i = j;
+    }
+    Ok(())
 }
 
 /// The positions on open (or non-manifold) edges of at least two of the given cells, sorted:
