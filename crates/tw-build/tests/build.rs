@@ -883,7 +883,6 @@ fn data_dir() -> Option<PathBuf> {
 
 /// The dragon has holes: the cut's boundary edges must be boundary edges of the input.
 #[test]
-#[ignore = "871k triangles: run with --release -- --ignored"]
 fn stanford_dragon() {
     let Some(data) = data_dir() else { return };
     let input = [data.join("dragon_vrip.ply.gz")];
