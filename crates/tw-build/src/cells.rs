@@ -10,8 +10,8 @@
 //!    a tiny budget over a huge input takes several passes rather than more open files.
 //! 2. [`CellFiles::read_bucket`]: reads one bucket, groups its triangles by cell (a counting
 //!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
-//!    [`CellMesh`], its vertices deduplicated by exact grid position (sort based, first-occurrence
-//!    order: deterministic, no hash maps). `mesh` takes `&self`, so cells of a bucket can be built
+//!    [`CellMesh`], its vertices deduplicated by exact grid position (an open-addressing table with
+//!    a fixed hash; vertices numbered in order of first use, so deterministic). `mesh` takes `&self`, so cells of a bucket can be built
 //!    in parallel. [`CellFiles::for_each_cell`] hands out every cell in cell order.
 //!
 //! Bucket record, 44 bytes little endian: nine `u32` grid coordinates, the object id, the cell.
@@ -41,8 +41,8 @@ use crate::types::{CellMesh, GRID_STEPS};
 pub const RECORD_BYTES: usize = 44;
 /// Memory per triangle of a bucket being read: the decoded record and its sort index.
 pub const BUCKET_BYTES_PER_TRIANGLE: u64 = RECORD_BYTES as u64 + 4;
-/// Memory per triangle of the cell whose mesh is being built (sort keys, positions, indices,
-/// object ids, the output).
+/// Memory per triangle of the cell whose mesh is being built (an upper bound: the position
+/// table, at most 48 bytes, positions, indices and object ids).
 pub const CELL_BYTES_PER_TRIANGLE: u64 = 3 * 16 + 3 * 8 + 3 * 12 + 12 + 4;
 /// Bucket files written at once.
 pub const MAX_OPEN_BUCKETS: usize = 256;
@@ -310,35 +310,52 @@ impl Bucket {
         assert!(self.cells.contains(&cell), "cell {cell} is not in bucket {:?}", self.cells);
         let k = (cell - self.cells.start) as usize;
         let tris = &self.order[self.start[k]..self.start[k + 1]];
-        // (position, corner) sorted: equal positions become adjacent, first corner first.
-        let mut corners: Vec<([u32; 3], u32)> = Vec::with_capacity(3 * tris.len());
-        for (t, &i) in tris.iter().enumerate() {
+        let mut table = PositionTable::with_corners(3 * tris.len());
+        let mut indices = Vec::with_capacity(3 * tris.len());
+        let mut objects = Vec::with_capacity(tris.len());
+        for &i in tris {
             let r = &self.recs[i as usize];
-            for (v, q) in r.q.iter().enumerate() {
-                corners.push((*q, (3 * t + v) as u32));
+            for q in &r.q {
+                indices.push(table.vertex(*q));
             }
+            objects.push(r.object);
         }
-        corners.sort_unstable();
-        // Each distinct position's first corner, in corner order, gives the vertex order.
-        let mut group_of_corner = vec![0u32; corners.len()];
-        let mut firsts: Vec<(u32, u32)> = Vec::new();
-        for (i, &(q, corner)) in corners.iter().enumerate() {
-            if i == 0 || corners[i - 1].0 != q {
-                firsts.push((corner, firsts.len() as u32));
+        CellMesh { positions: table.positions, indices, objects }
+    }
+}
+
+/// Vertex ids by exact grid position, numbered in order of first use: an open-addressing table
+/// with a fixed hash, so the numbering depends only on the order of the queries.
+struct PositionTable {
+    /// Vertex id + 1 per slot (0: empty); the length is a power of two.
+    slots: Vec<u32>,
+    positions: Vec<[u32; 3]>,
+}
+
+impl PositionTable {
+    /// A table for at most `corners` distinct positions (load factor ≤ 1/2).
+    fn with_corners(corners: usize) -> PositionTable {
+        let len = (2 * corners).next_power_of_two().max(16);
+        PositionTable { slots: vec![0; len], positions: Vec::with_capacity(corners / 2 + 16) }
+    }
+
+    fn vertex(&mut self, p: [u32; 3]) -> u32 {
+        let mask = self.slots.len() - 1;
+        let h = ((p[0] as u64) | (p[1] as u64) << 32).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (p[2] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        let mut i = (h >> 32) as usize & mask;
+        loop {
+            let s = self.slots[i];
+            if s == 0 {
+                self.positions.push(p);
+                self.slots[i] = self.positions.len() as u32;
+                return self.positions.len() as u32 - 1;
             }
-            group_of_corner[corner as usize] = firsts.len() as u32 - 1;
+            if self.positions[s as usize - 1] == p {
+                return s - 1;
+            }
+            i = (i + 1) & mask;
         }
-        firsts.sort_unstable();
-        let mut vertex_of_group = vec![0u32; firsts.len()];
-        let mut positions = Vec::with_capacity(firsts.len());
-        for (v, &(corner, group)) in firsts.iter().enumerate() {
-            vertex_of_group[group as usize] = v as u32;
-            let (t, c) = (corner as usize / 3, corner as usize % 3);
-            positions.push(self.recs[tris[t] as usize].q[c]);
-        }
-        let indices = group_of_corner.iter().map(|&g| vertex_of_group[g as usize]).collect();
-        let objects = tris.iter().map(|&i| self.recs[i as usize].object).collect();
-        CellMesh { positions, indices, objects }
     }
 }
 
@@ -391,6 +408,22 @@ mod tests {
         let got = mesh_triangles(&files);
         assert_eq!(got.len(), 200_000);
         assert_eq!(got, direct_triangles(&ing));
+    }
+
+    #[test]
+    fn position_table_numbers_in_first_use_order_with_collisions() {
+        // 8 slots' worth of positions in a 16-slot table: probing wraps and collides.
+        let mut t = PositionTable::with_corners(8);
+        assert_eq!(t.slots.len(), 16);
+        let ps: Vec<[u32; 3]> = (0..8u32).map(|i| [i * 7, i * 7 + 1, u32::MAX - i]).collect();
+        for (i, &p) in ps.iter().enumerate() {
+            assert_eq!(t.vertex(p), i as u32);
+        }
+        for (i, &p) in ps.iter().enumerate().rev() {
+            assert_eq!(t.vertex(p), i as u32, "repeat lookup");
+        }
+        assert_eq!(t.positions, ps);
+        assert_eq!(t.vertex([0, 0, 0]), 8, "a new position after repeats");
     }
 
     #[test]

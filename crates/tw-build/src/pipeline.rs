@@ -6,10 +6,11 @@
 //! 3. distribute ([`crate::cells`]) → one bucket file per range of cells;
 //! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), which HLOD
 //!    must keep where a neighbouring subtree may be drawn finer ([`crate::hlod::build_hlod`]);
-//! 5. for each bucket: LOD of its cells in parallel ([`crate::lod::build_cell_lod`]); then, in
-//!    leaf order, the cells' groups go to pages ([`crate::pages`]) and their roots up the tree,
-//!    where each node whose children are complete gets its HLOD groups at once — so only the roots
-//!    of the subtrees on the current path are held in memory;
+//! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
+//!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
+//!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
+//!    gets its HLOD groups at once — so only the roots of the subtrees on the current path are
+//!    held in memory;
 //! 6. write: group, node and object tables, atomically ([`tw_store::StoreWriter`]).
 //!
 //! Output is byte-identical for any thread count: parallel work is collected in cell order.
@@ -218,22 +219,22 @@ fn build_with_pool(
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
         let ids: Vec<u32> = bucket.cells().collect();
-        let dags: Vec<LodDag> = pool.install(|| {
-            ids.par_iter()
-                .map(|&c| {
-                    let mesh = bucket.mesh(c);
-                    build_cell_lod(&mesh, &grid, &options.lod)
-                })
-                .collect()
-        });
-        drop(bucket);
-        for (&cell, dag) in ids.iter().zip(dags) {
-            let leaf = state.leaf_of_cell[cell as usize];
-            state.add_cell(&mut writer, leaf, dag)?;
-            state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &external)?;
-            done_triangles += red.cells[cell as usize].triangles;
-            progress.advance(done_triangles);
-        }
+        // The pool builds the cells' DAGs, taking cells in order; this thread consumes them in
+        // cell order (pages, HLOD) as they come, so the sequential part overlaps the parallel one.
+        for_each_in_order(
+            pool,
+            ids.len(),
+            |i| build_cell_lod(&bucket.mesh(ids[i]), &grid, &options.lod),
+            |i, dag| {
+                let cell = ids[i];
+                let leaf = state.leaf_of_cell[cell as usize];
+                state.add_cell(&mut writer, leaf, dag)?;
+                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &external)?;
+                done_triangles += red.cells[cell as usize].triangles;
+                progress.advance(done_triangles);
+                Ok(())
+            },
+        )?;
     }
     progress.end_phase();
     t.lap("lod+hlod+pages");
@@ -282,6 +283,61 @@ fn build_with_pool(
     report.file_bytes = summary.file_bytes;
     report.peak_rss = tw_core::mem::peak_rss_bytes();
     Ok(report)
+}
+
+/// Runs `produce(i)` for `i` in `0..n` on `pool` (workers take indices in increasing order) and
+/// hands the results to `consume` on the calling thread in index order, as soon as each is
+/// ready. Results wait only until their predecessors are consumed, so at most about a worker's
+/// lead over the slowest worker is held. On the first error of `consume` the workers stop
+/// taking new indices and the error is returned.
+fn for_each_in_order<T, P, C>(
+    pool: &rayon::ThreadPool,
+    n: usize,
+    produce: P,
+    mut consume: C,
+) -> Result<(), BuildError>
+where
+    T: Send,
+    P: Fn(usize) -> T + Sync,
+    C: FnMut(usize, T) -> Result<(), BuildError>,
+{
+    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+    let next = AtomicUsize::new(0);
+    let stop = AtomicBool::new(false);
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, T)>();
+    std::thread::scope(|scope| {
+        let (next, stop, produce) = (&next, &stop, &produce);
+        scope.spawn(move || {
+            pool.scope(|s| {
+                for _ in 0..pool.current_num_threads() {
+                    let tx = tx.clone();
+                    s.spawn(move |_| loop {
+                        if stop.load(Ordering::Relaxed) {
+                            return;
+                        }
+                        let i = next.fetch_add(1, Ordering::Relaxed);
+                        if i >= n || tx.send((i, produce(i))).is_err() {
+                            return;
+                        }
+                    });
+                }
+            });
+            drop(tx);
+        });
+        let mut waiting: std::collections::BTreeMap<usize, T> = std::collections::BTreeMap::new();
+        let mut expected = 0usize;
+        for (i, item) in rx.iter() {
+            waiting.insert(i, item);
+            while let Some(item) = waiting.remove(&expected) {
+                if let Err(e) = consume(expected, item) {
+                    stop.store(true, Ordering::Relaxed);
+                    return Err(e);
+                }
+                expected += 1;
+            }
+        }
+        Ok(())
+    })
 }
 
 /// Open-boundary vertices shared by at least two cells, sorted.
@@ -488,4 +544,62 @@ fn store_nodes(h: &Hierarchy, node_groups: &[(u32, u32)], groups: &[tw_store::Gr
         nodes[i].max_error = nodes[i].max_error.max(child_max);
     }
     nodes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pool(n: usize) -> rayon::ThreadPool {
+        rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap()
+    }
+
+    #[test]
+    fn for_each_in_order_consumes_every_result_in_order() {
+        for threads in [1, 2, 4] {
+            let mut got = Vec::new();
+            // Uneven work so that results arrive out of order.
+            let produce = |i: usize| {
+                std::thread::sleep(std::time::Duration::from_micros(((i * 7919) % 13) as u64 * 50));
+                i * i
+            };
+            for_each_in_order(&pool(threads), 100, produce, |i, v| {
+                got.push((i, v));
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(got, (0..100).map(|i| (i, i * i)).collect::<Vec<_>>(), "{threads} threads");
+        }
+    }
+
+    #[test]
+    fn for_each_in_order_handles_nothing() {
+        for_each_in_order(&pool(2), 0, |i| i, |_, _| panic!("nothing to consume")).unwrap();
+    }
+
+    #[test]
+    fn for_each_in_order_stops_at_the_first_error() {
+        let produced = std::sync::atomic::AtomicUsize::new(0);
+        let mut consumed = Vec::new();
+        let r = for_each_in_order(
+            &pool(2),
+            100_000,
+            |i| {
+                produced.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                std::thread::sleep(std::time::Duration::from_micros(20));
+                i
+            },
+            |i, _| {
+                consumed.push(i);
+                if i == 5 {
+                    Err(BuildError::Param("stop".into()))
+                } else {
+                    Ok(())
+                }
+            },
+        );
+        assert!(matches!(r, Err(BuildError::Param(m)) if m == "stop"));
+        assert_eq!(consumed, (0..=5).collect::<Vec<_>>());
+        assert!(produced.load(std::sync::atomic::Ordering::Relaxed) < 100_000, "workers stopped early");
+    }
 }
