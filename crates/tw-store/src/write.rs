@@ -76,7 +76,16 @@ impl StoreWriter {
             _ => PathBuf::from("."),
         };
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let tmp = tempfile::Builder::new().prefix(&format!(".{name}.tmp")).tempfile_in(&dir).map_err(io)?;
+        let prefix = format!(".{name}.tmp");
+        let mut builder = tempfile::Builder::new();
+        builder.prefix(&prefix);
+        // The usual permissions of a new file (0666 less the umask), not a temp file's 0600.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            builder.permissions(std::fs::Permissions::from_mode(0o666));
+        }
+        let tmp = builder.tempfile_in(&dir).map_err(io)?;
         let mut out = BufWriter::with_capacity(1 << 20, tmp);
         out.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
         Ok(StoreWriter { path, out, pos: HEADER_LEN as u64, pages: Vec::new(), scratch: Vec::new() })
