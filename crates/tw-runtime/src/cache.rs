@@ -242,7 +242,9 @@ impl PageCache {
             let victim = inner.lru.iter().map(|(&t, &p)| (t, p)).find(|&(_, p)| p != keep);
             let Some((tick, victim)) = victim else { break };
             inner.lru.remove(&tick);
-            if let Slot::Resident { page, .. } = std::mem::replace(&mut inner.slots[victim as usize], Slot::Empty) {
+            if let Slot::Resident { page, .. } =
+                std::mem::replace(&mut inner.slots[victim as usize], Slot::Empty)
+            {
                 inner.stats.resident_bytes -= page.bytes() as u64;
                 inner.stats.resident_pages -= 1;
                 inner.stats.evictions += 1;
@@ -344,8 +346,13 @@ pub(crate) mod tests {
             input_triangles: groups.iter().map(|g| g.triangles as u64).sum(),
         };
         let objects = [Object { name: "o".into(), color: None, triangles: info.input_triangles }];
-        let nodes =
-            [Node { min: [0; 3], max: [100; 3], group_count: pages, max_error: f32::INFINITY, ..Default::default() }];
+        let nodes = [Node {
+            min: [0; 3],
+            max: [100; 3],
+            group_count: pages,
+            max_error: f32::INFINITY,
+            ..Default::default()
+        }];
         w.finish(&info, &objects, &nodes, &groups).unwrap();
         Store::open(&path).unwrap()
     }

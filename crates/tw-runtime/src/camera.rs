@@ -44,7 +44,14 @@ pub const NEAR_FAR_RATIO: f32 = 1e-5;
 
 impl Camera {
     /// A camera from its parts, checked with [`validate`](Self::validate).
-    pub fn new(eye: Vec3, target: Vec3, up: Vec3, fovy: f32, near: f32, far: f32) -> Result<Camera, RuntimeError> {
+    pub fn new(
+        eye: Vec3,
+        target: Vec3,
+        up: Vec3,
+        fovy: f32,
+        near: f32,
+        far: f32,
+    ) -> Result<Camera, RuntimeError> {
         let c = Camera { eye, target, up, fovy, near, far };
         c.validate()?;
         Ok(c)
@@ -197,7 +204,8 @@ impl InputCamera {
             let mut v = [0f64; 3];
             let mut n = 0;
             for c in p.split(',') {
-                let x: f64 = c.trim().parse().map_err(|_| err(format!("bad number {:?} in {what}", c.trim())))?;
+                let x: f64 =
+                    c.trim().parse().map_err(|_| err(format!("bad number {:?} in {what}", c.trim())))?;
                 if !x.is_finite() {
                     return Err(err(format!("{what} must be finite, got {:?}", c.trim())));
                 }
@@ -323,8 +331,14 @@ mod tests {
     #[test]
     fn input_coordinates_are_rebased_to_the_grid_origin() {
         let h = header([1000.0, 2000.0, 3000.0], 0.01, [1000.0, 2000.0, 3000.0], [1010.0, 2010.0, 3010.0]);
-        let c = Camera::from_input_coordinates([1005.0, 1990.0, 3005.0], [1005.0, 2005.0, 3005.0], [0.0, 0.0, 1.0], 60.0, &h)
-            .unwrap();
+        let c = Camera::from_input_coordinates(
+            [1005.0, 1990.0, 3005.0],
+            [1005.0, 2005.0, 3005.0],
+            [0.0, 0.0, 1.0],
+            60.0,
+            &h,
+        )
+        .unwrap();
         assert_eq!(c.eye, Vec3::new(5.0, -10.0, 5.0));
         assert_eq!(c.target, Vec3::new(5.0, 5.0, 5.0));
         assert_eq!(c.up, Vec3::Z);
@@ -338,7 +352,15 @@ mod tests {
     #[test]
     fn camera_string_parses_in_input_coordinates() {
         let c = InputCamera::parse("1,2,3; 4, 5 ,6;0,0,1; 60").unwrap();
-        assert_eq!(c, InputCamera { eye: [1.0, 2.0, 3.0], target: [4.0, 5.0, 6.0], up: [0.0, 0.0, 1.0], fovy_deg: 60.0 });
+        assert_eq!(
+            c,
+            InputCamera {
+                eye: [1.0, 2.0, 3.0],
+                target: [4.0, 5.0, 6.0],
+                up: [0.0, 0.0, 1.0],
+                fovy_deg: 60.0
+            }
+        );
         let c: InputCamera = "-1e3,0,0;0,0,0;0,1,0;90".parse().unwrap();
         assert_eq!(c.eye, [-1000.0, 0.0, 0.0]);
     }

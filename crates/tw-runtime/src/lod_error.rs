@@ -47,8 +47,8 @@ impl LodMetric {
     /// Pixels of `error` at `distance` (> 0 means outside; ≤ 0 means the eye is inside).
     #[inline]
     fn at_distance(&self, error: f32, distance: f64) -> f64 {
-        // `!(e > 0)` also catches NaN, which the store rejects: treat it as no error.
-        if !(error > 0.0) {
+        // NaN (which the store rejects) is treated as no error.
+        if error <= 0.0 || error.is_nan() {
             return 0.0;
         }
         if distance <= 0.0 {

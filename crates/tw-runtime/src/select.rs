@@ -139,7 +139,8 @@ impl Selector {
                 hi = hi.max(Vec3::new(widen(x + r, 1.0), widen(y + r, 1.0), widen(z + r, 1.0)));
             }
             let children = n.first_child as usize..n.first_child as usize + n.child_count as usize;
-            if let (Some(errs), Some(boxes)) = (subtree_error.get(children.clone()), lod_boxes.get(children)) {
+            if let (Some(errs), Some(boxes)) = (subtree_error.get(children.clone()), lod_boxes.get(children))
+            {
                 for (&e, &(clo, chi)) in errs.iter().zip(boxes) {
                     err = err.max(e);
                     lo = lo.min(clo);
@@ -154,7 +155,13 @@ impl Selector {
 
     /// Selects the clusters to draw for `camera` (see the module documentation). Pages come
     /// from `cache` (loaded on a miss).
-    pub fn select(&self, store: &Store, cache: &PageCache, camera: &Camera, options: &SelectOptions) -> Selection {
+    pub fn select(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        options: &SelectOptions,
+    ) -> Selection {
         let mut out = Selection::default();
         self.select_into(store, cache, camera, options, &mut out);
         out
@@ -186,7 +193,8 @@ impl Selector {
             stack.clear();
         }
         while let Some((ni, mut inside)) = stack.pop() {
-            let (Some(node), Some(&(lo, hi))) = (nodes.get(ni as usize), self.node_boxes.get(ni as usize)) else {
+            let (Some(node), Some(&(lo, hi))) = (nodes.get(ni as usize), self.node_boxes.get(ni as usize))
+            else {
                 continue;
             };
             stats.nodes_visited += 1;
@@ -231,7 +239,8 @@ impl Selector {
                     }
                 };
                 let range = g.first_cluster as usize..g.first_cluster as usize + g.cluster_count as usize;
-                let (Some(clusters), Some(bounds)) = (page.clusters.get(range.clone()), page.bounds.get(range))
+                let (Some(clusters), Some(bounds)) =
+                    (page.clusters.get(range.clone()), page.bounds.get(range))
                 else {
                     tracing::error!(
                         "group {gi} skipped: clusters {}..+{} beyond the {} clusters of page {}",
@@ -244,7 +253,11 @@ impl Selector {
                     continue;
                 };
                 if let Some(c) = clusters.iter().find(|c| c.group as usize != gi) {
-                    tracing::error!("group {gi} skipped: page {} lists a member of group {}", g.page, c.group);
+                    tracing::error!(
+                        "group {gi} skipped: page {} lists a member of group {}",
+                        g.page,
+                        c.group
+                    );
                     stats.groups_failed += 1;
                     continue;
                 }
