@@ -1,0 +1,34 @@
+//! The CPU side of terawalk's per-frame runtime (DESIGN "Data flow": camera → select → …):
+//!
+//! - [`camera`]: the scene-space camera, its matrices (right-handed, depth 0..1, optional
+//!   reverse-Z) and the command-line camera string in input coordinates;
+//! - [`frustum`]: frustum planes and box/sphere tests;
+//! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
+//! - [`select`]: the LOD cut and frustum culling of one frame over a store;
+//! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned.
+//!
+//! ```no_run
+//! use tw_runtime::{Camera, InputCamera, PageCache, SelectOptions, Selector};
+//! let store = tw_store::Store::open("scene.tw")?;
+//! let camera = InputCamera::parse("10,5,1.7;40,5,1.7;0,0,1;70")?.to_scene(store.header())?;
+//! let cache = PageCache::new(&store, 512 << 20);
+//! cache.load_root_pages(&store);
+//! let selector = Selector::new(&store);
+//! let frame = selector.select(&store, &cache, &camera, &SelectOptions { tau: 1.0, ..Default::default() });
+//! println!("{} clusters, {} triangles, {:?}", frame.clusters.len(), frame.triangles, frame.stats);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+pub mod cache;
+pub mod camera;
+pub mod error;
+pub mod frustum;
+pub mod lod_error;
+pub mod select;
+
+pub use cache::{CacheStats, PageCache, ResidentPage};
+pub use camera::{Camera, InputCamera};
+pub use error::RuntimeError;
+pub use frustum::{Containment, Frustum};
+pub use lod_error::LodMetric;
+pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};

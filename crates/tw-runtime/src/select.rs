@@ -1,0 +1,295 @@
+//! The LOD cut and view-frustum culling of one frame (DESIGN decisions 1–3; docs/FORMAT.md,
+//! "Render rule").
+//!
+//! A depth-first traversal of the skeleton from node 0 (children in index order, so the output
+//! order is deterministic):
+//!
+//! 1. **Frustum** (optional): a node whose grid box is outside the frustum is skipped with its
+//!    subtree (every vertex of a group lies in the box of its node, and child boxes lie in their
+//!    parent's). A node entirely inside switches frustum tests off below it.
+//! 2. **LOD**: a node is skipped when no group in its subtree can be drawn from. A group's
+//!    clusters are drawn only when the group is *not replaced*, `proj(group.sphere,
+//!    group.error) > τ`. Let `M` be the largest group error in the subtree and `B` a box
+//!    containing every group sphere of the subtree (both precomputed by [`Selector::new`]). If
+//!    the eye is outside `B` at distance `d_B > 0`, then for each group `G` of the subtree the
+//!    nearest point of its sphere lies in `B`, so its distance `d_G ≥ d_B > 0` (the eye is not
+//!    in the sphere either) and, with `e_G ≤ M`,
+//!    `proj(G) = e_G·s / max(d_G, near) ≤ M·s / max(d_B, near) = proj_B(M)`.
+//!    So `proj_B(M) ≤ τ` proves every group below is replaced by something coarser: skipping the
+//!    subtree loses nothing. (With the eye in `B`, `proj_B(M) = ∞` for `M > 0`: never skipped;
+//!    for `M = 0` every group projects to 0 and is replaced.) `M` is computed from the group
+//!    table rather than trusted from `node.max_error`, and the bound is inflated by 10⁻⁹ against
+//!    rounding, so a store that breaks invariant 10 still gets a correct cut.
+//! 3. **Groups** of a visited node: a replaced group (`proj ≤ τ`) is skipped; so is one whose
+//!    sphere is outside the frustum. The others' pages are fetched through the [`PageCache`].
+//! 4. **Clusters** of such a group are drawn when `proj(self_sphere, self_error) ≤ τ` (the
+//!    cluster is fine enough) and their vertex box is not outside the frustum.
+//!
+//! Because each decision is a function of (error, sphere) evaluated the same way everywhere
+//! ([`LodMetric`]), a group's "replaced" and its replacement's "fine enough" agree exactly, and
+//! the drawn set is a crack-free cut of the DAG; the frustum only removes clusters whose
+//! vertices are all outside the view.
+//!
+//! A page that cannot be loaded (checksum, decoding) is logged once (`tracing::error`) and its
+//! groups are skipped and counted in [`SelectStats::groups_failed`]; the frame goes on.
+
+use glam::Vec3;
+use tw_store::Store;
+
+use crate::cache::PageCache;
+use crate::camera::Camera;
+use crate::error::RuntimeError;
+use crate::frustum::{grid_box, Containment, Frustum};
+use crate::lod_error::LodMetric;
+
+/// What to select for one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SelectOptions {
+    /// Pixel error threshold τ (DESIGN decision 3; default 1).
+    pub tau: f32,
+    /// Viewport size in pixels (width, height): the height scales the pixel error, the aspect
+    /// ratio shapes the frustum.
+    pub viewport: [u32; 2],
+    /// Cull against the view frustum (`--frustum off` turns it off).
+    pub frustum_culling: bool,
+}
+
+impl Default for SelectOptions {
+    fn default() -> Self {
+        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true }
+    }
+}
+
+/// One selected cluster: cluster `index_in_page` of page `page`, a member of group `group`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct ClusterRef {
+    pub page: u32,
+    pub index_in_page: u32,
+    pub group: u32,
+}
+
+/// What the selection did (per frame; DESIGN: "what was culled and why").
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct SelectStats {
+    /// Nodes reached by the traversal (including the culled ones).
+    pub nodes_visited: u64,
+    /// Nodes skipped (with their subtrees) because their box is outside the frustum.
+    pub nodes_culled_frustum: u64,
+    /// Nodes skipped because every group below is replaced by something coarser.
+    pub nodes_culled_lod: u64,
+    /// Groups of visited nodes whose error was tested.
+    pub groups_tested: u64,
+    /// Groups outside the frustum (not replaced, but not visible).
+    pub groups_culled_frustum: u64,
+    /// Groups drawn from (not replaced, in the frustum, page loaded).
+    pub groups_selected: u64,
+    /// Groups skipped because their page could not be loaded.
+    pub groups_failed: u64,
+    /// Clusters of selected groups that were fine enough but outside the frustum.
+    pub clusters_culled_frustum: u64,
+    pub clusters_selected: u64,
+    /// Distinct pages the selected groups live in.
+    pub pages_touched: u64,
+}
+
+/// The clusters to draw this frame, in traversal order.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Selection {
+    pub clusters: Vec<ClusterRef>,
+    pub triangles: u64,
+    pub stats: SelectStats,
+}
+
+/// Per-store data for [`Selector::select`], computed once from the tables.
+#[derive(Clone, Debug)]
+pub struct Selector {
+    grid_step: f64,
+    /// Scene-space box of each node.
+    node_boxes: Vec<(Vec3, Vec3)>,
+    /// Box of each node's subtree group spheres (see the module documentation).
+    lod_boxes: Vec<(Vec3, Vec3)>,
+    /// Largest group error in each node's subtree.
+    subtree_error: Vec<f32>,
+}
+
+/// Widens `v` by a relative 2⁻²⁰ (outwards in direction `sign`) before rounding to f32.
+fn widen(v: f64, sign: f64) -> f32 {
+    (v + sign * v.abs() * 2f64.powi(-20)) as f32
+}
+
+impl Selector {
+    /// Precomputes node boxes, subtree sphere boxes and subtree errors: O(nodes + groups).
+    pub fn new(store: &Store) -> Selector {
+        let step = store.header().grid_step;
+        let nodes = store.nodes();
+        let groups = store.groups();
+        let node_boxes: Vec<(Vec3, Vec3)> = nodes.iter().map(|n| grid_box(n.min, n.max, step)).collect();
+        let mut lod_boxes = node_boxes.clone();
+        let mut subtree_error = vec![0f32; nodes.len()];
+        // Children have larger indices than their parent (checked when the store is opened).
+        for i in (0..nodes.len()).rev() {
+            let n = &nodes[i];
+            let (mut lo, mut hi) = lod_boxes[i];
+            let mut err = 0f32;
+            let range = n.first_group as usize..n.first_group as usize + n.group_count as usize;
+            for g in groups.get(range).unwrap_or_default() {
+                err = err.max(g.error);
+                let [x, y, z, r] = g.sphere.map(|v| v as f64);
+                lo = lo.min(Vec3::new(widen(x - r, -1.0), widen(y - r, -1.0), widen(z - r, -1.0)));
+                hi = hi.max(Vec3::new(widen(x + r, 1.0), widen(y + r, 1.0), widen(z + r, 1.0)));
+            }
+            let children = n.first_child as usize..n.first_child as usize + n.child_count as usize;
+            if let (Some(errs), Some(boxes)) = (subtree_error.get(children.clone()), lod_boxes.get(children))
+            {
+                for (&e, &(clo, chi)) in errs.iter().zip(boxes) {
+                    err = err.max(e);
+                    lo = lo.min(clo);
+                    hi = hi.max(chi);
+                }
+            }
+            lod_boxes[i] = (lo, hi);
+            subtree_error[i] = err;
+        }
+        Selector { grid_step: step, node_boxes, lod_boxes, subtree_error }
+    }
+
+    /// Selects the clusters to draw for `camera` (see the module documentation). Pages come
+    /// from `cache` (loaded on a miss).
+    pub fn select(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        options: &SelectOptions,
+    ) -> Selection {
+        let mut out = Selection::default();
+        self.select_into(store, cache, camera, options, &mut out);
+        out
+    }
+
+    /// [`select`](Self::select) into `out` (cleared first), reusing its allocation.
+    pub fn select_into(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        options: &SelectOptions,
+        out: &mut Selection,
+    ) {
+        out.clusters.clear();
+        out.triangles = 0;
+        out.stats = SelectStats::default();
+        let [w, h] = options.viewport.map(|v| v.max(1) as f32);
+        let metric = LodMetric::new(camera, h);
+        let frustum = Frustum::from_view_projection(&camera.view_projection(w / h));
+        let tau = options.tau as f64;
+        let nodes = store.nodes();
+        let groups = store.groups();
+        let stats = &mut out.stats;
+        let mut pages: Vec<u32> = Vec::new();
+        // (node, inside): `inside` = an ancestor's box is entirely inside the frustum.
+        let mut stack: Vec<(u32, bool)> = vec![(0, !options.frustum_culling)];
+        if nodes.is_empty() {
+            stack.clear();
+        }
+        while let Some((ni, mut inside)) = stack.pop() {
+            let (Some(node), Some(&(lo, hi))) = (nodes.get(ni as usize), self.node_boxes.get(ni as usize))
+            else {
+                continue;
+            };
+            stats.nodes_visited += 1;
+            if !inside {
+                match frustum.test_aabb(lo, hi) {
+                    Containment::Outside => {
+                        stats.nodes_culled_frustum += 1;
+                        continue;
+                    }
+                    Containment::Inside => inside = true,
+                    Containment::Intersecting => {}
+                }
+            }
+            let (blo, bhi) = self.lod_boxes[ni as usize];
+            if metric.aabb(self.subtree_error[ni as usize], blo, bhi) * (1.0 + 1e-9) <= tau {
+                stats.nodes_culled_lod += 1;
+                continue;
+            }
+            let first = node.first_group as usize;
+            for gi in first..first + node.group_count as usize {
+                let Some(g) = groups.get(gi) else { break };
+                stats.groups_tested += 1;
+                if metric.sphere(g.error, g.sphere) <= tau {
+                    continue; // replaced by coarser clusters
+                }
+                if !inside
+                    && frustum.test_sphere(Vec3::new(g.sphere[0], g.sphere[1], g.sphere[2]), g.sphere[3])
+                        == Containment::Outside
+                {
+                    stats.groups_culled_frustum += 1;
+                    continue;
+                }
+                let page = match cache.get(store, g.page) {
+                    Ok(p) => p,
+                    Err(e) => {
+                        match &e {
+                            RuntimeError::PageFailed { .. } => tracing::debug!("group {gi}: {e}"),
+                            _ => tracing::error!("group {gi} skipped: {e}"),
+                        }
+                        stats.groups_failed += 1;
+                        continue;
+                    }
+                };
+                let range = g.first_cluster as usize..g.first_cluster as usize + g.cluster_count as usize;
+                let (Some(clusters), Some(bounds)) =
+                    (page.clusters.get(range.clone()), page.bounds.get(range))
+                else {
+                    tracing::error!(
+                        "group {gi} skipped: clusters {}..+{} beyond the {} clusters of page {}",
+                        g.first_cluster,
+                        g.cluster_count,
+                        page.clusters.len(),
+                        g.page
+                    );
+                    stats.groups_failed += 1;
+                    continue;
+                };
+                if let Some(c) = clusters.iter().find(|c| c.group as usize != gi) {
+                    tracing::error!(
+                        "group {gi} skipped: page {} lists a member of group {}",
+                        g.page,
+                        c.group
+                    );
+                    stats.groups_failed += 1;
+                    continue;
+                }
+                stats.groups_selected += 1;
+                pages.push(g.page);
+                for (k, (c, &(cmin, cmax))) in clusters.iter().zip(bounds).enumerate() {
+                    if metric.sphere(c.self_error, c.self_sphere) > tau {
+                        continue; // too coarse: finer clusters of another group are drawn
+                    }
+                    if !inside {
+                        let (clo, chi) = grid_box(cmin, cmax, self.grid_step);
+                        if frustum.test_aabb(clo, chi) == Containment::Outside {
+                            stats.clusters_culled_frustum += 1;
+                            continue;
+                        }
+                    }
+                    out.clusters.push(ClusterRef {
+                        page: g.page,
+                        index_in_page: g.first_cluster + k as u32,
+                        group: gi as u32,
+                    });
+                    out.triangles += c.triangle_count() as u64;
+                }
+            }
+            let children = node.first_child..node.first_child.saturating_add(node.child_count);
+            if node.child_count > 0 {
+                stack.extend(children.rev().map(|c| (c, inside)));
+            }
+        }
+        stats.clusters_selected = out.clusters.len() as u64;
+        pages.sort_unstable();
+        pages.dedup();
+        stats.pages_touched = pages.len() as u64;
+    }
+}
