@@ -12,7 +12,13 @@
 //!    borders and borders between the children are free), falling back to `simplify_sloppy`
 //!    (error × 2, as clusterlod does) when the regular simplifier stalls above the target. Only
 //!    the seams shared with cells outside the node (split objects) are locked, so that a cut that
-//!    is coarse here and finer next door does not crack;
+//!    is coarse here and finer next door does not crack. Every result is checked (see
+//!    `broken_edges`): each seam edge still open, used by one triangle (not lost, not folded
+//!    into a double-sided pair, which would unlock it one level up), and no new boundary edge
+//!    but along an object border (meshopt's topology rules are per directed half-edge, and
+//!    the double-sided and non-manifold parts left by earlier levels fool them; the sloppy
+//!    simplifier has none). A result that fails is simplified again with the neighbourhood of
+//!    the broken edges locked (a few rounds), else the node keeps its merged mesh;
 //! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
@@ -33,6 +39,9 @@ use crate::lod::{
 };
 use crate::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
 use meshopt::SimplifyOptions;
+
+/// Most simplifications of one node, each locking more vertices around the edges the last broke.
+const REPAIR_ROUNDS: usize = 8;
 
 /// Parameters of [`build_hlod`].
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -186,51 +195,78 @@ pub fn build_hlod(
         .zip(&positions)
         .map(|(open, &p)| open && external(p))
         .collect();
-    let mut simplified = if target < tri_count {
-        let simplify = |options: SimplifyOptions, error: &mut f32| {
-            meshopt::simplify_with_locks(
-                &indices,
-                &vertices,
-                &locks,
-                target * 3,
-                f32::MAX,
-                options,
-                Some(error),
-            )
-        };
-        let mut out = simplify(SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune, &mut error_local);
-        // Pruning removes whole components, locked vertices included: a pruned component on a
-        // seam would leave the finer neighbour's border open (a crack), and pruning everything
-        // would leave nothing. Then simplify again without it. (Same check for the sloppy
-        // fallback below.)
-        if out.is_empty() || keeps_seams(&indices, &out, &locks).is_err() {
-            error_local = 0.0;
-            out = simplify(SimplifyOptions::ErrorAbsolute, &mut error_local);
+    // A result is kept only if it breaks no edge (`broken_edges`: seams kept open, no holes).
+    // If the regular simplifier breaks some, the neighbourhood of those edges is locked too and
+    // it runs again (a few rounds); the last resort is the merged mesh itself (a lossless step:
+    // the parent tries again with more room).
+    let border = free_border_vertices(positions.len(), &indices, &locks);
+    let broken = |out: &[u32]| broken_edges(&indices, out, &locks, &border);
+    let mut simplified = indices.clone();
+    let mut sim_locks = locks.clone();
+    if target < tri_count {
+        for _ in 0..REPAIR_ROUNDS {
+            let simplify = |options: SimplifyOptions, error: &mut f32| {
+                meshopt::simplify_with_locks(
+                    &indices,
+                    &vertices,
+                    &sim_locks,
+                    target * 3,
+                    f32::MAX,
+                    options,
+                    Some(error),
+                )
+            };
+            // Pruning removes whole components, locked vertices included: a pruned component
+            // on a seam would leave the finer neighbour's border open (a crack), and pruning
+            // everything would leave nothing. Then simplify again without it.
+            let mut err = 0.0f32;
+            let mut out = simplify(SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune, &mut err);
+            if out.is_empty() || !broken(&out).is_empty() {
+                err = 0.0;
+                out = simplify(SimplifyOptions::ErrorAbsolute, &mut err);
+            }
+            let bad = broken(&out);
+            if !out.is_empty() && bad.is_empty() {
+                simplified = out;
+                error_local = err;
+                break;
+            }
+            // The vertices that collapsed to break an edge are among its ends' neighbours.
+            let mut ends: Vec<u32> = bad.into_iter().flat_map(|(a, b)| [a, b]).collect();
+            ends.sort_unstable();
+            ends.dedup();
+            let mut grew = false;
+            for t in indices.chunks_exact(3) {
+                if t.iter().any(|v| ends.binary_search(v).is_ok()) {
+                    for &v in t {
+                        if let Some(l) = sim_locks.get_mut(v as usize) {
+                            grew |= !*l;
+                            *l = true;
+                        }
+                    }
+                }
+            }
+            if !grew {
+                break;
+            }
         }
-        if out.len() / 3 > target + target / 8 {
+        // The sloppy simplifier ignores topology: only when the regular one stalls above the
+        // target, and only if its result passes the same checks.
+        if simplified.len() / 3 > target + target / 8 {
             let mut rel = 0.0f32;
             let sloppy = meshopt::simplify_sloppy_with_locks(
                 &indices,
                 &vertices,
-                &locks,
+                &sim_locks,
                 target * 3,
                 f32::MAX,
                 Some(&mut rel),
             );
-            if !sloppy.is_empty()
-                && sloppy.len() < out.len()
-                && keeps_seams(&indices, &sloppy, &locks).is_ok()
-            {
-                out = sloppy;
+            if !sloppy.is_empty() && sloppy.len() < simplified.len() && broken(&sloppy).is_empty() {
+                simplified = sloppy;
                 error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
             }
         }
-        out
-    } else {
-        indices.clone()
-    };
-    if simplified.is_empty() {
-        simplified = indices[..3].to_vec();
     }
     let error = child_error.max(round_up(error_local as f64 * frame.step)).max(MIN_ERROR);
 
@@ -268,34 +304,102 @@ pub fn build_hlod(
     HlodNode { dag, replaced, error, sphere }
 }
 
-/// `Ok` when every open edge of `before` between two locked vertices (a seam with a cell outside
-/// the node) is still an edge of `after`; else the first one lost.
-fn keeps_seams(before: &[u32], after: &[u32], locks: &[bool]) -> Result<(), (u32, u32)> {
-    let locked = |v: u32| locks.get(v as usize) == Some(&true);
-    let edges = |idx: &[u32], only_locked: bool| {
-        let mut e: Vec<(u32, u32)> = idx
-            .chunks_exact(3)
-            .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
-            .filter(|&(a, b)| !only_locked || (locked(a) && locked(b)))
-            .map(|(a, b)| (a.min(b), a.max(b)))
-            .collect();
-        e.sort_unstable();
-        e
-    };
-    let seams = edges(before, true);
-    let kept = edges(after, false);
-    let mut i = 0;
-    while i < seams.len() {
-        let mut j = i + 1;
-        while j < seams.len() && seams[j] == seams[i] {
-            j += 1;
+/// Triangles with their vertices rotated so the smallest comes first (winding kept), sorted and
+/// deduplicated: the triangle set that crack checks see (`crate::cut::boundary_edges`).
+fn unique_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
+    let mut tris: Vec<[u32; 3]> = indices
+        .chunks_exact(3)
+        .map(|t| {
+            let k = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
+            [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+        })
+        .collect();
+    tris.sort_unstable();
+    tris.dedup();
+    tris
+}
+
+/// The undirected edges (smaller index first) of `tris` for which `keep` holds, each with the
+/// number of triangles using it; sorted.
+fn edge_uses(
+    tris: impl Iterator<Item = [u32; 3]>,
+    keep: impl Fn(u32, u32) -> bool,
+) -> Vec<((u32, u32), usize)> {
+    let mut edges: Vec<(u32, u32)> = tris
+        .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
+        .filter(|&(a, b)| keep(a, b))
+        .map(|(a, b)| (a.min(b), a.max(b)))
+        .collect();
+    edges.sort_unstable();
+    let mut out: Vec<((u32, u32), usize)> = Vec::new();
+    for e in edges {
+        match out.last_mut() {
+            Some((last, n)) if *last == e => *n += 1,
+            _ => out.push((e, 1)),
         }
-        if j - i == 1 && kept.binary_search(&seams[i]).is_err() {
-            return Err(seams[i]);
-        }
-        i = j;
     }
-    Ok(())
+    out
+}
+
+/// How many triangles use edge `e` in `uses` (from [`edge_uses`]).
+fn uses_of(uses: &[((u32, u32), usize)], e: (u32, u32)) -> usize {
+    uses.binary_search_by_key(&e, |&(e, _)| e).map_or(0, |i| uses[i].1)
+}
+
+/// The vertices of the merged mesh on its free border: on a boundary edge (used by one triangle)
+/// that is not a seam edge (both ends locked). These are object borders, which HLOD may simplify
+/// (meshopt moves border vertices along the border); vertices that are only on seams, or only
+/// on non-manifold edges (left by earlier simplification: a vertex inside the input's surface),
+/// are not.
+fn free_border_vertices(n: usize, indices: &[u32], locks: &[bool]) -> Vec<bool> {
+    let locked = |v: u32| locks.get(v as usize) == Some(&true);
+    let mut free = vec![false; n];
+    for ((a, b), uses) in edge_uses(unique_triangles(indices).into_iter(), |_, _| true) {
+        if uses == 1 && !(locked(a) && locked(b)) {
+            for v in [a, b] {
+                if let Some(f) = free.get_mut(v as usize) {
+                    *f = true;
+                }
+            }
+        }
+    }
+    free
+}
+
+/// The edges that `after` (a simplification of `before`) breaks, sorted:
+///
+/// * seams: an edge of `before` used by one triangle, between two locked vertices (a seam with a
+///   cell outside the node), must still be used by exactly one triangle. Lost, the finer
+///   neighbour's border is open; folded into two triangles (a double-sided pair, which meshopt
+///   makes of thin parts), it is no longer open in the parent's merged mesh, so its vertices are
+///   not locked there and the seam is lost one level up;
+/// * holes: every boundary edge of `after` (used by one of its unique triangles, as crack checks
+///   count) must be one of `before` or join two free border vertices of `before` (a simplified
+///   object border). Anything else is a hole inside the surface, a crack in every cut that uses
+///   these clusters (meshopt's topology rules are per directed half-edge, so the double-sided and
+///   non-manifold parts that earlier levels leave can lose triangles next to an edge it takes for
+///   interior; the sloppy simplifier ignores topology altogether).
+fn broken_edges(before: &[u32], after: &[u32], locks: &[bool], free_border: &[bool]) -> Vec<(u32, u32)> {
+    let locked = |v: u32| locks.get(v as usize) == Some(&true);
+    let free = |v: u32| free_border.get(v as usize) == Some(&true);
+    let triangles = |idx: &[u32]| idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect::<Vec<_>>();
+    let seam = |a: u32, b: u32| locked(a) && locked(b);
+    let seams_after = edge_uses(triangles(after).into_iter(), seam);
+    let mut bad: Vec<(u32, u32)> = edge_uses(triangles(before).into_iter(), seam)
+        .into_iter()
+        .filter(|&(e, n)| n == 1 && uses_of(&seams_after, e) != 1)
+        .map(|(e, _)| e)
+        .collect();
+    let old = edge_uses(unique_triangles(before).into_iter(), |_, _| true);
+    bad.extend(
+        edge_uses(unique_triangles(after).into_iter(), |_, _| true)
+            .into_iter()
+            .filter(|&((a, b), n)| n == 1 && !(free(a) && free(b)) && uses_of(&old, (a, b)) != 1)
+            .map(|(e, _)| e),
+    );
+    bad.sort_unstable();
+    bad.dedup();
+    bad
 }
 
 /// The positions on open (or non-manifold) edges of at least two of the given cells, sorted:
@@ -573,6 +677,46 @@ mod tests {
         let grid = Grid::for_bounds([0.0; 3], [1.0; 3]);
         let node = build_hlod(&[], &grid, &HlodParams::default(), &|_| false);
         assert!(node.dag.clusters.is_empty() && node.replaced.is_empty());
+    }
+
+    /// A 3 × 3 grid of vertices (`row * 3 + column`), two triangles per square; vertex 4 is the
+    /// only one inside.
+    fn grid_mesh() -> Vec<u32> {
+        vec![0, 1, 4, 0, 4, 3, 1, 2, 5, 1, 5, 4, 3, 4, 7, 3, 7, 6, 4, 5, 8, 4, 8, 7]
+    }
+
+    fn broken(after: &[u32], locks: &[bool]) -> Vec<(u32, u32)> {
+        let before = grid_mesh();
+        broken_edges(&before, after, locks, &free_border_vertices(9, &before, locks))
+    }
+
+    #[test]
+    fn simplified_object_border_is_not_broken() {
+        // Vertex 1 (on the border) collapsed onto 0: the new border edge 0-2 joins two border
+        // vertices.
+        let after = [0, 4, 3, 0, 2, 5, 0, 5, 4, 3, 4, 7, 3, 7, 6, 4, 5, 8, 4, 8, 7];
+        assert_eq!(broken(&after, &[false; 9]), []);
+    }
+
+    #[test]
+    fn hole_next_to_an_inner_vertex_is_broken() {
+        // Triangle 0-1-4 gone: edges 0-4 and 1-4 end inside the surface.
+        let mesh = grid_mesh();
+        assert_eq!(broken(&mesh[3..], &[false; 9]), [(0, 4), (1, 4)]);
+    }
+
+    #[test]
+    fn lost_or_folded_seam_is_broken() {
+        // The top row is a seam with a cell outside the node.
+        let mut locks = [false; 9];
+        locks[..3].fill(true);
+        assert_eq!(broken(&grid_mesh(), &locks), []);
+        let collapsed = [0, 4, 3, 0, 2, 5, 0, 5, 4, 3, 4, 7, 3, 7, 6, 4, 5, 8, 4, 8, 7];
+        assert_eq!(broken(&collapsed, &locks), [(0, 1), (1, 2)]);
+        // Triangle 0-1-4 doubled into a double-sided pair: 0-1 is no longer open.
+        let mut folded = grid_mesh();
+        folded.splice(0..0, [0, 4, 1]);
+        assert_eq!(broken(&folded, &locks), [(0, 1)]);
     }
 
     #[test]
