@@ -282,7 +282,7 @@ fn boundary_and_area(store: &Store, sel: &Selection) -> (usize, f64, HashSet<u8>
 /// Checks the cut of `eye` looking at the scene centre at each τ: no boundary edge (the input
 /// is closed), area within [0.95, 1.001] of the input's (no overlap, no hole). Returns how many
 /// cuts mixed LOD levels and how many included HLOD groups (groups of inner nodes).
-fn check_cuts(store: &Store, eyes: &[[f32; 3]], taus: &[f32]) -> (u32, u32) {
+fn check_cuts(store: &Store, eyes: &[[f32; 3]], taus: &[f32], min_area: f64) -> (u32, u32) {
     let cache = PageCache::new(store, u64::MAX);
     let full = select(store, &cache, &cameras(store)[0], opts(0.0, false));
     let (open_edges, input_area, _) = boundary_and_area(store, &full);
@@ -296,7 +296,7 @@ fn check_cuts(store: &Store, eyes: &[[f32; 3]], taus: &[f32]) -> (u32, u32) {
             let (open_edges, area, levels) = boundary_and_area(store, &sel);
             assert_eq!(open_edges, 0, "eye {eye:?} tau {tau}: cracks ({} clusters)", sel.clusters.len());
             assert!(
-                area <= input_area * 1.001 && area >= input_area * 0.95,
+                area <= input_area * 1.001 && area >= input_area * min_area,
                 "eye {eye:?} tau {tau}: area {area} vs input {input_area} (overlap or hole)"
             );
             mixed += (levels.len() > 1) as u32;
@@ -323,19 +323,16 @@ fn cuts_of_a_closed_input_are_complete_and_crack_free() {
         [0.0, 0.0, 0.0],   // inside the big sphere
         (c + Vec3::new(0.3, -1.0, 0.2) * (3.0 * r)).to_array(),
     ];
-    let (mixed, hlod) = check_cuts(&store, &eyes, &[0.5, 1.0, 3.0, 10.0]);
+    let (mixed, hlod) = check_cuts(&store, &eyes, &[0.5, 1.0, 3.0, 10.0], 0.95);
     assert!(mixed >= 15, "view-dependent cuts mix levels (only {mixed} of 20 did)");
     assert!(hlod >= 5, "some cuts include HLOD groups ({hlod})");
 }
 
-/// Far views whose cuts use HLOD groups over the cells of the split big sphere: the HLOD
-/// results there do not keep the seams with the neighbouring cells (a patch of ~170 triangles
-/// becomes one triangle with error 3.2), so the cut has holes (eye 30 r away, τ = 3 px:
-/// 2 104 boundary edges, 55 % of the area). A build issue (tw-build hlod), not a runtime one:
-/// the traversal selects exactly what the per-cluster rule selects (see
-/// `traversal_selects_what_the_per_cluster_rule_selects`).
+/// Far views whose cuts use HLOD groups over the cells of the split big sphere. Regression test
+/// for the HLOD seam bug (before the fix: eye 30 r away, τ = 3 px, 2 104 boundary edges and 55 %
+/// of the area). The cut must be closed; its area may shrink as a coarse polyhedron inscribed in
+/// the sphere does (95 % at τ = 10 px from 30 r), so the lower bound is looser than up close.
 #[test]
-#[ignore = "tw-build: HLOD over the cells of a split object loses the seams (holes at far views)"]
 fn far_cuts_of_a_split_closed_object_are_crack_free() {
     let store = open(spheres_path());
     let (c, r) = scene_sphere(&store);
@@ -343,7 +340,7 @@ fn far_cuts_of_a_split_closed_object_are_crack_free() {
         (c + Vec3::new(0.3, -1.0, 0.2) * (3.0 * r)).to_array(),
         (c + Vec3::new(-1.0, 0.1, 0.5) * (30.0 * r)).to_array(),
     ];
-    check_cuts(&store, &eyes, &[1.0, 3.0, 10.0, 50.0]);
+    check_cuts(&store, &eyes, &[1.0, 3.0, 10.0, 50.0], 0.8);
 }
 
 #[test]
