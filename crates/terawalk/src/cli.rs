@@ -54,6 +54,12 @@ pub enum Command {
     /// Describe a store file; `--verify` checks every checksum and invariant.
     #[command(after_help = "Examples:\n  terawalk info plant.tw\n  terawalk info plant.tw --verify")]
     Info(InfoArgs),
+    /// Render one frame of a store on the GPU (headless; LOD cut and frustum culling as a walk would).
+    #[command(after_help = "Examples:\n  terawalk render plant.tw -o frame.png\n  \
+                            terawalk render plant.tw -o lod.png --color level --error 4\n  \
+                            terawalk render plant.tw -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --size 1920x1080\n  \
+                            WGPU_BACKEND=gl terawalk render plant.tw -o frame.png")]
+    Render(RenderArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
@@ -155,6 +161,43 @@ pub struct PreviewArgs {
     pub up: String,
     #[command(flatten)]
     pub import: ImportArgs,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RenderColoring {
+    /// Object colours from the store (materials), grey otherwise.
+    Material,
+    /// A distinct colour per object.
+    Object,
+    /// A colour per LOD level (green = full resolution).
+    Level,
+    /// A distinct colour per cluster.
+    Cluster,
+}
+
+#[derive(Args, Debug)]
+pub struct RenderArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// Output PNG.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
+    /// whole scene from an oblique direction.
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// Pixel error threshold τ of the LOD cut (0 = full resolution).
+    #[arg(long, default_value_t = 1.0)]
+    pub error: f32,
+    /// How to colour triangles.
+    #[arg(long, value_enum, default_value = "material")]
+    pub color: RenderColoring,
+    /// Memory budget of the decoded page cache.
+    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    pub memory: u64,
 }
 
 #[derive(Args, Debug)]

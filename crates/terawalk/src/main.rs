@@ -1,6 +1,6 @@
 //! `terawalk`: the command-line program. Glue only: it parses arguments and wires the library
-//! crates together (tw-io for input and generation, tw-preview for images). Exit codes: 0 success,
-//! 1 failure (bad input, I/O), 2 bad usage (clap).
+//! crates together (tw-io for input and generation, tw-preview for images, tw-runtime and tw-gpu
+//! for GPU frames). Exit codes: 0 success, 1 failure (bad input, I/O), 2 bad usage (clap).
 
 mod cli;
 mod commands;
@@ -18,6 +18,7 @@ fn main() {
         cli::Command::Preview(a) => commands::preview::run(a),
         cli::Command::Build(a) => commands::build::run(a, cli.quiet),
         cli::Command::Info(a) => commands::info::run(a),
+        cli::Command::Render(a) => commands::render::run(a),
         cli::Command::Demo(a) => commands::demo::run(a),
     };
     if let Err(e) = result {
@@ -34,7 +35,10 @@ fn init_logging(verbose: u8, quiet: bool) {
         (false, 2) => "debug",
         _ => "trace",
     };
+    // wgpu-hal logs failed driver probes (e.g. EGL's hardware DRI2 driver on a machine without a
+    // GPU) as errors even when another adapter serves: only shown from -v on.
+    let default = if verbose == 0 { format!("{level},wgpu_hal=off") } else { level.to_string() };
     let filter = tracing_subscriber::EnvFilter::try_from_env("TERAWALK_LOG")
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(level));
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
     tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).init();
 }

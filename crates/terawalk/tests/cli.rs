@@ -20,7 +20,7 @@ fn help_lists_subcommands_and_each_has_an_example() {
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["--help"], dir.path());
     assert!(o.status.success());
-    for sub in ["stats", "generate", "preview", "build", "info", "demo"] {
+    for sub in ["stats", "generate", "preview", "build", "info", "render", "demo"] {
         assert!(stdout(&o).contains(sub), "--help lacks {sub}");
         let h = terawalk(&[sub, "--help"], dir.path());
         assert!(h.status.success(), "{sub} --help failed");
@@ -135,4 +135,40 @@ fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
         .filter(|n| n.starts_with(".terawalk-build") || n.ends_with(".tmp"))
         .collect();
     assert!(leftovers.is_empty(), "{leftovers:?}");
+}
+
+#[test]
+fn render_writes_a_png_of_a_store() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "20k", "-o", "p.ply"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M", "--threads", "2"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(
+        &["render", "p.tw", "-o", "frame.png", "--size", "320x200", "--error", "1", "--color", "level"],
+        dir.path(),
+    );
+    if !o.status.success()
+        && stderr(&o).contains("no GPU adapter")
+        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1")
+    {
+        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(&o));
+        return;
+    }
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = stdout(&o);
+    assert!(
+        out.contains("adapter:") && out.contains("triangles drawn") && out.contains("frame.png"),
+        "{out}"
+    );
+    let png = std::fs::read(dir.path().join("frame.png")).unwrap();
+    assert_eq!(&png[1..4], b"PNG");
+    // IHDR: width and height, big-endian, at bytes 16..24.
+    assert_eq!(u32::from_be_bytes(png[16..20].try_into().unwrap()), 320);
+    assert_eq!(u32::from_be_bytes(png[20..24].try_into().unwrap()), 200);
+
+    // A bad camera is a usage error naming the camera, not a panic.
+    let o = terawalk(&["render", "p.tw", "-o", "x.png", "--camera", "1,2,3;1,2,3;0,0,1;60"], dir.path());
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("camera") && !stderr(&o).contains("panicked"), "{}", stderr(&o));
 }

@@ -5,4 +5,5 @@ pub mod demo;
 pub mod generate;
 pub mod info;
 pub mod preview;
+pub mod render;
 pub mod stats;

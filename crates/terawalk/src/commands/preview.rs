@@ -46,7 +46,7 @@ pub fn parse_camera(s: &str) -> Result<Camera> {
 }
 
 /// The view direction (from the model towards the eye) of a preset, for a model with `up` axis.
-fn preset_direction(view: View, up: usize) -> ([f64; 3], [f64; 3]) {
+pub(crate) fn preset_direction(view: View, up: usize) -> ([f64; 3], [f64; 3]) {
     // Directions in a Z-up frame, then the axes permuted so that Z becomes `up`.
     let (dir, upv) = match view {
         View::Iso => ([-0.55, -0.75, 0.55], [0.0, 0.0, 1.0]),
