@@ -94,6 +94,9 @@ fn demo_runs_on_a_small_plant_and_reuses_its_cache() {
     assert!(dir.path().join("cache/plant-outside.png").exists());
     assert!(dir.path().join("cache/plant-inside.png").exists());
     assert!(dir.path().join("cache/plant-30000-s1.tw").exists());
+    if std::env::var("TERAWALK_REQUIRE_GPU").is_ok_and(|v| v == "1") {
+        assert!(dir.path().join("cache/plant-render-lod.png").exists(), "{out}");
+    }
     assert!(out.contains("verified"), "{out}");
     let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));

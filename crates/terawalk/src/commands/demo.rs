@@ -77,7 +77,23 @@ pub fn run(args: DemoArgs) -> Result<()> {
         interior_viewpoints(&params, 1).into_iter().next().context("no interior viewpoint")?;
     let cam = Camera { eye, target, up: [0.0, 0.0, 1.0], fovy_deg: 70.0 };
     preview::render(&files, &options, cam, (1280, 720), Coloring::Material, &inside)?;
-    println!("4. views: {} and {}", outside.display(), inside.display());
+    println!("4. views (CPU preview of the input): {} and {}", outside.display(), inside.display());
+
+    // One frame through the runtime and the GPU renderer (Mesa's CPU drivers where no GPU).
+    let frame = args.dir.join("plant-render-lod.png");
+    println!("5. GPU frame of the store at 1 px error, coloured by LOD level:");
+    let render = crate::cli::RenderArgs {
+        store: store.clone(),
+        output: frame,
+        size: (1280, 720),
+        camera: None,
+        error: 1.0,
+        color: crate::cli::RenderColoring::Level,
+        memory: 1 << 30,
+    };
+    if let Err(e) = crate::commands::render::run(render) {
+        println!("   skipped: {e:#}");
+    }
 
     println!(
         "done in {:.1} s, peak memory {}",
