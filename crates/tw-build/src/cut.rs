@@ -265,75 +265,8 @@ pub(crate) mod fixtures {
 
     /// An icosphere with `20 × 4^level` triangles.
     pub fn icosphere(center: [f64; 3], r: f64, level: u32, object: u32) -> Soup {
-        let t = (1.0 + 5f64.sqrt()) / 2.0;
-        let mut v: Vec<[f64; 3]> = vec![
-            [-1.0, t, 0.0],
-            [1.0, t, 0.0],
-            [-1.0, -t, 0.0],
-            [1.0, -t, 0.0],
-            [0.0, -1.0, t],
-            [0.0, 1.0, t],
-            [0.0, -1.0, -t],
-            [0.0, 1.0, -t],
-            [t, 0.0, -1.0],
-            [t, 0.0, 1.0],
-            [-t, 0.0, -1.0],
-            [-t, 0.0, 1.0],
-        ];
-        let mut f: Vec<[usize; 3]> = vec![
-            [0, 11, 5],
-            [0, 5, 1],
-            [0, 1, 7],
-            [0, 7, 10],
-            [0, 10, 11],
-            [1, 5, 9],
-            [5, 11, 4],
-            [11, 10, 2],
-            [10, 7, 6],
-            [7, 1, 8],
-            [3, 9, 4],
-            [3, 4, 2],
-            [3, 2, 6],
-            [3, 6, 8],
-            [3, 8, 9],
-            [4, 9, 5],
-            [2, 4, 11],
-            [6, 2, 10],
-            [8, 6, 7],
-            [9, 8, 1],
-        ];
-        let norm = |p: [f64; 3]| {
-            let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-            p.map(|x| x / l)
-        };
-        v.iter_mut().for_each(|p| *p = norm(*p));
-        for _ in 0..level {
-            let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-            let mut nf = Vec::with_capacity(f.len() * 4);
-            for tri in &f {
-                let mut m = [0usize; 3];
-                for e in 0..3 {
-                    let (a, b) = (tri[e], tri[(e + 1) % 3]);
-                    let key = (a.min(b), a.max(b));
-                    m[e] = *mid.entry(key).or_insert_with(|| {
-                        let p = norm([
-                            (v[a][0] + v[b][0]) / 2.0,
-                            (v[a][1] + v[b][1]) / 2.0,
-                            (v[a][2] + v[b][2]) / 2.0,
-                        ]);
-                        v.push(p);
-                        v.len() - 1
-                    });
-                }
-                nf.push([tri[0], m[0], m[2]]);
-                nf.push([tri[1], m[1], m[0]]);
-                nf.push([tri[2], m[2], m[1]]);
-                nf.push([m[0], m[1], m[2]]);
-            }
-            f = nf;
-        }
-        let p = |i: usize| [center[0] + v[i][0] * r, center[1] + v[i][1] * r, center[2] + v[i][2] * r];
-        f.iter().map(|t| ([p(t[0]), p(t[1]), p(t[2])], object)).collect()
+        let (v, f) = tw_io::generate::icosphere(center, r, level);
+        f.iter().map(|t| (t.map(|i| v[i as usize]), object)).collect()
     }
 
     /// A torus of `2 × nu × nv` triangles; only the quads with `u` in `us` (to split it).

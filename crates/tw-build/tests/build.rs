@@ -17,7 +17,6 @@
 //! The Stanford dragon test needs `data/dragon_vrip.ply.gz` (`scripts/fetch-data.sh`, or
 //! `TERAWALK_DATA`); without it, it prints a note and passes unless `TERAWALK_REQUIRE_DATA=1`.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use tw_build::cut::{boundary_edges, check_complete, check_dag, cut_triangles, open_edges, GridTriangle};
@@ -41,73 +40,8 @@ struct Mesh {
 
 /// An icosphere of `20 × 4^level` triangles (closed, manifold).
 fn icosphere(name: &str, center: [f64; 3], r: f64, level: u32) -> Mesh {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut v: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ];
-    let mut f: Vec<[u32; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    let norm = |p: [f64; 3]| {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        p.map(|x| x / l)
-    };
-    v.iter_mut().for_each(|p| *p = norm(*p));
-    for _ in 0..level {
-        let mut mid: BTreeMap<(u32, u32), u32> = BTreeMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0u32; 3];
-            for e in 0..3 {
-                let (a, b) = (tri[e], tri[(e + 1) % 3]);
-                m[e] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    let (pa, pb) = (v[a as usize], v[b as usize]);
-                    v.push(norm([(pa[0] + pb[0]) / 2.0, (pa[1] + pb[1]) / 2.0, (pa[2] + pb[2]) / 2.0]));
-                    v.len() as u32 - 1
-                });
-            }
-            nf.push([tri[0], m[0], m[2]]);
-            nf.push([tri[1], m[1], m[0]]);
-            nf.push([tri[2], m[2], m[1]]);
-            nf.push([m[0], m[1], m[2]]);
-        }
-        f = nf;
-    }
-    Mesh {
-        name: name.into(),
-        positions: v.iter().map(|p| std::array::from_fn(|i| center[i] + p[i] * r)).collect(),
-        indices: f.into_iter().flatten().collect(),
-    }
+    let (positions, faces) = tw_io::generate::icosphere(center, r, level);
+    Mesh { name: name.into(), positions, indices: faces.into_iter().flatten().collect() }
 }
 
 /// A closed torus of `2 × nu × nv` triangles (radii 10 and 3, around the z axis).

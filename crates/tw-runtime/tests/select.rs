@@ -43,74 +43,8 @@ fn plant_path() -> &'static Path {
 struct Spheres(Vec<([f64; 3], f64, u32)>);
 
 fn icosphere(center: [f64; 3], r: f64, level: u32) -> Vec<[[f64; 3]; 3]> {
-    let t = (1.0 + 5f64.sqrt()) / 2.0;
-    let mut v: Vec<[f64; 3]> = vec![
-        [-1.0, t, 0.0],
-        [1.0, t, 0.0],
-        [-1.0, -t, 0.0],
-        [1.0, -t, 0.0],
-        [0.0, -1.0, t],
-        [0.0, 1.0, t],
-        [0.0, -1.0, -t],
-        [0.0, 1.0, -t],
-        [t, 0.0, -1.0],
-        [t, 0.0, 1.0],
-        [-t, 0.0, -1.0],
-        [-t, 0.0, 1.0],
-    ];
-    let mut f: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    let norm = |p: [f64; 3]| {
-        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-        p.map(|x| x / l)
-    };
-    v.iter_mut().for_each(|p| *p = norm(*p));
-    for _ in 0..level {
-        let mut mid: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut nf = Vec::with_capacity(f.len() * 4);
-        for tri in &f {
-            let mut m = [0usize; 3];
-            for e in 0..3 {
-                let (a, b) = (tri[e], tri[(e + 1) % 3]);
-                m[e] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                    v.push(norm([
-                        (v[a][0] + v[b][0]) / 2.0,
-                        (v[a][1] + v[b][1]) / 2.0,
-                        (v[a][2] + v[b][2]) / 2.0,
-                    ]));
-                    v.len() - 1
-                });
-            }
-            nf.push([tri[0], m[0], m[2]]);
-            nf.push([tri[1], m[1], m[0]]);
-            nf.push([tri[2], m[2], m[1]]);
-            nf.push(m);
-        }
-        f = nf;
-    }
-    f.iter()
-        .map(|t| t.map(|i| [center[0] + r * v[i][0], center[1] + r * v[i][1], center[2] + r * v[i][2]]))
-        .collect()
+    let (v, f) = tw_io::generate::icosphere(center, r, level);
+    f.iter().map(|t| t.map(|i| v[i as usize])).collect()
 }
 
 impl TriangleSource for Spheres {

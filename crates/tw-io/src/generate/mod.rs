@@ -508,3 +508,74 @@ mod report {
         }
     }
 }
+
+/// A geodesic sphere: the icosahedron subdivided `subdivisions` times (each triangle into four,
+/// midpoints pushed onto the sphere), `20 × 4^subdivisions` triangles, closed and manifold,
+/// consistently wound outwards. Vertices are numbered in order of creation, so the mesh is the
+/// same on every platform. The shared test geometry of the build and runtime tests.
+pub fn icosphere(center: [f64; 3], radius: f64, subdivisions: u32) -> (Vec<[f64; 3]>, Vec<[u32; 3]>) {
+    let t = (1.0 + 5f64.sqrt()) / 2.0;
+    let mut v: Vec<[f64; 3]> = vec![
+        [-1.0, t, 0.0],
+        [1.0, t, 0.0],
+        [-1.0, -t, 0.0],
+        [1.0, -t, 0.0],
+        [0.0, -1.0, t],
+        [0.0, 1.0, t],
+        [0.0, -1.0, -t],
+        [0.0, 1.0, -t],
+        [t, 0.0, -1.0],
+        [t, 0.0, 1.0],
+        [-t, 0.0, -1.0],
+        [-t, 0.0, 1.0],
+    ];
+    let mut f: Vec<[u32; 3]> = vec![
+        [0, 11, 5],
+        [0, 5, 1],
+        [0, 1, 7],
+        [0, 7, 10],
+        [0, 10, 11],
+        [1, 5, 9],
+        [5, 11, 4],
+        [11, 10, 2],
+        [10, 7, 6],
+        [7, 1, 8],
+        [3, 9, 4],
+        [3, 4, 2],
+        [3, 2, 6],
+        [3, 6, 8],
+        [3, 8, 9],
+        [4, 9, 5],
+        [2, 4, 11],
+        [6, 2, 10],
+        [8, 6, 7],
+        [9, 8, 1],
+    ];
+    let norm = |p: [f64; 3]| {
+        let l = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+        p.map(|x| x / l)
+    };
+    v.iter_mut().for_each(|p| *p = norm(*p));
+    for _ in 0..subdivisions {
+        let mut mid: std::collections::BTreeMap<(u32, u32), u32> = std::collections::BTreeMap::new();
+        let mut nf = Vec::with_capacity(f.len() * 4);
+        for tri in &f {
+            let mut m = [0u32; 3];
+            for e in 0..3 {
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                m[e] = *mid.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                    let (pa, pb) = (v[a as usize], v[b as usize]);
+                    v.push(norm([(pa[0] + pb[0]) / 2.0, (pa[1] + pb[1]) / 2.0, (pa[2] + pb[2]) / 2.0]));
+                    v.len() as u32 - 1
+                });
+            }
+            nf.push([tri[0], m[0], m[2]]);
+            nf.push([tri[1], m[1], m[0]]);
+            nf.push([tri[2], m[2], m[1]]);
+            nf.push(m);
+        }
+        f = nf;
+    }
+    let positions = v.iter().map(|p| std::array::from_fn(|i| center[i] + p[i] * radius)).collect();
+    (positions, f)
+}
