@@ -12,11 +12,15 @@ use crate::units::{parse_bytes, parse_count};
     version,
     about = "Walk through 3D models of billions of triangles, with or without a GPU",
     long_about = "terawalk reads OBJ, PLY, STL and glTF/GLB models (optionally .gz) of any size in \
-                  bounded memory, generates procedural power plants for testing, and (as the \
-                  project grows) preprocesses them into an out-of-core store for interactive \
-                  walkthroughs.",
+                  bounded memory, generates procedural power plants for testing, preprocesses \
+                  models into an out-of-core store with a cluster-DAG LOD hierarchy, and renders \
+                  that store headless with view-dependent LOD on any wgpu adapter (Mesa's CPU \
+                  drivers included).",
     after_help = "Examples:\n  terawalk demo\n  terawalk stats dragon.ply.gz engine.glb\n  \
                   terawalk generate plant --triangles 10M -o plant.ply\n  \
+                  terawalk build plant.ply -o plant.tw --memory 1G\n  \
+                  terawalk info plant.tw --verify\n  \
+                  terawalk render plant.tw -o frame.png --error 1\n  \
                   terawalk preview plant.ply -o plant.png --view iso"
 )]
 pub struct Cli {
