@@ -407,20 +407,28 @@ fn broken_edges(before: &[u32], after: &[u32], locks: &[bool], free_border: &[bo
 /// conservative to use the scene-wide set for every node: only vertices on the merged mesh's
 /// own open edges are locked).
 pub fn seam_positions(cells: &[&crate::types::CellMesh]) -> Vec<[u32; 3]> {
-    let mut all: Vec<[u32; 3]> = Vec::new();
-    for m in cells {
-        let (indices, _) = crate::lod::clean_triangles(m);
-        let mut open: Vec<[u32; 3]> = crate::lod::open_boundary_vertices(m.positions.len(), &indices)
-            .into_iter()
-            .zip(&m.positions)
-            .filter(|(o, _)| *o)
-            .map(|(_, &p)| p)
-            .collect();
-        open.sort_unstable();
-        open.dedup();
-        all.extend(open);
-    }
-    all.sort_unstable();
+    shared_positions(cells.iter().flat_map(|m| open_positions(m)).collect())
+}
+
+/// The grid positions of a cell's vertices on open (or non-manifold) edges, sorted, once each.
+pub fn open_positions(mesh: &crate::types::CellMesh) -> Vec<[u32; 3]> {
+    let (indices, _) = crate::lod::clean_triangles(mesh);
+    let mut open: Vec<[u32; 3]> = crate::lod::open_boundary_vertices(mesh.positions.len(), &indices)
+        .into_iter()
+        .zip(&mesh.positions)
+        .filter(|(o, _)| *o)
+        .map(|(_, &p)| p)
+        .collect();
+    open.sort_unstable();
+    open.dedup();
+    open
+}
+
+/// The positions that occur more than once in `all` (the concatenated [`open_positions`] of
+/// several cells), sorted. The sort runs on the current rayon pool.
+pub fn shared_positions(mut all: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
+    use rayon::slice::ParallelSliceMut;
+    all.par_sort_unstable();
     let mut seams: Vec<[u32; 3]> = all.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
     seams.dedup();
     seams

@@ -351,30 +351,15 @@ fn find_seams(
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
         let ids: Vec<u32> = bucket.cells().collect();
-        let per_cell: Vec<Vec<[u32; 3]>> = pool.install(|| {
-            ids.par_iter()
-                .map(|&c| {
-                    let mesh = bucket.mesh(c);
-                    let (indices, _) = crate::lod::clean_triangles(&mesh);
-                    let open = crate::lod::open_boundary_vertices(mesh.positions.len(), &indices);
-                    let mut v: Vec<[u32; 3]> =
-                        open.iter().zip(&mesh.positions).filter(|(o, _)| **o).map(|(_, &p)| p).collect();
-                    v.sort_unstable();
-                    v.dedup();
-                    v
-                })
-                .collect()
-        });
+        let per_cell: Vec<Vec<[u32; 3]>> =
+            pool.install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
         for v in per_cell {
             all.extend(v);
         }
         done += ids.len() as u64;
         progress.advance(done);
     }
-    pool.install(|| all.par_sort_unstable());
-    let mut seams: Vec<[u32; 3]> = all.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
-    seams.dedup();
-    Ok(seams)
+    Ok(pool.install(|| crate::hlod::shared_positions(all)))
 }
 
 /// The bottom-up state of phase 5.
