@@ -18,4 +18,7 @@ pub enum RuntimeError {
     /// A page that failed before: the cache remembers failures instead of decoding again.
     #[error("page {page} failed to load earlier: {msg}")]
     PageFailed { page: u32, msg: String },
+    /// A camera path file that cannot be read, parsed or written.
+    #[error("camera path {}: {msg}", path.display())]
+    Path { path: std::path::PathBuf, msg: String },
 }

@@ -5,7 +5,8 @@
 //! - [`frustum`]: frustum planes and box/sphere tests;
 //! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
-//! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned.
+//! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
+//! - [`path`]: camera paths (one camera per frame) as JSON, for `path`, `bench` and the viewer.
 //!
 //! ```no_run
 //! use tw_runtime::{Camera, InputCamera, PageCache, SelectOptions, Selector};
@@ -24,6 +25,7 @@ pub mod camera;
 pub mod error;
 pub mod frustum;
 pub mod lod_error;
+pub mod path;
 pub mod select;
 
 pub use cache::{CacheStats, PageCache, ResidentPage};
@@ -31,4 +33,5 @@ pub use camera::{Camera, InputCamera};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use lod_error::LodMetric;
+pub use path::{CameraPath, PathFrame};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
