@@ -3,6 +3,7 @@
 //! - [`camera`]: the scene-space camera, its matrices (right-handed, depth 0..1, optional
 //!   reverse-Z) and the command-line camera string in input coordinates;
 //! - [`frustum`]: frustum planes and box/sphere tests;
+//! - [`hzb`]: the hierarchical Z-buffer and its conservative box test (GigaWalk's occlusion test);
 //! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
@@ -24,6 +25,7 @@ pub mod cache;
 pub mod camera;
 pub mod error;
 pub mod frustum;
+pub mod hzb;
 pub mod lod_error;
 pub mod path;
 pub mod select;
@@ -32,6 +34,7 @@ pub use cache::{CacheStats, PageCache, ResidentPage};
 pub use camera::{Camera, InputCamera};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
+pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
 pub use path::{CameraPath, PathFrame};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};

@@ -1,0 +1,340 @@
+//! The hierarchical Z-buffer (HZB) and its conservative box test, on the CPU, as GigaWalk's
+//! scene-traversal stage uses it (Baxter et al. 2002, §4 "STC": build the depth pyramid from the
+//! occluders' Z-buffer, then test each node's screen-space bounding rectangle against it; Greene
+//! et al. 1993 for the pyramid).
+//!
+//! Depth is **reverse-Z** as the renderer draws it (tw-gpu; [`crate::Camera::projection_reverse_z`]):
+//! 1 at the near plane, 0 at the far plane and on the cleared background, so *larger is nearer*.
+//! Each pyramid texel holds the *farthest* (smallest) depth of the pixels it covers: level 0 is the
+//! depth buffer itself, each next level halves the size, rounding up; a texel covers the
+//! (existing) texels `2x..=2x+1 × 2y..=2y+1` of the level below, so at level `k` it covers the
+//! pixels `x·2ᵏ..(x+1)·2ᵏ` (clipped to the image).
+//!
+//! [`Hzb::test_box`] projects the 8 corners of a scene-space box; its screen rectangle is their
+//! bounding rectangle (the box projects inside the hull of its corners when all lie in front of
+//! the eye) and its nearest depth is the largest corner depth (depth is monotone in view-space
+//! distance, which is linear over the box, so its extreme is at a corner). The rectangle is
+//! reduced to the pixels whose *centres* it contains — the only ones rasterization can write —
+//! after widening it by [`RECT_SLACK_PX`] against rounding and the rasterizer's vertex snapping.
+//! The box is occluded when its nearest depth is strictly farther than the farthest occluder depth
+//! over those pixels, read from the level where the rectangle spans at most 2×2 texels (so a test
+//! costs at most 4 reads), with a relative margin ([`DEPTH_MARGIN`]) in the box's favour. A box
+//! with a corner behind the eye or in front of the near plane is reported visible.
+//!
+//! The test is therefore conservative: it never reports a box occluded if any point inside it
+//! would pass the depth test at a pixel centre, for the same camera and resolution as the depth
+//! buffer. (Conservative *relative to the occluders drawn*: GigaWalk's argument that the result
+//! equals no culling needs the occluders to be drawn at the same LOD cut as the frame, which is
+//! the caller's job.)
+
+use glam::{Mat4, Vec3, Vec4};
+
+/// Pixels by which a projected rectangle is widened on every side before it is reduced to pixel
+/// centres: covers f32 rounding of the projection and the rasterizer's sub-pixel snapping
+/// (≥ 1/256 px on every GPU and on lavapipe/llvmpipe).
+pub const RECT_SLACK_PX: f32 = 1.0 / 32.0;
+
+/// Relative depth margin in the box's favour: a box is occluded only when its nearest depth is
+/// below `occluder_depth × (1 − DEPTH_MARGIN)`.
+pub const DEPTH_MARGIN: f32 = 1e-5;
+
+/// The outcome of one [`Hzb::test_box`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum HzbResult {
+    /// Some pixel centre inside the rectangle could show the box (or the test cannot tell: the
+    /// box crosses the near plane).
+    Visible,
+    /// Every pixel the box could cover holds nearer geometry.
+    Occluded,
+    /// The box covers no pixel centre of the image (outside the viewport, or thinner than a
+    /// pixel between centres): nothing of it can be drawn at this resolution.
+    NoPixels,
+}
+
+/// One level of the pyramid: `width × height` farthest depths, rows from the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HzbLevel {
+    pub width: u32,
+    pub height: u32,
+    pub depth: Vec<f32>,
+}
+
+/// A farthest-depth pyramid over a reverse-Z depth buffer; see the module documentation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hzb {
+    pub levels: Vec<HzbLevel>,
+}
+
+/// Errors of [`Hzb::build`].
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum HzbError {
+    #[error("depth buffer of {len} values does not match {width}×{height}")]
+    SizeMismatch { width: u32, height: u32, len: usize },
+    #[error("depth buffer must not be empty")]
+    Empty,
+}
+
+impl Hzb {
+    /// Builds the pyramid from a reverse-Z depth buffer (`width × height`, rows from the top).
+    /// Non-finite depths are treated as far (0), so they never occlude.
+    pub fn build(depth: &[f32], width: u32, height: u32) -> Result<Hzb, HzbError> {
+        if width == 0 || height == 0 {
+            return Err(HzbError::Empty);
+        }
+        if depth.len() as u64 != width as u64 * height as u64 {
+            return Err(HzbError::SizeMismatch { width, height, len: depth.len() });
+        }
+        let base: Vec<f32> = depth.iter().map(|&d| if d.is_finite() { d } else { 0.0 }).collect();
+        let mut levels = vec![HzbLevel { width, height, depth: base }];
+        while let Some(last) = levels.last() {
+            if last.width == 1 && last.height == 1 {
+                break;
+            }
+            let (w, h) = (last.width.div_ceil(2), last.height.div_ceil(2));
+            let mut next = Vec::with_capacity(w as usize * h as usize);
+            for y in 0..h {
+                let y0 = (2 * y) as usize;
+                let y1 = ((2 * y + 1).min(last.height - 1)) as usize;
+                for x in 0..w {
+                    let x0 = (2 * x) as usize;
+                    let x1 = ((2 * x + 1).min(last.width - 1)) as usize;
+                    let row0 = y0 * last.width as usize;
+                    let row1 = y1 * last.width as usize;
+                    let d = last.depth[row0 + x0]
+                        .min(last.depth[row0 + x1])
+                        .min(last.depth[row1 + x0])
+                        .min(last.depth[row1 + x1]);
+                    next.push(d);
+                }
+            }
+            levels.push(HzbLevel { width: w, height: h, depth: next });
+        }
+        Ok(Hzb { levels })
+    }
+
+    /// Width and height of the depth buffer (level 0).
+    pub fn size(&self) -> (u32, u32) {
+        (self.levels[0].width, self.levels[0].height)
+    }
+
+    /// Tests the scene-space box `min..=max` seen through `view_proj` (a reverse-Z
+    /// view-projection, the one the depth buffer was drawn with).
+    pub fn test_box(&self, view_proj: &Mat4, min: Vec3, max: Vec3) -> HzbResult {
+        let (w, h) = self.size();
+        let (mut x_lo, mut y_lo) = (f32::INFINITY, f32::INFINITY);
+        let (mut x_hi, mut y_hi) = (f32::NEG_INFINITY, f32::NEG_INFINITY);
+        let mut nearest = 0f32;
+        for i in 0..8 {
+            let p = Vec3::new(
+                if i & 1 == 0 { min.x } else { max.x },
+                if i & 2 == 0 { min.y } else { max.y },
+                if i & 4 == 0 { min.z } else { max.z },
+            );
+            let c: Vec4 = *view_proj * p.extend(1.0);
+            if !c.is_finite() || c.w <= 0.0 {
+                return HzbResult::Visible; // behind the eye, or degenerate
+            }
+            let depth = c.z / c.w;
+            if depth >= 1.0 {
+                return HzbResult::Visible; // at or before the near plane
+            }
+            nearest = nearest.max(depth);
+            let sx = (c.x / c.w * 0.5 + 0.5) * w as f32;
+            let sy = (0.5 - c.y / c.w * 0.5) * h as f32;
+            x_lo = x_lo.min(sx);
+            x_hi = x_hi.max(sx);
+            y_lo = y_lo.min(sy);
+            y_hi = y_hi.max(sy);
+        }
+        self.test_rect(x_lo, y_lo, x_hi, y_hi, nearest)
+    }
+
+    /// Tests a screen rectangle (pixel units, x right, y down, pixel `i` spans `i..i+1` with its
+    /// centre at `i + 0.5`) whose nearest reverse-Z depth is `nearest`.
+    pub fn test_rect(&self, x_lo: f32, y_lo: f32, x_hi: f32, y_hi: f32, nearest: f32) -> HzbResult {
+        let (w, h) = self.size();
+        if !(x_lo.is_finite() && y_lo.is_finite() && x_hi.is_finite() && y_hi.is_finite()) {
+            return HzbResult::Visible;
+        }
+        // Pixels whose centre lies in the widened rectangle: ceil(lo − ½) ..= floor(hi − ½).
+        let px0 = (x_lo - RECT_SLACK_PX - 0.5).ceil().max(0.0);
+        let py0 = (y_lo - RECT_SLACK_PX - 0.5).ceil().max(0.0);
+        let px1 = (x_hi + RECT_SLACK_PX - 0.5).floor().min(w as f32 - 1.0);
+        let py1 = (y_hi + RECT_SLACK_PX - 0.5).floor().min(h as f32 - 1.0);
+        if px0 > px1 || py0 > py1 {
+            return HzbResult::NoPixels;
+        }
+        let (x0, y0, x1, y1) = (px0 as u32, py0 as u32, px1 as u32, py1 as u32);
+        // The finest level where the rectangle spans at most 2×2 texels.
+        let mut k = 0usize;
+        while k + 1 < self.levels.len() && ((x1 >> k) - (x0 >> k) > 1 || (y1 >> k) - (y0 >> k) > 1) {
+            k += 1;
+        }
+        let level = &self.levels[k];
+        let mut farthest = f32::INFINITY;
+        for ty in (y0 >> k)..=(y1 >> k) {
+            for tx in (x0 >> k)..=(x1 >> k) {
+                farthest = farthest.min(level.depth[(ty * level.width + tx) as usize]);
+            }
+        }
+        if nearest < farthest * (1.0 - DEPTH_MARGIN) {
+            HzbResult::Occluded
+        } else {
+            HzbResult::Visible
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::camera::Camera;
+
+    const W: u32 = 64;
+    const H: u32 = 48;
+
+    /// A camera at the origin looking down +X, z up.
+    fn camera() -> Camera {
+        Camera::new(Vec3::ZERO, Vec3::X, Vec3::Z, 60f32.to_radians(), 0.1, 1000.0).unwrap()
+    }
+
+    fn view_proj(c: &Camera) -> Mat4 {
+        c.projection_reverse_z(W as f32 / H as f32) * c.view()
+    }
+
+    /// Reverse-Z depth of a point at distance `x` straight ahead.
+    fn depth_at(vp: &Mat4, x: f32) -> f32 {
+        let c = *vp * Vec4::new(x, 0.0, 0.0, 1.0);
+        c.z / c.w
+    }
+
+    /// A full-screen wall at distance `x`, with the pixel columns `gap` left open (background).
+    fn wall(vp: &Mat4, x: f32, gap: std::ops::Range<u32>) -> Vec<f32> {
+        let d = depth_at(vp, x);
+        (0..W * H).map(|i| if gap.contains(&(i % W)) { 0.0 } else { d }).collect()
+    }
+
+    fn unit_box_at(x: f32) -> (Vec3, Vec3) {
+        (Vec3::new(x - 0.5, -0.5, -0.5), Vec3::new(x + 0.5, 0.5, 0.5))
+    }
+
+    #[test]
+    fn pyramid_keeps_the_farthest_depth_and_covers_odd_sizes() {
+        let depth: Vec<f32> = (0..5 * 3).map(|i| 1.0 - i as f32 / 100.0).collect();
+        let hzb = Hzb::build(&depth, 5, 3).unwrap();
+        let sizes: Vec<(u32, u32)> = hzb.levels.iter().map(|l| (l.width, l.height)).collect();
+        assert_eq!(sizes, vec![(5, 3), (3, 2), (2, 1), (1, 1)]);
+        // Level 1 texel (2, 1) covers only pixel (4, 2): no neighbours beyond the edge.
+        assert_eq!(hzb.levels[1].depth[3 + 2], depth[2 * 5 + 4]);
+        // The top is the farthest (smallest) depth of all.
+        assert_eq!(hzb.levels[3].depth[0], depth.iter().cloned().fold(f32::INFINITY, f32::min));
+        for k in 1..hzb.levels.len() {
+            let (lo, hi) = (&hzb.levels[k - 1], &hzb.levels[k]);
+            for y in 0..lo.height {
+                for x in 0..lo.width {
+                    let parent = hi.depth[((y / 2) * hi.width + x / 2) as usize];
+                    assert!(parent <= lo.depth[(y * lo.width + x) as usize]);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn bad_sizes_are_errors() {
+        assert_eq!(Hzb::build(&[], 0, 4), Err(HzbError::Empty));
+        assert!(matches!(Hzb::build(&[0.0; 5], 2, 3), Err(HzbError::SizeMismatch { .. })));
+    }
+
+    #[test]
+    fn a_wall_hides_a_box_behind_it() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let hzb = Hzb::build(&wall(&vp, 10.0, 0..0), W, H).unwrap();
+        assert_eq!(hzb.test_box(&vp, unit_box_at(20.0).0, unit_box_at(20.0).1), HzbResult::Occluded);
+        // In front of the wall, and straddling it: visible.
+        assert_eq!(hzb.test_box(&vp, unit_box_at(5.0).0, unit_box_at(5.0).1), HzbResult::Visible);
+        assert_eq!(hzb.test_box(&vp, unit_box_at(10.2).0, unit_box_at(10.2).1), HzbResult::Visible);
+    }
+
+    #[test]
+    fn a_one_pixel_gap_shows_the_box() {
+        let c = camera();
+        let vp = view_proj(&c);
+        // The box at distance 20 covers the central columns; open one of them.
+        let (lo, hi) = unit_box_at(20.0);
+        let center_col = W / 2;
+        let hzb = Hzb::build(&wall(&vp, 10.0, center_col..center_col + 1), W, H).unwrap();
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Visible);
+        // A gap outside the box's rectangle does not.
+        let hzb = Hzb::build(&wall(&vp, 10.0, 1..2), W, H).unwrap();
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Occluded);
+    }
+
+    #[test]
+    fn a_background_pixel_never_occludes() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let hzb = Hzb::build(&vec![0.0; (W * H) as usize], W, H).unwrap();
+        let (lo, hi) = (Vec3::new(899.0, -50.0, -50.0), Vec3::new(900.0, 50.0, 50.0));
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Visible);
+    }
+
+    #[test]
+    fn boxes_at_the_near_plane_or_behind_the_eye_are_visible() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let hzb = Hzb::build(&vec![1.0; (W * H) as usize], W, H).unwrap();
+        // Crosses the near plane (0.1): reported visible even though the buffer is all "nearest".
+        let b = (Vec3::new(0.05, -0.5, -0.5), Vec3::new(3.0, 0.5, 0.5));
+        assert_eq!(hzb.test_box(&vp, b.0, b.1), HzbResult::Visible);
+        // Contains the eye.
+        assert_eq!(hzb.test_box(&vp, Vec3::splat(-1.0), Vec3::splat(1.0)), HzbResult::Visible);
+        // Entirely behind the eye: the frustum culls it; the HZB does not guess.
+        assert_eq!(hzb.test_box(&vp, unit_box_at(-5.0).0, unit_box_at(-5.0).1), HzbResult::Visible);
+    }
+
+    #[test]
+    fn off_screen_and_sub_pixel_boxes_cover_no_pixels() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let hzb = Hzb::build(&vec![0.0; (W * H) as usize], W, H).unwrap();
+        // Far to the left of the view.
+        let b = (Vec3::new(10.0, 40.0, -0.5), Vec3::new(11.0, 41.0, 0.5));
+        assert_eq!(hzb.test_box(&vp, b.0, b.1), HzbResult::NoPixels);
+        // A rectangle between pixel centres.
+        assert_eq!(hzb.test_rect(10.6, 10.6, 10.9, 10.9, 0.5), HzbResult::NoPixels);
+        // The same rectangle reaching a centre within the slack is tested.
+        assert_eq!(hzb.test_rect(10.6, 10.6, 11.49, 11.49, 0.5), HzbResult::Visible);
+    }
+
+    #[test]
+    fn big_rectangles_read_a_coarse_level_and_stay_conservative() {
+        // Random depth buffers: the pyramid answer must agree with a brute-force scan whenever it
+        // says occluded.
+        let mut rng = tw_core::Rng::new(7);
+        for _ in 0..200 {
+            let depth: Vec<f32> = (0..W * H).map(|_| 0.2 + 0.8 * rng.f64() as f32).collect();
+            let hzb = Hzb::build(&depth, W, H).unwrap();
+            let x0 = rng.f64() as f32 * W as f32;
+            let y0 = rng.f64() as f32 * H as f32;
+            let x1 = x0 + rng.f64() as f32 * 30.0;
+            let y1 = y0 + rng.f64() as f32 * 30.0;
+            let z = rng.f64() as f32 * 0.3;
+            let brute = {
+                let mut far = f32::INFINITY;
+                for y in 0..H {
+                    for x in 0..W {
+                        let (cx, cy) = (x as f32 + 0.5, y as f32 + 0.5);
+                        if cx >= x0 && cx <= x1 && cy >= y0 && cy <= y1 {
+                            far = far.min(depth[(y * W + x) as usize]);
+                        }
+                    }
+                }
+                far
+            };
+            if hzb.test_rect(x0, y0, x1, y1, z) == HzbResult::Occluded {
+                assert!(z < brute, "occluded at depth {z} but a pixel has {brute}");
+            }
+        }
+    }
+}
