@@ -4,6 +4,7 @@
 //!   reverse-Z) and the command-line camera string in input coordinates;
 //! - [`frustum`]: frustum planes and box/sphere tests;
 //! - [`hzb`]: the hierarchical Z-buffer and its conservative box test (GigaWalk's occlusion test);
+//! - [`occlusion`]: two-pass occlusion culling of a cut against an HZB of last frame's visible set;
 //! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
@@ -27,6 +28,7 @@ pub mod error;
 pub mod frustum;
 pub mod hzb;
 pub mod lod_error;
+pub mod occlusion;
 pub mod path;
 pub mod select;
 
@@ -36,5 +38,6 @@ pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
+pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
