@@ -412,8 +412,9 @@ impl Store {
     /// the cluster's level ≤ the group's level; positions lie in the group's node bounds; each
     /// node's `max_error` ≥ the errors of the groups in its subtree; the group sources agree
     /// with the clusters: a cluster with `self_error > 0` has a source in its group's sources
-    /// whose error and sphere equal its self error and self sphere, and every source of a group
-    /// is matched so by one of its clusters.
+    /// whose error and sphere equal its self error and self sphere, every source of a group is
+    /// matched so by one of its clusters, and sources of a group with equal error and sphere (one
+    /// simplification step) have the same parents.
     /// `progress(done, total)` is called after each page. Stops at the first problem.
     pub fn verify(&self, mut progress: impl FnMut(u32, u32)) -> Result<VerifyReport, StoreError> {
         let invariant = |msg: String| StoreError::Invariant { path: self.path.clone(), msg };
@@ -533,6 +534,30 @@ impl Store {
                  (no cluster was simplified from it)",
                 self.groups[s as usize].error, self.groups[s as usize].sphere
             )));
+        }
+        // The sources of one simplification step (those of a group with equal error and sphere)
+        // have the same parents, so that the runtime's availability rule treats them alike.
+        let step_key = |s: u32| {
+            let g = &self.groups[s as usize];
+            (g.error.to_bits(), g.sphere.map(f32::to_bits))
+        };
+        let mut step: Vec<u32> = Vec::new();
+        for group in 0..self.groups.len() as u32 {
+            step.clear();
+            step.extend_from_slice(self.links.sources(group));
+            step.sort_by_key(|&s| (step_key(s), s));
+            for w in step.windows(2) {
+                if step_key(w[0]) == step_key(w[1]) && self.links.parents(w[0]) != self.links.parents(w[1]) {
+                    return Err(invariant(format!(
+                        "group {group}: sources {} and {} have the same error and sphere (one simplification \
+                         step) but different parents {:?} and {:?}",
+                        w[0],
+                        w[1],
+                        self.links.parents(w[0]),
+                        self.links.parents(w[1])
+                    )));
+                }
+            }
         }
         // Children come after their parent (checked at open): one backward pass.
         let mut subtree = vec![0f32; self.nodes.len()];

@@ -535,6 +535,26 @@ fn verify_finds_cluster_level_invariant_violations() {
     }
 }
 
+/// Groups 0 and 1 are the sources of one step (same error and sphere) into root group 2; a
+/// second root group 3 made from group 1 alone gives them different parents: verify says so.
+#[test]
+fn verify_finds_a_step_whose_sources_have_different_parents() {
+    let mut s = scene();
+    let extra = PageCluster { self_sphere: s.groups[1].sphere, ..strip(1000, 1, 3, 1, 0.75, 2) };
+    let triangles = extra.triangle_count() as u32;
+    s.pages[2].0.push(extra);
+    s.groups.push(Group { first_cluster: 2, cluster_count: 1, triangles, source_count: 1, ..s.groups[2] });
+    s.sources.push(1);
+    s.nodes[0].group_count = 2;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("step.tw");
+    write(&path, &s).unwrap();
+    let store = Store::open(&path).unwrap();
+    assert_eq!((store.group_parents(0), store.group_parents(1)), (&[2][..], &[2, 3][..]));
+    let e = store.verify(|_, _| {}).unwrap_err();
+    assert!(e.to_string().contains("group 2: sources 0 and 1 have the same error and sphere"), "{e}");
+}
+
 #[test]
 fn corrupt_page_reports_page_and_offset() {
     let mut bytes = store_bytes(&scene());
