@@ -1,5 +1,6 @@
 //! Fuzz target: arbitrary bytes as a `scene.tw` store, written to a temporary file, opened
-//! (memory-mapped), verified, every page decoded and every group's links read; and the same through the in-memory reader.
+//! (memory-mapped), verified, every page decoded and every group's links read; and the same
+//! through the in-memory reader.
 //! Checksums are not enforced under `cfg(fuzzing)`, so the fuzzer reaches the parsers.
 #![no_main]
 use std::io::Write;
