@@ -1,5 +1,6 @@
 //! Fuzz target: arbitrary bytes as a `scene.tw` store, written to a temporary file, opened
-//! (memory-mapped), verified and every page decoded; and the same through the in-memory reader.
+//! (memory-mapped), verified, every page decoded and every group's links read; and the same
+//! through the in-memory reader.
 //! Checksums are not enforced under `cfg(fuzzing)`, so the fuzzer reaches the parsers.
 #![no_main]
 use std::io::Write;
@@ -12,6 +13,10 @@ libfuzzer_sys::fuzz_target!(|data: &[u8]| {
         let _ = store.verify(|_, _| {});
         for i in 0..store.pages().len() as u32 {
             let _ = store.page(i);
+        }
+        // The group links (one index past the table too).
+        for g in 0..=store.groups().len() as u32 {
+            let _ = (store.group_sources(g), store.group_parents(g));
         }
     }
     // The mmap reader and the in-memory reader must agree on whether the bytes are a store.

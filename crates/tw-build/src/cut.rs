@@ -191,6 +191,20 @@ pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
 /// replaced). The clusters left must be exactly [`extract_cut`]'s, each once. So every input
 /// triangle is represented exactly once, at the granularity of simplification steps.
 pub fn check_complete(dag: &LodDag, tau: f32) -> Result<(), String> {
+    check_complete_with(dag, |g| tau >= dag.groups[g].error, |c| in_cut(dag, c, tau))
+        .map_err(|e| format!("{e} at tau {tau}"))
+}
+
+/// [`check_complete`] for any set of coarsened groups (`coarsened(g)`: the cut draws something
+/// coarser than group `g`) and the cut `in_cut(c)` that is claimed to follow from it (e.g. the
+/// runtime's cut when some pages are missing, docs/FORMAT.md "Availability"): replays the
+/// simplification steps of the coarsened groups and checks that exactly the claimed clusters
+/// are left, each once.
+pub fn check_complete_with(
+    dag: &LodDag,
+    coarsened: impl Fn(usize) -> bool,
+    in_cut: impl Fn(usize) -> bool,
+) -> Result<(), String> {
     let ng = dag.groups.len();
     let mut made_from: Vec<Vec<u32>> = vec![Vec::new(); ng];
     let mut sources_left: Vec<usize> = Vec::with_capacity(dag.clusters.len());
@@ -203,7 +217,6 @@ pub fn check_complete(dag: &LodDag, tau: f32) -> Result<(), String> {
         }
         sources_left.push(c.refined_from.len());
     }
-    let coarsened = |g: usize| tau >= dag.groups[g].error;
     let mut present = vec![0u32; dag.clusters.len()];
     let mut members_present = vec![0usize; ng];
     let mut done = vec![false; ng];
@@ -224,15 +237,12 @@ pub fn check_complete(dag: &LodDag, tau: f32) -> Result<(), String> {
     while let Some(g) = ready.pop() {
         let g = g as usize;
         if done[g] {
-            return Err(format!("group {g} replaced twice at tau {tau}"));
+            return Err(format!("group {g} replaced twice"));
         }
         done[g] = true;
         for &m in &dag.groups[g].clusters {
             if present[m as usize] != 1 {
-                return Err(format!(
-                    "group {g}: member {m} present {} times at tau {tau}",
-                    present[m as usize]
-                ));
+                return Err(format!("group {g}: member {m} present {} times", present[m as usize]));
             }
             present[m as usize] = 0;
         }
@@ -244,12 +254,12 @@ pub fn check_complete(dag: &LodDag, tau: f32) -> Result<(), String> {
         }
     }
     if let Some(g) = (0..ng).find(|&g| coarsened(g) && !done[g]) {
-        return Err(format!("group {g} is coarsened at tau {tau} but not all its clusters are drawn"));
+        return Err(format!("group {g} is coarsened but not all its clusters are drawn"));
     }
     for (ci, &n) in present.iter().enumerate() {
-        let cut = in_cut(dag, ci, tau);
+        let cut = in_cut(ci);
         if n > 1 || (n == 1) != cut {
-            return Err(format!("cluster {ci}: present {n} times, in cut {cut}, at tau {tau}"));
+            return Err(format!("cluster {ci}: present {n} times, in cut {cut}"));
         }
     }
     Ok(())

@@ -11,7 +11,8 @@
 //!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
 //!    gets its HLOD groups at once — so only the roots of the subtrees on the current path are
 //!    held in memory;
-//! 6. write: group, node and object tables, atomically ([`tw_store::StoreWriter`]).
+//! 6. write: group (with each group's sources, the groups its clusters were simplified from),
+//!    node and object tables, atomically ([`tw_store::StoreWriter`]).
 //!
 //! Output is byte-identical for any thread count: parallel work is collected in cell order.
 
@@ -241,7 +242,7 @@ fn build_with_pool(
 
     // 6. Tables and the file.
     progress.phase("write", 0, "");
-    let LodState { packer, groups, node_groups, clusters, stored_triangles, .. } = state;
+    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, .. } = state;
     let (placements, pages, root_pages) = packer.finish(&mut writer)?;
     let mut table: Vec<tw_store::Group> = groups;
     for p in placements {
@@ -265,7 +266,7 @@ fn build_with_pool(
         build_options: options.describe(),
         input_triangles: ing.triangles,
     };
-    let summary = writer.finish(&info, &objects, &nodes, &table).map_err(BuildError::store)?;
+    let summary = writer.finish(&info, &objects, &nodes, &table, &sources).map_err(BuildError::store)?;
     progress.end_phase();
     t.lap("write");
 
@@ -372,6 +373,8 @@ struct LodState<'h> {
     roots: Vec<Option<Roots>>,
     /// The group table (page references filled in at the end).
     groups: Vec<tw_store::Group>,
+    /// The sources of every group, group after group (`groups[i].source_count` each).
+    sources: Vec<u32>,
     /// The range of groups attached to each node.
     node_groups: Vec<(u32, u32)>,
     packer: PagePacker,
@@ -402,6 +405,7 @@ impl<'h> LodState<'h> {
             leaf_of_cell,
             roots: vec![None; n],
             groups: Vec::new(),
+            sources: Vec::new(),
             node_groups: vec![(0, 0); n],
             packer: PagePacker::new(options.pages),
             root_depth: options.root_depth,
@@ -410,10 +414,19 @@ impl<'h> LodState<'h> {
         }
     }
 
-    /// Gives `dag`'s groups scene ids, sends their clusters to pages and records the groups.
-    /// Returns the scene id of `dag.groups[0]`.
-    fn emit(&mut self, writer: &mut StoreWriter, node: u32, dag: &LodDag) -> Result<u32, BuildError> {
+    /// Gives `dag`'s groups scene ids, sends their clusters to pages and records the groups and
+    /// their sources: the union of their clusters' `refined_from`, which are indices into `dag`
+    /// when `local_sources` (a cell's DAG) and scene ids otherwise (an HLOD node's). Sources are
+    /// always groups emitted earlier (the store writer checks it). Returns the scene id of `dag.groups[0]`.
+    fn emit(
+        &mut self,
+        writer: &mut StoreWriter,
+        node: u32,
+        dag: &LodDag,
+        local_sources: bool,
+    ) -> Result<u32, BuildError> {
         let base = self.groups.len() as u32;
+        let mut group_sources: Vec<u32> = Vec::new();
         let root = (self.depth[node as usize] as usize) <= self.root_depth
             && !self.hierarchy.nodes[node as usize].is_leaf();
         for (gi, g) in dag.groups.iter().enumerate() {
@@ -423,7 +436,17 @@ impl<'h> LodState<'h> {
             let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
             self.clusters += clusters.len() as u64;
             self.stored_triangles += triangles as u64;
-            self.groups.push(store_group(g, node, triangles as u32, clusters.len() as u32));
+            group_sources.clear();
+            for &c in &g.clusters {
+                let from = &dag.clusters[c as usize].refined_from;
+                group_sources.extend(from.iter().map(|&r| if local_sources { base + r } else { r }));
+            }
+            group_sources.sort_unstable();
+            group_sources.dedup();
+            self.sources.extend_from_slice(&group_sources);
+            let mut entry = store_group(g, node, triangles as u32, clusters.len() as u32);
+            entry.source_count = group_sources.len() as u32;
+            self.groups.push(entry);
             self.packer.add_group(writer, id, g.level, root, clusters)?;
         }
         self.node_groups[node as usize] = (base, dag.groups.len() as u32);
@@ -431,7 +454,7 @@ impl<'h> LodState<'h> {
     }
 
     fn add_cell(&mut self, writer: &mut StoreWriter, leaf: u32, dag: LodDag) -> Result<(), BuildError> {
-        let base = self.emit(writer, leaf, &dag)?;
+        let base = self.emit(writer, leaf, &dag, true)?;
         self.roots[leaf as usize] = Some(roots_of(&dag, base));
         Ok(())
     }
@@ -462,7 +485,7 @@ impl<'h> LodState<'h> {
                 e.error = hl.error;
                 e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
             }
-            let base = self.emit(writer, parent, &hl.dag)?;
+            let base = self.emit(writer, parent, &hl.dag, false)?;
             self.roots[parent as usize] = Some(hl.roots(base));
             node = parent;
         }
@@ -496,6 +519,7 @@ fn store_group(g: &LodGroup, node: u32, triangles: u32, cluster_count: u32) -> t
         first_cluster: 0,
         cluster_count,
         triangles,
+        source_count: 0,
     }
 }
 

@@ -12,14 +12,19 @@
 //! 4. byte-identical output for 1 and 2 threads;
 //! 5. a failed build leaves no file behind and an existing output untouched;
 //! 6. a corrupt page, a truncated file, a wrong version give errors that say so;
-//! 7. the generated plant (50k and 200k triangles): all of the above, cuts shrinking with τ.
+//! 7. the generated plant (50k and 200k triangles): all of the above, cuts shrinking with τ;
+//! 8. the group links (`Store::group_sources` / `group_parents`) equal the `refined_from` relation
+//!    rebuilt from the clusters, "replaced" is monotone along them for every τ tested, and the
+//!    availability rule of docs/FORMAT.md gives complete, crack-free cuts when pages are missing.
 //!
 //! The Stanford dragon test needs `data/dragon_vrip.ply.gz` (`scripts/fetch-data.sh`, or
 //! `TERAWALK_DATA`); without it, it prints a note and passes unless `TERAWALK_REQUIRE_DATA=1`.
 
 use std::path::{Path, PathBuf};
 
-use tw_build::cut::{boundary_edges, check_complete, check_dag, cut_triangles, open_edges, GridTriangle};
+use tw_build::cut::{
+    boundary_edges, check_complete, check_complete_with, check_dag, cut_triangles, open_edges, GridTriangle,
+};
 use tw_build::redefine::RedefineParams;
 use tw_build::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
 use tw_build::{build, BuildError, BuildOptions, BuildReport, NoProgress};
@@ -509,6 +514,138 @@ fn check_cuts(
     counts
 }
 
+/// 8a: the stored links are the `refined_from` relation of [`store_dag`] (rebuilt from the
+/// clusters alone), the parents its inverse, and for every τ a replaced group's sources are
+/// replaced.
+fn check_links(store: &Store, dag: &LodDag) {
+    let n = store.groups().len() as u32;
+    let mut links = 0;
+    for g in 0..n {
+        let mut expected: Vec<u32> = dag.groups[g as usize]
+            .clusters
+            .iter()
+            .flat_map(|&c| dag.clusters[c as usize].refined_from.iter().copied())
+            .collect();
+        expected.sort_unstable();
+        expected.dedup();
+        assert_eq!(store.group_sources(g), &expected[..], "sources of group {g}");
+        links += expected.len();
+        for &s in &expected {
+            assert!(store.group_parents(s).contains(&g), "group {g} missing from the parents of {s}");
+        }
+        let error = store.groups()[g as usize].error;
+        assert_eq!(store.group_parents(g).is_empty(), error == f32::INFINITY, "parents of group {g}");
+    }
+    assert_eq!((0..n).map(|g| store.group_parents(g).len()).sum::<usize>(), links);
+    for tau in thresholds(dag) {
+        let replaced = |g: u32| tau >= store.groups()[g as usize].error;
+        for g in (0..n).filter(|&g| replaced(g)) {
+            if let Some(s) = store.group_sources(g).iter().find(|&&s| !replaced(s)) {
+                panic!("tau {tau}: group {g} is replaced but its source {s} is not");
+            }
+        }
+    }
+}
+
+/// A deterministic pseudo-random bit for `(seed, page)`: resident with probability 3/5.
+fn resident_page(seed: u64, page: u32) -> bool {
+    let mut x = (seed << 32 | page as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    x ^= x >> 29;
+    x = x.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    (x >> 40) % 5 < 3
+}
+
+/// 8b: the availability rule of docs/FORMAT.md ("Availability"), computed from the store's
+/// links only, for a few τ and a few sets of resident pages (root pages and the pages of root
+/// groups always resident): the cut it draws holds only resident groups and is complete (the
+/// replay of [`check_complete_with`]) and, below `crack_limit`, has no cracks.
+fn check_availability(store: &Store, dag: &LodDag, input: &[(GridTriangle, u32)], crack_limit: f32) {
+    let groups = store.groups();
+    let n = groups.len();
+    let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
+    let allowed = open_edges(&input_tris);
+    let mut border_vertices: Vec<[u32; 3]> = allowed.iter().flat_map(|&(a, b)| [a, b]).collect();
+    border_vertices.sort_unstable();
+    border_vertices.dedup();
+    let taus = thresholds(dag);
+    let mut missing_drawn_coarser = 0;
+    let mut picked = vec![taus[0], taus[taus.len() / 2], taus[taus.len().saturating_sub(2)]];
+    picked.dedup();
+    for tau in picked {
+        for seed in 0..2u64 {
+            let resident: Vec<bool> = groups
+                .iter()
+                .map(|g| {
+                    g.error == f32::INFINITY
+                        || store.pages()[g.page as usize].is_root()
+                        || resident_page(seed, g.page)
+                })
+                .collect();
+            // Parents have larger indices: one backward pass.
+            let mut available = vec![false; n];
+            for g in (0..n).rev() {
+                let parents = store.group_parents(g as u32);
+                available[g] = if parents.is_empty() {
+                    resident[g]
+                } else {
+                    parents.iter().all(|&p| {
+                        available[p as usize] && store.group_sources(p).iter().all(|&s| resident[s as usize])
+                    })
+                };
+            }
+            let replaced: Vec<bool> = (0..n).map(|g| tau >= groups[g].error || !available[g]).collect();
+            missing_drawn_coarser += (0..n).filter(|&g| tau < groups[g].error && !available[g]).count();
+            // A cluster's step: the sources of its group with its self error and sphere.
+            let drawn = |c: usize| {
+                let c = &dag.clusters[c];
+                let g = c.group as usize;
+                if replaced[g] {
+                    return false;
+                }
+                if c.self_error == 0.0 {
+                    return true;
+                }
+                let own = [
+                    c.self_sphere.center[0],
+                    c.self_sphere.center[1],
+                    c.self_sphere.center[2],
+                    c.self_sphere.radius,
+                ];
+                let step: Vec<u32> = store
+                    .group_sources(g as u32)
+                    .iter()
+                    .copied()
+                    .filter(|&s| {
+                        key(groups[s as usize].error, groups[s as usize].sphere) == key(c.self_error, own)
+                    })
+                    .collect();
+                assert!(!step.is_empty(), "cluster of group {g} without a step");
+                step.iter().all(|&s| replaced[s as usize])
+            };
+            let cut: Vec<u32> = (0..dag.clusters.len()).filter(|&c| drawn(c)).map(|c| c as u32).collect();
+            for &c in &cut {
+                let g = dag.clusters[c as usize].group as usize;
+                assert!(resident[g], "tau {tau}, seed {seed}: cluster {c} of non-resident group {g} drawn");
+            }
+            check_complete_with(dag, |g| replaced[g], |c| cut.binary_search(&(c as u32)).is_ok())
+                .unwrap_or_else(|e| panic!("tau {tau}, seed {seed}: availability cut: {e}"));
+            if tau < crack_limit {
+                let tris: Vec<GridTriangle> = cut_triangles(dag, &cut).into_iter().map(|t| t.0).collect();
+                let bad = crack_edges(&tris, &allowed, &border_vertices);
+                assert!(
+                    bad.is_empty(),
+                    "tau {tau}, seed {seed}: availability cut has {} crack edges",
+                    bad.len()
+                );
+            }
+        }
+    }
+    // Not vacuous: some groups the τ rule would draw were unavailable.
+    if store.pages().iter().any(|p| !p.is_root()) && n > 1 {
+        assert!(missing_drawn_coarser > 0, "no group was ever unavailable");
+    }
+}
+
 /// The input: closed (no open edge: the cuts must have none), or open (the cuts' borders must
 /// be the input's borders, for the τ that `cracks` says).
 #[derive(Clone, Copy, Debug)]
@@ -535,18 +672,16 @@ fn check_store(out: &Path, reference: &Reference, kind: Input) -> (Store, Vec<(f
     let dag = store_dag(&store);
     check_full_resolution(&store, &dag, &input, reference.tris.len());
     check_structure(&store, &dag);
-    let counts = match kind {
-        Input::Closed => check_cuts(&store, &dag, &input, true, 0.4, f32::INFINITY),
-        Input::Open { cracks } => {
-            let max_finite = dag.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).fold(0.0, f32::max);
-            let limit = match cracks {
-                Cracks::All => f32::INFINITY,
-                Cracks::BelowRoot => max_finite,
-                Cracks::Unchecked => f32::NEG_INFINITY,
-            };
-            check_cuts(&store, &dag, &input, false, 0.0, limit)
-        }
+    check_links(&store, &dag);
+    let max_finite = dag.groups.iter().map(|g| g.error).filter(|e| e.is_finite()).fold(0.0, f32::max);
+    let (closed, min_area, crack_limit) = match kind {
+        Input::Closed => (true, 0.4, f32::INFINITY),
+        Input::Open { cracks: Cracks::All } => (false, 0.0, f32::INFINITY),
+        Input::Open { cracks: Cracks::BelowRoot } => (false, 0.0, max_finite),
+        Input::Open { cracks: Cracks::Unchecked } => (false, 0.0, f32::NEG_INFINITY),
     };
+    let counts = check_cuts(&store, &dag, &input, closed, min_area, crack_limit);
+    check_availability(&store, &dag, &input, crack_limit);
     (store, counts)
 }
 
@@ -746,14 +881,14 @@ fn wrong_version_does_not_open() {
     let dir = tempfile::tempdir().unwrap();
     let out = small_store(dir.path());
     let mut bytes = std::fs::read(&out).unwrap();
-    bytes[8..12].copy_from_slice(&(tw_store::FORMAT_VERSION + 1).to_le_bytes());
-    std::fs::write(&out, &bytes).unwrap();
-    let err = Store::open(&out).expect_err("wrong version");
-    assert!(
-        matches!(err, StoreError::Version { found, .. } if found == tw_store::FORMAT_VERSION + 1),
-        "{err:?}"
-    );
-    assert!(err.to_string().contains("version"), "{err}");
+    for (version, says) in [(tw_store::FORMAT_VERSION + 1, "newer terawalk"), (1, "older terawalk")] {
+        bytes[8..12].copy_from_slice(&version.to_le_bytes());
+        std::fs::write(&out, &bytes).unwrap();
+        let err = Store::open(&out).expect_err("wrong version");
+        assert!(matches!(err, StoreError::Version { found, .. } if found == version), "{err:?}");
+        let msg = err.to_string();
+        assert!(msg.contains(says) && msg.contains("scene.tw") && msg.contains("terawalk build"), "{msg}");
+    }
 }
 
 fn check_plant(triangles: u64, cracks: Cracks) {

@@ -353,7 +353,7 @@ pub(crate) mod tests {
             max_error: f32::INFINITY,
             ..Default::default()
         }];
-        w.finish(&info, &objects, &nodes, &groups).unwrap();
+        w.finish(&info, &objects, &nodes, &groups, &[]).unwrap();
         Store::open(&path).unwrap()
     }
 

@@ -21,11 +21,7 @@ pub enum StoreError {
     #[error("{}: not a terawalk store (the file does not start with \"TERAWALK\")", .path.display())]
     NotAStore { path: PathBuf },
     /// The file is a store of another format version.
-    #[error(
-        "{}: store version {found}, this terawalk reads version {FORMAT_VERSION}; rebuild it with \
-         `terawalk build`",
-        .path.display()
-    )]
+    #[error("{}: {}", .path.display(), version_advice(*.found))]
     Version { path: PathBuf, found: u32 },
     /// The file ends before the data its header describes.
     #[error(
@@ -46,6 +42,21 @@ pub enum StoreError {
     /// The writer was given data that cannot be stored (a bug in the caller).
     #[error("cannot write store: {0}")]
     Invalid(String),
+}
+
+/// What to do with a store of format version `found` (≠ [`FORMAT_VERSION`]).
+fn version_advice(found: u32) -> String {
+    if found < FORMAT_VERSION {
+        format!(
+            "was written by an older terawalk (store format {found}); rebuild it with `terawalk build` \
+             (this terawalk reads store format {FORMAT_VERSION})"
+        )
+    } else {
+        format!(
+            "was written by a newer terawalk (store format {found}; this terawalk reads store format \
+             {FORMAT_VERSION}); rebuild it with this terawalk's `terawalk build`, or update terawalk"
+        )
+    }
 }
 
 /// A page that could not be decoded: `offset` is relative to the start of the page's bytes.

@@ -1,4 +1,4 @@
-//! On-disk structures of `scene.tw`, version 1, as specified in `docs/FORMAT.md`.
+//! On-disk structures of `scene.tw`, version 2, as specified in `docs/FORMAT.md`.
 //!
 //! Every structure is little-endian with a fixed size and is (de)serialized field by field with
 //! checked reads: nothing is transmuted from file bytes. [`validate_tables`] holds the structural
@@ -8,11 +8,17 @@
 /// The first 8 bytes of every store.
 pub const MAGIC: [u8; 8] = *b"TERAWALK";
 /// The format version this crate reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Size of the header in bytes.
-pub const HEADER_LEN: usize = 320;
+pub const HEADER_LEN: usize = 344;
 /// Byte offset of the header checksum (CRC-32C of bytes `0..HEADER_CRC_AT`).
-pub const HEADER_CRC_AT: usize = 316;
+pub const HEADER_CRC_AT: usize = 340;
+/// Byte offset of the section directory in the header.
+pub const SECTIONS_AT: usize = 160;
+/// Size of one section directory entry.
+pub const SECTION_ENTRY_LEN: usize = 24;
+/// Number of sections (entries of the section directory).
+pub const SECTION_COUNT: usize = 7;
 /// Size of one object table entry.
 pub const OBJECT_LEN: usize = 24;
 /// Size of one skeleton node.
@@ -21,6 +27,8 @@ pub const NODE_LEN: usize = 48;
 pub const GROUP_LEN: usize = 48;
 /// Size of one page table entry.
 pub const PAGE_ENTRY_LEN: usize = 32;
+/// Size of one entry of the group sources (a `u32` group index).
+pub const SOURCE_LEN: usize = 4;
 /// Tables start at multiples of this (the gap is zero-filled).
 pub const SECTION_ALIGN: u64 = 8;
 
@@ -43,16 +51,20 @@ pub enum SectionKind {
     PageTable = 3,
     Pages = 4,
     Strings = 5,
+    /// The sources of every group (the finer groups it was simplified from), as `u32` group
+    /// indices, group after group.
+    GroupSources = 6,
 }
 
 impl SectionKind {
-    pub const ALL: [SectionKind; 6] = [
+    pub const ALL: [SectionKind; SECTION_COUNT] = [
         SectionKind::Objects,
         SectionKind::Nodes,
         SectionKind::Groups,
         SectionKind::PageTable,
         SectionKind::Pages,
         SectionKind::Strings,
+        SectionKind::GroupSources,
     ];
 
     pub fn name(self) -> &'static str {
@@ -63,6 +75,7 @@ impl SectionKind {
             SectionKind::PageTable => "page table",
             SectionKind::Pages => "pages region",
             SectionKind::Strings => "string table",
+            SectionKind::GroupSources => "group sources",
         }
     }
 }
@@ -91,11 +104,11 @@ pub struct StrRef {
     pub len: u32,
 }
 
-/// The fixed 320-byte header at offset 0.
+/// The fixed 344-byte header at offset 0.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
     pub version: u32,
-    /// Feature flags; none are defined in version 1 (must be 0).
+    /// Feature flags; none are defined in version 2 (must be 0).
     pub flags: u32,
     /// Up axis of the input: 0 x, 1 y, 2 z.
     pub up_axis: u8,
@@ -121,7 +134,7 @@ pub struct Header {
     /// Triangles over all clusters (all LOD levels).
     pub triangle_count: u64,
     /// Section directory, indexed by [`SectionKind`].
-    pub sections: [Section; 6],
+    pub sections: [Section; SECTION_COUNT],
 }
 
 impl Header {
@@ -229,7 +242,7 @@ impl Header {
         let input_triangles = r.u64()?;
         let cluster_count = r.u64()?;
         let triangle_count = r.u64()?;
-        let mut sections = [Section::default(); 6];
+        let mut sections = [Section::default(); SECTION_COUNT];
         for s in &mut sections {
             s.offset = r.u64()?;
             s.length = r.u64()?;
@@ -361,6 +374,10 @@ pub struct Group {
     pub cluster_count: u32,
     /// Triangles over the group's clusters.
     pub triangles: u32,
+    /// Number of the group's sources: the finer groups its clusters were simplified from. They
+    /// are the next `source_count` entries of the group sources section (the sources of the
+    /// groups before this one come first); see [`GroupLinks`].
+    pub source_count: u32,
 }
 
 impl Group {
@@ -373,7 +390,8 @@ impl Group {
             put_u32(w, v);
         }
         w.push(self.level);
-        w.extend_from_slice(&[0; 7]);
+        w.extend_from_slice(&[0; 3]);
+        put_u32(w, self.source_count);
     }
 
     pub fn parse(r: &mut Reader) -> Result<Group, (u64, String)> {
@@ -386,9 +404,11 @@ impl Group {
             cluster_count: r.u32()?,
             triangles: r.u32()?,
             level: r.u8()?,
+            source_count: 0,
         };
-        r.zeros(7)?;
-        Ok(g)
+        r.zeros(3)?;
+        let source_count = r.u32()?;
+        Ok(Group { source_count, ..g })
     }
 }
 
@@ -455,12 +475,65 @@ pub struct Tables<'a> {
     pub groups: &'a [Group],
     pub pages: &'a [PageEntry],
     pub strings: &'a [u8],
+    /// The group sources section: each group's sources, group after group.
+    pub sources: &'a [u32],
 }
 
-/// Checks the structural invariants that need no page decoding (docs/FORMAT.md, "Invariants").
-/// Errors are `(absolute byte offset of the offending entry, message)`; offsets assume the
-/// header's section directory (the writer validates before writing with the final offsets).
-pub fn validate_tables(t: &Tables) -> Result<(), (u64, String)> {
+/// The links of the cluster DAG between groups, in flat arrays (no allocation per group).
+///
+/// The *sources* of group `g` are the finer groups its clusters were simplified from; its
+/// *parents* are the coarser groups whose clusters were simplified from `g` (the inverse
+/// relation, derived when the store is opened). Both lists are sorted; sources have smaller
+/// indices than their group, parents larger ones.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct GroupLinks {
+    /// Sources of group `g`: `sources[source_first[g]..source_first[g + 1]]`.
+    source_first: Vec<u32>,
+    sources: Vec<u32>,
+    /// Parents of group `g`: `parents[parent_first[g]..parent_first[g + 1]]`.
+    parent_first: Vec<u32>,
+    parents: Vec<u32>,
+}
+
+impl GroupLinks {
+    /// The sources of `group` (empty for a group of input clusters, or out of range).
+    pub fn sources(&self, group: u32) -> &[u32] {
+        range_of(&self.source_first, &self.sources, group)
+    }
+
+    /// The parents of `group` (empty for a root group, or out of range).
+    pub fn parents(&self, group: u32) -> &[u32] {
+        range_of(&self.parent_first, &self.parents, group)
+    }
+
+    /// Number of links (Σ source counts = Σ parent counts).
+    pub fn link_count(&self) -> usize {
+        self.sources.len()
+    }
+
+    /// Where the sources of `group` lie among all links (empty when out of range).
+    pub(crate) fn source_range(&self, group: u32) -> std::ops::Range<usize> {
+        let g = group as usize;
+        match (self.source_first.get(g), self.source_first.get(g + 1)) {
+            (Some(&a), Some(&b)) => a as usize..b as usize,
+            _ => 0..0,
+        }
+    }
+}
+
+fn range_of<'a>(first: &[u32], items: &'a [u32], g: u32) -> &'a [u32] {
+    let g = g as usize;
+    match (first.get(g), first.get(g + 1)) {
+        (Some(&a), Some(&b)) => items.get(a as usize..b as usize).unwrap_or_default(),
+        _ => &[],
+    }
+}
+
+/// Checks the structural invariants that need no page decoding (docs/FORMAT.md, "Invariants")
+/// and returns the group links they describe. Errors are `(absolute byte offset of the offending
+/// entry, message)`; offsets assume the header's section directory (the writer validates before
+/// writing with the final offsets).
+pub fn validate_tables(t: &Tables) -> Result<GroupLinks, (u64, String)> {
     let h = t.header;
     let at = |kind: SectionKind, i: usize, len: usize| h.section(kind).offset + (i * len) as u64;
     for (what, s, off) in [("units", h.units, 104u64), ("build options", h.build_options, 112)] {
@@ -630,7 +703,98 @@ pub fn validate_tables(t: &Tables) -> Result<(), (u64, String)> {
             format!("groups list {group_clusters} clusters, the pages hold {}", h.cluster_count),
         ));
     }
-    Ok(())
+    validate_links(t)
+}
+
+/// The group sources (docs/FORMAT.md, "Group sources"): each group's sources strictly increasing
+/// and smaller than the group's index (so the links form a DAG and there is no self-link), of a
+/// level ≤ and a finite error ≤ the group's; every group with a finite error is the source of at
+/// least one group, a root group (error = +∞) of none. Builds the inverse relation (parents).
+fn validate_links(t: &Tables) -> Result<GroupLinks, (u64, String)> {
+    let h = t.header;
+    let section = h.section(SectionKind::GroupSources);
+    let group_at = |i: usize| h.section(SectionKind::Groups).offset + (i * GROUP_LEN) as u64;
+    let total: u64 = t.groups.iter().map(|g| g.source_count as u64).sum();
+    if total != t.sources.len() as u64 {
+        return Err((
+            section.offset,
+            format!("the groups count {total} sources, the group sources section holds {}", t.sources.len()),
+        ));
+    }
+    // The prefix sums below are u32.
+    if total > u32::MAX as u64 {
+        return Err((section.offset, format!("{total} group sources: more than 2^32 - 1")));
+    }
+    let mut source_first = Vec::with_capacity(t.groups.len() + 1);
+    let mut parent_count = vec![0u32; t.groups.len()];
+    let mut next = 0usize;
+    source_first.push(0u32);
+    for (i, g) in t.groups.iter().enumerate() {
+        let end = next + g.source_count as usize;
+        let mut prev: Option<u32> = None;
+        for (k, &s) in t.sources[next..end].iter().enumerate() {
+            let at = section.offset + ((next + k) * SOURCE_LEN) as u64;
+            if s as usize >= i {
+                return Err((
+                    at,
+                    format!("group {i}: source {s} is not a group before it (sources precede their group)"),
+                ));
+            }
+            if prev.is_some_and(|p| p >= s) {
+                return Err((at, format!("group {i}: sources are not strictly increasing ({prev:?}, {s})")));
+            }
+            prev = Some(s);
+            let src = &t.groups[s as usize];
+            if src.level > g.level {
+                return Err((at, format!("group {i}: source {s} has level {} > {}", src.level, g.level)));
+            }
+            if !src.error.is_finite() || src.error > g.error {
+                return Err((
+                    at,
+                    format!(
+                        "group {i}: source {s} has error {} (must be finite and ≤ the group's {})",
+                        src.error, g.error
+                    ),
+                ));
+            }
+            parent_count[s as usize] += 1;
+        }
+        next = end;
+        source_first.push(next as u32);
+    }
+    for (i, g) in t.groups.iter().enumerate() {
+        let (finite, parents) = (g.error.is_finite(), parent_count[i]);
+        if finite && parents == 0 {
+            return Err((
+                group_at(i),
+                format!(
+                    "group {i} has error {} but no group was simplified from it (a finite error needs a \
+                     coarser group that replaces it)",
+                    g.error
+                ),
+            ));
+        }
+        // Root groups are never sources (checked above: sources have finite errors).
+        debug_assert!(finite || parents == 0);
+    }
+    // Parents: counting sort of the links by source, filled in group order, so each group's
+    // parents come out increasing.
+    let mut parent_first = Vec::with_capacity(t.groups.len() + 1);
+    let mut sum = 0u32;
+    for &c in &parent_count {
+        parent_first.push(sum);
+        sum += c;
+    }
+    parent_first.push(sum);
+    let mut fill = parent_first.clone();
+    let mut parents = vec![0u32; t.sources.len()];
+    for i in 0..t.groups.len() {
+        for &s in &t.sources[source_first[i] as usize..source_first[i + 1] as usize] {
+            parents[fill[s as usize] as usize] = i as u32;
+            fill[s as usize] += 1;
+        }
+    }
+    Ok(GroupLinks { source_first, sources: t.sources.to_vec(), parent_first, parents })
 }
 
 /// The string `s` of the string table, checked.
@@ -751,7 +915,7 @@ mod tests {
             input_triangles: 5,
             cluster_count: 6,
             triangle_count: 7,
-            sections: [Section { offset: 320, length: 8, checksum: 9 }; 6],
+            sections: [Section { offset: 344, length: 8, checksum: 9 }; SECTION_COUNT],
         }
     }
 
@@ -760,13 +924,16 @@ mod tests {
         let h = header();
         let b = h.to_bytes();
         assert_eq!(&b[..8], b"TERAWALK");
-        assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 1);
+        assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 2);
         assert_eq!(u32::from_le_bytes(b[12..16].try_into().unwrap()), HEADER_LEN as u32);
         assert_eq!(b[20], 2);
         assert_eq!(f64::from_le_bytes(b[96..104].try_into().unwrap()), h.grid_step);
         assert_eq!(u32::from_le_bytes(b[132..136].try_into().unwrap()), 4);
-        assert_eq!(u64::from_le_bytes(b[160..168].try_into().unwrap()), 320);
-        assert_eq!(u32::from_le_bytes(b[316..320].try_into().unwrap()), checksum(&b[..316]));
+        assert_eq!(u64::from_le_bytes(b[160..168].try_into().unwrap()), 344);
+        // The group sources entry is the 7th of the directory; 12 reserved bytes follow it.
+        assert_eq!(u64::from_le_bytes(b[304..312].try_into().unwrap()), 344);
+        assert!(b[328..340].iter().all(|&x| x == 0));
+        assert_eq!(u32::from_le_bytes(b[340..344].try_into().unwrap()), checksum(&b[..340]));
         assert_eq!(Header::parse(&b, true).unwrap(), h);
     }
 
@@ -797,6 +964,98 @@ mod tests {
         w.clear();
         PageEntry::default().write(&mut w);
         assert_eq!(w.len(), PAGE_ENTRY_LEN);
+    }
+
+    #[test]
+    fn group_entry_has_its_documented_layout() {
+        let g = Group { level: 3, source_count: 0x0102_0304, triangles: 7, ..Group::default() };
+        let mut w = Vec::new();
+        g.write(&mut w);
+        assert_eq!(w[40], 3);
+        assert_eq!(&w[41..44], &[0, 0, 0]);
+        assert_eq!(u32::from_le_bytes(w[44..48].try_into().unwrap()), 0x0102_0304);
+        assert_eq!(Group::parse(&mut Reader::new(&w, 0)).unwrap(), g);
+        w[42] = 1;
+        assert_eq!(Group::parse(&mut Reader::new(&w, 1000)).unwrap_err().0, 1042);
+    }
+
+    /// Groups 0 and 1 (finite errors) are simplified into group 2; group 3 (error ∞) is made
+    /// from 2; group 4 is a lone root.
+    fn linked_groups() -> (Vec<Group>, Vec<u32>) {
+        let g = |error: f32, level: u8, source_count: u32| Group {
+            error,
+            level,
+            source_count,
+            ..Group::default()
+        };
+        (
+            vec![g(1.0, 0, 0), g(1.0, 0, 0), g(2.0, 1, 2), g(f32::INFINITY, 2, 1), g(f32::INFINITY, 0, 0)],
+            vec![0, 1, 2],
+        )
+    }
+
+    fn links_of(groups: &[Group], sources: &[u32]) -> Result<GroupLinks, (u64, String)> {
+        let mut h = header();
+        h.sections[SectionKind::Groups as usize].offset = 1000;
+        h.sections[SectionKind::GroupSources as usize].offset = 2000;
+        validate_links(&Tables {
+            header: &h,
+            objects: &[],
+            nodes: &[],
+            groups,
+            pages: &[],
+            strings: &[],
+            sources,
+        })
+    }
+
+    #[test]
+    fn links_give_sources_and_parents() {
+        let (groups, sources) = linked_groups();
+        let links = links_of(&groups, &sources).unwrap();
+        assert_eq!(links.link_count(), 3);
+        let all = |f: &dyn Fn(u32) -> Vec<u32>| (0..5).map(f).collect::<Vec<_>>();
+        assert_eq!(all(&|g| links.sources(g).to_vec()), vec![vec![], vec![], vec![0, 1], vec![2], vec![]]);
+        assert_eq!(all(&|g| links.parents(g).to_vec()), vec![vec![2], vec![2], vec![3], vec![], vec![]]);
+        assert!(links.sources(5).is_empty() && links.parents(u32::MAX).is_empty());
+        assert_eq!(GroupLinks::default().sources(0), &[] as &[u32]);
+    }
+
+    #[test]
+    fn broken_links_are_rejected_with_their_offset() {
+        type Edit = fn(&mut Vec<Group>, &mut Vec<u32>);
+        let cases: [(&str, Edit, u64, &str); 9] = [
+            ("self link", |_, s| s[2] = 3, 2008, "not a group before it"),
+            ("forward link", |_, s| s[1] = 4, 2004, "not a group before it"),
+            ("out of range", |_, s| s[2] = 99, 2008, "not a group before it"),
+            ("unsorted", |_, s| s.swap(0, 1), 2004, "strictly increasing"),
+            ("duplicate", |_, s| s[1] = 0, 2004, "strictly increasing"),
+            ("finer level", |g, _| g[0].level = 2, 2000, "level"),
+            ("larger error", |g, _| g[1].error = 3.0, 2004, "error"),
+            (
+                "finite error, no parent",
+                |g, s| {
+                    g[2].source_count = 1;
+                    s.remove(1);
+                },
+                1048,
+                "no group was simplified from it",
+            ),
+            ("count mismatch", |g, _| g[3].source_count = 2, 2000, "sources"),
+        ];
+        for (name, edit, offset, msg) in cases {
+            let (mut groups, mut sources) = linked_groups();
+            edit(&mut groups, &mut sources);
+            let (at, m) = links_of(&groups, &sources).expect_err(name);
+            assert_eq!(at, offset, "{name}: {m}");
+            assert!(m.contains(msg), "{name}: {m}");
+        }
+        // A root group (error ∞) is never a source.
+        let (mut groups, sources) = linked_groups();
+        groups[1].error = f32::INFINITY;
+        groups[2].error = f32::INFINITY;
+        let (_, m) = links_of(&groups, &sources).unwrap_err();
+        assert!(m.contains("source 1 has error inf"), "{m}");
     }
 
     #[test]

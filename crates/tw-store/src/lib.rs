@@ -3,7 +3,9 @@
 //!
 //! A store holds a scene as a *cluster DAG* (clusters of ≤ 128 triangles over vertices on one
 //! scene-wide integer grid, grouped into LOD groups with monotone object-space errors), attached
-//! to the nodes of a spatial hierarchy (the *skeleton*), and paged: clusters are packed into
+//! to the nodes of a spatial hierarchy (the *skeleton*), with the links between groups (each
+//! group's *sources*, the finer groups it was simplified from, and their inverse, its
+//! *parents*), and paged: clusters are packed into
 //! compressed, checksummed pages that can be loaded and decoded independently.
 //!
 //! - [`format`](mod@format): the on-disk structures (header, object table, nodes, groups, page table) and
@@ -50,7 +52,7 @@
 //!     triangles: 1,
 //!     ..Default::default()
 //! }];
-//! writer.finish(&info, &objects, &nodes, &groups)?;
+//! writer.finish(&info, &objects, &nodes, &groups, &[])?;
 //!
 //! let store = Store::open(&path)?;
 //! assert_eq!(store.objects()[0].name, "floor");
@@ -71,7 +73,7 @@ mod write;
 
 pub use codec::{PageCluster, MAX_TRIANGLES, MAX_VERTICES};
 pub use error::{CodecError, StoreError};
-pub use format::{Group, Header, Node, PageEntry, FORMAT_VERSION};
+pub use format::{Group, GroupLinks, Header, Node, PageEntry, FORMAT_VERSION};
 pub use read::{Store, VerifyReport};
 pub use write::{Object, StoreInfo, StoreWriter, WriteSummary};
 
@@ -82,6 +84,9 @@ pub fn fuzz_bytes(data: &[u8]) {
         let _ = store.verify(|_, _| {});
         for i in 0..store.pages().len() as u32 {
             let _ = store.page(i);
+        }
+        for g in 0..store.groups().len() as u32 + 1 {
+            let _ = (store.group_sources(g), store.group_parents(g));
         }
     }
 }

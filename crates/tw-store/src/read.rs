@@ -1,10 +1,11 @@
 //! [`Store`]: opens a store (memory-mapped, or from a byte buffer), validates it and decodes
 //! pages on demand; [`Store::verify`] checks a whole store (docs/FORMAT.md, "Invariants").
 //!
-//! `open` reads only the header and the tables (O(objects + nodes + groups + pages)) and checks
-//! their checksums and structural invariants, so a store that opens can be traversed without
-//! further checks; `page` checks the page's checksum and decodes it; `verify` decodes every page
-//! and checks the invariants that need the clusters.
+//! `open` reads only the header and the tables (O(objects + nodes + groups + links + pages)) and
+//! checks their checksums and structural invariants, so a store that opens can be traversed
+//! without further checks; it also derives each group's parents from the stored sources
+//! ([`Store::group_parents`]). `page` checks the page's checksum and decodes it; `verify` decodes
+//! every page and checks the invariants that need the clusters.
 
 use std::fs::File;
 use std::path::{Path, PathBuf};
@@ -12,9 +13,9 @@ use std::path::{Path, PathBuf};
 use crate::codec::{self, PageCluster};
 use crate::error::StoreError;
 use crate::format::{
-    checksum, str_at, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Reader, SectionKind,
-    Tables, FORMAT_VERSION, GROUP_LEN, HEADER_LEN, MAGIC, NODE_LEN, OBJECT_LEN, PAGE_ENTRY_LEN,
-    SECTION_ALIGN,
+    checksum, str_at, validate_tables, Group, GroupLinks, Header, Node, ObjectEntry, PageEntry, Reader,
+    SectionKind, Tables, FORMAT_VERSION, GROUP_LEN, HEADER_LEN, MAGIC, NODE_LEN, OBJECT_LEN, PAGE_ENTRY_LEN,
+    SECTIONS_AT, SECTION_ALIGN, SECTION_ENTRY_LEN, SOURCE_LEN,
 };
 use crate::write::{Object, TABLE_ORDER};
 
@@ -45,6 +46,7 @@ pub struct Store {
     objects: Vec<Object>,
     nodes: Vec<Node>,
     groups: Vec<Group>,
+    links: GroupLinks,
     pages: Vec<PageEntry>,
 }
 
@@ -58,6 +60,8 @@ pub struct VerifyReport {
     pub nodes: u32,
     pub groups: u32,
     pub objects: u32,
+    /// Links between groups (Σ of the groups' source counts).
+    pub group_links: u64,
     pub clusters: u64,
     /// Triangles over all levels.
     pub triangles: u64,
@@ -144,7 +148,7 @@ impl Store {
             (SectionKind::Groups, h.group_count, GROUP_LEN),
             (SectionKind::PageTable, h.page_count, PAGE_ENTRY_LEN),
         ];
-        let dir_at = |k: SectionKind| 160 + 24 * k as u64;
+        let dir_at = |k: SectionKind| (SECTIONS_AT + SECTION_ENTRY_LEN * k as usize) as u64;
         for (kind, count, size) in fixed {
             if h.section(kind).length != count as u64 * size as u64 {
                 return Err(corrupt((
@@ -156,6 +160,13 @@ impl Store {
                     ),
                 )));
             }
+        }
+        let sources_len = h.section(SectionKind::GroupSources).length;
+        if sources_len % SOURCE_LEN as u64 != 0 {
+            return Err(corrupt((
+                dir_at(SectionKind::GroupSources),
+                format!("group sources are {sources_len} bytes, not a multiple of {SOURCE_LEN}"),
+            )));
         }
         let strings_len = h.section(SectionKind::Strings).length;
         if strings_len > u32::MAX as u64 {
@@ -237,18 +248,26 @@ impl Store {
             .map(|_| PageEntry::parse(&mut r))
             .collect::<Result<Vec<_>, _>>()
             .map_err(corrupt)?;
+        // The section lies inside the file (checked above): its length bounds this allocation.
+        let mut r = section(SectionKind::GroupSources);
+        let sources = (0..sources_len / SOURCE_LEN as u64)
+            .map(|_| r.u32())
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(corrupt)?;
         let s = h.section(SectionKind::Strings);
         let strings = &bytes[s.offset as usize..s.end() as usize];
 
-        validate_tables(&Tables {
+        let links = validate_tables(&Tables {
             header: h,
             objects: &object_entries,
             nodes: &nodes,
             groups: &groups,
             pages: &page_entries,
             strings,
+            sources: &sources,
         })
         .map_err(corrupt)?;
+        drop(sources);
 
         // Validated above: these cannot fail.
         let text = |r| str_at(strings, r).unwrap_or_default().to_owned();
@@ -258,7 +277,18 @@ impl Store {
             .iter()
             .map(|o| Object { name: text(o.name), color: o.color, triangles: o.triangles })
             .collect();
-        Ok(Store { path, data, header, units, build_options, objects, nodes, groups, pages: page_entries })
+        Ok(Store {
+            path,
+            data,
+            header,
+            units,
+            build_options,
+            objects,
+            nodes,
+            groups,
+            links,
+            pages: page_entries,
+        })
     }
 
     /// The file this store was opened from (`<memory>` for [`from_bytes`](Self::from_bytes)).
@@ -293,6 +323,25 @@ impl Store {
 
     pub fn pages(&self) -> &[PageEntry] {
         &self.pages
+    }
+
+    /// The sources of `group`: the finer groups its clusters were simplified from (sorted, each
+    /// with a smaller index than `group`). Empty for a group of input clusters, or for an index
+    /// beyond the group table.
+    pub fn group_sources(&self, group: u32) -> &[u32] {
+        self.links.sources(group)
+    }
+
+    /// The parents of `group`: the coarser groups whose clusters were simplified from it (sorted,
+    /// each with a larger index than `group`). Empty exactly for the root groups (error = +∞),
+    /// or for an index beyond the group table.
+    pub fn group_parents(&self, group: u32) -> &[u32] {
+        self.links.parents(group)
+    }
+
+    /// Both relations, for callers that keep them apart from the store.
+    pub fn group_links(&self) -> &GroupLinks {
+        &self.links
     }
 
     /// Size of the store in bytes.
@@ -361,8 +410,12 @@ impl Store {
     /// cluster's group lists it (same page, within the group's cluster range) and the group's
     /// counts match; `self_error ≤ group.error`; the self sphere lies in the group's sphere;
     /// the cluster's level ≤ the group's level; positions lie in the group's node bounds; each
-    /// node's `max_error` ≥ the errors of the groups in its subtree. `progress(done, total)` is
-    /// called after each page. Stops at the first problem.
+    /// node's `max_error` ≥ the errors of the groups in its subtree; the group sources agree
+    /// with the clusters: a cluster with `self_error > 0` has a source in its group's sources
+    /// whose error and sphere equal its self error and self sphere, every source of a group is
+    /// matched so by one of its clusters, and sources of a group with equal error and sphere (one
+    /// simplification step) have the same parents.
+    /// `progress(done, total)` is called after each page. Stops at the first problem.
     pub fn verify(&self, mut progress: impl FnMut(u32, u32)) -> Result<VerifyReport, StoreError> {
         let invariant = |msg: String| StoreError::Invariant { path: self.path.clone(), msg };
         let mut rep = VerifyReport {
@@ -372,8 +425,11 @@ impl Store {
             nodes: self.nodes.len() as u32,
             groups: self.groups.len() as u32,
             objects: self.objects.len() as u32,
+            group_links: self.links.link_count() as u64,
             ..Default::default()
         };
+        // Whether some cluster of the group was made from that source, by link.
+        let mut link_used = vec![false; self.links.link_count()];
         let mut claimed = vec![0u32; self.groups.len()];
         let mut group_tris = vec![0u64; self.groups.len()];
         let total = self.pages.len() as u32;
@@ -406,6 +462,28 @@ impl Store {
                         "{at}: self error {} > error {} of its group {}",
                         c.self_error, g.error, c.group
                     )));
+                }
+                // A simplified cluster (self error > 0) carries the error and sphere of the
+                // source(s) it was made from.
+                if c.self_error > 0.0 {
+                    let range = self.links.source_range(c.group);
+                    let mut matched = false;
+                    for (k, &s) in range.clone().zip(self.links.sources(c.group)) {
+                        let src = &self.groups[s as usize];
+                        if src.error == c.self_error && src.sphere == c.self_sphere {
+                            link_used[k] = true;
+                            matched = true;
+                        }
+                    }
+                    if !matched {
+                        return Err(invariant(format!(
+                            "{at}: self error {} and sphere {:?} match none of the sources {:?} of its group {}",
+                            c.self_error,
+                            c.self_sphere,
+                            self.links.sources(c.group),
+                            c.group
+                        )));
+                    }
                 }
                 if !sphere_contains(g.sphere, c.self_sphere) {
                     return Err(invariant(format!(
@@ -444,6 +522,41 @@ impl Store {
                     "group {i} lists {} clusters / {} triangles, its clusters are {} / {}",
                     g.cluster_count, g.triangles, claimed[i], group_tris[i]
                 )));
+            }
+        }
+        if let Some(k) = link_used.iter().position(|&u| !u) {
+            let group = (0..self.groups.len() as u32)
+                .find(|&g| self.links.source_range(g).contains(&k))
+                .unwrap_or_default();
+            let s = self.links.sources(group)[k - self.links.source_range(group).start];
+            return Err(invariant(format!(
+                "group {group}: source {s} (error {}, sphere {:?}) matches none of the group's clusters \
+                 (no cluster was simplified from it)",
+                self.groups[s as usize].error, self.groups[s as usize].sphere
+            )));
+        }
+        // The sources of one simplification step (those of a group with equal error and sphere)
+        // have the same parents, so that the runtime's availability rule treats them alike.
+        let step_key = |s: u32| {
+            let g = &self.groups[s as usize];
+            (g.error.to_bits(), g.sphere.map(f32::to_bits))
+        };
+        let mut step: Vec<u32> = Vec::new();
+        for group in 0..self.groups.len() as u32 {
+            step.clear();
+            step.extend_from_slice(self.links.sources(group));
+            step.sort_by_key(|&s| (step_key(s), s));
+            for w in step.windows(2) {
+                if step_key(w[0]) == step_key(w[1]) && self.links.parents(w[0]) != self.links.parents(w[1]) {
+                    return Err(invariant(format!(
+                        "group {group}: sources {} and {} have the same error and sphere (one simplification \
+                         step) but different parents {:?} and {:?}",
+                        w[0],
+                        w[1],
+                        self.links.parents(w[0]),
+                        self.links.parents(w[1])
+                    )));
+                }
             }
         }
         // Children come after their parent (checked at open): one backward pass.

@@ -1,8 +1,8 @@
 //! [`StoreWriter`]: writes a store atomically, streaming pages as they come (docs/FORMAT.md).
 //!
 //! Layout written: a zeroed header placeholder, then each page as it is added (the pages
-//! region), then on [`StoreWriter::finish`] the tables (objects, nodes, groups, page table,
-//! strings), then the header is patched in place. Everything goes to a temporary file in the
+//! region), then on [`StoreWriter::finish`] the tables (objects, nodes, groups, group sources,
+//! page table, strings), then the header is patched in place. Everything goes to a temporary file in the
 //! destination directory, which is fsynced and renamed over the destination only when `finish`
 //! succeeds; a writer dropped before that leaves nothing behind. The bytes depend only on the
 //! input (no timestamps, no hash-map order).
@@ -15,7 +15,7 @@ use crate::codec::{self, PageCluster};
 use crate::error::StoreError;
 use crate::format::{
     checksum, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Section, SectionKind, StrRef,
-    Tables, FORMAT_VERSION, HEADER_LEN, PAGE_ROOT, SECTION_ALIGN,
+    Tables, FORMAT_VERSION, HEADER_LEN, PAGE_ROOT, SECTION_ALIGN, SECTION_COUNT,
 };
 
 /// Scene-wide facts for the header.
@@ -130,13 +130,16 @@ impl StoreWriter {
 
     /// Writes the tables and the header, fsyncs and renames the file into place. Fails without
     /// leaving a file when the tables break an invariant of docs/FORMAT.md (the error says
-    /// which). Node 0 is the root; children must come after their parent.
+    /// which). Node 0 is the root; children must come after their parent. `group_sources` holds
+    /// the sources of every group, group after group (`groups[i].source_count` of them for group
+    /// `i`, increasing, each a smaller group index than `i`).
     pub fn finish(
         mut self,
         info: &StoreInfo,
         objects: &[Object],
         nodes: &[Node],
         groups: &[Group],
+        group_sources: &[u32],
     ) -> Result<WriteSummary, StoreError> {
         let count = |n: usize, what: &str| {
             u32::try_from(n).map_err(|_| StoreError::Invalid(format!("{n} {what}: more than 2^32")))
@@ -162,10 +165,13 @@ impl StoreWriter {
         }
         count(strings.len(), "string bytes")?;
 
-        let mut bodies: [Vec<u8>; 6] = Default::default();
+        let mut bodies: [Vec<u8>; SECTION_COUNT] = Default::default();
         object_entries.iter().for_each(|o| o.write(&mut bodies[SectionKind::Objects as usize]));
         nodes.iter().for_each(|n| n.write(&mut bodies[SectionKind::Nodes as usize]));
         groups.iter().for_each(|g| g.write(&mut bodies[SectionKind::Groups as usize]));
+        let links = &mut bodies[SectionKind::GroupSources as usize];
+        links.reserve(group_sources.len() * 4);
+        group_sources.iter().for_each(|&s| links.extend_from_slice(&s.to_le_bytes()));
         self.pages.iter().for_each(|p| p.write(&mut bodies[SectionKind::PageTable as usize]));
         bodies[SectionKind::Strings as usize] = strings;
 
@@ -203,6 +209,7 @@ impl StoreWriter {
             groups,
             pages: &self.pages,
             strings: &bodies[SectionKind::Strings as usize],
+            sources: group_sources,
         };
         validate_tables(&tables).map_err(|(_, m)| StoreError::Invalid(m))?;
 
@@ -245,10 +252,11 @@ impl StoreWriter {
 }
 
 /// Tables in file order, after the pages region.
-pub(crate) const TABLE_ORDER: [SectionKind; 5] = [
+pub(crate) const TABLE_ORDER: [SectionKind; SECTION_COUNT - 1] = [
     SectionKind::Objects,
     SectionKind::Nodes,
     SectionKind::Groups,
+    SectionKind::GroupSources,
     SectionKind::PageTable,
     SectionKind::Strings,
 ];
@@ -259,8 +267,8 @@ pub(crate) fn layout_sections(
     pages_len: u64,
     len: impl Fn(SectionKind) -> u64,
     crc: impl Fn(SectionKind) -> u32,
-) -> [Section; 6] {
-    let mut sections = [Section::default(); 6];
+) -> [Section; SECTION_COUNT] {
+    let mut sections = [Section::default(); SECTION_COUNT];
     sections[SectionKind::Pages as usize] =
         Section { offset: HEADER_LEN as u64, length: pages_len, checksum: 0 };
     let mut pos = HEADER_LEN as u64 + pages_len;

@@ -1,12 +1,13 @@
 //! Store round trips, determinism, atomic writes, and every kind of damage: flipped bytes (with
-//! and without fixed-up checksums), truncation, wrong magic and version, broken references and
-//! broken tree structure. None of them may panic.
+//! and without fixed-up checksums), truncation, wrong magic and version (a format-1 store among
+//! them), broken references, broken tree structure and broken group links. None of them may
+//! panic.
 
 use std::path::Path;
 
 use tw_store::format::{
     checksum, Header, PageEntry, Reader, SectionKind, GROUP_LEN, HEADER_CRC_AT, HEADER_LEN, NODE_LEN,
-    PAGE_ENTRY_LEN,
+    PAGE_ENTRY_LEN, SOURCE_LEN,
 };
 use tw_store::{Group, Node, Object, PageCluster, Store, StoreError, StoreInfo, StoreWriter};
 
@@ -46,16 +47,19 @@ struct Scene {
     objects: Vec<Object>,
     nodes: Vec<Node>,
     groups: Vec<Group>,
+    sources: Vec<u32>,
 }
 
 /// Root node 0 with leaves 1 and 2. Leaf groups 0 and 1 (level 0, pages 0 and 1), root group 2
-/// (level 1, error ∞, root page 2).
+/// (level 1, error ∞, root page 2), simplified from groups 0 and 1 (its sources) in one step:
+/// its clusters' self error and sphere are theirs.
 fn scene() -> Scene {
     let big = [1.0, 1.0, 0.0, 100.0];
+    let simplified = |x0| PageCluster { self_sphere: big, ..strip(x0, 2, 2, 1, 0.75, x0 / 500) };
     let pages = vec![
         (vec![strip(0, 4, 0, 0, 0.0, 0), strip(40, 5, 0, 0, 0.0, 1)], false),
         (vec![strip(1000, 3, 1, 0, 0.0, 2), strip(1030, 6, 1, 0, 0.0, 2)], false),
-        (vec![strip(0, 2, 2, 1, 0.75, 0), strip(1000, 2, 2, 1, 0.75, 2)], true),
+        (vec![simplified(0), simplified(1000)], true),
     ];
     let tris = |p: usize| pages[p].0.iter().map(|c| c.triangle_count() as u32).sum::<u32>();
     let groups = vec![
@@ -68,6 +72,7 @@ fn scene() -> Scene {
             first_cluster: 0,
             cluster_count: 2,
             triangles: tris(0),
+            source_count: 0,
         },
         Group {
             sphere: big,
@@ -78,6 +83,7 @@ fn scene() -> Scene {
             first_cluster: 0,
             cluster_count: 2,
             triangles: tris(1),
+            source_count: 0,
         },
         Group {
             sphere: big,
@@ -88,6 +94,7 @@ fn scene() -> Scene {
             first_cluster: 0,
             cluster_count: 2,
             triangles: tris(2),
+            source_count: 2,
         },
     ];
     let nodes = vec![
@@ -124,7 +131,7 @@ fn scene() -> Scene {
         Object { name: "door ü".into(), color: None, triangles: 8 },
         Object { name: String::new(), color: Some([1, 2, 3, 4]), triangles: 18 },
     ];
-    Scene { pages, objects, nodes, groups }
+    Scene { pages, objects, nodes, groups, sources: vec![0, 1] }
 }
 
 fn write(path: &Path, s: &Scene) -> Result<tw_store::WriteSummary, StoreError> {
@@ -132,7 +139,7 @@ fn write(path: &Path, s: &Scene) -> Result<tw_store::WriteSummary, StoreError> {
     for (i, (clusters, root)) in s.pages.iter().enumerate() {
         assert_eq!(w.add_page(clusters, *root)?, i as u32);
     }
-    w.finish(&info(36), &s.objects, &s.nodes, &s.groups)
+    w.finish(&info(36), &s.objects, &s.nodes, &s.groups, &s.sources)
 }
 
 fn store_bytes(s: &Scene) -> Vec<u8> {
@@ -218,6 +225,15 @@ fn round_trip_of_a_few_pages() {
     assert_eq!(store.objects(), &s.objects[..]);
     assert_eq!(store.nodes(), &s.nodes[..]);
     assert_eq!(store.groups(), &s.groups[..]);
+    assert_eq!(
+        [store.group_sources(0), store.group_sources(1), store.group_sources(2)],
+        [&[][..], &[], &[0, 1]]
+    );
+    assert_eq!(
+        [store.group_parents(0), store.group_parents(1), store.group_parents(2)],
+        [&[2][..], &[2], &[]]
+    );
+    assert!(store.group_sources(3).is_empty() && store.group_parents(3).is_empty());
     assert!(store.pages()[2].is_root() && !store.pages()[0].is_root());
     for (i, (clusters, _)) in s.pages.iter().enumerate() {
         let back = store.page(i as u32).unwrap();
@@ -227,7 +243,7 @@ fn round_trip_of_a_few_pages() {
     let mut calls = Vec::new();
     let rep = store.verify(|d, t| calls.push((d, t))).unwrap();
     assert_eq!(calls, vec![(1, 3), (2, 3), (3, 3)]);
-    assert_eq!((rep.pages, rep.root_pages, rep.clusters, rep.max_level), (3, 1, 6, 1));
+    assert_eq!((rep.pages, rep.root_pages, rep.clusters, rep.max_level, rep.group_links), (3, 1, 6, 1, 2));
     assert_eq!(rep.triangles, h.triangle_count);
     assert_eq!(rep.level0_triangles, 36);
     assert!(matches!(store.page(3), Err(StoreError::Page { page: 3, .. })));
@@ -283,6 +299,10 @@ fn writer_rejects_bad_clusters_and_tables() {
         ("cluster range", Box::new(|s| s.groups[0].first_cluster = 1)),
         ("nan error", Box::new(|s| s.groups[0].error = f32::NAN)),
         ("group level", Box::new(|s| s.groups[0].level = 5)),
+        ("source after its group", Box::new(|s| s.sources[1] = 2)),
+        ("sources unsorted", Box::new(|s| s.sources.swap(0, 1))),
+        ("source count", Box::new(|s| s.groups[2].source_count = 1)),
+        ("finite error, no parent", Box::new(|s| s.groups[2].error = 0.5)),
         ("no nodes", Box::new(|s| s.nodes.clear())),
         ("bad up axis", Box::new(|_| {})),
     ];
@@ -297,7 +317,7 @@ fn writer_rejects_bad_clusters_and_tables() {
         if name == "bad up axis" {
             i.up_axis = 3;
         }
-        let r = w.finish(&i, &s.objects, &s.nodes, &s.groups);
+        let r = w.finish(&i, &s.objects, &s.nodes, &s.groups, &s.sources);
         assert!(matches!(r, Err(StoreError::Invalid(_))), "{name}: {r:?}");
         assert!(!path.exists(), "{name}");
     }
@@ -372,14 +392,68 @@ fn wrong_magic_is_not_a_store() {
 #[test]
 fn wrong_version_says_rebuild() {
     let mut bytes = store_bytes(&scene());
-    bytes[8] = 2;
+    bytes[8] = 3;
     let e = Store::from_bytes(bytes).unwrap_err();
-    assert!(matches!(e, StoreError::Version { found: 2, .. }));
-    assert!(e.to_string().contains("store version 2, this terawalk reads version 1; rebuild it"), "{e}");
+    assert!(matches!(e, StoreError::Version { found: 3, .. }));
+    assert!(e.to_string().contains("written by a newer terawalk (store format 3"), "{e}");
     // The version is checked before the rest of the header, even if that is cut short.
     let mut short = store_bytes(&scene())[..16].to_vec();
     short[8] = 7;
     assert!(matches!(Store::from_bytes(short), Err(StoreError::Version { found: 7, .. })));
+}
+
+/// A format-1 store (320-byte header, no group sources) is refused by name, before anything
+/// else of its header is read, through both readers.
+#[test]
+fn format_1_store_is_refused_with_rebuild_advice() {
+    let mut v1 = b"TERAWALK".to_vec();
+    v1.extend_from_slice(&1u32.to_le_bytes());
+    v1.extend_from_slice(&320u32.to_le_bytes());
+    v1.resize(320, 0);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("old.tw");
+    std::fs::write(&path, &v1).unwrap();
+    for e in [Store::open(&path).unwrap_err(), Store::from_bytes(v1).unwrap_err()] {
+        assert!(matches!(e, StoreError::Version { found: 1, .. }), "{e:?}");
+        let msg = e.to_string();
+        assert!(
+            msg.contains(
+                "was written by an older terawalk (store format 1); rebuild it with `terawalk build`"
+            ),
+            "{msg}"
+        );
+    }
+    assert!(Store::open(&path).unwrap_err().to_string().starts_with(&path.display().to_string()));
+}
+
+#[test]
+fn corrupt_group_link_is_rejected_at_open() {
+    let base = store_bytes(&scene());
+    let at = section_offset(&base, SectionKind::GroupSources);
+    // Group 2's second source made itself.
+    let mut bytes = base.clone();
+    patch_u32(&mut bytes, at + SOURCE_LEN, 2);
+    let e = Store::from_bytes(bytes).unwrap_err();
+    match &e {
+        StoreError::Corrupt { offset, msg, .. } => {
+            assert_eq!(*offset, (at + SOURCE_LEN) as u64, "{e}");
+            assert!(msg.contains("group 2: source 2 is not a group before it"), "{e}");
+        }
+        other => panic!("expected a corrupt store, got {other:?}"),
+    }
+    // Beyond the group table.
+    let mut bytes = base.clone();
+    patch_u32(&mut bytes, at, 1000);
+    assert!(Store::from_bytes(bytes).unwrap_err().to_string().contains("source 1000"));
+    // Group 2 counts one source only: the section holds one too many.
+    let mut bytes = base.clone();
+    patch_u32(&mut bytes, section_offset(&base, SectionKind::Groups) + 2 * GROUP_LEN + 44, 1);
+    assert!(Store::from_bytes(bytes).unwrap_err().to_string().contains("count 1 sources"));
+    // Without the checksum fix-up, the section's checksum catches the change.
+    let mut bytes = base;
+    bytes[at] ^= 1;
+    let e = Store::from_bytes(bytes).unwrap_err();
+    assert!(e.to_string().contains("group sources checksum mismatch"), "{e}");
 }
 
 #[test]
@@ -425,6 +499,16 @@ fn verify_finds_cluster_level_invariant_violations() {
         ("sphere not nested", Box::new(|s| s.groups[0].sphere[3] = 0.1), "sphere"),
         ("vertex outside node", Box::new(|s| s.nodes[1].max[0] = 80), "outside the bounds"),
         (
+            "simplified cluster from no source",
+            Box::new(|s| s.pages[2].0[1].self_sphere[3] = 50.0),
+            "match none of the sources",
+        ),
+        (
+            "source no cluster was made from",
+            Box::new(|s| s.groups[1].sphere[3] = 99.0),
+            "matches none of the group's clusters",
+        ),
+        (
             "cluster level above group",
             Box::new(|s| {
                 s.pages[1].0[0].level = 1;
@@ -451,6 +535,26 @@ fn verify_finds_cluster_level_invariant_violations() {
     }
 }
 
+/// Groups 0 and 1 are the sources of one step (same error and sphere) into root group 2; a
+/// second root group 3 made from group 1 alone gives them different parents: verify says so.
+#[test]
+fn verify_finds_a_step_whose_sources_have_different_parents() {
+    let mut s = scene();
+    let extra = PageCluster { self_sphere: s.groups[1].sphere, ..strip(1000, 1, 3, 1, 0.75, 2) };
+    let triangles = extra.triangle_count() as u32;
+    s.pages[2].0.push(extra);
+    s.groups.push(Group { first_cluster: 2, cluster_count: 1, triangles, source_count: 1, ..s.groups[2] });
+    s.sources.push(1);
+    s.nodes[0].group_count = 2;
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("step.tw");
+    write(&path, &s).unwrap();
+    let store = Store::open(&path).unwrap();
+    assert_eq!((store.group_parents(0), store.group_parents(1)), (&[2][..], &[2, 3][..]));
+    let e = store.verify(|_, _| {}).unwrap_err();
+    assert!(e.to_string().contains("group 2: sources 0 and 1 have the same error and sphere"), "{e}");
+}
+
 #[test]
 fn corrupt_page_reports_page_and_offset() {
     let mut bytes = store_bytes(&scene());
@@ -471,7 +575,7 @@ fn empty_scene_stores_and_opens() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("empty.tw");
     let w = StoreWriter::create(&path).unwrap();
-    w.finish(&info(0), &[], &[Node::default()], &[]).unwrap();
+    w.finish(&info(0), &[], &[Node::default()], &[], &[]).unwrap();
     let rep = Store::open(&path).unwrap().verify(|_, _| {}).unwrap();
     assert_eq!((rep.pages, rep.triangles, rep.nodes), (0, 0, 1));
 }
@@ -533,7 +637,7 @@ fn store_size_per_triangle() {
         max_error: f32::INFINITY,
         ..Default::default()
     }];
-    let s = w.finish(&info(tris), &[Object::default()], &nodes, &groups).unwrap();
+    let s = w.finish(&info(tris), &[Object::default()], &nodes, &groups, &[]).unwrap();
     let per_tri = s.file_bytes as f64 / tris as f64;
     println!(
         "{tris} triangles: {} bytes in the store, {per_tri:.2} bytes/triangle (pages {:.2})",
@@ -558,6 +662,7 @@ fn write_fuzz_seed() {
     s.groups.truncate(1);
     s.groups[0].node = 0;
     s.groups[0].error = f32::INFINITY;
+    s.sources.clear();
     s.nodes = vec![Node {
         child_count: 0,
         first_child: 0,

@@ -26,11 +26,13 @@ pub fn run(args: InfoArgs) -> Result<()> {
     );
     println!("  grid: step {:.3e}", h.grid_step);
     println!(
-        "  {} input triangles, {} objects, {} nodes, {} groups, {} pages",
+        "  {} input triangles, {} objects, {} nodes, {} groups ({} links to the groups they were \
+         simplified from), {} pages",
         fmt_count(h.input_triangles),
         fmt_count(store.objects().len() as u64),
         fmt_count(store.nodes().len() as u64),
         fmt_count(store.groups().len() as u64),
+        fmt_count(store.group_links().link_count() as u64),
         fmt_count(store.pages().len() as u64)
     );
     // Counts per level, from the group table.
