@@ -67,6 +67,13 @@ pub enum Command {
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
+    /// Generate a camera path: an interior walk at eye height and a fly-over (for bench and the viewer).
+    #[command(after_help = "Examples:\n  terawalk path plant.tw -o path.json\n  \
+                            terawalk path plant.tw -o walk.json --part walk --frames 900 --seed 7\n  \
+                            terawalk path plant.tw -o tour.json --walk-share 0.8 --speed 2\n  \
+                            terawalk path dragon.tw -o orbit.json   # no floors: a fly-around\n  \
+                            terawalk path ship_mm.tw -o p.json --eye-height 1700")]
+    Path(PathArgs),
 }
 
 #[derive(Args, Debug)]
@@ -279,4 +286,53 @@ pub struct InfoArgs {
     /// Check every page checksum and structural invariant; report the first bad page.
     #[arg(long)]
     pub verify: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PathPartArg {
+    /// Only the walk at eye height.
+    Walk,
+    /// Only the fly-over.
+    Fly,
+    /// A walk, then a rise into the fly-over.
+    Both,
+}
+
+#[derive(Args, Debug)]
+pub struct PathArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// The camera path to write (JSON, one camera per frame, input coordinates).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Frames in all.
+    #[arg(long, default_value_t = 600)]
+    pub frames: usize,
+    /// Frame rate the path is made for (sets the walking step per frame).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f64,
+    /// Which parts: walk, fly or both.
+    #[arg(long, value_enum, default_value = "both")]
+    pub part: PathPartArg,
+    /// Share of the frames that walk with `--part both`.
+    #[arg(long, default_value_t = 0.6)]
+    pub walk_share: f64,
+    /// Eye height above the floor, in the store's units (default: 1.7 m in its units).
+    #[arg(long)]
+    pub eye_height: Option<f64>,
+    /// Walking speed, units per second (default: 1.4 m/s in the store's units).
+    #[arg(long)]
+    pub speed: Option<f64>,
+    /// Vertical field of view, degrees.
+    #[arg(long, default_value_t = 60.0)]
+    pub fovy: f64,
+    /// Random seed: the same seed gives the same path.
+    #[arg(short, long, default_value_t = 1)]
+    pub seed: u64,
+    /// Voxel size of the walkable-space analysis (default: eye height / 8).
+    #[arg(long)]
+    pub voxel: Option<f64>,
+    /// Most voxels of the analysis (one bit each; larger scenes get coarser voxels or a window).
+    #[arg(long, default_value = "256M", value_parser = parse_count)]
+    pub max_voxels: u64,
 }

@@ -8,7 +8,8 @@
 //! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
-//! - [`path`]: camera paths (one camera per frame) as JSON, for `path`, `bench` and the viewer.
+//! - [`path`]: camera paths (one camera per frame) as JSON, for `path`, `bench` and the viewer;
+//! - [`pathgen`]: automatic walkthrough paths (interior walk at eye height, fly-over).
 //!
 //! ```no_run
 //! use tw_runtime::{Camera, InputCamera, PageCache, SelectOptions, Selector};
@@ -30,6 +31,7 @@ pub mod hzb;
 pub mod lod_error;
 pub mod occlusion;
 pub mod path;
+pub mod pathgen;
 pub mod select;
 
 pub use cache::{CacheStats, PageCache, ResidentPage};
@@ -40,4 +42,5 @@ pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
+pub use pathgen::{generate_path, GeneratedPath, PathGenError, PathOptions, PathPart, PathReport, RegionKind, WalkGrid, WalkParams};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};

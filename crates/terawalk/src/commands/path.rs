@@ -1,0 +1,102 @@
+//! `terawalk path`: generate a camera path through a store (tw-runtime's `pathgen`: an interior
+//! walk at eye height, a fly-over, or a fly-around when there is nothing to walk on) and write
+//! it as JSON for `bench` and the viewer.
+
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use tw_runtime::pathgen::{generate_path, PathOptions, PathPart, RegionKind};
+use tw_store::Store;
+
+use crate::cli::{PathArgs, PathPartArg};
+use crate::progress;
+use crate::units::fmt_count;
+
+pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
+    let start = Instant::now();
+    let store =
+        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    let options = PathOptions {
+        frames: args.frames,
+        fps: args.fps,
+        part: match args.part {
+            PathPartArg::Walk => PathPart::Walk,
+            PathPartArg::Fly => PathPart::Fly,
+            PathPartArg::Both => PathPart::Both,
+        },
+        walk_share: args.walk_share,
+        eye_height: args.eye_height,
+        speed: args.speed,
+        fovy_deg: args.fovy,
+        seed: args.seed,
+        voxel_size: args.voxel,
+        max_voxels: args.max_voxels,
+    };
+    let units = store.units().to_string();
+    let unit_name = if units.is_empty() { "units".to_string() } else { units.clone() };
+    if units.is_empty() && options.eye_height.is_none() && options.part != PathPart::Fly {
+        tracing::info!("the store has no units: assuming metres (eye height 1.7)");
+    } else if tw_runtime::pathgen::metres_per_unit(&units).is_none() && options.eye_height.is_none() {
+        eprintln!("note: unknown units {units:?}; assuming metres (give --eye-height in the model's units)");
+    }
+    let pb = progress::count(0, "voxelizing");
+    if quiet {
+        pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
+    }
+    pb.set_message("coarse pages");
+    let generated = generate_path(&store, &options, &mut |_stage, done, total| {
+        pb.set_length(total);
+        pb.set_position(done);
+    })?;
+    pb.finish_and_clear();
+    let path = &generated.path;
+    path.save(&args.output)?;
+    let r = &generated.report;
+    if let Some(why) = &r.fallback {
+        println!("no walk: {why}; the path is a fly-around instead");
+    }
+    if r.walk_frames > 0 {
+        println!(
+            "walk: {} frames, {:.1} {unit_name} at {:.2} {unit_name}/s, eye height {} {unit_name}, {} region of \
+             {} walkable spans ({} in all), {} waypoints",
+            r.walk_frames,
+            r.walk_length,
+            r.walk_length / (r.walk_frames.max(2) - 1) as f64 * args.fps,
+            r.eye_height,
+            match r.region {
+                Some(RegionKind::Interior) => "interior",
+                Some(RegionKind::Outdoor) => "outdoor",
+                None => "no",
+            },
+            fmt_count(r.region_spans as u64),
+            fmt_count(r.walkable_spans as u64),
+            r.waypoints
+        );
+        println!(
+            "  voxels: {:.3} {unit_name}, grid {} x {} x {}{}; {} coarse triangles from {} pages{}",
+            r.voxel_size,
+            r.grid[0],
+            r.grid[1],
+            r.grid[2],
+            if r.windowed { " (a window around the centre: the scene is too large for the voxel cap)" } else { "" },
+            fmt_count(r.triangles_voxelized),
+            fmt_count(r.pages_read),
+            if r.pages_failed > 0 { format!(", {} pages failed", r.pages_failed) } else { String::new() }
+        );
+    }
+    if r.fly_frames > 0 {
+        println!("fly: {} frames, {:.1} {unit_name}", r.fly_frames, r.fly_length);
+    }
+    println!(
+        "wrote {}: {} frames ({:.1} s at {} fps; walk {} / fly {}), {:.1} {unit_name} in {:.2} s",
+        args.output.display(),
+        path.frames.len(),
+        path.duration_s(),
+        args.fps,
+        r.walk_frames,
+        r.fly_frames,
+        r.walk_length + r.fly_length,
+        start.elapsed().as_secs_f64()
+    );
+    Ok(())
+}

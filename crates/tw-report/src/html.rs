@@ -1,0 +1,218 @@
+//! The report page: one self-contained HTML file (inline CSS and SVG, images as PNG data URIs;
+//! no scripts, nothing fetched). Sections: the run's metadata, a summary table (medians, p95,
+//! p99, fps, speed-up of each run against the first, memory, fidelity), a plot per per-frame
+//! series (see [`crate::svg`]), and the embedded frames.
+
+use std::fmt::Write;
+
+use crate::svg::{escape, plot, plotted, PALETTE, SERIES};
+use crate::{BenchReport, ReportImage};
+
+const STYLE: &str = "\
+:root{--fg:#1f2933;--muted:#616e7c;--line:#d9e2ec;--bg:#f5f7fa}\
+*{box-sizing:border-box}\
+body{margin:0;font:14px/1.45 system-ui,-apple-system,'Segoe UI',Roboto,Helvetica,Arial,sans-serif;color:var(--fg);background:var(--bg)}\
+header{background:#102a43;color:#f0f4f8;padding:20px 32px}\
+header h1{margin:0 0 4px;font-size:22px;font-weight:600}\
+header p{margin:0;color:#bcccdc}\
+main{max-width:1620px;margin:0 auto;padding:20px 32px 40px}\
+section{background:#fff;border:1px solid var(--line);border-radius:6px;padding:16px 20px;margin:0 0 20px}\
+h2{font-size:16px;margin:0 0 12px;font-weight:600}\
+table{border-collapse:collapse;width:100%;font-variant-numeric:tabular-nums}\
+th,td{padding:5px 10px;border-bottom:1px solid var(--line);text-align:right;white-space:nowrap}\
+th{font-weight:600;color:var(--muted);font-size:12px;text-transform:uppercase;letter-spacing:.03em}\
+td:first-child,th:first-child{text-align:left}\
+table.meta td{text-align:left;white-space:normal}table.meta td:first-child{color:var(--muted);width:180px}\
+code{font:12px ui-monospace,SFMono-Regular,Menlo,Consolas,monospace;background:var(--bg);padding:1px 4px;border-radius:3px}\
+.swatch{display:inline-block;width:10px;height:10px;border-radius:2px;margin-right:6px;vertical-align:middle}\
+.plots{display:grid;grid-template-columns:repeat(auto-fill,minmax(560px,1fr));gap:14px}\
+svg.plot{width:100%;height:auto;border:1px solid var(--line);border-radius:4px}\
+svg .grid{stroke:#e4e7eb;stroke-width:1}svg .axis{stroke:#9aa5b1;stroke-width:1}\
+svg .tick{font-size:11px;fill:#616e7c}svg .axislabel{font-size:11px;fill:#616e7c}\
+svg .ptitle{font-size:13px;font-weight:600;fill:#1f2933}svg .legend{font-size:11px;fill:#3e4c59}\
+svg .seg{font-size:10px;fill:#9aa5b1}\
+.frames{display:grid;grid-template-columns:repeat(auto-fill,minmax(360px,1fr));gap:14px}\
+figure{margin:0}figure img{width:100%;height:auto;border:1px solid var(--line);border-radius:4px;background:#000}\
+figcaption{color:var(--muted);font-size:12px;margin-top:4px}\
+.note{color:var(--muted);font-size:12px;margin:8px 0 0}\
+footer{color:var(--muted);font-size:12px;text-align:center;padding:0 0 24px}";
+
+/// The page for `report` with `images` embedded (PNG bytes, checked by the caller).
+pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
+    let m = &report.meta;
+    let mut h = String::with_capacity(64 << 10);
+    let title = format!("terawalk bench — {}", if m.store.is_empty() { "report" } else { &m.store });
+    let _ = write!(
+        h,
+        "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
+         <meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">\
+         <title>{}</title><style>{STYLE}</style></head><body>",
+        escape(&title)
+    );
+    let first = report.runs.first();
+    let _ = write!(
+        h,
+        "<header><h1>{}</h1><p>{} · {} runs · {} frames · {}</p></header><main>",
+        escape(&title),
+        escape(&m.date),
+        report.runs.len(),
+        first.map(|r| r.frames.len()).unwrap_or(0),
+        escape(&m.adapter)
+    );
+
+    // Metadata.
+    h.push_str("<section><h2>Run</h2><table class=\"meta\">");
+    let mut row = |k: &str, v: String| {
+        if !v.is_empty() {
+            let _ = write!(h, "<tr><td>{}</td><td>{v}</td></tr>", escape(k));
+        }
+    };
+    row("Store", escape(&m.store));
+    row("Camera path", escape(&m.path));
+    row("Command", if m.command_line.is_empty() { String::new() } else { format!("<code>{}</code>", escape(&m.command_line)) });
+    row("Adapter", escape(&m.adapter));
+    row("Image size", if m.size == [0, 0] { String::new() } else { format!("{} × {} px", m.size[0], m.size[1]) });
+    row("Pixel error ε", format!("{} px", m.error_px));
+    row(
+        "Memory budget",
+        if m.memory_budget_bytes == 0 { String::new() } else { format!("{:.0} MB", m.memory_budget_bytes as f64 / 1e6) },
+    );
+    row("Date", escape(&m.date));
+    row("Machine", escape(&m.machine));
+    for (k, v) in &m.extra {
+        row(k, escape(v));
+    }
+    h.push_str("</table></section>");
+
+    // Summary.
+    let base = first.map(|r| r.summary.median_ms).unwrap_or(0.0);
+    let base_name = first.map(|r| r.name.as_str()).unwrap_or("");
+    let any_psnr = report.runs.iter().any(|r| r.summary.min_psnr_db.is_some());
+    let any_eff = report.runs.iter().any(|r| r.summary.median_culling_efficiency.is_some());
+    let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
+    h.push_str("<section><h2>Summary</h2><table><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
+                <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>");
+    let _ = write!(h, "<th>Speed-up vs {}</th>", escape(base_name));
+    h.push_str("<th>Median triangles</th><th>Median select ms</th><th>Median culling ms</th><th>Max resident MB</th><th>Disk MB</th>");
+    if any_rss {
+        h.push_str("<th>Peak RSS MB</th>");
+    }
+    if any_psnr {
+        h.push_str("<th>Min PSNR dB</th>");
+    }
+    if any_eff {
+        h.push_str("<th>Culling efficiency</th>");
+    }
+    h.push_str("</tr>");
+    for (i, r) in report.runs.iter().enumerate() {
+        let s = &r.summary;
+        let speedup = if s.median_ms > 0.0 && base > 0.0 { format!("{:.2}×", base / s.median_ms) } else { "–".into() };
+        let _ = write!(
+            h,
+            "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{:.2}</td>\
+             <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.1}</td><td>{speedup}</td><td>{:.0}</td><td>{:.2}</td>\
+             <td>{:.2}</td><td>{:.1}</td><td>{:.1}</td>",
+            PALETTE[i % PALETTE.len()],
+            escape(&r.name),
+            s.frames,
+            s.median_ms,
+            s.p95_ms,
+            s.p99_ms,
+            s.max_ms,
+            s.mean_fps,
+            s.median_triangles,
+            s.median_select_ms,
+            s.median_culling_ms,
+            s.max_resident_mb,
+            s.total_disk_read_mb
+        );
+        let opt = |v: Option<f64>, digits: usize| v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into());
+        if any_rss {
+            let _ = write!(h, "<td>{}</td>", opt(s.peak_rss_mb, 1));
+        }
+        if any_psnr {
+            let _ = write!(h, "<td>{}</td>", opt(s.min_psnr_db, 2));
+        }
+        if any_eff {
+            let _ = write!(h, "<td>{}</td>", opt(s.median_culling_efficiency, 3));
+        }
+        h.push_str("</tr>");
+    }
+    h.push_str("</table>");
+    let described: Vec<String> = report
+        .runs
+        .iter()
+        .filter(|r| !r.description.is_empty())
+        .map(|r| format!("<b>{}</b>: {}", escape(&r.name), escape(&r.description)))
+        .collect();
+    if !described.is_empty() {
+        let _ = write!(h, "<p class=\"note\">{}</p>", described.join(" · "));
+    }
+    h.push_str(
+        "<p class=\"note\">Percentiles interpolate linearly between ranks. Speed-up is the first run's median \
+         frame time divided by each run's, measured in the same session.</p></section>",
+    );
+
+    // Plots.
+    let shown = plotted(&report.runs);
+    h.push_str("<section><h2>Per frame</h2><div class=\"plots\">");
+    for s in &shown {
+        h.push_str(&plot(s, &report.runs));
+    }
+    h.push_str("</div>");
+    let zero: Vec<&str> = SERIES
+        .iter()
+        .filter(|s| !shown.iter().any(|p| p.key == s.key))
+        .filter(|s| report.runs.iter().any(|r| r.frames.iter().any(|f| (s.value)(f).is_some())))
+        .map(|s| s.title)
+        .collect();
+    if !zero.is_empty() {
+        let _ = write!(h, "<p class=\"note\">Zero in every frame of every run: {}.</p>", escape(&zero.join(", ")));
+    }
+    h.push_str("</section>");
+
+    // Frames.
+    if !images.is_empty() {
+        h.push_str("<section><h2>Frames</h2><div class=\"frames\">");
+        for im in images {
+            let _ = write!(
+                h,
+                "<figure><img alt=\"{c}\" src=\"data:image/png;base64,{}\"><figcaption>{c}</figcaption></figure>",
+                base64(&im.png),
+                c = escape(&im.caption)
+            );
+        }
+        h.push_str("</div></section>");
+    }
+    let _ = write!(
+        h,
+        "</main><footer>terawalk {} · every figure is also in report.json</footer></body></html>\n",
+        env!("CARGO_PKG_VERSION")
+    );
+    h
+}
+
+/// Standard base64 with padding (RFC 4648).
+pub fn base64(data: &[u8]) -> String {
+    const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    let mut o = String::with_capacity(data.len().div_ceil(3) * 4);
+    for c in data.chunks(3) {
+        let b = [c[0], *c.get(1).unwrap_or(&0), *c.get(2).unwrap_or(&0)];
+        let n = (b[0] as u32) << 16 | (b[1] as u32) << 8 | b[2] as u32;
+        o.push(A[(n >> 18) as usize & 63] as char);
+        o.push(A[(n >> 12) as usize & 63] as char);
+        o.push(if c.len() > 1 { A[(n >> 6) as usize & 63] as char } else { '=' });
+        o.push(if c.len() > 2 { A[n as usize & 63] as char } else { '=' });
+    }
+    o
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn base64_matches_rfc4648() {
+        for (i, o) in [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foobar", "Zm9vYmFy")] {
+            assert_eq!(super::base64(i.as_bytes()), o);
+        }
+    }
+}

@@ -1,0 +1,304 @@
+//! Benchmark reports (DESIGN "Conventions": reports are self-contained HTML with inline SVG plots,
+//! no network, plus JSON with every figure). Plain data in, files out:
+//!
+//! - [`BenchReport`]: run metadata, and one or more [`Run`]s (the measured run and comparison
+//!   runs such as "reference", "none", "hzb", "queries"), each a named series of per-frame
+//!   [`FrameRecord`]s with its [`Summary`];
+//! - [`write_report`] writes `report.json` and `index.html` into a folder, atomically;
+//! - [`stats`]: median and percentiles; [`svg`]: the line plots; [`html`]: the page.
+//!
+//! Memory figures come from [`tw_core::mem`] (VmHWM / VmRSS), re-exported here as
+//! [`peak_rss_bytes`] and [`rss_bytes`].
+//!
+//! ```no_run
+//! use tw_report::{BenchReport, FrameRecord, ReportImage, Run, RunMeta};
+//! let frames = vec![FrameRecord { frame: 0, frame_ms: 16.0, ..Default::default() }];
+//! let run = Run::new("hzb", "occlusion culling with a CPU hierarchical Z-buffer", frames, tw_report::peak_rss_bytes());
+//! let report = BenchReport::new(RunMeta { store: "plant.tw".into(), ..Default::default() }, vec![run]);
+//! tw_report::write_report("bench-out".as_ref(), &report, &[])?;
+//! # Ok::<(), tw_report::ReportError>(())
+//! ```
+
+pub mod html;
+pub mod stats;
+pub mod svg;
+mod write;
+
+use serde::{Deserialize, Serialize};
+
+pub use tw_core::mem::{peak_rss_bytes, rss_bytes};
+pub use write::{write_report, ReportFiles};
+
+/// The `format` field of every `report.json`.
+pub const REPORT_FORMAT: &str = "terawalk-bench-report";
+/// The version this crate writes.
+pub const REPORT_VERSION: u32 = 1;
+
+/// What was measured, where and how.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunMeta {
+    /// The store file.
+    pub store: String,
+    /// The command line that produced the report.
+    pub command_line: String,
+    /// The wgpu adapter ("llvmpipe (LLVM 19, 256 bits), Gl").
+    pub adapter: String,
+    /// Image size in pixels, width × height.
+    pub size: [u32; 2],
+    /// Pixel error threshold ε (τ) of the LOD cut.
+    pub error_px: f64,
+    /// Memory budget given with `--memory`, bytes.
+    pub memory_budget_bytes: u64,
+    /// When the run started, RFC 3339 UTC (see [`utc_now`]).
+    pub date: String,
+    /// The machine (CPU, cores, memory, OS).
+    pub machine: String,
+    /// The camera path file, if any.
+    #[serde(default)]
+    pub path: String,
+    /// Anything else worth keeping (key → value), shown in the page's header table.
+    #[serde(default)]
+    pub extra: Vec<(String, String)>,
+}
+
+/// One frame's figures. Times in milliseconds, memory and I/O in MB (10^6 bytes).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FrameRecord {
+    pub frame: u32,
+    /// The camera path's segment ("walk", "fly", …).
+    #[serde(default)]
+    pub segment: String,
+    /// From camera update to image complete.
+    pub frame_ms: f64,
+    pub select_ms: f64,
+    pub cull_ms: f64,
+    pub upload_ms: f64,
+    pub render_ms: f64,
+    pub triangles: u64,
+    pub clusters: u64,
+    pub nodes_visited: u64,
+    pub nodes_culled_frustum: u64,
+    pub nodes_culled_lod: u64,
+    pub nodes_culled_occlusion: u64,
+    pub occlusion_queries: u64,
+    /// Time spent in occlusion culling (queries, HZB build and tests).
+    pub culling_ms: f64,
+    /// Decoded pages resident in memory.
+    pub resident_mb: f64,
+    pub gpu_resident_mb: f64,
+    /// Read from the store file this frame.
+    pub disk_read_mb: f64,
+    pub pages_requested: u64,
+    pub pages_loaded: u64,
+    pub pages_evicted: u64,
+    /// Groups drawn from a coarser resident ancestor instead of waiting for a page.
+    pub stalls_avoided: u64,
+    /// `--compare`: PSNR against the reference image, dB (∞ for identical images is stored as
+    /// `None` with `differing_pixels = 0`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psnr_db: Option<f64>,
+    /// `--compare`: share of pixels that differ from the reference (0..1).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub differing_pixels: Option<f64>,
+    /// `--exact`: triangles and objects visible in the item buffer.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact_visible_triangles: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exact_visible_objects: Option<u64>,
+    /// `--exact`: triangles drawn ÷ exact visible triangles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub culling_efficiency: Option<f64>,
+}
+
+/// Summary statistics of one run's frames (percentiles interpolate linearly between ranks).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    pub frames: usize,
+    pub median_ms: f64,
+    pub p95_ms: f64,
+    pub p99_ms: f64,
+    pub mean_ms: f64,
+    pub max_ms: f64,
+    /// Frames ÷ total frame time.
+    pub mean_fps: f64,
+    /// 1000 ÷ median frame time.
+    pub median_fps: f64,
+    pub median_triangles: f64,
+    pub median_select_ms: f64,
+    pub median_culling_ms: f64,
+    pub total_disk_read_mb: f64,
+    pub max_resident_mb: f64,
+    /// Peak resident set (VmHWM) of the process after the run, MB.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub peak_rss_mb: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_psnr_db: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_culling_efficiency: Option<f64>,
+}
+
+impl Summary {
+    /// The summary of `frames`; `peak_rss_bytes` from [`peak_rss_bytes`] after the run.
+    pub fn of(frames: &[FrameRecord], peak_rss_bytes: Option<u64>) -> Summary {
+        let ms: Vec<f64> = frames.iter().map(|f| f.frame_ms).collect();
+        let total: f64 = ms.iter().sum();
+        let med = |v: Vec<f64>| stats::median(&v).unwrap_or(0.0);
+        let median_ms = med(ms.clone());
+        let psnr: Vec<f64> = frames.iter().filter_map(|f| f.psnr_db).collect();
+        let eff: Vec<f64> = frames.iter().filter_map(|f| f.culling_efficiency).collect();
+        Summary {
+            frames: frames.len(),
+            median_ms,
+            p95_ms: stats::percentile(&ms, 95.0).unwrap_or(0.0),
+            p99_ms: stats::percentile(&ms, 99.0).unwrap_or(0.0),
+            mean_ms: if ms.is_empty() { 0.0 } else { total / ms.len() as f64 },
+            max_ms: ms.iter().cloned().fold(0.0, f64::max),
+            mean_fps: if total > 0.0 { frames.len() as f64 * 1000.0 / total } else { 0.0 },
+            median_fps: if median_ms > 0.0 { 1000.0 / median_ms } else { 0.0 },
+            median_triangles: med(frames.iter().map(|f| f.triangles as f64).collect()),
+            median_select_ms: med(frames.iter().map(|f| f.select_ms).collect()),
+            median_culling_ms: med(frames.iter().map(|f| f.culling_ms).collect()),
+            total_disk_read_mb: frames.iter().map(|f| f.disk_read_mb).sum(),
+            max_resident_mb: frames.iter().map(|f| f.resident_mb).fold(0.0, f64::max),
+            peak_rss_mb: peak_rss_bytes.map(|b| b as f64 / 1e6),
+            min_psnr_db: psnr.iter().cloned().reduce(f64::min),
+            median_culling_efficiency: stats::median(&eff),
+        }
+    }
+}
+
+/// One measured run: a named series of frames (e.g. the occlusion strategy).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Run {
+    /// Short name, used in legends ("hzb").
+    pub name: String,
+    /// What the run is ("occlusion culling with a CPU hierarchical Z-buffer").
+    #[serde(default)]
+    pub description: String,
+    pub summary: Summary,
+    pub frames: Vec<FrameRecord>,
+}
+
+impl Run {
+    /// A run with its summary computed from `frames`.
+    pub fn new(
+        name: impl Into<String>,
+        description: impl Into<String>,
+        frames: Vec<FrameRecord>,
+        peak_rss_bytes: Option<u64>,
+    ) -> Run {
+        let summary = Summary::of(&frames, peak_rss_bytes);
+        Run { name: name.into(), description: description.into(), summary, frames }
+    }
+}
+
+/// The whole report: metadata and runs (the first is the main run; the others compare with it).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BenchReport {
+    pub format: String,
+    pub version: u32,
+    pub meta: RunMeta,
+    pub runs: Vec<Run>,
+}
+
+impl BenchReport {
+    pub fn new(meta: RunMeta, runs: Vec<Run>) -> BenchReport {
+        BenchReport { format: REPORT_FORMAT.into(), version: REPORT_VERSION, meta, runs }
+    }
+
+    /// Reads a `report.json`.
+    pub fn from_json(text: &str) -> Result<BenchReport, ReportError> {
+        let r: BenchReport = serde_json::from_str(text)
+            .map_err(|e| ReportError::Invalid(format!("line {}, column {}: {e}", e.line(), e.column())))?;
+        if r.format != REPORT_FORMAT {
+            return Err(ReportError::Invalid(format!("\"format\" is {:?}, expected {REPORT_FORMAT:?}", r.format)));
+        }
+        Ok(r)
+    }
+
+    /// Checks what JSON cannot carry or a page cannot show: every number finite, at least one
+    /// run, distinct run names.
+    pub fn validate(&self) -> Result<(), ReportError> {
+        let bad = |m: String| Err(ReportError::Invalid(m));
+        if self.runs.is_empty() {
+            return bad("the report has no runs".into());
+        }
+        for (i, r) in self.runs.iter().enumerate() {
+            if self.runs[..i].iter().any(|o| o.name == r.name) {
+                return bad(format!("two runs are named {:?}", r.name));
+            }
+            for f in &r.frames {
+                for s in svg::SERIES {
+                    if let Some(v) = (s.value)(f) {
+                        if !v.is_finite() {
+                            return bad(format!("run {:?}, frame {}: {} is {v}", r.name, f.frame, s.key));
+                        }
+                    }
+                }
+            }
+            let s = &r.summary;
+            let all = [s.median_ms, s.p95_ms, s.p99_ms, s.mean_ms, s.max_ms, s.mean_fps, s.median_fps];
+            if all.iter().any(|v| !v.is_finite()) {
+                return bad(format!("run {:?}: summary figures must be finite", r.name));
+            }
+        }
+        if !self.meta.error_px.is_finite() {
+            return bad(format!("ε is {}", self.meta.error_px));
+        }
+        Ok(())
+    }
+}
+
+/// A frame image embedded in the page (PNG bytes, as the renderer saves them).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReportImage {
+    pub caption: String,
+    pub png: Vec<u8>,
+}
+
+/// Errors of writing a report.
+#[derive(Debug, thiserror::Error)]
+pub enum ReportError {
+    #[error("report: {0}")]
+    Invalid(String),
+    #[error("report: {}: {msg}", path.display())]
+    Io { path: std::path::PathBuf, msg: String },
+}
+
+/// The current time as RFC 3339 UTC (`2026-12-01T18:30:00Z`).
+pub fn utc_now() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_secs() as i64)
+        .unwrap_or(0);
+    rfc3339(secs)
+}
+
+/// `secs` since the Unix epoch as RFC 3339 UTC (Hinnant's days-to-civil algorithm).
+pub fn rfc3339(secs: i64) -> String {
+    let days = secs.div_euclid(86_400);
+    let rem = secs.rem_euclid(86_400);
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + (m <= 2) as i64;
+    format!("{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}Z", rem / 3600, rem % 3600 / 60, rem % 60)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dates_are_rfc3339() {
+        assert_eq!(rfc3339(0), "1970-01-01T00:00:00Z");
+        assert_eq!(rfc3339(951_782_400), "2000-02-29T00:00:00Z");
+        assert_eq!(rfc3339(1_796_146_200), "2026-12-01T17:30:00Z");
+        assert!(utc_now().ends_with('Z'));
+    }
+}

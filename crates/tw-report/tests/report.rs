@@ -1,0 +1,160 @@
+//! Report writing end to end: JSON round trip, the page's plots and images, summary statistics
+//! on known inputs, atomic writes.
+
+use tw_report::{svg, write_report, BenchReport, FrameRecord, ReportImage, Run, RunMeta, Summary};
+
+/// A 1×1 PNG.
+const PNG: [u8; 70] = [137, 80, 78, 71, 13, 10, 26, 10, 0, 0, 0, 13, 73, 72, 68, 82, 0, 0, 0, 1, 0, 0, 0, 1, 8, 6, 0, 0, 0, 31, 21, 196, 137, 0, 0, 0, 13, 73, 68, 65, 84, 120, 218, 99, 100, 248, 207, 80, 15, 0, 3, 134, 1, 128, 90, 52, 125, 107, 0, 0, 0, 0, 73, 69, 78, 68, 174, 66, 96, 130];
+
+fn frames(n: u32, scale: f64, compare: bool) -> Vec<FrameRecord> {
+    (0..n)
+        .map(|i| FrameRecord {
+            frame: i,
+            segment: if i < n / 2 { "walk".into() } else { "fly".into() },
+            frame_ms: scale * (10.0 + (i % 7) as f64),
+            select_ms: 1.0 + (i % 3) as f64 * 0.1,
+            render_ms: scale * 8.0,
+            triangles: 100_000 + i as u64 * 1000,
+            clusters: 800 + i as u64,
+            nodes_visited: 5000,
+            nodes_culled_frustum: 1200,
+            nodes_culled_occlusion: if scale < 1.0 { 900 } else { 0 },
+            resident_mb: 50.0 + i as f64 * 0.1,
+            disk_read_mb: if i == 0 { 30.0 } else { 0.2 },
+            pages_loaded: if i == 0 { 40 } else { 1 },
+            psnr_db: compare.then_some(42.0 + (i % 5) as f64),
+            differing_pixels: compare.then_some(0.001),
+            ..Default::default()
+        })
+        .collect()
+}
+
+fn report() -> BenchReport {
+    let meta = RunMeta {
+        store: "plant <10M>.tw".into(),
+        command_line: "terawalk bench plant.tw --path walk.json --occlusion none,hzb".into(),
+        adapter: "llvmpipe (LLVM 19), Gl".into(),
+        size: [1280, 720],
+        error_px: 1.0,
+        memory_budget_bytes: 1 << 30,
+        date: "2026-12-01T18:00:00Z".into(),
+        machine: "2 cores, 8 GB".into(),
+        path: "walk.json".into(),
+        extra: vec![("seed".into(), "1".into())],
+    };
+    BenchReport::new(
+        meta,
+        vec![
+            Run::new("none", "no occlusion culling", frames(120, 1.0, false), Some(300_000_000)),
+            Run::new("hzb", "CPU hierarchical Z-buffer", frames(120, 0.5, true), Some(310_000_000)),
+        ],
+    )
+}
+
+fn images() -> Vec<ReportImage> {
+    vec![
+        ReportImage { caption: "frame 0 (walk)".into(), png: PNG.to_vec() },
+        ReportImage { caption: "frame 90 (fly)".into(), png: PNG.to_vec() },
+    ]
+}
+
+#[test]
+fn json_round_trips() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = report();
+    let files = write_report(dir.path(), &r, &images()).unwrap();
+    let back = BenchReport::from_json(&std::fs::read_to_string(&files.json).unwrap()).unwrap();
+    assert_eq!(back, r);
+    assert!(BenchReport::from_json("{\"format\":\"x\"").unwrap_err().to_string().contains("line 1"));
+}
+
+#[test]
+fn page_has_one_plot_per_series_and_the_images() {
+    let dir = tempfile::tempdir().unwrap();
+    let r = report();
+    let files = write_report(dir.path(), &r, &images()).unwrap();
+    let html = std::fs::read_to_string(&files.html).unwrap();
+    let shown = svg::plotted(&r.runs);
+    assert_eq!(html.matches("<svg").count(), shown.len());
+    for s in &shown {
+        assert_eq!(html.matches(&format!("data-series=\"{}\"", s.key)).count(), 1, "{}", s.key);
+    }
+    // Non-zero series are shown, all-zero ones are listed instead.
+    for key in ["frame_ms", "triangles", "nodes_culled_occlusion", "psnr_db", "disk_read_mb"] {
+        assert!(shown.iter().any(|s| s.key == key), "{key}");
+    }
+    assert!(!shown.iter().any(|s| s.key == "occlusion_queries"));
+    assert!(html.contains("Occlusion queries"));
+    assert_eq!(html.matches("src=\"data:image/png;base64,").count(), 2);
+    assert!(html.contains("frame 90 (fly)"));
+    // Self-contained: nothing fetched, no scripts; text escaped.
+    assert_eq!(html.matches("http").count(), html.matches("http://www.w3.org/2000/svg").count());
+    assert!(!html.contains("<script"));
+    assert!(html.contains("plant &lt;10M&gt;.tw"));
+    // Speed-up of hzb against none: frame times are halved.
+    assert!(html.contains("2.00×"), "speed-up column");
+    assert!(html.contains("#4e79a7") && html.contains("#f28e2b"), "one colour per run");
+}
+
+#[test]
+fn summary_statistics_on_known_inputs() {
+    let f: Vec<FrameRecord> =
+        (1..=100).map(|i| FrameRecord { frame: i, frame_ms: i as f64, triangles: 10, ..Default::default() }).collect();
+    let s = Summary::of(&f, Some(2_000_000));
+    assert_eq!(s.frames, 100);
+    assert!((s.median_ms - 50.5).abs() < 1e-12);
+    assert!((s.p95_ms - 95.05).abs() < 1e-9);
+    assert!((s.p99_ms - 99.01).abs() < 1e-9);
+    assert!((s.mean_ms - 50.5).abs() < 1e-12);
+    assert_eq!(s.max_ms, 100.0);
+    assert!((s.mean_fps - 1000.0 / 50.5).abs() < 1e-9);
+    assert_eq!(s.median_triangles, 10.0);
+    assert_eq!(s.peak_rss_mb, Some(2.0));
+    assert_eq!(s.min_psnr_db, None);
+    let empty = Summary::of(&[], None);
+    assert_eq!((empty.frames, empty.median_ms, empty.mean_fps), (0, 0.0, 0.0));
+}
+
+#[test]
+fn failed_writes_leave_no_partial_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    // Not PNG data: refused before anything is written.
+    let bad = vec![ReportImage { caption: "x".into(), png: b"GIF89a".to_vec() }];
+    let e = write_report(&out, &report(), &bad).unwrap_err().to_string();
+    assert!(e.contains("not PNG"), "{e}");
+    assert!(!out.exists());
+    // A value JSON cannot carry.
+    let mut r = report();
+    r.runs[1].frames[3].frame_ms = f64::NAN;
+    let e = write_report(&out, &r, &[]).unwrap_err().to_string();
+    assert!(e.contains("frame 3") && e.contains("frame_ms"), "{e}");
+    assert!(!out.exists());
+    // The page's place is taken by a folder: the rename fails, no temporary file is left.
+    std::fs::create_dir_all(out.join("index.html")).unwrap();
+    let e = write_report(&out, &report(), &[]).unwrap_err().to_string();
+    assert!(e.contains("index.html"), "{e}");
+    let left: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with(".tw-report-"))
+        .collect();
+    assert!(left.is_empty(), "{left:?}");
+    // Writing again over an existing report replaces it whole.
+    std::fs::remove_dir(out.join("index.html")).unwrap();
+    write_report(&out, &report(), &images()).unwrap();
+    let mut r = report();
+    r.runs.truncate(1);
+    write_report(&out, &r, &[]).unwrap();
+    let back = BenchReport::from_json(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(back.runs.len(), 1);
+}
+
+#[test]
+fn invalid_reports_are_refused() {
+    let mut r = report();
+    r.runs[1].name = "none".into();
+    assert!(r.validate().unwrap_err().to_string().contains("two runs"));
+    let r = BenchReport::new(RunMeta::default(), vec![]);
+    assert!(r.validate().unwrap_err().to_string().contains("no runs"));
+}
