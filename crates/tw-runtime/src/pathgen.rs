@@ -257,12 +257,15 @@ impl WalkGrid {
         let max_voxels = params.max_voxels.max(1 << 12);
         let mut windowed = false;
         let (nx, ny, nz, wpc, radius, body, step, pad) = loop {
-            let body = ((eye * 1.15) / v).ceil().max(2.0);
+            // Body: the eye height and 5 % above; step: a quarter of it; agent radius: 0.12 of it
+            // (0.2 m for a 1.7 m eye: a camera, not a person, so doors of 1 m stay passable).
+            let body = ((eye * 1.05) / v).ceil().max(3.0);
             let step = ((eye * 0.25) / v).floor().max(1.0);
-            let radius = ((eye * 0.18) / v).ceil().max(1.0) as usize;
+            let radius = ((eye * 0.12) / v).round().max(1.0) as usize;
             let pad = radius + 2;
             let n = |a: usize| ((whi[a] - wlo[a]) / v).ceil().max(1.0) + 2.0 * pad as f64;
             let (fx, fy) = (n(0), n(1));
+            // Grid sizes are f64 here so that huge scenes cannot overflow before the cap test.
             let fz = ((whi[2] - wlo[2]) / v).ceil().max(1.0) + body + 3.0;
             let wpc = (fz / 64.0).ceil();
             let total = fx * fy * wpc * 64.0;
@@ -375,12 +378,13 @@ impl WalkGrid {
     }
 
     fn voxelize(&mut self, store: &Store, progress: &mut dyn FnMut(u64, u64)) {
+        let this: &WalkGrid = self;
         let t = (self.v * 0.5) as f32;
         let groups = store.groups();
         let step = store.header().grid_step;
         // Window in scene space, for the group sphere test.
-        let glo = self.to_scene([0.0; 3]);
-        let ghi = self.to_scene([self.nx as f64, self.ny as f64, self.nz as f64]);
+        let glo = this.to_scene([0.0; 3]);
+        let ghi = this.to_scene([this.nx as f64, this.ny as f64, this.nz as f64]);
         let wanted: Vec<bool> = groups
             .iter()
             .map(|g| {
@@ -400,7 +404,7 @@ impl WalkGrid {
             groups.iter().zip(&wanted).filter(|(_, &w)| w).map(|(g, _)| g.page).collect();
         pages.sort_unstable();
         pages.dedup();
-        let atoms: Vec<AtomicU64> = (0..self.nx * self.ny * self.wpc).map(|_| AtomicU64::new(0)).collect();
+        let atoms: Vec<AtomicU64> = (0..this.nx * this.ny * this.wpc).map(|_| AtomicU64::new(0)).collect();
         let total = pages.len() as u64;
         let mut done = 0u64;
         progress(0, total);
@@ -424,10 +428,10 @@ impl WalkGrid {
                                     break;
                                 };
                                 let s = [0, 1, 2].map(|a| pos[a] as f64 * step);
-                                *slot = self.to_grid(s);
+                                *slot = this.to_grid(s);
                             }
                             if ok {
-                                self.rasterize(&q, &atoms, &mut buf);
+                                this.rasterize(&q, &atoms, &mut buf);
                                 n += 1;
                             }
                         }
@@ -1115,6 +1119,12 @@ pub fn generate_path(
                 max_voxels: options.max_voxels,
             };
             let g = WalkGrid::build(store, &params, &mut |d, t| progress("voxelize", d, t))?;
+            tracing::debug!(
+                "path: voxels {:.3}, grid {:?}, {} walkable spans",
+                g.v,
+                g.dims(),
+                g.nodes.len()
+            );
             report.voxel_size = g.v;
             report.grid = g.dims();
             report.windowed = g.windowed;
@@ -1147,7 +1157,7 @@ pub fn generate_path(
     let mut fly: Vec<PathFrame> = Vec::with_capacity(fly_count);
     if fly_count > 0 {
         let hz = [(up + 1) % 3, (up + 2) % 3];
-        let transition = if walk_end.is_some() { (fly_count / 4).max(1).min(fly_count) } else { 0 };
+        let transition = if walk_end.is_some() { (fly_count / 3).max(1).min(fly_count) } else { 0 };
         let orbit_frames = fly_count - transition;
         if let Some((we, wv)) = walk_end {
             // Start the orbit above the walk's end, turning the way the walk was heading.
@@ -1222,12 +1232,18 @@ fn walk_path(
     fovy: f64,
     report: &mut PathReport,
 ) -> Result<(Vec<PathFrame>, ([f64; 3], [f64; 3])), String> {
+    if g.v > g.eye / 3.0 {
+        return Err(format!(
+            "the voxel cap leaves voxels of {:.3}, too coarse for an eye height of {} (raise --max-voxels)",
+            g.v, g.eye
+        ));
+    }
     if g.nodes.is_empty() {
         return Err("no walkable space: no floor with room for the eye height was found".into());
     }
-    // Useful size: 40 eye heights² of floor for an interior, 100 in the open.
+    // Useful size: 20 eye heights² of floor for an interior, 100 in the open.
     let area = |n: usize| n as f64 * g.v * g.v;
-    let min_interior = 40.0 * g.eye * g.eye;
+    let min_interior = 20.0 * g.eye * g.eye;
     let min_outdoor = 100.0 * g.eye * g.eye;
     let (comp_c, sizes_c) = g.components(|n| n.covered);
     let best_c = (0..sizes_c.len()).max_by_key(|&c| (sizes_c[c], std::cmp::Reverse(c)));
@@ -1239,10 +1255,9 @@ fn walk_path(
                 Some(c) if area(sizes_a[c]) >= min_outdoor => (comp_a, c, RegionKind::Outdoor),
                 Some(c) => {
                     return Err(format!(
-                        "no walkable space: the largest walkable region has {:.1} {}² of floor, less \
-                         than the {:.1} a walk needs",
+                        "no walkable space: the largest walkable region has {:.1} square units of \
+                         floor, less than the {:.1} (100 eye heights squared) a walk in the open needs",
                         area(sizes_a[c]),
-                        "units",
                         min_outdoor
                     ))
                 }
@@ -1313,7 +1328,21 @@ fn walk_path(
         heading.push([a]);
         last = a;
     }
+    // Smoothed, then limited to 90°/s (a reversal at a waypoint becomes a two-second turn),
+    // then smoothed a little again so the limiter leaves no kinks.
     let heading = gaussian(&heading, fps * 0.5);
+    let max_turn = 90f64.to_radians() / fps;
+    let mut limited = Vec::with_capacity(frames);
+    for (i, a) in heading.iter().enumerate() {
+        let a = if i == 0 {
+            a[0]
+        } else {
+            let prev: f64 = limited[i - 1];
+            prev + (a[0] - prev).clamp(-max_turn, max_turn)
+        };
+        limited.push(a);
+    }
+    let heading: Vec<[f64; 1]> = gaussian(&limited.iter().map(|&a| [a]).collect::<Vec<_>>(), fps * 0.15);
     let phase = rng.range_f64(0.0, std::f64::consts::TAU);
     let mut out = Vec::with_capacity(frames);
     for i in 0..frames {

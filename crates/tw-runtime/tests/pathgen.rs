@@ -114,14 +114,14 @@ fn plant_walk_is_at_eye_height_in_free_space_and_smooth() {
         assert!(!grid.is_occupied(s), "frame {i}: eye in an occupied voxel {f:?}");
         let floor = grid.floor_below(s).unwrap_or_else(|| panic!("frame {i}: no floor below {f:?}"));
         let above = s[2] - floor;
-        assert!((above - 1.7).abs() <= 2.0 * VOXEL, "frame {i}: eye {above} above the floor");
+        assert!((above - 1.7).abs() <= 2.5 * VOXEL, "frame {i}: eye {above} above the floor");
         assert_eq!(f.up, [0.0, 0.0, 1.0]);
     }
     for (i, w) in walk.windows(2).enumerate() {
         let d = dist(w[0].eye, w[1].eye);
         assert!(d <= step * 1.05, "frame {i}: moved {d}, walking step {step}");
         let turn = angle(dir(w[0]), dir(w[1]));
-        assert!(turn <= 5.0, "frame {i}: turned {turn}° in one frame");
+        assert!(turn <= 3.5, "frame {i}: turned {turn}° in one frame");
     }
     let length: f64 = walk.windows(2).map(|w| dist(w[0].eye, w[1].eye)).sum();
     assert!(length > 0.8 * step * 179.0, "walk of {length}");
