@@ -1183,10 +1183,19 @@ pub fn generate_path(
                 let (h00, h10, h01, h11) =
                     (2.0 * u3 - 3.0 * u2 + 1.0, u3 - 2.0 * u2 + u, -2.0 * u3 + 3.0 * u2, u3 - u2);
                 let p = [0, 1, 2].map(|c| h00 * we[c] + h10 * t0[c] + h01 * o0[c] + h11 * t1[c]);
-                let to_c = normalize(sub(centre, p));
+                // Turn the view from the walk's to the centre by yaw and pitch (the shorter way
+                // round), with a smoothstep: no fast swing even when the two are opposite.
                 let s = u2 * (3.0 - 2.0 * u);
-                let d = normalize(lerp3(normalize(wdir), to_c, s));
-                let d = if d == [0.0; 3] { to_c } else { d };
+                let (y0, p0) = yaw_pitch(wdir, up);
+                let (y1, p1) = yaw_pitch(sub(centre, p), up);
+                let mut dy = y1 - y0;
+                while dy > std::f64::consts::PI {
+                    dy -= std::f64::consts::TAU;
+                }
+                while dy < -std::f64::consts::PI {
+                    dy += std::f64::consts::TAU;
+                }
+                let d = from_yaw_pitch(y0 + dy * s, p0 + (p1 - p0) * s, up);
                 fly.push(frame(p, d, up, origin, fovy, "fly"));
             }
         }
@@ -1206,17 +1215,23 @@ pub fn generate_path(
     Ok(GeneratedPath { path: CameraPath::new(options.fps, walk), report })
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+/// Yaw (about the up axis) and pitch of a direction.
+fn yaw_pitch(d: [f64; 3], up: usize) -> (f64, f64) {
+    let h = [(up + 1) % 3, (up + 2) % 3];
+    (d[h[1]].atan2(d[h[0]]), d[up].atan2(d[h[0]].hypot(d[h[1]])))
 }
 
-fn normalize(a: [f64; 3]) -> [f64; 3] {
-    let l = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    if l > 0.0 && l.is_finite() {
-        a.map(|c| c / l)
-    } else {
-        [0.0; 3]
-    }
+fn from_yaw_pitch(yaw: f64, pitch: f64, up: usize) -> [f64; 3] {
+    let h = [(up + 1) % 3, (up + 2) % 3];
+    let mut d = [0.0; 3];
+    d[h[0]] = yaw.cos() * pitch.cos();
+    d[h[1]] = yaw.sin() * pitch.cos();
+    d[up] = pitch.sin();
+    d
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 /// The walk frames, or why there is none. Also returns the last eye and its per-frame velocity.
@@ -1349,11 +1364,7 @@ fn walk_path(
         let a = heading[i][0];
         let t = i as f64 / fps;
         let pitch = (-4.0 + 3.0 * (std::f64::consts::TAU * t / 7.0 + phase).sin()).to_radians();
-        let mut d = [0.0; 3];
-        d[hz[0]] = a.cos() * pitch.cos();
-        d[hz[1]] = a.sin() * pitch.cos();
-        d[up] = pitch.sin();
-        out.push(frame(eyes[i], d, up, origin, fovy, "walk"));
+        out.push(frame(eyes[i], from_yaw_pitch(a, pitch, up), up, origin, fovy, "walk"));
     }
     let n = eyes.len();
     let vel = if n >= 2 { sub(eyes[n - 1], eyes[n - 2]) } else { [0.0; 3] };

@@ -134,7 +134,7 @@ fn plant_walk_is_at_eye_height_in_free_space_and_smooth() {
         assert!(f.eye[2] > h.bounds_max[2], "orbit above the model: {f:?}");
     }
     for w in all.windows(2) {
-        assert!(angle(dir(w[0]), dir(w[1])) <= 10.0, "{w:?}");
+        assert!(angle(dir(&w[0]), dir(&w[1])) <= 10.0, "{w:?}");
     }
 }
 
