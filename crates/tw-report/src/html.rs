@@ -69,13 +69,27 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     };
     row("Store", escape(&m.store));
     row("Camera path", escape(&m.path));
-    row("Command", if m.command_line.is_empty() { String::new() } else { format!("<code>{}</code>", escape(&m.command_line)) });
+    row(
+        "Command",
+        if m.command_line.is_empty() {
+            String::new()
+        } else {
+            format!("<code>{}</code>", escape(&m.command_line))
+        },
+    );
     row("Adapter", escape(&m.adapter));
-    row("Image size", if m.size == [0, 0] { String::new() } else { format!("{} × {} px", m.size[0], m.size[1]) });
+    row(
+        "Image size",
+        if m.size == [0, 0] { String::new() } else { format!("{} × {} px", m.size[0], m.size[1]) },
+    );
     row("Pixel error ε", format!("{} px", m.error_px));
     row(
         "Memory budget",
-        if m.memory_budget_bytes == 0 { String::new() } else { format!("{:.0} MB", m.memory_budget_bytes as f64 / 1e6) },
+        if m.memory_budget_bytes == 0 {
+            String::new()
+        } else {
+            format!("{:.0} MB", m.memory_budget_bytes as f64 / 1e6)
+        },
     );
     row("Date", escape(&m.date));
     row("Machine", escape(&m.machine));
@@ -90,8 +104,10 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     let any_psnr = report.runs.iter().any(|r| r.summary.min_psnr_db.is_some());
     let any_eff = report.runs.iter().any(|r| r.summary.median_culling_efficiency.is_some());
     let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
-    h.push_str("<section><h2>Summary</h2><table><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
-                <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>");
+    h.push_str(
+        "<section><h2>Summary</h2><table><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
+                <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>",
+    );
     let _ = write!(h, "<th>Speed-up vs {}</th>", escape(base_name));
     h.push_str("<th>Median triangles</th><th>Median select ms</th><th>Median culling ms</th><th>Max resident MB</th><th>Disk MB</th>");
     if any_rss {
@@ -106,7 +122,11 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     h.push_str("</tr>");
     for (i, r) in report.runs.iter().enumerate() {
         let s = &r.summary;
-        let speedup = if s.median_ms > 0.0 && base > 0.0 { format!("{:.2}×", base / s.median_ms) } else { "–".into() };
+        let speedup = if s.median_ms > 0.0 && base > 0.0 {
+            format!("{:.2}×", base / s.median_ms)
+        } else {
+            "–".into()
+        };
         let _ = write!(
             h,
             "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{:.2}</td>\
@@ -126,7 +146,8 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             s.max_resident_mb,
             s.total_disk_read_mb
         );
-        let opt = |v: Option<f64>, digits: usize| v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into());
+        let opt =
+            |v: Option<f64>, digits: usize| v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into());
         if any_rss {
             let _ = write!(h, "<td>{}</td>", opt(s.peak_rss_mb, 1));
         }
@@ -167,7 +188,11 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         .map(|s| s.title)
         .collect();
     if !zero.is_empty() {
-        let _ = write!(h, "<p class=\"note\">Zero in every frame of every run: {}.</p>", escape(&zero.join(", ")));
+        let _ = write!(
+            h,
+            "<p class=\"note\">Zero in every frame of every run: {}.</p>",
+            escape(&zero.join(", "))
+        );
     }
     h.push_str("</section>");
 

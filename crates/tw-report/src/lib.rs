@@ -211,7 +211,10 @@ impl BenchReport {
         let r: BenchReport = serde_json::from_str(text)
             .map_err(|e| ReportError::Invalid(format!("line {}, column {}: {e}", e.line(), e.column())))?;
         if r.format != REPORT_FORMAT {
-            return Err(ReportError::Invalid(format!("\"format\" is {:?}, expected {REPORT_FORMAT:?}", r.format)));
+            return Err(ReportError::Invalid(format!(
+                "\"format\" is {:?}, expected {REPORT_FORMAT:?}",
+                r.format
+            )));
         }
         Ok(r)
     }

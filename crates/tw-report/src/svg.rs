@@ -55,8 +55,10 @@ pub const SERIES: &[Series] = &[
 ];
 
 /// Colours of runs (Tableau 10), in order.
-pub const PALETTE: [&str; 10] =
-    ["#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f", "#edc948", "#b07aa1", "#ff9da7", "#9c755f", "#bab0ac"];
+pub const PALETTE: [&str; 10] = [
+    "#4e79a7", "#f28e2b", "#e15759", "#76b7b2", "#59a14f", "#edc948", "#b07aa1", "#ff9da7", "#9c755f",
+    "#bab0ac",
+];
 
 /// The series worth a plot: some run has a non-zero value.
 pub fn plotted(runs: &[Run]) -> Vec<&'static Series> {
@@ -84,7 +86,8 @@ pub fn escape(s: &str) -> String {
 
 /// "Nice" tick positions covering `lo..=hi` with about `target` steps.
 pub fn ticks(lo: f64, hi: f64, target: usize) -> Vec<f64> {
-    let (lo, hi) = if hi > lo { (lo, hi) } else { (lo - 0.5 * lo.abs().max(1.0), hi + 0.5 * hi.abs().max(1.0)) };
+    let (lo, hi) =
+        if hi > lo { (lo, hi) } else { (lo - 0.5 * lo.abs().max(1.0), hi + 0.5 * hi.abs().max(1.0)) };
     let raw = (hi - lo) / target.max(1) as f64;
     let mag = 10f64.powf(raw.log10().floor());
     let step = [1.0, 2.0, 2.5, 5.0, 10.0].iter().map(|m| m * mag).find(|s| *s >= raw).unwrap_or(10.0 * mag);
@@ -257,7 +260,12 @@ pub fn plot(series: &Series, runs: &[Run]) -> String {
             let _ = write!(d, "{}{:.1},{:.1}", if i == 0 { "" } else { " " }, sx(x), sy(y));
         }
         if pts.len() == 1 {
-            let _ = write!(s, "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.5\" fill=\"{colour}\"/>", sx(pts[0].0), sy(pts[0].1));
+            let _ = write!(
+                s,
+                "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.5\" fill=\"{colour}\"/>",
+                sx(pts[0].0),
+                sy(pts[0].1)
+            );
         } else {
             let _ = write!(s, "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.4\" stroke-linejoin=\"round\" points=\"{d}\"/>");
         }
@@ -332,7 +340,8 @@ mod tests {
 
     #[test]
     fn decimation_keeps_spikes() {
-        let pts: Vec<(f64, f64)> = (0..10_000).map(|i| (i as f64, if i == 5000 { 99.0 } else { 1.0 })).collect();
+        let pts: Vec<(f64, f64)> =
+            (0..10_000).map(|i| (i as f64, if i == 5000 { 99.0 } else { 1.0 })).collect();
         let d = decimate(&pts, 100);
         assert!(d.len() <= 400);
         assert!(d.iter().any(|p| p.1 == 99.0));

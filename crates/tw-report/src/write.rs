@@ -20,14 +20,19 @@ const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
 /// Writes `dir/report.json` (every figure) and `dir/index.html` (the page, `images` embedded),
 /// creating `dir` if needed. Checks the report ([`BenchReport::validate`]) and that each image
 /// is PNG data before writing anything.
-pub fn write_report(dir: &Path, report: &BenchReport, images: &[ReportImage]) -> Result<ReportFiles, ReportError> {
+pub fn write_report(
+    dir: &Path,
+    report: &BenchReport,
+    images: &[ReportImage],
+) -> Result<ReportFiles, ReportError> {
     report.validate()?;
     for (i, im) in images.iter().enumerate() {
         if !im.png.starts_with(&PNG_SIGNATURE) {
             return Err(ReportError::Invalid(format!("image {i} ({:?}) is not PNG data", im.caption)));
         }
     }
-    let mut json = serde_json::to_string_pretty(report).map_err(|e| ReportError::Invalid(format!("cannot encode: {e}")))?;
+    let mut json = serde_json::to_string_pretty(report)
+        .map_err(|e| ReportError::Invalid(format!("cannot encode: {e}")))?;
     json.push('\n');
     let html = crate::html::page(report, images);
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
@@ -51,7 +56,9 @@ fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
         .prefix(".tw-report-")
         .tempfile_in(dir)
         .map_err(|e| io(dir, format!("cannot create a temporary file: {e}")))?;
-    tmp.write_all(bytes).and_then(|_| tmp.as_file().sync_all()).map_err(|e| io(path, format!("cannot write: {e}")))?;
+    tmp.write_all(bytes)
+        .and_then(|_| tmp.as_file().sync_all())
+        .map_err(|e| io(path, format!("cannot write: {e}")))?;
     tmp.persist(path).map_err(|e| io(path, format!("cannot rename into place: {}", e.error)))?;
     Ok(())
 }

@@ -4,7 +4,11 @@
 use tw_report::{svg, write_report, BenchReport, FrameRecord, ReportImage, Run, RunMeta, Summary};
 
 /// A 1×1 PNG.
-const PNG: [u8; 70] = [137, 80, 78, 71, 13, 10, 26, 10, 0, 0, 0, 13, 73, 72, 68, 82, 0, 0, 0, 1, 0, 0, 0, 1, 8, 6, 0, 0, 0, 31, 21, 196, 137, 0, 0, 0, 13, 73, 68, 65, 84, 120, 218, 99, 100, 248, 207, 80, 15, 0, 3, 134, 1, 128, 90, 52, 125, 107, 0, 0, 0, 0, 73, 69, 78, 68, 174, 66, 96, 130];
+const PNG: [u8; 70] = [
+    137, 80, 78, 71, 13, 10, 26, 10, 0, 0, 0, 13, 73, 72, 68, 82, 0, 0, 0, 1, 0, 0, 0, 1, 8, 6, 0, 0, 0, 31,
+    21, 196, 137, 0, 0, 0, 13, 73, 68, 65, 84, 120, 218, 99, 100, 248, 207, 80, 15, 0, 3, 134, 1, 128, 90,
+    52, 125, 107, 0, 0, 0, 0, 73, 69, 78, 68, 174, 66, 96, 130,
+];
 
 fn frames(n: u32, scale: f64, compare: bool) -> Vec<FrameRecord> {
     (0..n)
@@ -98,8 +102,9 @@ fn page_has_one_plot_per_series_and_the_images() {
 
 #[test]
 fn summary_statistics_on_known_inputs() {
-    let f: Vec<FrameRecord> =
-        (1..=100).map(|i| FrameRecord { frame: i, frame_ms: i as f64, triangles: 10, ..Default::default() }).collect();
+    let f: Vec<FrameRecord> = (1..=100)
+        .map(|i| FrameRecord { frame: i, frame_ms: i as f64, triangles: 10, ..Default::default() })
+        .collect();
     let s = Summary::of(&f, Some(2_000_000));
     assert_eq!(s.frames, 100);
     assert!((s.median_ms - 50.5).abs() < 1e-12);

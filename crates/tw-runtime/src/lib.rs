@@ -42,5 +42,8 @@ pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
-pub use pathgen::{generate_path, GeneratedPath, PathGenError, PathOptions, PathPart, PathReport, RegionKind, WalkGrid, WalkParams};
+pub use pathgen::{
+    generate_path, GeneratedPath, PathGenError, PathOptions, PathPart, PathReport, RegionKind, WalkGrid,
+    WalkParams,
+};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};

@@ -269,8 +269,18 @@ impl WalkGrid {
             let fz = ((whi[2] - wlo[2]) / v).ceil().max(1.0) + body + 3.0;
             let wpc = (fz / 64.0).ceil();
             let total = fx * fy * wpc * 64.0;
-            if fz < 65000.0 && body < 60000.0 && total <= max_voxels as f64 && fx * fy <= (1u64 << 26) as f64 {
-                break (fx as usize, fy as usize, fz as usize, wpc as usize, radius, body as u16, step as u16, pad);
+            if fz < 65000.0 && body < 60000.0 && total <= max_voxels as f64 && fx * fy <= (1u64 << 26) as f64
+            {
+                break (
+                    fx as usize,
+                    fy as usize,
+                    fz as usize,
+                    wpc as usize,
+                    radius,
+                    body as u16,
+                    step as u16,
+                    pad,
+                );
             }
             // Prefer a window of at least 40 eye heights at the fine voxel size.
             let wide = (0..2).any(|a| whi[a] - wlo[a] > 40.0 * eye);
@@ -886,7 +896,8 @@ fn route(region: &Region, rng: &mut Rng, length: f64) -> (Vec<[f64; 3]>, usize) 
             break;
         }
         // Farthest point from all waypoints so far (ties: lowest index).
-        let (next, d) = dist.iter().enumerate().fold((0usize, 0u32), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
+        let (next, d) =
+            dist.iter().enumerate().fold((0usize, 0u32), |b, (i, &d)| if d > b.1 { (i, d) } else { b });
         if d == 0 {
             break;
         }
@@ -969,7 +980,14 @@ fn gaussian<const N: usize>(x: &[[f64; N]], sigma: f64) -> Vec<[f64; N]> {
 // ---------------------------------------------------------------------------------------------
 
 /// A frame looking from `eye` along `dir` (pitch limited to ±80° so `up` never lines up).
-fn frame(eye: [f64; 3], dir: [f64; 3], up_axis: usize, origin: [f64; 3], fovy: f64, segment: &str) -> PathFrame {
+fn frame(
+    eye: [f64; 3],
+    dir: [f64; 3],
+    up_axis: usize,
+    origin: [f64; 3],
+    fovy: f64,
+    segment: &str,
+) -> PathFrame {
     let h = [(up_axis + 1) % 3, (up_axis + 2) % 3];
     let horiz = (dir[h[0]].powi(2) + dir[h[1]].powi(2)).sqrt();
     let mut d = dir;
@@ -1043,7 +1061,10 @@ pub fn generate_path(
         return bad(format!("fps must be in (0, 1000], got {}", options.fps));
     }
     if !(options.walk_share > 0.0 && options.walk_share < 1.0) {
-        return bad(format!("the walk share must be between 0 and 1 (exclusive), got {}", options.walk_share));
+        return bad(format!(
+            "the walk share must be between 0 and 1 (exclusive), got {}",
+            options.walk_share
+        ));
     }
     if !(1.0..=179.0).contains(&options.fovy_deg) {
         return bad(format!("field of view must be 1..=179 degrees, got {}", options.fovy_deg));
@@ -1062,14 +1083,18 @@ pub fn generate_path(
     }
     if let Some(v) = options.voxel_size {
         if !(v.is_finite() && v > 0.0 && v <= eye / 2.0) {
-            return bad(format!("voxel size must be > 0 and at most half the eye height ({}), got {v}", eye / 2.0));
+            return bad(format!(
+                "voxel size must be > 0 and at most half the eye height ({}), got {v}",
+                eye / 2.0
+            ));
         }
     }
     let (walk_frames_wanted, _) = match options.part {
         PathPart::Walk => (options.frames, 0),
         PathPart::Fly => (0, options.frames),
         PathPart::Both => {
-            let w = ((options.frames as f64 * options.walk_share).round() as usize).clamp(1, options.frames - 1);
+            let w =
+                ((options.frames as f64 * options.walk_share).round() as usize).clamp(1, options.frames - 1);
             (w, options.frames - w)
         }
     };
@@ -1119,12 +1144,7 @@ pub fn generate_path(
                 max_voxels: options.max_voxels,
             };
             let g = WalkGrid::build(store, &params, &mut |d, t| progress("voxelize", d, t))?;
-            tracing::debug!(
-                "path: voxels {:.3}, grid {:?}, {} walkable spans",
-                g.v,
-                g.dims(),
-                g.nodes.len()
-            );
+            tracing::debug!("path: voxels {:.3}, grid {:?}, {} walkable spans", g.v, g.dims(), g.nodes.len());
             report.voxel_size = g.v;
             report.grid = g.dims();
             report.windowed = g.windowed;
@@ -1132,7 +1152,17 @@ pub fn generate_path(
             report.pages_failed = g.pages_failed;
             report.triangles_voxelized = g.triangles;
             report.walkable_spans = g.nodes.len();
-            match walk_path(&g, &mut rng, walk_frames_wanted, options.fps, speed, up, origin, fovy, &mut report) {
+            match walk_path(
+                &g,
+                &mut rng,
+                walk_frames_wanted,
+                options.fps,
+                speed,
+                up,
+                origin,
+                fovy,
+                &mut report,
+            ) {
                 Ok((frames, end)) => {
                     walk = frames;
                     walk_end = Some(end);
@@ -1176,7 +1206,8 @@ pub fn generate_path(
             // Hermite from the walk's end to the orbit's start, velocities matched per frame.
             let t0 = wv.map(|c| c * n);
             let t1 = [0, 1, 2].map(|c| (o1[c] - o0[c]) * n);
-            let wdir = walk.last().map(|f| [0, 1, 2].map(|c| f.target[c] - f.eye[c])).unwrap_or([1.0, 0.0, 0.0]);
+            let wdir =
+                walk.last().map(|f| [0, 1, 2].map(|c| f.target[c] - f.eye[c])).unwrap_or([1.0, 0.0, 0.0]);
             for k in 1..=transition {
                 let u = k as f64 / n;
                 let (u2, u3) = (u * u, u * u * u);

@@ -61,9 +61,11 @@ fn sphere_path(r: f64) -> PathBuf {
     static SMALL: OnceLock<Built> = OnceLock::new();
     static LARGE: OnceLock<Built> = OnceLock::new();
     let cell = if r < 2.0 { &SMALL } else { &LARGE };
-    cell.get_or_init(|| build(tw_io::Scene::from_sources(vec![Box::new(Sphere([3.0, -2.0, 1.0], r))]), "s.tw"))
-        .path
-        .clone()
+    cell.get_or_init(|| {
+        build(tw_io::Scene::from_sources(vec![Box::new(Sphere([3.0, -2.0, 1.0], r))]), "s.tw")
+    })
+    .path
+    .clone()
 }
 
 const VOXEL: f64 = 0.3;

@@ -78,7 +78,11 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
             r.grid[0],
             r.grid[1],
             r.grid[2],
-            if r.windowed { " (a window around the centre: the scene is too large for the voxel cap)" } else { "" },
+            if r.windowed {
+                " (a window around the centre: the scene is too large for the voxel cap)"
+            } else {
+                ""
+            },
             fmt_count(r.triangles_voxelized),
             fmt_count(r.pages_read),
             if r.pages_failed > 0 { format!(", {} pages failed", r.pages_failed) } else { String::new() }
