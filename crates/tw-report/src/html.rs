@@ -209,9 +209,9 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         }
         h.push_str("</div></section>");
     }
-    let _ = write!(
+    let _ = writeln!(
         h,
-        "</main><footer>terawalk {} · every figure is also in report.json</footer></body></html>\n",
+        "</main><footer>terawalk {} · every figure is also in report.json</footer></body></html>",
         env!("CARGO_PKG_VERSION")
     );
     h

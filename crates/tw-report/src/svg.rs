@@ -184,7 +184,7 @@ pub fn plot(series: &Series, runs: &[Run]) -> String {
         for i in 1..=r.frames.len() {
             if i == r.frames.len() || r.frames[i].segment != r.frames[start].segment {
                 let seg = &r.frames[start].segment;
-                if !seg.is_empty() && !(start == 0 && i == r.frames.len()) {
+                if !(seg.is_empty() || start == 0 && i == r.frames.len()) {
                     let (a, b) = (sx(start as f64), sx((i - 1) as f64));
                     let fill = if band % 2 == 0 { "#f3f6fa" } else { "#fbf7f0" };
                     let _ = write!(

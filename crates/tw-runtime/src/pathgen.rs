@@ -19,8 +19,9 @@
 //!    border over spans that overlap in 4-neighbour columns finds the *exterior* free space;
 //!    free space enclosed by geometry (inside tanks, pipes, a closed statue) counts as solid.
 //! 4. **Walkable**: an exterior span with a floor (an occupied voxel below) and room for the eye
-//!    height plus head clearance; *eroded* by the agent radius: above step height, the body's
-//!    cylinder must be free in the neighbouring columns too. Walkable spans of 8-neighbour
+//!    height plus 5 %; *eroded* by the agent radius (0.12 eye heights, at least a voxel: a
+//!    camera, not a person, so 1 m doors stay open): above step height (a quarter of the eye
+//!    height), the body's cylinder must be free in the neighbouring columns too. Walkable spans of 8-neighbour
 //!    columns connect when their floors differ by at most a step and their free intervals
 //!    overlap by the body height (diagonals also need both orthogonal moves), so stairs work.
 //! 5. **Region**: the largest connected region of *covered* walkable spans (something above within
@@ -32,13 +33,20 @@
 //! 7. **Smoothing**: the route is resampled, Gaussian-smoothed (position and height, so stairs
 //!    become ramps), checked against the voxels (a smoothed point that leaves walkable space
 //!    halves the smoothing), then resampled at constant walking speed. The look direction
-//!    follows the path a little ahead, smoothed over half a second, with a slow seeded pitch
-//!    sway.
+//!    follows the path 1.5 s ahead, smoothed over half a second and limited to 90°/s (a
+//!    reversal at a waypoint becomes a two-second turn), with a slow seeded pitch sway.
 //!
-//! The fly part is an orbit around the scene's centre at a distance that frames the whole
-//! scene, with elevation and distance varying slowly; after a walk, a Hermite curve rises from
-//! the walk's last camera (same velocity) to the orbit (same velocity), turning the view
-//! towards the centre.
+//! The fly part is one orbit around the scene's centre at about the distance that frames its
+//! bounding sphere, elevation 25–45° and distance varying slowly, never below the model's top;
+//! after a walk, a Hermite curve rises from the walk's last camera (same velocity) to the orbit
+//! (same velocity) over a third of the fly frames, turning the view to the centre by yaw and
+//! pitch. (The rise goes through whatever is above the walk: the renderer's near plane cuts
+//! the roof for a few frames.)
+//!
+//! Bounds: the grid holds at most [`PathOptions::max_voxels`] bits (32 MiB by default) plus
+//! per-column spans; pages are decoded one at a time per thread; a scene too large for fine
+//! voxels is voxelized in a window around its centre (the walk stays in it) and, failing
+//! that, with coarser voxels, down to a third of the eye height, below which there is no walk.
 
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
@@ -525,7 +533,7 @@ impl WalkGrid {
             let mut start: Option<usize> = None;
             while k < self.nz {
                 let w = words[k / 64];
-                if k % 64 == 0 && (w == 0 || w == u64::MAX) && k + 64 <= self.nz {
+                if k.is_multiple_of(64) && (w == 0 || w == u64::MAX) && k + 64 <= self.nz {
                     if w == 0 {
                         start.get_or_insert(k);
                     } else if let Some(s) = start.take() {
@@ -628,8 +636,8 @@ impl WalkGrid {
             }
         }
         // Links: floors within a step, free intervals overlapping by the body height.
-        for n in 0..nodes.len() {
-            let (col, sp) = (nodes[n].col as usize, self.spans[nodes[n].span as usize]);
+        for node in nodes.iter_mut() {
+            let (col, sp) = (node.col as usize, self.spans[node.span as usize]);
             let mut nb = [NONE; 8];
             for (d, dir) in DIRS.iter().enumerate() {
                 let Some(nc) = self.neighbour_col(col, *dir) else { continue };
@@ -651,7 +659,7 @@ impl WalkGrid {
                     nb[d] = NONE;
                 }
             }
-            nodes[n].nb = nb;
+            node.nb = nb;
         }
         self.node_of = node_of;
         self.nodes = nodes;
@@ -816,7 +824,7 @@ impl<'a> Region<'a> {
                 return None;
             }
             let lm = self.local[m as usize];
-            (lm != NONE).then(|| (lm, if d < 4 { 1.0 } else { std::f64::consts::SQRT_2 }))
+            (lm != NONE).then_some((lm, if d < 4 { 1.0 } else { std::f64::consts::SQRT_2 }))
         })
     }
 
@@ -1030,18 +1038,20 @@ struct Orbit {
     sense: f64,
     phase: f64,
     up: usize,
+    /// The eye never goes below this (the model's top plus a margin).
+    min_height: f64,
 }
 
 impl Orbit {
     fn eye(&self, u: f64) -> [f64; 3] {
         let theta = self.theta0 + self.sense * std::f64::consts::TAU * u;
-        let elev = (32.0 + 10.0 * (std::f64::consts::TAU * u + self.phase).sin()).to_radians();
+        let elev = (35.0 + 10.0 * (std::f64::consts::TAU * u + self.phase).sin()).to_radians();
         let d = self.dist * (0.9 + 0.1 * (std::f64::consts::TAU * 2.0 * u + self.phase).cos());
         let h = [(self.up + 1) % 3, (self.up + 2) % 3];
         let mut p = self.centre;
         p[h[0]] += d * elev.cos() * theta.cos();
         p[h[1]] += d * elev.cos() * theta.sin();
-        p[self.up] += d * elev.sin();
+        p[self.up] = (p[self.up] + d * elev.sin()).max(self.min_height);
         p
     }
 }
@@ -1178,11 +1188,14 @@ pub fn generate_path(
     let half_fov = (fovy.min(100.0) / 2.0).to_radians();
     let mut orbit = Orbit {
         centre,
-        dist: radius / half_fov.sin() * 1.05,
+        // The bounding sphere fits the view at `radius / sin(fov / 2)`; sites are flatter than
+        // their sphere, so come a little closer.
+        dist: radius / half_fov.sin() * 0.8,
         theta0: rng.range_f64(0.0, std::f64::consts::TAU),
         sense: 1.0,
         phase: rng.range_f64(0.0, std::f64::consts::TAU),
         up,
+        min_height: h.bounds_max[up] - h.grid_origin[up] + 0.1 * radius,
     };
     let mut fly: Vec<PathFrame> = Vec::with_capacity(fly_count);
     if fly_count > 0 {
@@ -1265,6 +1278,9 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
+/// The last eye of a walk and its velocity per frame.
+type WalkEnd = ([f64; 3], [f64; 3]);
+
 /// The walk frames, or why there is none. Also returns the last eye and its per-frame velocity.
 #[allow(clippy::too_many_arguments)]
 fn walk_path(
@@ -1277,7 +1293,7 @@ fn walk_path(
     origin: [f64; 3],
     fovy: f64,
     report: &mut PathReport,
-) -> Result<(Vec<PathFrame>, ([f64; 3], [f64; 3])), String> {
+) -> Result<(Vec<PathFrame>, WalkEnd), String> {
     if g.v > g.eye / 3.0 {
         return Err(format!(
             "the voxel cap leaves voxels of {:.3}, too coarse for an eye height of {} (raise --max-voxels)",
