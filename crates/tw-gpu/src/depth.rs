@@ -98,7 +98,7 @@ impl DepthCopy {
     ) -> Result<DepthImage, GpuError> {
         let (width, height) = (texture.width(), texture.height());
         let size = width as u64 * height as u64 * 4;
-        if size > device.limits().max_storage_buffer_binding_size as u64 {
+        if size > device.limits().max_storage_buffer_binding_size {
             return Err(GpuError::Gpu(format!(
                 "a {width}×{height} depth buffer exceeds the storage-buffer binding limit"
             )));

@@ -139,7 +139,7 @@ mod tests {
 
     #[test]
     fn psnr_and_differing_pixels() {
-        let a = img(2, 2, vec![10, 10, 10, 255].repeat(4));
+        let a = img(2, 2, [10, 10, 10, 255].repeat(4));
         assert_eq!(a.psnr(&a).unwrap(), f64::INFINITY);
         assert_eq!(a.differing_pixels(&a).unwrap(), 0);
         // One channel of one pixel off by 4: MSE = 16 / 12.

@@ -12,6 +12,7 @@
 //!   loop, [`DrawMode`]); shading in draw.wgsl (headlight + fixed sun, [`ColorMode`]).
 //! - [`ids`]: the item buffer and the exact visible sets.
 //! - [`depth`]: reverse-Z depth readback for the CPU HZB.
+//! - [`query`]: hardware occlusion queries of boxes against the frame's depth.
 //! - [`image`]: RGBA images, PNG, PSNR and pixel differences.
 //! - `readback`, [`color`], [`error`].
 //!
@@ -31,6 +32,7 @@ pub mod error;
 pub mod ids;
 pub mod image;
 pub mod pool;
+pub mod query;
 mod readback;
 
 use std::time::{Duration, Instant};
@@ -121,6 +123,7 @@ pub struct Renderer {
     draw_mode: DrawMode,
     indirect_supported: bool,
     depth_copy: Option<depth::DepthCopy>,
+    box_queries: Option<query::BoxQueries>,
     mode: ColorMode,
     stats: FrameStats,
     /// Whether the last draw went to the own target (so read_color / read_depth make sense).
@@ -238,6 +241,7 @@ impl Renderer {
             draw_mode: if indirect_supported { DrawMode::Indirect } else { DrawMode::Direct },
             indirect_supported,
             depth_copy: None,
+            box_queries: None,
             mode: ColorMode::default(),
             stats: FrameStats::default(),
             last_own: false,
@@ -407,6 +411,39 @@ impl Renderer {
         let d = copy.read(&self.device, &self.queue, &mut self.readback, &self.depth)?;
         self.stats.render += start.elapsed();
         Ok(d)
+    }
+
+    /// Hardware occlusion queries of `boxes` (scene-space min, max) against the own depth
+    /// target as the frame's draws left it, from `camera` (the camera of those draws): per box
+    /// the samples that passed on Vulkan, 0 or 1 on GL ([`Renderer::queries_count_samples`]),
+    /// [`query::EYE_INSIDE`] for a box around the eye; > 0 means visible. Waits for the GPU.
+    pub fn query_boxes(&mut self, camera: &Camera, boxes: &[(Vec3, Vec3)]) -> Result<Vec<u64>, GpuError> {
+        if !self.last_own {
+            return Err(GpuError::NotOwnTarget { what: "query_boxes" });
+        }
+        let start = Instant::now();
+        let aspect = self.width as f32 / self.height as f32;
+        let view_proj = camera.projection_reverse_z(aspect) * camera.view();
+        let q = self
+            .box_queries
+            .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT));
+        let r = q.run(
+            &self.device,
+            &self.queue,
+            &mut self.readback,
+            &self.depth_view,
+            view_proj,
+            camera.eye,
+            camera.near,
+            boxes,
+        )?;
+        self.stats.render += start.elapsed();
+        Ok(r)
+    }
+
+    /// Whether [`query_boxes`](Self::query_boxes) returns sample counts (else 0/1: GL).
+    pub fn queries_count_samples(&self) -> bool {
+        self.info.backend != wgpu::Backend::Gl
     }
 
     /// A whole single-pass frame into the own target: [`begin_frame`](Self::begin_frame),

@@ -85,10 +85,6 @@ fn select(store: &Store, cache: &PageCache, camera: &Camera, tau: f32) -> Vec<Cl
         .clusters
 }
 
-fn cluster_list<'a>(pages: &'a tw_gpu::SelectionPages) -> Vec<(ClusterRef, &'a PageCluster)> {
-    pages.clusters()
-}
-
 // ---------------------------------------------------------------------------------------------
 // The pool: a tiny budget gives the same images as a large one.
 
@@ -111,7 +107,7 @@ fn pool_tiny_budget(backends: wgpu::Backends) {
         let tau = if i % 2 == 0 { 0.0 } else { 2.0 };
         let sel = select(&store, &cache, cam, tau);
         let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
-        let list = cluster_list(&pages);
+        let list = pages.clusters();
         let a = big.render_clusters(cam, step, &list).unwrap();
         let sa = big.stats();
         let b = tiny.render_clusters(cam, step, &list).unwrap();
@@ -136,7 +132,7 @@ fn pool_tiny_budget(backends: wgpu::Backends) {
     // The same selection again: nothing to upload with the big budget.
     let sel = select(&store, &cache, &cameras[0], 0.0);
     let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
-    big.render_clusters(&cameras[0], step, &cluster_list(&pages)).unwrap();
+    big.render_clusters(&cameras[0], step, &pages.clusters()).unwrap();
     assert_eq!(big.stats().pool.uploaded_clusters, 0);
     assert_eq!(big.stats().pool.evicted_clusters, 0);
     assert_eq!(frames, 6);
@@ -164,7 +160,7 @@ fn indirect_vs_direct(backends: wgpu::Backends) {
     let cam = &plant_cameras(&store, 1)[0];
     let sel = select(&store, &cache, cam, 0.0);
     let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
-    let list = cluster_list(&pages);
+    let list = pages.clusters();
     let step = store.header().grid_step;
     let mut images = Vec::new();
     for mode in [DrawMode::Indirect, DrawMode::Direct] {
@@ -364,7 +360,7 @@ fn two_pass(backends: wgpu::Backends) {
     let cam = &plant_cameras(&store, 2)[1];
     let sel = select(&store, &cache, cam, 0.0);
     let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
-    let list = cluster_list(&pages);
+    let list = pages.clusters();
     let (a, b) = list.split_at(list.len() / 2);
     let t = std::time::Instant::now();
     r.begin_frame();
@@ -496,4 +492,44 @@ fn from_device_and_render_to_view_gl() {
 #[test]
 fn from_device_and_render_to_view_vulkan() {
     external(wgpu::Backends::VULKAN);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Hardware occlusion queries of boxes against the frame's depth.
+
+fn queries(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    let cam = top_camera();
+    let back = quad(0, 0, 100, 100, 10, 5);
+    r.begin_frame();
+    r.draw(Target::Own, &cam, 1.0, &[(key(1), &back)], true).unwrap();
+    let boxes = [
+        (Vec3::new(40.0, 40.0, 0.0), Vec3::new(60.0, 60.0, 5.0)), // under the quad: hidden
+        (Vec3::new(40.0, 40.0, 20.0), Vec3::new(60.0, 60.0, 30.0)), // above it: visible
+        (Vec3::new(90.0, 90.0, 0.0), Vec3::new(130.0, 95.0, 5.0)), // under, but sticks out
+        (Vec3::new(500.0, 0.0, 0.0), Vec3::new(510.0, 10.0, 5.0)), // off screen
+        (Vec3::new(40.0, 40.0, 150.0), Vec3::new(60.0, 60.0, 250.0)), // around the eye
+    ];
+    let got = r.query_boxes(&cam, &boxes).unwrap();
+    eprintln!("{backends:?}: query results {got:?} (samples: {})", r.queries_count_samples());
+    assert_eq!(got[0], 0);
+    assert!(got[1] > 0);
+    assert!(got[2] > 0);
+    assert_eq!(got[3], 0);
+    assert_eq!(got[4], tw_gpu::query::EYE_INSIDE);
+    if r.queries_count_samples() {
+        // The visible box covers about its projected area in pixels.
+        assert!(got[1] > 100, "{}", got[1]);
+    }
+}
+
+#[test]
+fn occlusion_queries_gl() {
+    queries(wgpu::Backends::GL);
+}
+
+#[test]
+fn occlusion_queries_vulkan() {
+    queries(wgpu::Backends::VULKAN);
 }
