@@ -612,6 +612,14 @@ impl Renderer {
             Pass::Shade { format, .. } => Some(format),
             Pass::Items => None,
         };
+        // GL (llvmpipe) hazard, seen in tests: a queued write into an arena range that an
+        // earlier, still running submission draws from is not always ordered after it. On GL,
+        // wait for earlier work before any eviction can happen (the arena is full) and after
+        // each batch; other backends order it themselves.
+        let gl = self.info.backend == wgpu::Backend::Gl;
+        if gl && self.pool.stats().arena_bytes >= self.pool.budget() {
+            self.wait_idle()?;
+        }
         let mut batch: Vec<DrawArgs> = Vec::new();
         let mut keys: Vec<PoolKey> = Vec::new();
         let mut first = true;
@@ -638,6 +646,9 @@ impl Renderer {
                     Ensure::Full if !retried && !batch.is_empty() => {
                         self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
                         first = false;
+                        if gl {
+                            self.wait_idle()?;
+                        }
                         self.pool.release_batch(&keys);
                         batch.clear();
                         keys.clear();
@@ -655,6 +666,13 @@ impl Renderer {
         self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
         self.stats.upload += upload;
         Ok(())
+    }
+
+    fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))
     }
 
     /// Encodes and submits one batch. `format` is `None` for the item buffer.

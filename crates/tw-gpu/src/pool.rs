@@ -195,7 +195,11 @@ pub struct ClusterPool {
     stats: PoolStats,
     vertices: Vec<PoolVertex>,
     indices: Vec<u32>,
-    remap: HashMap<(u8, u32), u32>,
+    /// Per local vertex: (object, pooled index) of its first copy; further objects of the same
+    /// vertex (rare) go through `remap_more`.
+    remap: Vec<(u32, u32)>,
+    remap_more: HashMap<(u8, u32), u32>,
+    bytes: Vec<u8>,
 }
 
 fn slot_buffer(device: &wgpu::Device, slots: u32) -> wgpu::Buffer {
@@ -227,7 +231,9 @@ impl ClusterPool {
             stats: PoolStats::default(),
             vertices: Vec::new(),
             indices: Vec::new(),
-            remap: HashMap::new(),
+            remap: vec![(0, u32::MAX); 256],
+            remap_more: HashMap::new(),
+            bytes: Vec::new(),
         }
     }
 
@@ -306,7 +312,8 @@ impl ClusterPool {
         // Build the cluster's vertices (duplicated per object) and indices.
         self.vertices.clear();
         self.indices.clear();
-        self.remap.clear();
+        self.remap.fill((0, u32::MAX));
+        self.remap_more.clear();
         for (t, tri) in cluster.indices.chunks_exact(3).enumerate() {
             if tri.iter().any(|&i| i as usize >= cluster.positions.len()) {
                 self.stats.bad_triangles += 1;
@@ -315,7 +322,15 @@ impl ClusterPool {
             let object = cluster.objects.get(t).copied().unwrap_or(0);
             for &i in tri {
                 let next = self.vertices.len() as u32;
-                let v = *self.remap.entry((i, object)).or_insert(next);
+                let first = &mut self.remap[i as usize];
+                let v = if first.1 == u32::MAX {
+                    *first = (object, next);
+                    next
+                } else if first.0 == object {
+                    first.1
+                } else {
+                    *self.remap_more.entry((i, object)).or_insert(next)
+                };
                 if v == next {
                     let g = cluster.positions[i as usize];
                     let position = g.map(|c| (c as f64 * grid_step) as f32);
@@ -361,10 +376,12 @@ impl ClusterPool {
             v.slot = slot;
         }
         let Some(arena) = &self.arena else { return Ensure::Full };
-        queue.write_buffer(arena, start * UNIT, bytemuck::cast_slice(&self.vertices));
-        let mut index_bytes: Vec<u8> = bytemuck::cast_slice(&self.indices).to_vec();
-        index_bytes.resize((index_units * UNIT) as usize, 0);
-        queue.write_buffer(arena, (start + nv) * UNIT, &index_bytes);
+        // Vertices and indices are contiguous: one write.
+        self.bytes.clear();
+        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.vertices));
+        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.indices));
+        self.bytes.resize((units * UNIT) as usize, 0);
+        queue.write_buffer(arena, start * UNIT, &self.bytes);
         let info = SlotInfo { page: key.0, index_in_page: key.1, level: cluster.level as u32, item: 0 };
         queue.write_buffer(
             &self.slot_buffer,
