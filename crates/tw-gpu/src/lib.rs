@@ -1,198 +1,103 @@
 //! terawalk's GPU renderer (wgpu 30): draws the clusters a [`tw_runtime::Selector`] chose for a
-//! frame (DESIGN "Data flow": camera → select → … → draw), headless into an offscreen target
-//! that is read back (for `terawalk render`, tests and measurements, DESIGN decision 5).
+//! frame (DESIGN "Data flow": camera → select → occlude → stream → draw; decision 5), headless
+//! into its own offscreen target (for `terawalk render`, `bench`, tests) or into a caller's
+//! texture view (the viewer's surface or egui texture), with the measurements of DESIGN
+//! "Measuring" (item buffer, image comparison) and the GPU side of the occlusion strategies of
+//! decision 6 (two-pass drawing with depth readback for `hzb`).
 //!
-//! - [`Renderer::new_headless`] opens an adapter without a surface (backends from
-//!   `WGPU_BACKEND`, default all; on machines without a GPU, Mesa's lavapipe (Vulkan) or llvmpipe
-//!   (GL) serve), with an `Rgba8UnormSrgb` colour target, a `Depth32Float` depth target and a
-//!   readback buffer whose rows are padded to 256 bytes.
-//! - Geometry: [`Renderer::upload_clusters`] builds this frame's vertex buffers from decoded
-//!   store clusters ([`tw_store::PageCluster`], grid positions → f32 scene space `g × grid_step`,
-//!   docs/FORMAT.md "Model"). Vertices are **not indexed**: three per triangle, each 16 bytes
-//!   (position f32×3, colour sRGB u8×4), so a triangle's object colour needs no per-primitive
-//!   lookup. That is 48 bytes a triangle, about 3× an indexed layout; acceptable for a CPU
-//!   rasterizer whose limit is ~0.5 M visible triangles a frame, to be replaced by resident
-//!   per-cluster index buffers when streaming moves to the GPU. The buffers are rebuilt each
-//!   frame and their capacity reused; they are split into chunks of at most
-//!   [`MAX_CHUNK_BYTES`].
-//! - Shading: flat normals from screen-space derivatives (`cross(dpdx(p), dpdy(p))` in the
-//!   fragment shader, supported by every naga backend including GLSL), turned towards the viewer
-//!   (both sides are drawn), a headlight plus a fixed sun from above. Colours: the store's object
-//!   colours (grey when an object has none) or a debug mode ([`ColorMode`]).
-//! - Depth is reverse-Z ([`tw_runtime::Camera::projection_reverse_z`], `Greater`, clear 0).
-//! - [`Renderer::render`] draws, waits for the GPU (`PollType::wait_indefinitely`) and returns an
-//!   [`Image`]: RGBA8, rows from the top; alpha is 255 where geometry was drawn and 0 on the
-//!   background, so coverage can be read from it. [`Image::save_png`] writes it opaque.
+//! Modules, one concern each:
+//! - [`pool`]: clusters resident on the GPU in one pooled, indexed buffer under a byte budget,
+//!   LRU eviction; only clusters not yet resident are uploaded each frame.
+//! - [`draw`]: pipelines and batched draws (`multi_draw_indexed_indirect` or a `draw_indexed`
+//!   loop, [`DrawMode`]); shading in draw.wgsl (headlight + fixed sun, [`ColorMode`]).
+//! - [`ids`]: the item buffer and the exact visible sets.
+//! - [`depth`]: reverse-Z depth readback for the CPU HZB.
+//! - [`query`]: hardware occlusion queries of boxes against the frame's depth.
+//! - [`image`]: RGBA images, PNG, PSNR and pixel differences.
+//! - `readback`, [`color`], [`error`].
+//!
+//! A frame: [`Renderer::begin_frame`], then one or more [`Renderer::draw`] calls (the first
+//! clears, later ones draw on top — the two passes of an occlusion-culled frame), then
+//! [`Renderer::read_color`] / [`Renderer::read_depth`]. [`Renderer::render_clusters`] and
+//! [`Renderer::render_selection`] do the whole single-pass frame and return an [`Image`];
+//! [`Renderer::render_to_view`] draws into a caller's view and does not wait.
+//!
+//! Depth is reverse-Z ([`tw_runtime::Camera::projection_reverse_z`], `Greater`, clear 0).
+//! Images: RGBA8 sRGB, rows from the top; alpha 255 where geometry was drawn, 0 elsewhere.
 
-use std::path::{Path, PathBuf};
+pub mod color;
+pub mod depth;
+pub mod draw;
+pub mod error;
+pub mod ids;
+pub mod image;
+pub mod pool;
+pub mod query;
+mod readback;
+
 use std::time::{Duration, Instant};
 
 pub use wgpu;
 
-use bytemuck::{Pod, Zeroable};
 use glam::Vec3;
 use tw_runtime::{Camera, ClusterRef, PageCache, Selection};
 use tw_store::{PageCluster, Store};
 
-/// Identifies a cluster: its page, index in the page and group (as selected).
-pub type ClusterKey = ClusterRef;
+pub use color::{hash_color, level_color, ColorMode, BACKGROUND, DEFAULT_COLOR};
+pub use depth::DepthImage;
+pub use draw::DrawMode;
+pub use error::GpuError;
+pub use ids::{ClusterVisibility, Item, ItemBuffer, VisibleSet};
+pub use image::Image;
+pub use pool::{PoolStats, MIN_BUDGET};
 
-/// The largest vertex buffer chunk (bytes). Well under every backend's `max_buffer_size`.
-pub const MAX_CHUNK_BYTES: u64 = 256 << 20;
+use draw::{IndirectArgs, Pipelines, Uniforms, DEPTH_FORMAT, ITEM_FORMAT};
+use pool::{ClusterPool, DrawArgs, Ensure, PoolKey};
+use readback::Readback;
+
+/// Identifies a cluster: its page, index in the page and group (as selected). The pool keys
+/// clusters by (page, index in page).
+pub type ClusterKey = ClusterRef;
 
 /// The largest image side accepted.
 pub const MAX_SIDE: u32 = 16384;
 
-/// Colour of objects without one in the store (sRGB).
-pub const DEFAULT_COLOR: [u8; 4] = [180, 180, 180, 255];
-
-/// Background (sRGB) that [`Image::save_png`] puts where nothing was drawn.
-pub const BACKGROUND: [u8; 3] = [205, 218, 235];
+/// The default GPU-memory budget for resident cluster geometry (bytes).
+pub const DEFAULT_GPU_BUDGET: u64 = 512 << 20;
 
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
-const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
 
-/// Errors of this crate.
-#[derive(Debug, thiserror::Error)]
-pub enum GpuError {
-    #[error(
-        "no GPU adapter for backends {backends}: {reason}; install mesa-vulkan-drivers or set \
-         WGPU_BACKEND=gl"
-    )]
-    NoAdapter { backends: String, reason: String },
-    #[error("cannot create a device on {adapter}: {source}")]
-    Device {
-        adapter: String,
-        #[source]
-        source: wgpu::RequestDeviceError,
-    },
-    #[error("image size {width}×{height} is invalid: each side must be 1 to {max} pixels")]
-    Size { width: u32, height: u32, max: u32 },
-    #[error("GPU error: {0}")]
-    Gpu(String),
-    #[error("{}: {source}", path.display())]
-    Io {
-        path: PathBuf,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("{}: PNG encoding failed: {source}", path.display())]
-    Png {
-        path: PathBuf,
-        #[source]
-        source: png::EncodingError,
-    },
-}
-
-/// Where a triangle's colour comes from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum ColorMode {
-    /// The object's colour from the store's object table, [`DEFAULT_COLOR`] without one.
-    #[default]
-    Material,
-    /// A colour from a hash of the object id.
-    Object,
-    /// A colour per LOD level (0 = full resolution).
-    Level,
-    /// A colour from a hash of the cluster (page, index in page).
-    Cluster,
-}
-
-/// One vertex: scene-space position and sRGB colour.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct Vertex {
-    position: [f32; 3],
-    color: [u8; 4],
-}
-
-const VERTEX_SIZE: u64 = std::mem::size_of::<Vertex>() as u64;
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Pod, Zeroable)]
-struct Uniforms {
-    view_proj: [[f32; 4]; 4],
-    eye: [f32; 4],
-    sun: [f32; 4],
-}
-
-/// An RGBA8 image read back from the GPU.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Image {
-    pub width: u32,
-    pub height: u32,
-    /// RGBA, 8 bits a channel (sRGB), rows from the top, `width × height × 4` bytes. Alpha is
-    /// 255 where geometry was drawn, 0 elsewhere.
-    pub rgba: Vec<u8>,
-}
-
-impl Image {
-    /// Whether pixel `(x, y)` shows geometry.
-    pub fn covered(&self, x: u32, y: u32) -> bool {
-        let i = (y as usize * self.width as usize + x as usize) * 4 + 3;
-        self.rgba.get(i).is_some_and(|&a| a != 0)
-    }
-
-    /// Pixels that show geometry.
-    pub fn covered_pixels(&self) -> usize {
-        self.rgba.chunks_exact(4).filter(|p| p[3] != 0).count()
-    }
-
-    /// The image with [`BACKGROUND`] where nothing was drawn, opaque.
-    pub fn opaque(&self) -> Vec<u8> {
-        let mut out = self.rgba.clone();
-        for p in out.chunks_exact_mut(4) {
-            if p[3] == 0 {
-                p[..3].copy_from_slice(&BACKGROUND);
-            }
-            p[3] = 255;
-        }
-        out
-    }
-
-    /// Writes the image as an opaque 8-bit RGBA PNG (see [`Image::opaque`]), atomically (a
-    /// temporary file beside `path`, renamed).
-    pub fn save_png(&self, path: &Path) -> Result<(), GpuError> {
-        let io = |source| GpuError::Io { path: path.to_path_buf(), source };
-        let png_err = |source| GpuError::Png { path: path.to_path_buf(), source };
-        let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
-        tmp_name.push(".tmp");
-        let tmp = path.with_file_name(tmp_name);
-        let result = (|| {
-            let file = std::fs::File::create(&tmp).map_err(io)?;
-            let mut w = std::io::BufWriter::new(file);
-            {
-                let mut enc = png::Encoder::new(&mut w, self.width, self.height);
-                enc.set_color(png::ColorType::Rgba);
-                enc.set_depth(png::BitDepth::Eight);
-                enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-                let mut pw = enc.write_header().map_err(png_err)?;
-                pw.write_image_data(&self.opaque()).map_err(png_err)?;
-                pw.finish().map_err(png_err)?;
-            }
-            let file = w.into_inner().map_err(|e| io(e.into_error()))?;
-            file.sync_all().map_err(io)?;
-            std::fs::rename(&tmp, path).map_err(io)
-        })();
-        if result.is_err() {
-            let _ = std::fs::remove_file(&tmp);
-        }
-        result
-    }
-}
-
-/// What the last frame drew and how long it took.
+/// What the current frame (since [`Renderer::begin_frame`]) drew and how long it took.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
     pub clusters: u64,
     pub triangles: u64,
-    /// Building and uploading the vertex buffers.
+    /// Draw calls issued (one per cluster with [`DrawMode::Direct`], one per batch indirect).
+    pub draw_calls: u64,
+    /// Making clusters resident: building and uploading the ones not yet on the GPU (CPU time).
     pub upload: Duration,
-    /// Encoding, GPU work and readback (wall clock, waiting for the GPU).
+    /// Encoding, submitting and, for the headless calls, waiting and reading back.
     pub render: Duration,
+    /// The cluster pool: uploads, evictions, resident bytes, batches.
+    pub pool: PoolStats,
 }
 
-/// A headless wgpu renderer; see the crate documentation.
+/// Where a [`Renderer::draw`] goes.
+#[derive(Clone, Copy, Debug)]
+pub enum Target<'a> {
+    /// The renderer's own colour and depth targets (read back with [`Renderer::read_color`]
+    /// and [`Renderer::read_depth`]).
+    Own,
+    /// A caller's colour view of `format` and `size`; depth is the renderer's (one per size).
+    View { view: &'a wgpu::TextureView, format: wgpu::TextureFormat, size: (u32, u32) },
+}
+
+enum Pass<'a> {
+    Shade { view: &'a wgpu::TextureView, format: wgpu::TextureFormat },
+    Items,
+}
+
+/// The wgpu renderer; see the crate documentation.
 pub struct Renderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
@@ -201,20 +106,28 @@ pub struct Renderer {
     height: u32,
     color: wgpu::Texture,
     color_view: wgpu::TextureView,
+    depth: wgpu::Texture,
     depth_view: wgpu::TextureView,
-    readback: wgpu::Buffer,
-    padded_row: u32,
-    pipeline: wgpu::RenderPipeline,
+    /// Depth targets for caller views of other sizes than the own target: (size, view).
+    extra_depth: Option<((u32, u32), wgpu::TextureView)>,
+    items: Option<(wgpu::Texture, wgpu::TextureView)>,
+    readback: Readback,
+    pipelines: Pipelines,
     uniforms: wgpu::Buffer,
+    object_colors: wgpu::Buffer,
+    object_color_count: u32,
     bind_group: wgpu::BindGroup,
-    /// Vertex buffer chunks with their capacity in vertices; `draws` says how many vertices of
-    /// each the current frame uses.
-    chunks: Vec<(wgpu::Buffer, u64)>,
-    draws: Vec<u32>,
-    scratch: Vec<Vertex>,
-    object_colors: Vec<[u8; 4]>,
+    bind_generation: u64,
+    pool: ClusterPool,
+    indirect: IndirectArgs,
+    draw_mode: DrawMode,
+    indirect_supported: bool,
+    depth_copy: Option<depth::DepthCopy>,
+    box_queries: Option<query::BoxQueries>,
     mode: ColorMode,
     stats: FrameStats,
+    /// Whether the last draw went to the own target (so read_color / read_depth make sense).
+    last_own: bool,
 }
 
 impl Renderer {
@@ -249,19 +162,47 @@ impl Renderer {
         if width > limits.max_texture_dimension_2d || height > limits.max_texture_dimension_2d {
             return Err(GpuError::Size { width, height, max: limits.max_texture_dimension_2d });
         }
+        let features = adapter.features() & Renderer::optional_features();
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("terawalk"),
-            required_features: wgpu::Features::empty(),
+            required_features: features,
             required_limits: limits,
             ..Default::default()
         }))
         .map_err(|source| GpuError::Device { adapter: adapter_summary(&info), source })?;
         tracing::info!("GPU adapter: {}", adapter_summary(&info));
+        let mut r = Renderer::from_device(device, queue, info, width, height)?;
+        r.set_downlevel(&adapter.get_downlevel_capabilities());
+        Ok(r)
+    }
 
-        let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
+    /// Features the renderer uses when the device has them (request them when opening a device
+    /// for [`Renderer::from_device`]): `PRIMITIVE_INDEX` (triangle ids in the item buffer).
+    pub fn optional_features() -> wgpu::Features {
+        wgpu::Features::PRIMITIVE_INDEX
+    }
+
+    /// A renderer on a device the caller already has (a viewer's winit surface or egui-wgpu
+    /// device; wgpu devices and queues are reference-counted handles: pass clones).
+    /// `width` × `height` is the size of the renderer's own offscreen target, used by
+    /// [`render_clusters`](Self::render_clusters) and [`Target::Own`];
+    /// [`render_to_view`](Self::render_to_view) draws into any caller view instead.
+    /// Indirect draws are used on all backends but GL, where the adapter must be asked:
+    /// call [`set_downlevel`](Self::set_downlevel) with the adapter's capabilities.
+    pub fn from_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+        width: u32,
+        height: u32,
+    ) -> Result<Renderer, GpuError> {
+        let max = device.limits().max_texture_dimension_2d.min(MAX_SIDE);
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(GpuError::Size { width, height, max });
+        }
         let color = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("colour target"),
-            size: extent,
+            size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
@@ -269,119 +210,82 @@ impl Renderer {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("depth target"),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
-        let padded_row =
-            (width * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-        let readback = device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: padded_row as u64 * height as u64,
-            usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-            mapped_at_creation: false,
-        });
+        let depth = depth_texture(&device, width, height);
         let uniforms = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("uniforms"),
             size: std::mem::size_of::<Uniforms>() as u64,
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("uniforms"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("uniforms"),
-            layout: &bind_layout,
-            entries: &[wgpu::BindGroupEntry { binding: 0, resource: uniforms.as_entire_binding() }],
-        });
-        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("clusters"),
-            bind_group_layouts: &[Some(&bind_layout)],
-            immediate_size: 0,
-        });
-        let shader = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("clusters"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
-        });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("clusters"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: VERTEX_SIZE,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Unorm8x4],
-                })],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
-        let color_view = color.create_view(&Default::default());
-        let depth_view = depth.create_view(&Default::default());
+        let object_colors = colors_buffer(&device, &queue, &[color::pack(DEFAULT_COLOR)]);
+        let pipelines = Pipelines::new(&device);
+        let pool = ClusterPool::new(&device, DEFAULT_GPU_BUDGET);
+        let bind_group = bind_group(&device, &pipelines, &uniforms, &pool, &object_colors);
+        let indirect_supported = info.backend != wgpu::Backend::Gl;
         Ok(Renderer {
+            color_view: color.create_view(&Default::default()),
+            depth_view: depth.create_view(&Default::default()),
+            color,
+            depth,
+            extra_depth: None,
+            items: None,
+            readback: Readback::default(),
+            pipelines,
+            uniforms,
+            object_colors,
+            object_color_count: 0,
+            bind_group,
+            bind_generation: pool.generation,
+            pool,
+            indirect: IndirectArgs::default(),
+            draw_mode: if indirect_supported { DrawMode::Indirect } else { DrawMode::Direct },
+            indirect_supported,
+            depth_copy: None,
+            box_queries: None,
+            mode: ColorMode::default(),
+            stats: FrameStats::default(),
+            last_own: false,
             device,
             queue,
             info,
             width,
             height,
-            color,
-            color_view,
-            depth_view,
-            readback,
-            padded_row,
-            pipeline,
-            uniforms,
-            bind_group,
-            chunks: Vec::new(),
-            draws: Vec::new(),
-            scratch: Vec::new(),
-            object_colors: Vec::new(),
-            mode: ColorMode::default(),
-            stats: FrameStats::default(),
         })
+    }
+
+    /// Tells the renderer what the adapter supports (indirect execution on GL), and picks
+    /// [`DrawMode::Indirect`] when it does.
+    pub fn set_downlevel(&mut self, caps: &wgpu::DownlevelCapabilities) {
+        self.indirect_supported = caps.flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
+        self.draw_mode = if self.indirect_supported { DrawMode::Indirect } else { DrawMode::Direct };
+    }
+
+    /// Chooses how draws are issued; [`DrawMode::Indirect`] falls back to
+    /// [`DrawMode::Direct`] where the device cannot execute indirect draws. Returns the mode in
+    /// effect.
+    pub fn set_draw_mode(&mut self, mode: DrawMode) -> DrawMode {
+        self.draw_mode = if self.indirect_supported { mode } else { DrawMode::Direct };
+        self.draw_mode
+    }
+
+    pub fn draw_mode(&self) -> DrawMode {
+        self.draw_mode
+    }
+
+    /// Whether the item buffer has triangle ids (`Features::PRIMITIVE_INDEX`).
+    pub fn has_triangle_ids(&self) -> bool {
+        self.pipelines.primitive_index
+    }
+
+    /// Sets the GPU-memory budget for resident cluster geometry (bytes; at least
+    /// [`MIN_BUDGET`]). Drops every resident cluster.
+    pub fn set_gpu_budget(&mut self, bytes: u64) {
+        self.pool = ClusterPool::new(&self.device, bytes);
+        self.bind_generation = u64::MAX;
+    }
+
+    pub fn gpu_budget(&self) -> u64 {
+        self.pool.budget()
     }
 
     /// The adapter in use.
@@ -394,19 +298,34 @@ impl Renderer {
         adapter_summary(&self.info)
     }
 
+    /// The device and queue in use (for callers that share them).
+    pub fn device(&self) -> (&wgpu::Device, &wgpu::Queue) {
+        (&self.device, &self.queue)
+    }
+
+    /// Size of the own target.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)
     }
 
-    /// What the last [`upload_clusters`](Self::upload_clusters) / [`render`](Self::render) did.
+    /// What the current frame did so far.
     pub fn stats(&self) -> FrameStats {
-        self.stats
+        FrameStats { pool: self.pool.stats(), ..self.stats }
     }
 
     /// Object colours (sRGB) by object id; `None` entries and ids beyond the list get
-    /// [`DEFAULT_COLOR`].
+    /// [`DEFAULT_COLOR`]. Lists beyond the device's storage-binding limit (32 M objects at
+    /// 128 MiB) are cut there; later objects get the default colour.
     pub fn set_object_colors(&mut self, colors: impl IntoIterator<Item = Option<[u8; 4]>>) {
-        self.object_colors = colors.into_iter().map(|c| c.unwrap_or(DEFAULT_COLOR)).collect();
+        let max = (self.device.limits().max_storage_buffer_binding_size as usize / 4).max(1);
+        let mut packed: Vec<u32> =
+            colors.into_iter().take(max).map(|c| color::pack(c.unwrap_or(DEFAULT_COLOR))).collect();
+        self.object_color_count = packed.len() as u32;
+        if packed.is_empty() {
+            packed.push(color::pack(DEFAULT_COLOR));
+        }
+        self.object_colors = colors_buffer(&self.device, &self.queue, &packed);
+        self.bind_generation = u64::MAX;
     }
 
     /// [`set_object_colors`](Self::set_object_colors) from the store's object table.
@@ -418,89 +337,213 @@ impl Renderer {
         self.mode = mode;
     }
 
-    /// Builds this frame's geometry from `clusters` (replacing the previous frame's): positions
-    /// are grid coordinates × `grid_step` (scene space). Malformed clusters (an index beyond the
-    /// vertices) have the bad triangles skipped.
-    pub fn upload_clusters(&mut self, grid_step: f64, clusters: &[(ClusterKey, &PageCluster)]) {
+    /// Starts a frame: resets the stats; clusters drawn from now on are this frame's (the pool
+    /// evicts only clusters not drawn in the current frame).
+    pub fn begin_frame(&mut self) {
+        self.pool.begin_frame();
+        self.stats = FrameStats::default();
+    }
+
+    /// Draws `clusters` from `camera` into `target`: clusters not resident are uploaded first
+    /// (positions are grid coordinates × `grid_step`, scene space). With `clear` the colour and
+    /// depth targets are cleared first (colour to transparent black, depth to 0); without, the
+    /// clusters are drawn on top of what the frame drew before (depth-tested against it). When
+    /// the selection exceeds the GPU budget it is drawn in several batches (see [`pool`]).
+    /// Submits without waiting. Malformed triangles (an index beyond the vertices) are skipped.
+    pub fn draw(
+        &mut self,
+        target: Target<'_>,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        match target {
+            Target::Own => {
+                let view = self.color_view.clone();
+                self.last_own = true;
+                let size = (self.width, self.height);
+                self.draw_pass(
+                    Pass::Shade { view: &view, format: COLOR_FORMAT },
+                    size,
+                    camera,
+                    grid_step,
+                    clusters,
+                    clear,
+                )
+            }
+            Target::View { view, format, size } => {
+                self.last_own = false;
+                self.draw_pass(Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
+            }
+        }
+    }
+
+    /// Reads the own colour target back (after [`draw`](Self::draw) to [`Target::Own`]);
+    /// waits for the GPU.
+    pub fn read_color(&mut self) -> Result<Image, GpuError> {
+        if !self.last_own {
+            return Err(GpuError::NotOwnTarget { what: "read_color" });
+        }
         let start = Instant::now();
-        let max_chunk_vertices = (MAX_CHUNK_BYTES / VERTEX_SIZE)
-            .min(self.device.limits().max_buffer_size / VERTEX_SIZE)
-            .min(u32::MAX as u64 / 3 * 3)
-            / 3
-            * 3;
-        self.draws.clear();
-        self.scratch.clear();
-        let mut chunk = 0usize;
-        let mut triangles = 0u64;
-        for (key, c) in clusters {
-            let cluster_color = hash_color(key.page.wrapping_mul(0x9e37_79b9) ^ key.index_in_page);
-            let level_color = level_color(c.level);
-            for (t, tri) in c.indices.chunks_exact(3).enumerate() {
-                let (Some(a), Some(b), Some(d)) = (
-                    c.positions.get(tri[0] as usize),
-                    c.positions.get(tri[1] as usize),
-                    c.positions.get(tri[2] as usize),
-                ) else {
-                    continue;
-                };
-                let object = c.objects.get(t).copied().unwrap_or(0);
-                let color = match self.mode {
-                    ColorMode::Material => {
-                        self.object_colors.get(object as usize).copied().unwrap_or(DEFAULT_COLOR)
-                    }
-                    ColorMode::Object => hash_color(object),
-                    ColorMode::Level => level_color,
-                    ColorMode::Cluster => cluster_color,
-                };
-                for p in [a, b, d] {
-                    let position = p.map(|g| (g as f64 * grid_step) as f32);
-                    self.scratch.push(Vertex { position, color });
-                }
-                triangles += 1;
-                if self.scratch.len() as u64 >= max_chunk_vertices {
-                    self.flush_chunk(chunk);
-                    chunk += 1;
-                }
-            }
-        }
-        if !self.scratch.is_empty() {
-            self.flush_chunk(chunk);
-        }
-        self.stats = FrameStats {
-            clusters: clusters.len() as u64,
-            triangles,
-            upload: start.elapsed(),
-            ..Default::default()
-        };
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        self.readback.copy_texture(&self.device, &mut encoder, &self.color, 4);
+        let pitch = readback::padded_row(self.width, 4) as usize;
+        let rgba = self.readback.finish(
+            &self.device,
+            &self.queue,
+            encoder,
+            pitch,
+            self.width as usize * 4,
+            self.height as usize,
+        )?;
+        self.stats.render += start.elapsed();
+        Ok(Image { width: self.width, height: self.height, rgba })
     }
 
-    /// Writes the scratch vertices into chunk `chunk` (growing it as needed) and records a draw.
-    fn flush_chunk(&mut self, chunk: usize) {
-        let n = self.scratch.len() as u64;
-        let needed = n.max(1024);
-        if chunk >= self.chunks.len() || self.chunks[chunk].1 < n {
-            let capacity = needed.next_power_of_two().min(MAX_CHUNK_BYTES / VERTEX_SIZE).max(n);
-            let buffer = self.device.create_buffer(&wgpu::BufferDescriptor {
-                label: Some("cluster vertices"),
-                size: capacity * VERTEX_SIZE,
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
-                mapped_at_creation: false,
-            });
-            if chunk < self.chunks.len() {
-                self.chunks[chunk] = (buffer, capacity);
-            } else {
-                self.chunks.push((buffer, capacity));
-            }
+    /// Reads the own depth target back as reverse-Z f32 (see [`depth`]); waits for the GPU.
+    pub fn read_depth(&mut self) -> Result<DepthImage, GpuError> {
+        if !self.last_own {
+            return Err(GpuError::NotOwnTarget { what: "read_depth" });
         }
-        self.queue.write_buffer(&self.chunks[chunk].0, 0, bytemuck::cast_slice(&self.scratch));
-        self.draws.push(n as u32);
-        self.scratch.clear();
+        let start = Instant::now();
+        let copy = self.depth_copy.get_or_insert_with(|| depth::DepthCopy::new(&self.device));
+        let d = copy.read(&self.device, &self.queue, &mut self.readback, &self.depth)?;
+        self.stats.render += start.elapsed();
+        Ok(d)
     }
 
-    /// Draws the uploaded geometry from `camera`, waits for the GPU and reads the image back.
-    pub fn render(&mut self, camera: &Camera) -> Result<Image, GpuError> {
+    /// Hardware occlusion queries of `boxes` (scene-space min, max) against the own depth
+    /// target as the frame's draws left it, from `camera` (the camera of those draws): per box
+    /// the samples that passed on Vulkan, 0 or 1 on GL ([`Renderer::queries_count_samples`]),
+    /// [`query::EYE_INSIDE`] for a box around the eye; > 0 means visible. Waits for the GPU.
+    pub fn query_boxes(&mut self, camera: &Camera, boxes: &[(Vec3, Vec3)]) -> Result<Vec<u64>, GpuError> {
+        if !self.last_own {
+            return Err(GpuError::NotOwnTarget { what: "query_boxes" });
+        }
         let start = Instant::now();
         let aspect = self.width as f32 / self.height as f32;
+        let view_proj = camera.projection_reverse_z(aspect) * camera.view();
+        let q = self
+            .box_queries
+            .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT));
+        let r = q.run(
+            &self.device,
+            &self.queue,
+            &mut self.readback,
+            &self.depth_view,
+            view_proj,
+            camera.eye,
+            camera.near,
+            boxes,
+        )?;
+        self.stats.render += start.elapsed();
+        Ok(r)
+    }
+
+    /// Whether [`query_boxes`](Self::query_boxes) returns sample counts (else 0/1: GL).
+    pub fn queries_count_samples(&self) -> bool {
+        self.info.backend != wgpu::Backend::Gl
+    }
+
+    /// A whole single-pass frame into the own target: [`begin_frame`](Self::begin_frame),
+    /// [`draw`](Self::draw) (clearing), [`read_color`](Self::read_color).
+    pub fn render_clusters(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+    ) -> Result<Image, GpuError> {
+        self.begin_frame();
+        self.draw(Target::Own, camera, grid_step, clusters, true)?;
+        self.read_color()
+    }
+
+    /// A whole frame into the caller's colour `view` (`format`, `size`): begins a frame,
+    /// draws (clearing) and submits, without waiting and without readback — the caller
+    /// presents the surface texture or shows the egui texture. Formats without sRGB encoding
+    /// (e.g. `Bgra8Unorm` surfaces) get it in the shader.
+    pub fn render_to_view(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        self.begin_frame();
+        self.draw(Target::View { view, format, size }, camera, grid_step, clusters, true)
+    }
+
+    /// Renders a [`Selection`] over `store` into the own target, taking the decoded pages from
+    /// `cache` (clusters whose page cannot be loaded are skipped and logged).
+    pub fn render_selection(
+        &mut self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        selection: &Selection,
+    ) -> Result<Image, GpuError> {
+        let pages = SelectionPages::resolve(store, cache, &selection.clusters);
+        self.render_clusters(camera, store.header().grid_step, &pages.clusters())
+    }
+
+    /// Draws `clusters` with depth test into the item buffer (own size, cleared) and reads it
+    /// back: per pixel the object, the cluster (its position in `clusters`) and the triangle
+    /// (see [`ids`]). Begins a frame of its own.
+    pub fn item_buffer(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+    ) -> Result<ItemBuffer, GpuError> {
+        self.begin_frame();
+        let size = (self.width, self.height);
+        self.draw_pass(Pass::Items, size, camera, grid_step, clusters, true)?;
+        let start = Instant::now();
+        let Some((texture, _)) = &self.items else { return Err(GpuError::Gpu("no item target".into())) };
+        let mut encoder = self.device.create_command_encoder(&Default::default());
+        self.readback.copy_texture(&self.device, &mut encoder, texture, 16);
+        let pitch = readback::padded_row(self.width, 16) as usize;
+        let bytes = self.readback.finish(
+            &self.device,
+            &self.queue,
+            encoder,
+            pitch,
+            self.width as usize * 16,
+            self.height as usize,
+        )?;
+        self.stats.render += start.elapsed();
+        let raw = bytes
+            .chunks_exact(16)
+            .map(|p| {
+                let w = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+                [w(0), w(4), w(8), w(12)]
+            })
+            .collect();
+        Ok(ItemBuffer {
+            width: self.width,
+            height: self.height,
+            raw,
+            clusters: clusters.iter().map(|c| c.0).collect(),
+        })
+    }
+
+    /// [`item_buffer`](Self::item_buffer) of a [`Selection`] (pages from `cache`).
+    pub fn item_buffer_selection(
+        &mut self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        selection: &Selection,
+    ) -> Result<ItemBuffer, GpuError> {
+        let pages = SelectionPages::resolve(store, cache, &selection.clusters);
+        self.item_buffer(camera, store.header().grid_step, &pages.clusters())
+    }
+
+    fn write_uniforms(&self, camera: &Camera, (width, height): (u32, u32), srgb_in_shader: bool) {
+        let aspect = width as f32 / height as f32;
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
         // The sun: from above (the camera's up), tilted towards a fixed scene direction.
         let up = camera.up.normalize_or(Vec3::Z);
@@ -509,28 +552,172 @@ impl Renderer {
         let u = Uniforms {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
-            sun: sun.extend(0.0).to_array(),
+            sun: sun.extend(if srgb_in_shader { 1.0 } else { 0.0 }).to_array(),
+            params: [self.mode.code(), self.object_color_count, color::pack(DEFAULT_COLOR), 0],
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// The depth view for a target of `size`.
+    fn depth_view_for(&mut self, size: (u32, u32)) -> wgpu::TextureView {
+        if size == (self.width, self.height) {
+            return self.depth_view.clone();
+        }
+        match &self.extra_depth {
+            Some((s, v)) if *s == size => v.clone(),
+            _ => {
+                let v = depth_texture(&self.device, size.0, size.1).create_view(&Default::default());
+                self.extra_depth = Some((size, v.clone()));
+                v
+            }
+        }
+    }
+
+    fn draw_pass(
+        &mut self,
+        pass: Pass<'_>,
+        size: (u32, u32),
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let max = self.device.limits().max_texture_dimension_2d;
+        if size.0 == 0 || size.1 == 0 || size.0 > max || size.1 > max {
+            return Err(GpuError::Size { width: size.0, height: size.1, max });
+        }
+        let items = matches!(pass, Pass::Items);
+        let srgb_in_shader = matches!(pass, Pass::Shade { format, .. } if !format.is_srgb());
+        self.write_uniforms(camera, size, srgb_in_shader);
+        let depth_view = self.depth_view_for(size);
+        if items && self.items.is_none() {
+            let t = self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("item buffer"),
+                size: wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: ITEM_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
+            let v = t.create_view(&Default::default());
+            self.items = Some((t, v));
+        }
+        let color_view = match &pass {
+            Pass::Shade { view, .. } => (*view).clone(),
+            Pass::Items => self.items.as_ref().expect("created above").1.clone(),
+        };
+        let format = match pass {
+            Pass::Shade { format, .. } => Some(format),
+            Pass::Items => None,
+        };
+        // GL (llvmpipe) hazard, seen in tests: a queued write into an arena range that an
+        // earlier, still running submission draws from is not always ordered after it. On GL,
+        // wait for earlier work before any eviction can happen (the arena is full) and after
+        // each batch; other backends order it themselves.
+        let gl = self.info.backend == wgpu::Backend::Gl;
+        if gl && self.pool.stats().arena_bytes >= self.pool.budget() {
+            self.wait_idle()?;
+        }
+        let mut batch: Vec<DrawArgs> = Vec::new();
+        let mut keys: Vec<PoolKey> = Vec::new();
+        let mut first = true;
+        let mut upload = Duration::ZERO;
+        for (i, (key, cluster)) in clusters.iter().enumerate() {
+            let pk = (key.page, key.index_in_page);
+            let mut retried = false;
+            loop {
+                let t = Instant::now();
+                let r = self.pool.ensure(&self.device, &self.queue, pk, grid_step, cluster);
+                upload += t.elapsed();
+                match r {
+                    Ensure::Ready { args, slot } => {
+                        if items {
+                            self.pool.set_item(&self.queue, slot, i as u32 + 1);
+                        }
+                        self.stats.clusters += 1;
+                        self.stats.triangles += args.index_count as u64 / 3;
+                        batch.push(args);
+                        keys.push(pk);
+                        break;
+                    }
+                    Ensure::Empty => break,
+                    Ensure::Full if !retried && !batch.is_empty() => {
+                        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+                        first = false;
+                        if gl {
+                            self.wait_idle()?;
+                        }
+                        self.pool.release_batch(&keys);
+                        batch.clear();
+                        keys.clear();
+                        retried = true;
+                    }
+                    Ensure::Full => {
+                        return Err(GpuError::Gpu(format!(
+                            "cluster {key:?} does not fit the GPU budget of {} bytes",
+                            self.pool.budget()
+                        )))
+                    }
+                }
+            }
+        }
+        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+        self.stats.upload += upload;
+        Ok(())
+    }
+
+    fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))
+    }
+
+    /// Encodes and submits one batch. `format` is `None` for the item buffer.
+    fn flush(
+        &mut self,
+        color_view: &wgpu::TextureView,
+        format: Option<wgpu::TextureFormat>,
+        depth_view: &wgpu::TextureView,
+        batch: &[DrawArgs],
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let start = Instant::now();
+        if self.bind_generation != self.pool.generation {
+            self.bind_group =
+                bind_group(&self.device, &self.pipelines, &self.uniforms, &self.pool, &self.object_colors);
+            self.bind_generation = self.pool.generation;
+        }
+        let indirect = match self.draw_mode {
+            DrawMode::Indirect if !batch.is_empty() => {
+                Some(self.indirect.write(&self.device, &self.queue, batch).clone())
+            }
+            _ => None,
+        };
+        let pipeline = match format {
+            Some(f) => self.pipelines.shaded(&self.device, f).clone(),
+            None => self.pipelines.item(&self.device).clone(),
+        };
         let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") });
         {
+            let load_color =
+                if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("clusters"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color_view,
+                    view: color_view,
                     depth_slice: None,
                     resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.0, g: 0.0, b: 0.0, a: 0.0 }),
-                        store: wgpu::StoreOp::Store,
-                    },
+                    ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
+                    view: depth_view,
                     depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Discard,
+                        load: if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load },
+                        store: wgpu::StoreOp::Store,
                     }),
                     stencil_ops: None,
                 }),
@@ -538,88 +725,44 @@ impl Renderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.pipeline);
+            pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
-            for (&n, (buffer, _)) in self.draws.iter().zip(&self.chunks) {
-                pass.set_vertex_buffer(0, buffer.slice(..n as u64 * VERTEX_SIZE));
-                pass.draw(0..n, 0..1);
+            if let Some(arena) = self.pool.arena() {
+                draw::encode_batch(&mut pass, arena, batch, indirect.as_ref());
             }
         }
-        encoder.copy_texture_to_buffer(
-            wgpu::TexelCopyTextureInfo {
-                texture: &self.color,
-                mip_level: 0,
-                origin: wgpu::Origin3d::ZERO,
-                aspect: wgpu::TextureAspect::All,
-            },
-            wgpu::TexelCopyBufferInfo {
-                buffer: &self.readback,
-                layout: wgpu::TexelCopyBufferLayout {
-                    offset: 0,
-                    bytes_per_row: Some(self.padded_row),
-                    rows_per_image: Some(self.height),
-                },
-            },
-            wgpu::Extent3d { width: self.width, height: self.height, depth_or_array_layers: 1 },
-        );
         self.queue.submit([encoder.finish()]);
-        let (tx, rx) = std::sync::mpsc::channel();
-        self.readback.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        self.device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Gpu(format!("waiting for the frame: {e}")))?;
-        rx.recv()
-            .map_err(|_| GpuError::Gpu("the readback was never mapped".into()))?
-            .map_err(|e| GpuError::Gpu(format!("mapping the readback buffer: {e}")))?;
-        let row = self.width as usize * 4;
-        let mut rgba = Vec::with_capacity(row * self.height as usize);
-        {
-            let view = self
-                .readback
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Gpu(format!("reading the readback buffer: {e}")))?;
-            for r in view.chunks(self.padded_row as usize).take(self.height as usize) {
-                rgba.extend_from_slice(&r[..row]);
-            }
-        }
-        self.readback.unmap();
-        self.stats.render = start.elapsed();
-        Ok(Image { width: self.width, height: self.height, rgba })
+        self.pool.note_batch();
+        self.stats.draw_calls += match (self.draw_mode, batch.is_empty()) {
+            (_, true) => 0,
+            (DrawMode::Indirect, false) => 1,
+            (DrawMode::Direct, false) => batch.len() as u64,
+        };
+        self.stats.render += start.elapsed();
+        Ok(())
     }
+}
 
-    /// Uploads `clusters` and renders them (see [`upload_clusters`](Self::upload_clusters) and
-    /// [`render`](Self::render)).
-    pub fn render_clusters(
-        &mut self,
-        camera: &Camera,
-        grid_step: f64,
-        clusters: &[(ClusterKey, &PageCluster)],
-    ) -> Result<Image, GpuError> {
-        self.upload_clusters(grid_step, clusters);
-        self.render(camera)
-    }
+/// The decoded pages of a selection's clusters, held while the frame is drawn.
+pub struct SelectionPages {
+    pages: Vec<std::sync::Arc<tw_runtime::ResidentPage>>,
+    refs: Vec<(ClusterKey, usize)>,
+}
 
-    /// Renders a [`Selection`] over `store`, taking the decoded pages from `cache` (clusters
-    /// whose page cannot be loaded are skipped and logged).
-    pub fn render_selection(
-        &mut self,
-        store: &Store,
-        cache: &PageCache,
-        camera: &Camera,
-        selection: &Selection,
-    ) -> Result<Image, GpuError> {
+impl SelectionPages {
+    /// Looks the pages of `clusters` up in `cache` (loading them if needed); clusters whose page
+    /// fails are skipped and logged.
+    pub fn resolve(store: &Store, cache: &PageCache, clusters: &[ClusterRef]) -> SelectionPages {
         let mut pages = Vec::new();
-        let mut last: Option<(u32, usize)> = None;
-        let mut refs: Vec<(ClusterKey, usize, u32)> = Vec::with_capacity(selection.clusters.len());
-        for r in &selection.clusters {
-            let slot = match last {
-                Some((p, slot)) if p == r.page => slot,
-                _ => match cache.get(store, r.page) {
+        let mut slot_of: std::collections::HashMap<u32, usize> = std::collections::HashMap::new();
+        let mut refs = Vec::with_capacity(clusters.len());
+        for r in clusters {
+            let slot = match slot_of.get(&r.page) {
+                Some(&s) => s,
+                None => match cache.get(store, r.page) {
                     Ok(page) => {
                         pages.push(page);
-                        last = Some((r.page, pages.len() - 1));
+                        slot_of.insert(r.page, pages.len() - 1);
                         pages.len() - 1
                     }
                     Err(e) => {
@@ -628,87 +771,69 @@ impl Renderer {
                     }
                 },
             };
-            refs.push((*r, slot, r.index_in_page));
+            refs.push((*r, slot));
         }
-        let clusters: Vec<(ClusterKey, &PageCluster)> = refs
-            .iter()
-            .filter_map(|&(k, slot, i)| pages[slot].clusters.get(i as usize).map(|c| (k, c)))
-            .collect();
-        self.render_clusters(camera, store.header().grid_step, &clusters)
+        SelectionPages { pages, refs }
     }
+
+    /// The clusters, in the selection's order (clusters beyond their page are skipped).
+    pub fn clusters(&self) -> Vec<(ClusterKey, &PageCluster)> {
+        self.refs
+            .iter()
+            .filter_map(|&(k, slot)| self.pages[slot].clusters.get(k.index_in_page as usize).map(|c| (k, c)))
+            .collect()
+    }
+}
+
+fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("depth target"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
+        view_formats: &[],
+    })
+}
+
+fn colors_buffer(device: &wgpu::Device, queue: &wgpu::Queue, packed: &[u32]) -> wgpu::Buffer {
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("object colours"),
+        size: (packed.len() as u64 * 4).max(16),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+    queue.write_buffer(&buffer, 0, bytemuck::cast_slice(packed));
+    buffer
+}
+
+fn bind_group(
+    device: &wgpu::Device,
+    pipelines: &Pipelines,
+    uniforms: &wgpu::Buffer,
+    pool: &ClusterPool,
+    colors: &wgpu::Buffer,
+) -> wgpu::BindGroup {
+    device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("clusters"),
+        layout: &pipelines.bind_layout,
+        entries: &[
+            wgpu::BindGroupEntry { binding: 0, resource: uniforms.as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 1, resource: pool.slot_buffer().as_entire_binding() },
+            wgpu::BindGroupEntry { binding: 2, resource: colors.as_entire_binding() },
+        ],
+    })
 }
 
 fn adapter_summary(info: &wgpu::AdapterInfo) -> String {
     format!("{} ({:?}, {:?})", info.name, info.backend, info.device_type)
 }
 
-/// A distinct, fairly saturated sRGB colour for an id (MurmurHash3's finaliser; the same as
-/// tw-preview's `hash_color`).
-pub fn hash_color(id: u32) -> [u8; 4] {
-    let mut h = id.wrapping_add(0x9e37_79b9);
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x85eb_ca6b);
-    h ^= h >> 13;
-    h = h.wrapping_mul(0xc2b2_ae35);
-    h ^= h >> 16;
-    let hue = (h & 0xffff) as f64 / 65536.0 * 6.0;
-    let sat = 0.45 + 0.35 * ((h >> 16) & 0xff) as f64 / 255.0;
-    let val = 0.75 + 0.25 * (h >> 24) as f64 / 255.0;
-    let f = hue.fract();
-    let (p, q, t) = (val * (1.0 - sat), val * (1.0 - sat * f), val * (1.0 - sat * (1.0 - f)));
-    let rgb = match hue as u32 {
-        0 => [val, t, p],
-        1 => [q, val, p],
-        2 => [p, val, t],
-        3 => [p, q, val],
-        4 => [t, p, val],
-        _ => [val, p, q],
-    };
-    let [r, g, b] = rgb.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
-    [r, g, b, 255]
-}
-
-/// The colour of LOD level `level`: full resolution green, then yellow, orange, red, magenta,
-/// blue, cyan, repeating.
-pub fn level_color(level: u8) -> [u8; 4] {
-    const PALETTE: [[u8; 4]; 8] = [
-        [80, 200, 90, 255],
-        [220, 210, 70, 255],
-        [240, 150, 50, 255],
-        [225, 70, 60, 255],
-        [200, 80, 200, 255],
-        [90, 110, 230, 255],
-        [70, 200, 220, 255],
-        [240, 240, 240, 255],
-    ];
-    PALETTE[level as usize % PALETTE.len()]
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn hash_colors_differ_between_ids() {
-        let colors: std::collections::HashSet<_> = (0..64).map(hash_color).collect();
-        assert!(colors.len() > 50);
-    }
-
-    #[test]
-    fn level_colors_cycle() {
-        assert_ne!(level_color(0), level_color(1));
-        assert_eq!(level_color(0), level_color(8));
-    }
-
-    #[test]
-    fn opaque_fills_the_background() {
-        let img = Image { width: 2, height: 1, rgba: vec![1, 2, 3, 0, 9, 9, 9, 255] };
-        assert_eq!(img.opaque(), vec![205, 218, 235, 255, 9, 9, 9, 255]);
-        assert!(!img.covered(0, 0));
-        assert!(img.covered(1, 0));
-        assert!(!img.covered(5, 5));
-        assert_eq!(img.covered_pixels(), 1);
-    }
 
     #[test]
     fn bad_sizes_are_rejected_before_touching_the_gpu() {

@@ -187,8 +187,7 @@ fn debug_color_modes_and_png() {
     let reader = decoder.read_info().unwrap();
     assert_eq!((reader.info().width, reader.info().height), (W, H));
     // An empty frame: nothing covered.
-    renderer.upload_clusters(1.0, &[]);
-    assert_eq!(renderer.render(&camera).unwrap().covered_pixels(), 0);
+    assert_eq!(renderer.render_clusters(&camera, 1.0, &[]).unwrap().covered_pixels(), 0);
 }
 
 /// Frame times of the 50k plant at 1280×720, τ = 0 (run with `--ignored --nocapture`; pick the

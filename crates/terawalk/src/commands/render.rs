@@ -73,6 +73,15 @@ pub fn run(args: RenderArgs) -> Result<()> {
         stats.upload.as_secs_f64() * 1e3,
         stats.render.as_secs_f64() * 1e3,
     );
+    println!(
+        "GPU pool: {} clusters uploaded ({}), {} resident, {} batch(es), {} draw call(s) ({:?})",
+        fmt_count(stats.pool.uploaded_clusters),
+        fmt_bytes(stats.pool.uploaded_bytes),
+        fmt_bytes(stats.pool.resident_bytes),
+        stats.pool.batches,
+        fmt_count(stats.draw_calls),
+        renderer.draw_mode(),
+    );
     println!("wrote {} ({}x{})", args.output.display(), args.size.0, args.size.1);
     Ok(())
 }

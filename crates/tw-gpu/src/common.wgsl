@@ -1,0 +1,48 @@
+// terawalk: what the cluster shaders share — uniforms, the pool's slot table and vertex stage.
+// Pooled vertices (pool.rs): scene-space position, object id, pool slot. Every vertex of a
+// triangle carries the triangle's object and slot, so the flat varyings do not depend on the
+// backend's provoking vertex.
+
+struct Uniforms {
+    view_proj: mat4x4<f32>,
+    // xyz: eye in scene space.
+    eye: vec4<f32>,
+    // xyz: unit direction towards the sun; w: 1 when the target needs sRGB encoding here.
+    sun: vec4<f32>,
+    // x: colour mode (0 material, 1 object, 2 level, 3 cluster); y: object colours in the
+    // table; z: default colour (RGBA8).
+    params: vec4<u32>,
+};
+
+// One resident cluster (pool.rs SlotInfo).
+struct Slot {
+    page: u32,
+    index_in_page: u32,
+    level: u32,
+    item: u32,
+};
+
+@group(0) @binding(0) var<uniform> u: Uniforms;
+@group(0) @binding(1) var<storage, read> slots: array<Slot>;
+@group(0) @binding(2) var<storage, read> object_colors: array<u32>;
+
+struct VertexOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) @interpolate(flat) object: u32,
+    @location(2) @interpolate(flat) slot: u32,
+};
+
+@vertex
+fn vs_main(
+    @location(0) position: vec3<f32>,
+    @location(1) object: u32,
+    @location(2) slot: u32,
+) -> VertexOut {
+    var out: VertexOut;
+    out.clip = u.view_proj * vec4<f32>(position, 1.0);
+    out.world = position;
+    out.object = object;
+    out.slot = slot;
+    return out;
+}

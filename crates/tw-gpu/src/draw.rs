@@ -1,0 +1,224 @@
+//! Drawing pooled clusters (DESIGN decision 5): the pipelines (shaded colour per target format,
+//! the item buffer), their bind group, and the encoding of one batch of resident clusters as a
+//! single `multi_draw_indexed_indirect` where the device supports indirect execution
+//! (`DownlevelFlags::INDIRECT_EXECUTION`: Vulkan, Metal, DX12, GL ≥ 4.3 / ES ≥ 3.1 — wgpu's GL
+//! backend then loops over the draws itself) or a loop of `draw_indexed` otherwise. Both give the
+//! same draws in the same order, hence the same image. Depth is reverse-Z (`Greater`, clear 0)
+//! in `Depth32Float`; both faces are drawn (inputs are not consistently wound).
+//! Shaders: common.wgsl (uniforms, slot table, vertex stage), draw.wgsl (shading), ids.wgsl
+//! (item buffer).
+
+use crate::pool::{DrawArgs, UNIT};
+
+pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
+pub(crate) const ITEM_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Uint;
+
+/// How a batch's draws are issued.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DrawMode {
+    /// One `multi_draw_indexed_indirect` per batch (needs `DownlevelFlags::INDIRECT_EXECUTION`).
+    Indirect,
+    /// One `draw_indexed` per cluster.
+    Direct,
+}
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, bytemuck::Pod, bytemuck::Zeroable)]
+pub(crate) struct Uniforms {
+    pub view_proj: [[f32; 4]; 4],
+    pub eye: [f32; 4],
+    pub sun: [f32; 4],
+    pub params: [u32; 4],
+}
+
+/// The pipelines and their layout.
+pub(crate) struct Pipelines {
+    pub bind_layout: wgpu::BindGroupLayout,
+    layout: wgpu::PipelineLayout,
+    shade: wgpu::ShaderModule,
+    shaded: Vec<(wgpu::TextureFormat, wgpu::RenderPipeline)>,
+    item: Option<wgpu::RenderPipeline>,
+    /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
+    pub primitive_index: bool,
+}
+
+fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
+    wgpu::BindGroupLayoutEntry {
+        binding,
+        visibility: wgpu::ShaderStages::FRAGMENT,
+        ty: wgpu::BindingType::Buffer {
+            ty: wgpu::BufferBindingType::Storage { read_only: true },
+            has_dynamic_offset: false,
+            min_binding_size: None,
+        },
+        count: None,
+    }
+}
+
+impl Pipelines {
+    pub fn new(device: &wgpu::Device) -> Pipelines {
+        let bind_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("clusters"),
+            entries: &[
+                wgpu::BindGroupLayoutEntry {
+                    binding: 0,
+                    visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
+                    ty: wgpu::BindingType::Buffer {
+                        ty: wgpu::BufferBindingType::Uniform,
+                        has_dynamic_offset: false,
+                        min_binding_size: None,
+                    },
+                    count: None,
+                },
+                storage_entry(1),
+                storage_entry(2),
+            ],
+        });
+        let layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("clusters"),
+            bind_group_layouts: &[Some(&bind_layout)],
+            immediate_size: 0,
+        });
+        let source = format!("{}\n{}", include_str!("common.wgsl"), include_str!("draw.wgsl"));
+        let shade = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some("clusters"),
+            source: wgpu::ShaderSource::Wgsl(source.into()),
+        });
+        Pipelines {
+            bind_layout,
+            layout,
+            shade,
+            shaded: Vec::new(),
+            item: None,
+            primitive_index: device.features().contains(wgpu::Features::PRIMITIVE_INDEX),
+        }
+    }
+
+    /// The shaded pipeline drawing into `format`, created on first use.
+    pub fn shaded(&mut self, device: &wgpu::Device, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
+        let i = match self.shaded.iter().position(|(f, _)| *f == format) {
+            Some(i) => i,
+            None => {
+                let p = pipeline(device, &self.layout, &self.shade, "fs_main", format);
+                self.shaded.push((format, p));
+                self.shaded.len() - 1
+            }
+        };
+        &self.shaded[i].1
+    }
+
+    /// The item-buffer pipeline ([`ITEM_FORMAT`]), created on first use.
+    pub fn item(&mut self, device: &wgpu::Device) -> &wgpu::RenderPipeline {
+        if self.item.is_none() {
+            let ids = if self.primitive_index {
+                include_str!("ids.wgsl")
+                    .replace("PRIM_ARG", ", @builtin(primitive_index) prim: u32")
+                    .replace("PRIM_VALUE", "prim")
+            } else {
+                include_str!("ids.wgsl").replace("PRIM_ARG", "").replace("PRIM_VALUE", "0xffffffffu")
+            };
+            let enable = if self.primitive_index { "enable primitive_index;\n" } else { "" };
+            let source = format!("{enable}{}\n{ids}", include_str!("common.wgsl"));
+            let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some("item buffer"),
+                source: wgpu::ShaderSource::Wgsl(source.into()),
+            });
+            self.item = Some(pipeline(device, &self.layout, &module, "fs_items", ITEM_FORMAT));
+        }
+        self.item.as_ref().expect("just created")
+    }
+}
+
+fn pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    fragment: &str,
+    format: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(fragment),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: UNIT,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32],
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module,
+            entry_point: Some(fragment),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+/// A growable INDIRECT buffer for one batch's arguments.
+#[derive(Default)]
+pub(crate) struct IndirectArgs {
+    buffer: Option<wgpu::Buffer>,
+}
+
+impl IndirectArgs {
+    /// Writes `args` (through the queue, so before the next submit) and returns the buffer.
+    pub fn write(&mut self, device: &wgpu::Device, queue: &wgpu::Queue, args: &[DrawArgs]) -> &wgpu::Buffer {
+        let size = (std::mem::size_of_val(args) as u64).max(64);
+        if self.buffer.as_ref().is_none_or(|b| b.size() < size) {
+            self.buffer = Some(device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("indirect draws"),
+                size: size.next_power_of_two(),
+                usage: wgpu::BufferUsages::INDIRECT | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            }));
+        }
+        let buffer = self.buffer.as_ref().expect("just created");
+        queue.write_buffer(buffer, 0, bytemuck::cast_slice(args));
+        buffer
+    }
+}
+
+/// Records the draws of one batch into `pass` (pipeline and bind group already set).
+pub(crate) fn encode_batch(
+    pass: &mut wgpu::RenderPass<'_>,
+    arena: &wgpu::Buffer,
+    args: &[DrawArgs],
+    indirect: Option<&wgpu::Buffer>,
+) {
+    if args.is_empty() {
+        return;
+    }
+    pass.set_vertex_buffer(0, arena.slice(..));
+    pass.set_index_buffer(arena.slice(..), wgpu::IndexFormat::Uint32);
+    match indirect {
+        Some(buffer) => pass.multi_draw_indexed_indirect(buffer, 0, args.len() as u32),
+        None => {
+            for a in args {
+                pass.draw_indexed(a.first_index..a.first_index + a.index_count, a.base_vertex, 0..1);
+            }
+        }
+    }
+}

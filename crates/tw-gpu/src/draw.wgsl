@@ -1,0 +1,83 @@
+// terawalk shading (appended to common.wgsl): flat normals from screen-space derivatives, a
+// headlight plus a fixed sun, colour by material (the store's object colours), object, LOD
+// level or cluster (ColorMode).
+
+fn unpack_srgb(c: u32) -> vec3<f32> {
+    return vec3<f32>(f32(c & 255u), f32((c >> 8u) & 255u), f32((c >> 16u) & 255u)) / 255.0;
+}
+
+// hash_color in color.rs (MurmurHash3's finaliser, then HSV), in f32.
+fn hash_color(id: u32) -> vec3<f32> {
+    var h = id + 0x9e3779b9u;
+    h = h ^ (h >> 16u);
+    h = h * 0x85ebca6bu;
+    h = h ^ (h >> 13u);
+    h = h * 0xc2b2ae35u;
+    h = h ^ (h >> 16u);
+    let hue = f32(h & 0xffffu) / 65536.0 * 6.0;
+    let sat = 0.45 + 0.35 * f32((h >> 16u) & 255u) / 255.0;
+    let val = 0.75 + 0.25 * f32(h >> 24u) / 255.0;
+    let f = fract(hue);
+    let p = val * (1.0 - sat);
+    let q = val * (1.0 - sat * f);
+    let t = val * (1.0 - sat * (1.0 - f));
+    let sector = u32(hue);
+    if (sector == 0u) { return vec3<f32>(val, t, p); }
+    if (sector == 1u) { return vec3<f32>(q, val, p); }
+    if (sector == 2u) { return vec3<f32>(p, val, t); }
+    if (sector == 3u) { return vec3<f32>(p, q, val); }
+    if (sector == 4u) { return vec3<f32>(t, p, val); }
+    return vec3<f32>(val, p, q);
+}
+
+// level_color in color.rs.
+fn level_color(level: u32) -> vec3<f32> {
+    var palette = array<vec3<f32>, 8>(
+        vec3<f32>(80.0, 200.0, 90.0), vec3<f32>(220.0, 210.0, 70.0),
+        vec3<f32>(240.0, 150.0, 50.0), vec3<f32>(225.0, 70.0, 60.0),
+        vec3<f32>(200.0, 80.0, 200.0), vec3<f32>(90.0, 110.0, 230.0),
+        vec3<f32>(70.0, 200.0, 220.0), vec3<f32>(240.0, 240.0, 240.0));
+    return palette[level % 8u] / 255.0;
+}
+
+fn base_color(object: u32, slot: u32) -> vec3<f32> {
+    let mode = u.params.x;
+    if (mode == 1u) {
+        return hash_color(object);
+    }
+    if (mode == 2u) {
+        return level_color(slots[slot].level);
+    }
+    if (mode == 3u) {
+        let s = slots[slot];
+        return hash_color((s.page * 0x9e3779b9u) ^ s.index_in_page);
+    }
+    if (object < u.params.y) {
+        return unpack_srgb(object_colors[object]);
+    }
+    return unpack_srgb(u.params.z);
+}
+
+@fragment
+fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+    let to_eye = normalize(u.eye.xyz - in.world);
+    let c = cross(dpdx(in.world), dpdy(in.world));
+    let len = length(c);
+    var n = to_eye;
+    if (len > 0.0) {
+        n = c / len;
+    }
+    // Both sides are drawn (inputs are not consistently wound): face the viewer.
+    if (dot(n, to_eye) < 0.0) {
+        n = -n;
+    }
+    let head = max(dot(n, to_eye), 0.0);
+    let sun = max(dot(n, u.sun.xyz), 0.0);
+    let base = pow(base_color(in.object, in.slot), vec3<f32>(2.2));
+    var rgb = min(base * (0.18 + 0.62 * head + 0.35 * sun), vec3<f32>(1.0));
+    if (u.sun.w > 0.5) {
+        // A non-sRGB target (e.g. a Bgra8Unorm surface): encode here.
+        rgb = pow(rgb, vec3<f32>(1.0 / 2.2));
+    }
+    return vec4<f32>(rgb, 1.0);
+}

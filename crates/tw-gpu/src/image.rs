@@ -1,0 +1,172 @@
+//! Images read back from the GPU and their comparison (DESIGN "Measuring": fidelity is PSNR and
+//! the share of differing pixels against the full-detail, no-culling reference; conservative
+//! culling means identical images).
+
+use std::path::Path;
+
+use crate::color::BACKGROUND;
+use crate::error::GpuError;
+
+/// An RGBA8 image read back from the GPU.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Image {
+    pub width: u32,
+    pub height: u32,
+    /// RGBA, 8 bits a channel (sRGB), rows from the top, `width × height × 4` bytes. Alpha is
+    /// 255 where geometry was drawn, 0 elsewhere.
+    pub rgba: Vec<u8>,
+}
+
+impl Image {
+    /// Whether pixel `(x, y)` shows geometry.
+    pub fn covered(&self, x: u32, y: u32) -> bool {
+        if x >= self.width || y >= self.height {
+            return false;
+        }
+        let i = (y as usize * self.width as usize + x as usize) * 4 + 3;
+        self.rgba.get(i).is_some_and(|&a| a != 0)
+    }
+
+    /// Pixels that show geometry.
+    pub fn covered_pixels(&self) -> usize {
+        self.rgba.chunks_exact(4).filter(|p| p[3] != 0).count()
+    }
+
+    /// The image with [`BACKGROUND`] where nothing was drawn, opaque.
+    pub fn opaque(&self) -> Vec<u8> {
+        let mut out = self.rgba.clone();
+        for p in out.chunks_exact_mut(4) {
+            if p[3] == 0 {
+                p[..3].copy_from_slice(&BACKGROUND);
+            }
+            p[3] = 255;
+        }
+        out
+    }
+
+    fn check_same_size(&self, other: &Image) -> Result<(), GpuError> {
+        let n = self.width as usize * self.height as usize * 4;
+        if self.width != other.width
+            || self.height != other.height
+            || self.rgba.len() != n
+            || other.rgba.len() != n
+        {
+            return Err(GpuError::ImageMismatch {
+                a: (self.width, self.height),
+                b: (other.width, other.height),
+            });
+        }
+        Ok(())
+    }
+
+    /// Pixels whose RGBA differs from `other`'s (any channel, any amount).
+    pub fn differing_pixels(&self, other: &Image) -> Result<usize, GpuError> {
+        self.check_same_size(other)?;
+        Ok(self.rgba.chunks_exact(4).zip(other.rgba.chunks_exact(4)).filter(|(a, b)| a != b).count())
+    }
+
+    /// Share (0..=1) of the pixels that differ from `other`'s.
+    pub fn differing_share(&self, other: &Image) -> Result<f64, GpuError> {
+        let n = self.differing_pixels(other)?;
+        Ok(n as f64 / (self.width as f64 * self.height as f64))
+    }
+
+    /// Peak signal-to-noise ratio (dB) against `other`, over the R, G and B channels of the
+    /// opaque images (background filled, [`Image::opaque`]), peak 255:
+    /// `10 · log10(255² / MSE)`; `+∞` for identical images.
+    pub fn psnr(&self, other: &Image) -> Result<f64, GpuError> {
+        self.check_same_size(other)?;
+        let (a, b) = (self.opaque(), other.opaque());
+        let mut sum = 0f64;
+        for (p, q) in a.chunks_exact(4).zip(b.chunks_exact(4)) {
+            for c in 0..3 {
+                let d = p[c] as f64 - q[c] as f64;
+                sum += d * d;
+            }
+        }
+        let mse = sum / (self.width as f64 * self.height as f64 * 3.0);
+        Ok(if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0 * 255.0 / mse).log10() })
+    }
+
+    /// Writes the image as an opaque 8-bit RGBA PNG (see [`Image::opaque`]), atomically (a
+    /// temporary file beside `path`, renamed).
+    pub fn save_png(&self, path: &Path) -> Result<(), GpuError> {
+        let io = |source| GpuError::Io { path: path.to_path_buf(), source };
+        let png_err = |source| GpuError::Png { path: path.to_path_buf(), source };
+        let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
+        tmp_name.push(".tmp");
+        let tmp = path.with_file_name(tmp_name);
+        let result = (|| {
+            let file = std::fs::File::create(&tmp).map_err(io)?;
+            let mut w = std::io::BufWriter::new(file);
+            {
+                let mut enc = png::Encoder::new(&mut w, self.width, self.height);
+                enc.set_color(png::ColorType::Rgba);
+                enc.set_depth(png::BitDepth::Eight);
+                enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+                let mut pw = enc.write_header().map_err(png_err)?;
+                pw.write_image_data(&self.opaque()).map_err(png_err)?;
+                pw.finish().map_err(png_err)?;
+            }
+            let file = w.into_inner().map_err(|e| io(e.into_error()))?;
+            file.sync_all().map_err(io)?;
+            std::fs::rename(&tmp, path).map_err(io)
+        })();
+        if result.is_err() {
+            let _ = std::fs::remove_file(&tmp);
+        }
+        result
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn img(w: u32, h: u32, rgba: Vec<u8>) -> Image {
+        Image { width: w, height: h, rgba }
+    }
+
+    #[test]
+    fn opaque_fills_the_background() {
+        let img = img(2, 1, vec![1, 2, 3, 0, 9, 9, 9, 255]);
+        assert_eq!(img.opaque(), vec![205, 218, 235, 255, 9, 9, 9, 255]);
+        assert!(!img.covered(0, 0));
+        assert!(img.covered(1, 0));
+        assert!(!img.covered(5, 5));
+        assert_eq!(img.covered_pixels(), 1);
+    }
+
+    #[test]
+    fn psnr_and_differing_pixels() {
+        let a = img(2, 2, [10, 10, 10, 255].repeat(4));
+        assert_eq!(a.psnr(&a).unwrap(), f64::INFINITY);
+        assert_eq!(a.differing_pixels(&a).unwrap(), 0);
+        // One channel of one pixel off by 4: MSE = 16 / 12.
+        let mut b = a.clone();
+        b.rgba[0] = 14;
+        let expected = 10.0 * (255.0f64 * 255.0 / (16.0 / 12.0)).log10();
+        assert!((a.psnr(&b).unwrap() - expected).abs() < 1e-9);
+        assert_eq!(a.differing_pixels(&b).unwrap(), 1);
+        assert_eq!(a.differing_share(&b).unwrap(), 0.25);
+        // Alpha only (coverage) differs: a differing pixel; PSNR sees the background colour.
+        let mut c = a.clone();
+        c.rgba[7] = 0;
+        assert_eq!(a.differing_pixels(&c).unwrap(), 1);
+        assert!(a.psnr(&c).unwrap().is_finite());
+        // Black against white everywhere: 0 dB.
+        let black = img(1, 1, vec![0, 0, 0, 255]);
+        let white = img(1, 1, vec![255, 255, 255, 255]);
+        assert!(black.psnr(&white).unwrap().abs() < 1e-12);
+    }
+
+    #[test]
+    fn comparing_different_sizes_is_an_error() {
+        let a = img(2, 1, vec![0; 8]);
+        let b = img(1, 2, vec![0; 8]);
+        assert!(matches!(a.psnr(&b), Err(GpuError::ImageMismatch { .. })));
+        assert!(a.differing_pixels(&b).is_err());
+        let bad = img(2, 1, vec![0; 3]);
+        assert!(a.differing_pixels(&bad).is_err());
+    }
+}
