@@ -328,6 +328,12 @@ impl PageCache {
         need == 0
     }
 
+    /// Whether a prefetched page of about `bytes` decoded bytes would fit without evicting the
+    /// current frame's pages (a loader checks this before reading a prefetched page).
+    pub fn prefetch_fits(&self, bytes: u64) -> bool {
+        self.room_sparing_frame(&self.lock(), bytes)
+    }
+
     /// Starts a frame: pages used or loaded from now on are in the current frame, which
     /// prefetched pages may not evict ([`Eviction::SparingThisFrame`]).
     pub fn begin_frame(&self) {

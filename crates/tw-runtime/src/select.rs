@@ -224,6 +224,9 @@ impl Selector {
     /// frame's residency snapshot `availability` (call [`Availability::begin`] once per frame
     /// first; several selections of one frame may share it). Missing pages the cut wants are
     /// added to `requests` (priority: the pixel error they would remove). Never reads a page.
+    // The frame's snapshot and request list stay separate arguments: the prefetch views share
+    // the snapshot but collect into their own list.
+    #[allow(clippy::too_many_arguments)]
     pub fn select_available(
         &self,
         store: &Store,

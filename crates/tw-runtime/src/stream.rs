@@ -71,7 +71,7 @@ pub struct StreamStats {
     /// Of which prefetched.
     pub prefetch_loaded: u64,
     /// Prefetched pages dropped since the previous frame (no room without evicting the frame's
-    /// pages).
+    /// pages; most are dropped before they are read).
     pub prefetch_dropped: u64,
     pub pages_evicted: u64,
     /// Encoded bytes read from the store since the previous frame.
@@ -149,8 +149,10 @@ struct Job {
 }
 
 /// Takes the next page to load (frame pages first), marking it in flight; skips pages that
-/// became resident or failed meanwhile.
-fn take(q: &mut Queue, cache: &PageCache) -> Option<Job> {
+/// became resident or failed meanwhile, and prefetched pages that cannot fit without evicting
+/// the current frame's pages (estimated from the page table's decoded size; counted as
+/// dropped, without reading them).
+fn take(q: &mut Queue, store: &Store, cache: &PageCache) -> Option<Job> {
     loop {
         let (page, prefetch) = if let Some((p, _)) = q.demand.pop() {
             (p, false)
@@ -161,6 +163,13 @@ fn take(q: &mut Queue, cache: &PageCache) -> Option<Job> {
         };
         if q.in_flight.contains(&page) || cache.is_settled(page) {
             continue;
+        }
+        if prefetch {
+            let estimate = store.pages().get(page as usize).map_or(0, |p| p.uncompressed_len as u64);
+            if !cache.prefetch_fits(estimate) {
+                q.prefetch_dropped += 1;
+                continue;
+            }
         }
         q.in_flight.insert(page);
         return Some(Job { page, prefetch });
@@ -198,7 +207,7 @@ fn loader_loop(store: Arc<Store>, cache: Arc<PageCache>, shared: Arc<Shared>) {
                     return;
                 }
                 if !q.paused {
-                    if let Some(job) = take(&mut q, &cache) {
+                    if let Some(job) = take(&mut q, &store, &cache) {
                         break job;
                     }
                 }
@@ -428,7 +437,7 @@ impl Streamer {
     pub fn load_queued(&self, max: usize) -> usize {
         let mut n = 0;
         while n < max {
-            let Some(job) = take(&mut self.shared.lock(), &self.cache) else { break };
+            let Some(job) = take(&mut self.shared.lock(), &self.store, &self.cache) else { break };
             load(&self.store, &self.cache, &self.shared, job);
             n += 1;
         }
@@ -478,5 +487,46 @@ impl Drop for Streamer {
     /// Stops the loader threads and waits for them.
     fn drop(&mut self) {
         self.stop();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cache::tests::store_with_pages;
+
+    fn requests(list: &[(u32, f32)]) -> Requests {
+        let mut r = Requests::default();
+        for &(p, q) in list {
+            r.add(p, q);
+        }
+        r
+    }
+
+    #[test]
+    fn each_frame_replaces_the_queue_by_priority_without_duplicates() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = Arc::new(store_with_pages(dir.path(), 6, &[0]));
+        let options = StreamOptions { budget_bytes: 1 << 20, loader_threads: 0, ..Default::default() };
+        let s = Streamer::new(store, options).unwrap();
+        assert!(s.cache().contains(0), "root pages are loaded up front");
+        // Page 0 is resident: left out. Page 2 twice: once, with the larger priority.
+        assert_eq!(
+            s.submit(&requests(&[(0, 9.0), (1, 1.0), (2, 3.0), (2, 5.0)]), &requests(&[(3, 8.0)])),
+            (3, 0)
+        );
+        // The next frame's requests replace these: pages 1 and 3 are stale.
+        s.submit(&requests(&[(4, 1.0), (2, 2.0)]), &requests(&[(5, 7.0)]));
+        assert_eq!(s.pending(), (3, 0));
+        // Frame pages first (highest priority first), then prefetch.
+        assert_eq!(s.load_queued(1), 1);
+        assert!(s.cache().contains(2) && !s.cache().contains(4));
+        assert_eq!(s.load_queued(10), 2);
+        assert!(s.cache().contains(4) && s.cache().contains(5));
+        assert!(!s.cache().contains(1) && !s.cache().contains(3), "stale requests were dropped");
+        assert_eq!(s.pending(), (0, 0));
+        assert!(s.wait_idle(Duration::from_millis(1)));
+        // Resident pages are not queued again.
+        assert_eq!(s.submit(&requests(&[(2, 1.0), (4, 1.0)]), &Requests::default()), (0, 0));
     }
 }
