@@ -7,12 +7,20 @@
 //! sizes. After each load, least recently used unpinned pages are evicted until the resident
 //! bytes fit the budget again, never the page just loaded, so the cache exceeds its budget by
 //! at most one page — or by the pinned root pages (docs/FORMAT.md: flag bit 0), which are never
-//! evicted, when those alone exceed the budget.
+//! evicted, when those alone exceed the budget. (Pages evicted while someone still holds their
+//! `Arc` stay in memory until dropped; the budget counts what the cache holds.)
 //!
-//! Loading is synchronous for now: [`PageCache::get`] decodes on a miss. The cache is already
-//! shaped for a loader thread: every method takes `&self` (one mutex inside, never held while
-//! decoding), [`PageCache::try_get`] never loads, and [`PageCache::request`] /
-//! [`PageCache::take_requests`] queue pages by priority for whoever loads them with `get`.
+//! Two ways to fill it: [`PageCache::get`] decodes on a miss on the caller's thread (the
+//! blocking mode of the selection), and the loader threads of [`crate::stream::Streamer`]
+//! decode off-thread and hand pages in with [`PageCache::insert`]. Every method takes `&self`
+//! (one mutex inside, never held while decoding).
+//!
+//! **Frames and prefetch** (Manocha §5.5: prefetching must not disturb the current frame).
+//! [`PageCache::begin_frame`] starts a frame: every page used or loaded after it is *in the
+//! current frame*. A page inserted with [`Eviction::SparingThisFrame`] (a prefetched page) may
+//! only evict pages not in the current frame; when those do not free enough room the prefetched
+//! page is dropped instead ([`Inserted::Dropped`]), so prefetching never evicts what the frame
+//! draws and never pushes the cache past its budget.
 //!
 //! A page that fails (checksum, decoding) is remembered: later `get`s return
 //! [`RuntimeError::PageFailed`] at once instead of reading and logging it again every frame.
@@ -20,7 +28,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use tw_store::{PageCluster, Store};
+use tw_store::{PageCluster, Store, StoreError};
 
 use crate::error::RuntimeError;
 
@@ -89,6 +97,41 @@ pub struct CacheStats {
     pub failed_pages: u64,
 }
 
+/// What the cache holds for a page ([`PageCache::state`]).
+#[derive(Clone, Debug)]
+pub enum PageState {
+    Resident(Arc<ResidentPage>),
+    /// Not loaded (yet).
+    Missing,
+    /// Failed to load (checksum, decoding), or no such page: never retried.
+    Failed,
+}
+
+/// How a page handed to [`PageCache::insert`] makes room.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Eviction {
+    /// Evict least recently used pages (never the new one) until within the budget.
+    Lru,
+    /// A prefetched page: evict only pages outside the current frame
+    /// ([`PageCache::begin_frame`]); drop the new page if that is not enough.
+    SparingThisFrame,
+}
+
+/// What [`PageCache::insert`] did with a page.
+#[derive(Debug)]
+pub enum Inserted {
+    /// Now resident.
+    Resident(Arc<ResidentPage>),
+    /// Someone else loaded it first; this is the resident copy.
+    AlreadyResident(Arc<ResidentPage>),
+    /// Reading or decoding failed; the page is marked failed.
+    Failed(StoreError),
+    /// A prefetched page that did not fit without evicting the current frame's pages.
+    Dropped,
+    /// The page index is beyond the store's pages.
+    NoSuchPage,
+}
+
 enum Slot {
     Empty,
     Resident { page: Arc<ResidentPage>, last_use: u64, pinned: bool },
@@ -96,10 +139,16 @@ enum Slot {
 }
 
 struct Inner {
+    /// Invariant: `stats.resident_bytes` / `resident_pages` / `pinned_bytes` are the sums over
+    /// the `Resident` slots; every unpinned resident page is in `lru` exactly once, under its
+    /// `last_use` tick, and no other page is.
     slots: Vec<Slot>,
     /// Unpinned resident pages by last use (tick → page): the first entry is evicted first.
     lru: BTreeMap<u64, u32>,
     tick: u64,
+    /// Tick at the last [`PageCache::begin_frame`]: pages with `last_use > frame_start` are in
+    /// the current frame.
+    frame_start: u64,
     requests: HashMap<u32, f32>,
     stats: CacheStats,
 }
@@ -132,6 +181,7 @@ impl PageCache {
                 slots: pages.iter().map(|_| Slot::Empty).collect(),
                 lru: BTreeMap::new(),
                 tick: 0,
+                frame_start: 0,
                 requests: HashMap::new(),
                 stats: CacheStats::default(),
             }),
@@ -204,26 +254,53 @@ impl PageCache {
         }
         // Decode without holding the lock, so that other threads keep using the cache.
         let loaded = store.page(page).map(|c| Arc::new(ResidentPage::new(c)));
+        match self.insert(page, loaded, Eviction::Lru) {
+            Inserted::Resident(p) | Inserted::AlreadyResident(p) => Ok(p),
+            Inserted::Failed(e) => Err(e.into()),
+            // Not produced by `Eviction::Lru`; kept total for the match.
+            Inserted::Dropped | Inserted::NoSuchPage => {
+                Err(RuntimeError::PageFailed { page, msg: "not kept by the cache".into() })
+            }
+        }
+    }
+
+    /// Hands in the result of reading and decoding `page` (what [`get`](Self::get) does after a
+    /// miss; loader threads call it): counts the read, remembers a failure, or makes the page
+    /// resident and evicts as `eviction` says (see the module documentation).
+    pub fn insert(
+        &self,
+        page: u32,
+        loaded: Result<Arc<ResidentPage>, StoreError>,
+        eviction: Eviction,
+    ) -> Inserted {
+        let Some(&encoded) = self.encoded.get(page as usize) else {
+            return Inserted::NoSuchPage;
+        };
         let mut inner = self.lock();
         inner.stats.misses += 1;
-        inner.stats.bytes_read += self.encoded[page as usize] as u64;
+        inner.stats.bytes_read += encoded as u64;
         inner.requests.remove(&page);
         let loaded = match loaded {
             Ok(p) => p,
             Err(e) => {
-                inner.slots[page as usize] = Slot::Failed(e.to_string());
-                inner.stats.failed_pages += 1;
-                return Err(e.into());
+                if matches!(inner.slots[page as usize], Slot::Empty) {
+                    inner.slots[page as usize] = Slot::Failed(e.to_string());
+                    inner.stats.failed_pages += 1;
+                }
+                return Inserted::Failed(e);
             }
         };
         // Another thread may have loaded it meanwhile: keep the resident copy.
         if let Slot::Resident { page: p, .. } = &inner.slots[page as usize] {
-            return Ok(p.clone());
+            return Inserted::AlreadyResident(p.clone());
+        }
+        let pinned = self.pinned[page as usize];
+        let bytes = loaded.bytes() as u64;
+        if eviction == Eviction::SparingThisFrame && !pinned && !self.room_sparing_frame(&inner, bytes) {
+            return Inserted::Dropped;
         }
         inner.tick += 1;
         let tick = inner.tick;
-        let pinned = self.pinned[page as usize];
-        let bytes = loaded.bytes() as u64;
         inner.slots[page as usize] = Slot::Resident { page: loaded.clone(), last_use: tick, pinned };
         inner.stats.resident_bytes += bytes;
         inner.stats.resident_pages += 1;
@@ -233,7 +310,51 @@ impl PageCache {
             inner.lru.insert(tick, page);
         }
         self.evict(&mut inner, page);
-        Ok(loaded)
+        Inserted::Resident(loaded)
+    }
+
+    /// Whether evicting only pages outside the current frame (oldest first) makes room for
+    /// `bytes` more within the budget.
+    fn room_sparing_frame(&self, inner: &Inner, bytes: u64) -> bool {
+        let mut need = (inner.stats.resident_bytes + bytes).saturating_sub(self.budget);
+        for (&tick, &p) in &inner.lru {
+            if need == 0 || tick > inner.frame_start {
+                break;
+            }
+            if let Some(Slot::Resident { page, .. }) = inner.slots.get(p as usize) {
+                need = need.saturating_sub(page.bytes() as u64);
+            }
+        }
+        need == 0
+    }
+
+    /// Whether a prefetched page of about `bytes` decoded bytes would fit without evicting the
+    /// current frame's pages (a loader checks this before reading a prefetched page).
+    pub fn prefetch_fits(&self, bytes: u64) -> bool {
+        self.room_sparing_frame(&self.lock(), bytes)
+    }
+
+    /// Starts a frame: pages used or loaded from now on are in the current frame, which
+    /// prefetched pages may not evict ([`Eviction::SparingThisFrame`]).
+    pub fn begin_frame(&self) {
+        let mut inner = self.lock();
+        inner.frame_start = inner.tick;
+    }
+
+    /// What the cache holds for `page` now; marks a resident page used (like
+    /// [`try_get`](Self::try_get)). Pages that do not exist are [`PageState::Failed`].
+    pub fn state(&self, page: u32) -> PageState {
+        match Self::lookup(&mut self.lock(), page) {
+            Some(Ok(p)) => PageState::Resident(p),
+            Some(Err(_)) => PageState::Failed,
+            None if (page as usize) < self.pinned.len() => PageState::Missing,
+            None => PageState::Failed,
+        }
+    }
+
+    /// Whether `page` is resident or has failed (nothing left to load), or does not exist.
+    pub fn is_settled(&self, page: u32) -> bool {
+        !matches!(self.lock().slots.get(page as usize), Some(Slot::Empty))
     }
 
     /// Evicts least recently used unpinned pages, except `keep`, until within the budget.
@@ -471,5 +592,31 @@ pub(crate) mod tests {
         assert_eq!(cache.take_requests(2), vec![(2, 9.0), (1, 5.0)]);
         cache.get(&store, 3).unwrap();
         assert_eq!(cache.take_requests(10), vec![], "loading a page drops its request");
+    }
+
+    #[test]
+    fn prefetched_pages_never_evict_the_current_frame() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = store_with_pages(dir.path(), 4, &[]);
+        let load = |p: u32| store.page(p).map(|c| Arc::new(ResidentPage::new(c)));
+        let size = |p| ResidentPage::new(store.page(p).unwrap()).bytes() as u64;
+        // Room for pages 2 and 3 (the largest two).
+        let cache = PageCache::new(&store, size(2) + size(3));
+        cache.get(&store, 0).unwrap();
+        cache.begin_frame();
+        cache.get(&store, 2).unwrap();
+        // A prefetched page 3 may evict page 0 (not in this frame), and does.
+        assert!(matches!(cache.insert(3, load(3), Eviction::SparingThisFrame), Inserted::Resident(_)));
+        assert!(!cache.contains(0) && cache.contains(2) && cache.contains(3));
+        // Next frame uses 2 and 3: a prefetched page 1 finds no room outside the frame.
+        cache.begin_frame();
+        cache.try_get(2);
+        cache.try_get(3);
+        assert!(matches!(cache.insert(1, load(1), Eviction::SparingThisFrame), Inserted::Dropped));
+        assert!(cache.contains(2) && cache.contains(3) && !cache.contains(1));
+        assert!(cache.stats().resident_bytes <= cache.budget(), "prefetch never exceeds the budget");
+        // A frame page (LRU) may still evict the current frame's pages, oldest first.
+        assert!(matches!(cache.insert(1, load(1), Eviction::Lru), Inserted::Resident(_)));
+        assert!(cache.contains(1) && !cache.contains(2) && cache.contains(3));
     }
 }

@@ -18,6 +18,9 @@ pub enum RuntimeError {
     /// A page that failed before: the cache remembers failures instead of decoding again.
     #[error("page {page} failed to load earlier: {msg}")]
     PageFailed { page: u32, msg: String },
+    /// The page loader threads could not be started.
+    #[error("page loader: {0}")]
+    Loader(String),
     /// A camera path file that cannot be read, parsed or written.
     #[error("camera path {}: {msg}", path.display())]
     Path { path: std::path::PathBuf, msg: String },

@@ -8,6 +8,9 @@
 //! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
+//! - [`availability`]: the availability rule (what may be drawn while pages are missing);
+//! - [`stream`]: loader threads, per-frame requests by priority, selection that never waits;
+//! - [`prefetch`]: the views whose pages the next frames will need;
 //! - [`path`]: camera paths (one camera per frame) as JSON, for `path`, `bench` and the viewer;
 //! - [`pathgen`]: automatic walkthrough paths (interior walk at eye height, fly-over).
 //!
@@ -22,7 +25,24 @@
 //! println!("{} clusters, {} triangles, {:?}", frame.clusters.len(), frame.triangles, frame.stats);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! Streaming (a frame never waits for the disk; DESIGN decision 4):
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use tw_runtime::{InputCamera, SelectOptions, StreamOptions, Streamer};
+//! let store = Arc::new(tw_store::Store::open("scene.tw")?);
+//! let camera = InputCamera::parse("10,5,1.7;40,5,1.7;0,0,1;70")?.to_scene(store.header())?;
+//! let mut streamer = Streamer::new(store, StreamOptions { budget_bytes: 512 << 20, ..Default::default() })?;
+//! for _ in 0..100 {
+//!     let frame = streamer.frame(&camera, &SelectOptions::default()); // select, request, prefetch
+//!     // draw frame.selection.clusters from frame.pages
+//!     println!("{}", serde_json::to_string(&frame.stats)?);
+//! }
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
+pub mod availability;
 pub mod cache;
 pub mod camera;
 pub mod error;
@@ -32,9 +52,12 @@ pub mod lod_error;
 pub mod occlusion;
 pub mod path;
 pub mod pathgen;
+pub mod prefetch;
 pub mod select;
+pub mod stream;
 
-pub use cache::{CacheStats, PageCache, ResidentPage};
+pub use availability::{Availability, Requests};
+pub use cache::{CacheStats, Eviction, Inserted, PageCache, PageState, ResidentPage};
 pub use camera::{Camera, InputCamera};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
@@ -46,4 +69,6 @@ pub use pathgen::{
     generate_path, GeneratedPath, PathGenError, PathOptions, PathPart, PathReport, RegionKind, WalkGrid,
     WalkParams,
 };
+pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
+pub use stream::{StreamFrame, StreamOptions, StreamStats, Streamer};

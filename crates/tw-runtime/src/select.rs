@@ -32,11 +32,24 @@
 //!
 //! A page that cannot be loaded (checksum, decoding) is logged once (`tracing::error`) and its
 //! groups are skipped and counted in [`SelectStats::groups_failed`]; the frame goes on.
+//!
+//! **Two residency modes.** [`Selector::select`] waits: pages are loaded through
+//! [`PageCache::get`] on a miss, and the cut is exactly the render rule's. [`Selector::select_available`]
+//! never waits: it follows the availability rule of docs/FORMAT.md ([`crate::availability`]):
+//! a group that is not available is treated as replaced (counted in
+//! [`SelectStats::groups_unavailable`], the stalls avoided, and the pages it needs are added to
+//! the frame's requests), and a simplified cluster whose step sources are not available is
+//! drawn in their place (counted in [`SelectStats::clusters_fallback`]). With every needed page
+//! resident both modes give the same cut. The LOD skip of step 2 stays valid: availability only
+//! replaces more groups.
+
+use std::sync::Arc;
 
 use glam::Vec3;
 use tw_store::Store;
 
-use crate::cache::PageCache;
+use crate::availability::{Availability, Requests};
+use crate::cache::{PageCache, ResidentPage};
 use crate::camera::Camera;
 use crate::error::RuntimeError;
 use crate::frustum::{grid_box, Containment, Frustum};
@@ -83,8 +96,15 @@ pub struct SelectStats {
     pub groups_culled_frustum: u64,
     /// Groups drawn from (not replaced, in the frustum, page loaded).
     pub groups_selected: u64,
-    /// Groups skipped because their page could not be loaded.
+    /// Groups skipped because their page could not be loaded (in the streaming mode: failed
+    /// pages, their best available ancestor drawn instead).
     pub groups_failed: u64,
+    /// Streaming mode: groups that wanted to be drawn (not replaced, in the frustum) but were
+    /// not available, so an ancestor was drawn in their place — the stalls avoided.
+    pub groups_unavailable: u64,
+    /// Streaming mode: simplified clusters drawn because their finer sources were not
+    /// available (the fallback geometry drawn).
+    pub clusters_fallback: u64,
     /// Clusters of selected groups that were fine enough but outside the frustum.
     pub clusters_culled_frustum: u64,
     pub clusters_selected: u64,
@@ -110,6 +130,27 @@ pub struct Selector {
     lod_boxes: Vec<(Vec3, Vec3)>,
     /// Largest group error in each node's subtree.
     subtree_error: Vec<f32>,
+}
+
+/// Where a selection gets its pages (see the module documentation).
+enum Mode<'a> {
+    /// Load on a miss and wait.
+    Wait(&'a PageCache),
+    /// The availability rule over a residency snapshot; missing pages are requested.
+    Stream { cache: &'a PageCache, availability: &'a mut Availability, requests: &'a mut Requests },
+}
+
+/// The sources of cluster `c`'s step: the sources of its group `g` whose error and sphere
+/// equal its self error and self sphere (docs/FORMAT.md, "Links").
+fn step_sources<'s>(
+    store: &'s Store,
+    g: u32,
+    c: &'s tw_store::PageCluster,
+) -> impl Iterator<Item = u32> + 's {
+    let groups = store.groups();
+    store.group_sources(g).iter().copied().filter(move |&s| {
+        groups.get(s as usize).is_some_and(|sg| sg.error == c.self_error && sg.sphere == c.self_sphere)
+    })
 }
 
 /// Widens `v` by a relative 2⁻²⁰ (outwards in direction `sign`) before rounding to f32.
@@ -176,6 +217,38 @@ impl Selector {
         options: &SelectOptions,
         out: &mut Selection,
     ) {
+        self.traverse(store, &mut Mode::Wait(cache), camera, options, out);
+    }
+
+    /// Selects without waiting for pages: the availability rule of docs/FORMAT.md over the
+    /// frame's residency snapshot `availability` (call [`Availability::begin`] once per frame
+    /// first; several selections of one frame may share it). Missing pages the cut wants are
+    /// added to `requests` (priority: the pixel error they would remove). Never reads a page.
+    // The frame's snapshot and request list stay separate arguments: the prefetch views share
+    // the snapshot but collect into their own list.
+    #[allow(clippy::too_many_arguments)]
+    pub fn select_available(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        availability: &mut Availability,
+        requests: &mut Requests,
+        camera: &Camera,
+        options: &SelectOptions,
+        out: &mut Selection,
+    ) {
+        let mut mode = Mode::Stream { cache, availability, requests };
+        self.traverse(store, &mut mode, camera, options, out);
+    }
+
+    fn traverse(
+        &self,
+        store: &Store,
+        mode: &mut Mode<'_>,
+        camera: &Camera,
+        options: &SelectOptions,
+        out: &mut Selection,
+    ) {
         out.clusters.clear();
         out.triangles = 0;
         out.stats = SelectStats::default();
@@ -227,17 +300,40 @@ impl Selector {
                     stats.groups_culled_frustum += 1;
                     continue;
                 }
-                let page = match cache.get(store, g.page) {
-                    Ok(p) => p,
-                    Err(e) => {
-                        match &e {
-                            RuntimeError::PageFailed { .. } => tracing::debug!("group {gi}: {e}"),
-                            _ => tracing::error!("group {gi} skipped: {e}"),
+                let page = match mode {
+                    Mode::Wait(cache) => match cache.get(store, g.page) {
+                        Ok(p) => p,
+                        Err(e) => {
+                            match &e {
+                                RuntimeError::PageFailed { .. } => tracing::debug!("group {gi}: {e}"),
+                                _ => tracing::error!("group {gi} skipped: {e}"),
+                            }
+                            stats.groups_failed += 1;
+                            continue;
                         }
-                        stats.groups_failed += 1;
-                        continue;
+                    },
+                    Mode::Stream { cache, availability, requests } => {
+                        let page = if availability.available(store, cache, gi as u32) {
+                            availability.page(cache, g.page)
+                        } else {
+                            None
+                        };
+                        match page {
+                            Some(p) => p,
+                            None => {
+                                // Treated as replaced: its available ancestors are drawn.
+                                if availability.page_failed(cache, g.page) {
+                                    stats.groups_failed += 1;
+                                } else {
+                                    stats.groups_unavailable += 1;
+                                }
+                                availability.request_for(store, cache, &metric, gi as u32, requests);
+                                continue;
+                            }
+                        }
                     }
                 };
+                let page: Arc<ResidentPage> = page;
                 let range = g.first_cluster as usize..g.first_cluster as usize + g.cluster_count as usize;
                 let (Some(clusters), Some(bounds)) =
                     (page.clusters.get(range.clone()), page.bounds.get(range))
@@ -264,14 +360,36 @@ impl Selector {
                 stats.groups_selected += 1;
                 pages.push(g.page);
                 for (k, (c, &(cmin, cmax))) in clusters.iter().zip(bounds).enumerate() {
+                    let mut fallback = false;
                     if metric.sphere(c.self_error, c.self_sphere) > tau {
-                        continue; // too coarse: finer clusters of another group are drawn
+                        // Too coarse: finer clusters of another group are drawn — unless, when
+                        // streaming, those (the sources of its step) are not available.
+                        let Mode::Stream { cache, availability, .. } = mode else { continue };
+                        if c.self_error <= 0.0 {
+                            continue;
+                        }
+                        let mut step = step_sources(store, gi as u32, c).peekable();
+                        if step.peek().is_none() {
+                            continue; // no step recorded (a store that breaks invariant 12)
+                        }
+                        if step.all(|s| availability.available(store, cache, s)) {
+                            continue;
+                        }
+                        fallback = true;
                     }
                     if !inside {
                         let (clo, chi) = grid_box(cmin, cmax, self.grid_step);
                         if frustum.test_aabb(clo, chi) == Containment::Outside {
                             stats.clusters_culled_frustum += 1;
                             continue;
+                        }
+                    }
+                    if fallback {
+                        stats.clusters_fallback += 1;
+                        if let Mode::Stream { cache, availability, requests } = mode {
+                            for s in step_sources(store, gi as u32, c) {
+                                availability.request_for(store, cache, &metric, s, requests);
+                            }
                         }
                     }
                     out.clusters.push(ClusterRef {
