@@ -64,6 +64,12 @@ pub enum Command {
                             terawalk render plant.tw -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --size 1920x1080\n  \
                             WGPU_BACKEND=gl terawalk render plant.tw -o frame.png")]
     Render(RenderArgs),
+    /// Render a camera path headless and write a report (HTML with plots, JSON with every figure).
+    #[command(after_help = "Examples:\n  terawalk bench plant.tw --path path.json --out report/\n  \
+                            terawalk bench plant.tw --path path.json --occlusion none,hzb --compare 10 --exact\n  \
+                            terawalk bench plant.tw --path path.json --reference --frames 20\n  \
+                            terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
+    Bench(BenchArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
@@ -212,6 +218,68 @@ pub struct RenderArgs {
 }
 
 #[derive(Args, Debug)]
+pub struct BenchArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// Camera path (JSON, as `terawalk path` writes and the viewer records). Default: a path
+    /// generated like `terawalk path` does (walk and fly-over).
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Render only the first N frames of the path (or generate a path of N frames).
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Report folder (index.html, report.json); written atomically.
+    #[arg(long, default_value = "bench-report")]
+    pub out: PathBuf,
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Pixel error threshold τ of the LOD cut.
+    #[arg(long, default_value_t = 1.0)]
+    pub error: f32,
+    /// Memory budget of the decoded page cache (RAM).
+    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    pub memory: u64,
+    /// Occlusion culling strategies, comma-separated; one run each, in this order.
+    #[arg(long, value_delimiter = ',', default_value = "none", value_parser = parse_occlusion)]
+    pub occlusion: Vec<tw_frame::Occlusion>,
+    /// Render at full detail without any culling (the reference) instead.
+    #[arg(long, conflicts_with_all = ["compare", "exact"])]
+    pub reference: bool,
+    /// Also render the reference every K-th frame: PSNR, differing pixels and the speed-up on
+    /// the same frames.
+    #[arg(long, value_name = "K")]
+    pub compare: Option<usize>,
+    /// On the compared frames (every 10th without --compare), count the exact visible objects
+    /// and triangles from an item buffer at full detail: culling efficiency = drawn ÷ exact.
+    #[arg(long)]
+    pub exact: bool,
+    /// Load every page a frame needs before drawing it (frames may wait for the disk) instead
+    /// of streaming: the same cut whatever the timing, for comparing images.
+    #[arg(long)]
+    pub wait: bool,
+    /// GPU memory for resident cluster geometry.
+    #[arg(long, default_value = "512M", value_parser = parse_bytes)]
+    pub gpu_memory: u64,
+    /// Frames rendered at the first camera before measuring (fills the caches).
+    #[arg(long, default_value_t = 3)]
+    pub warmup: usize,
+    /// Frames embedded in the report as pictures.
+    #[arg(long, default_value_t = 4)]
+    pub images: usize,
+    /// How to colour triangles.
+    #[arg(long, value_enum, default_value = "material")]
+    pub color: RenderColoring,
+}
+
+fn parse_occlusion(s: &str) -> Result<tw_frame::Occlusion, String> {
+    tw_frame::Occlusion::ALL.into_iter().find(|o| o.name() == s.trim()).ok_or_else(|| {
+        let names: Vec<&str> = tw_frame::Occlusion::ALL.iter().map(|o| o.name()).collect();
+        format!("unknown occlusion strategy {s:?}; one of {}", names.join(", "))
+    })
+}
+
+#[derive(Args, Debug)]
 pub struct DemoArgs {
     /// Size of the generated plant.
     #[arg(short, long, default_value = "5M", value_parser = parse_count)]
@@ -222,6 +290,9 @@ pub struct DemoArgs {
     /// Cache directory for the generated model and the outputs.
     #[arg(long, default_value = ".terawalk-cache")]
     pub dir: PathBuf,
+    /// Frames of the walkthrough path.
+    #[arg(long, default_value_t = 300)]
+    pub frames: usize,
 }
 
 pub fn parse_size(s: &str) -> Result<(u32, u32), String> {

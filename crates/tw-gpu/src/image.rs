@@ -88,27 +88,32 @@ impl Image {
         Ok(if mse == 0.0 { f64::INFINITY } else { 10.0 * (255.0 * 255.0 / mse).log10() })
     }
 
-    /// Writes the image as an opaque 8-bit RGBA PNG (see [`Image::opaque`]), atomically (a
-    /// temporary file beside `path`, renamed).
+    /// The image encoded as an opaque 8-bit RGBA PNG (see [`Image::opaque`]), e.g. for a report.
+    pub fn png_bytes(&self) -> Result<Vec<u8>, png::EncodingError> {
+        let mut out = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut out, self.width, self.height);
+            enc.set_color(png::ColorType::Rgba);
+            enc.set_depth(png::BitDepth::Eight);
+            enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
+            let mut pw = enc.write_header()?;
+            pw.write_image_data(&self.opaque())?;
+            pw.finish()?;
+        }
+        Ok(out)
+    }
+
+    /// Writes the image as [`png_bytes`](Self::png_bytes), atomically (a temporary file beside
+    /// `path`, synced, renamed).
     pub fn save_png(&self, path: &Path) -> Result<(), GpuError> {
         let io = |source| GpuError::Io { path: path.to_path_buf(), source };
-        let png_err = |source| GpuError::Png { path: path.to_path_buf(), source };
+        let bytes = self.png_bytes().map_err(|source| GpuError::Png { path: path.to_path_buf(), source })?;
         let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
         tmp_name.push(".tmp");
         let tmp = path.with_file_name(tmp_name);
         let result = (|| {
-            let file = std::fs::File::create(&tmp).map_err(io)?;
-            let mut w = std::io::BufWriter::new(file);
-            {
-                let mut enc = png::Encoder::new(&mut w, self.width, self.height);
-                enc.set_color(png::ColorType::Rgba);
-                enc.set_depth(png::BitDepth::Eight);
-                enc.set_source_srgb(png::SrgbRenderingIntent::Perceptual);
-                let mut pw = enc.write_header().map_err(png_err)?;
-                pw.write_image_data(&self.opaque()).map_err(png_err)?;
-                pw.finish().map_err(png_err)?;
-            }
-            let file = w.into_inner().map_err(|e| io(e.into_error()))?;
+            let mut file = std::fs::File::create(&tmp).map_err(io)?;
+            std::io::Write::write_all(&mut file, &bytes).map_err(io)?;
             file.sync_all().map_err(io)?;
             std::fs::rename(&tmp, path).map_err(io)
         })();
@@ -116,57 +121,5 @@ impl Image {
             let _ = std::fs::remove_file(&tmp);
         }
         result
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn img(w: u32, h: u32, rgba: Vec<u8>) -> Image {
-        Image { width: w, height: h, rgba }
-    }
-
-    #[test]
-    fn opaque_fills_the_background() {
-        let img = img(2, 1, vec![1, 2, 3, 0, 9, 9, 9, 255]);
-        assert_eq!(img.opaque(), vec![205, 218, 235, 255, 9, 9, 9, 255]);
-        assert!(!img.covered(0, 0));
-        assert!(img.covered(1, 0));
-        assert!(!img.covered(5, 5));
-        assert_eq!(img.covered_pixels(), 1);
-    }
-
-    #[test]
-    fn psnr_and_differing_pixels() {
-        let a = img(2, 2, [10, 10, 10, 255].repeat(4));
-        assert_eq!(a.psnr(&a).unwrap(), f64::INFINITY);
-        assert_eq!(a.differing_pixels(&a).unwrap(), 0);
-        // One channel of one pixel off by 4: MSE = 16 / 12.
-        let mut b = a.clone();
-        b.rgba[0] = 14;
-        let expected = 10.0 * (255.0f64 * 255.0 / (16.0 / 12.0)).log10();
-        assert!((a.psnr(&b).unwrap() - expected).abs() < 1e-9);
-        assert_eq!(a.differing_pixels(&b).unwrap(), 1);
-        assert_eq!(a.differing_share(&b).unwrap(), 0.25);
-        // Alpha only (coverage) differs: a differing pixel; PSNR sees the background colour.
-        let mut c = a.clone();
-        c.rgba[7] = 0;
-        assert_eq!(a.differing_pixels(&c).unwrap(), 1);
-        assert!(a.psnr(&c).unwrap().is_finite());
-        // Black against white everywhere: 0 dB.
-        let black = img(1, 1, vec![0, 0, 0, 255]);
-        let white = img(1, 1, vec![255, 255, 255, 255]);
-        assert!(black.psnr(&white).unwrap().abs() < 1e-12);
-    }
-
-    #[test]
-    fn comparing_different_sizes_is_an_error() {
-        let a = img(2, 1, vec![0; 8]);
-        let b = img(1, 2, vec![0; 8]);
-        assert!(matches!(a.psnr(&b), Err(GpuError::ImageMismatch { .. })));
-        assert!(a.differing_pixels(&b).is_err());
-        let bad = img(2, 1, vec![0; 3]);
-        assert!(a.differing_pixels(&bad).is_err());
     }
 }

@@ -111,6 +111,8 @@ pub struct Renderer {
     /// Depth targets for caller views of other sizes than the own target: (size, view).
     extra_depth: Option<((u32, u32), wgpu::TextureView)>,
     items: Option<(wgpu::Texture, wgpu::TextureView)>,
+    /// Number of the first cluster of the current [`Renderer::draw_items`] call.
+    item_base: u32,
     readback: Readback,
     pipelines: Pipelines,
     uniforms: wgpu::Buffer,
@@ -229,6 +231,7 @@ impl Renderer {
             depth,
             extra_depth: None,
             items: None,
+            item_base: 0,
             readback: Readback::default(),
             pipelines,
             uniforms,
@@ -499,8 +502,32 @@ impl Renderer {
         clusters: &[(ClusterKey, &PageCluster)],
     ) -> Result<ItemBuffer, GpuError> {
         self.begin_frame();
+        self.draw_items(camera, grid_step, clusters, 0, true)?;
+        let keys: Vec<ClusterKey> = clusters.iter().map(|c| c.0).collect();
+        self.read_items(&keys)
+    }
+
+    /// Draws `clusters` into the item buffer (own size), the first of them numbered
+    /// `first_number` (cluster ids in the buffer are positions in the whole list the caller
+    /// later passes to [`read_items`](Self::read_items)); with `clear` the buffer and depth
+    /// are cleared first, else the clusters are depth-tested against what the frame drew
+    /// before — so a large set can be drawn in chunks.
+    pub fn draw_items(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        first_number: u32,
+        clear: bool,
+    ) -> Result<(), GpuError> {
         let size = (self.width, self.height);
-        self.draw_pass(Pass::Items, size, camera, grid_step, clusters, true)?;
+        self.item_base = first_number;
+        self.draw_pass(Pass::Items, size, camera, grid_step, clusters, clear)
+    }
+
+    /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
+    /// keys of every cluster drawn into it, in the numbering of those calls. Waits for the GPU.
+    pub fn read_items(&mut self, clusters: &[ClusterKey]) -> Result<ItemBuffer, GpuError> {
         let start = Instant::now();
         let Some((texture, _)) = &self.items else { return Err(GpuError::Gpu("no item target".into())) };
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -522,12 +549,7 @@ impl Renderer {
                 [w(0), w(4), w(8), w(12)]
             })
             .collect();
-        Ok(ItemBuffer {
-            width: self.width,
-            height: self.height,
-            raw,
-            clusters: clusters.iter().map(|c| c.0).collect(),
-        })
+        Ok(ItemBuffer { width: self.width, height: self.height, raw, clusters: clusters.to_vec() })
     }
 
     /// [`item_buffer`](Self::item_buffer) of a [`Selection`] (pages from `cache`).
@@ -634,7 +656,7 @@ impl Renderer {
                 match r {
                     Ensure::Ready { args, slot } => {
                         if items {
-                            self.pool.set_item(&self.queue, slot, i as u32 + 1);
+                            self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
                         }
                         self.stats.clusters += 1;
                         self.stats.triangles += args.index_count as u64 / 3;
@@ -664,6 +686,9 @@ impl Renderer {
             }
         }
         self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+        // Submitted: a later draw of the same frame (the second pass of occlusion culling, the
+        // next chunk of a reference frame) may evict these if it needs the room.
+        self.pool.release_batch(&keys);
         self.stats.upload += upload;
         Ok(())
     }

@@ -1,17 +1,15 @@
 //! `terawalk demo`: the README's main job. Generates a power plant (cached), reads it back
-//! through the importer, builds the out-of-core store (cached) and verifies it, renders an
-//! outside and an inside view, and prints a summary. The runtime issue extends it with the
-//! benchmark walkthrough.
+//! through the importer, builds the out-of-core store (cached) and verifies it, generates a
+//! walkthrough path (cached), renders it headless with every occlusion strategy (`bench`, with
+//! the full-detail reference every 30th frame) and prints where the report is.
 
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use tw_io::generate::{interior_viewpoints, PlantParams};
 use tw_io::SceneOptions;
-use tw_preview::Camera;
 
-use crate::cli::{Coloring, DemoArgs};
-use crate::commands::{generate, preview, stats};
+use crate::cli::DemoArgs;
+use crate::commands::{generate, stats};
 use crate::units::{fmt_bytes, fmt_count};
 
 pub fn run(args: DemoArgs) -> Result<()> {
@@ -67,43 +65,62 @@ pub fn run(args: DemoArgs) -> Result<()> {
         v.pages, v.groups, v.nodes
     );
 
-    let files = [model.clone()];
-    let outside = args.dir.join("plant-outside.png");
-    let cam = Camera::frame_bounds(&read.stats.bounds, [-0.55, -0.75, 0.55], [0.0, 0.0, 1.0], 1280.0 / 720.0);
-    preview::render(&files, &options, cam, (1280, 720), Coloring::Material, &outside)?;
-    let inside = args.dir.join("plant-inside.png");
-    let params = PlantParams { triangles: args.triangles, seed: args.seed };
-    let (eye, target) =
-        interior_viewpoints(&params, 1).into_iter().next().context("no interior viewpoint")?;
-    let cam = Camera { eye, target, up: [0.0, 0.0, 1.0], fovy_deg: 70.0 };
-    preview::render(&files, &options, cam, (1280, 720), Coloring::Material, &inside)?;
-    println!("4. views (CPU preview of the input): {} and {}", outside.display(), inside.display());
-
-    // One frame through the runtime and the GPU renderer (Mesa's CPU drivers where no GPU).
-    let frame = args.dir.join("plant-render-lod.png");
-    println!("5. GPU frame of the store at 1 px error, coloured by LOD level:");
-    let render = crate::cli::RenderArgs {
-        store: store.clone(),
-        output: frame,
-        size: (1280, 720),
-        camera: None,
-        error: 1.0,
-        color: crate::cli::RenderColoring::Level,
-        memory: 1 << 30,
-    };
-    if let Err(e) = crate::commands::render::run(render) {
-        println!("   skipped: {e:#}");
+    // An automatic walkthrough path (cached): a walk at eye height inside, then a fly-over.
+    let path_file = args.dir.join(format!("plant-{}-s{}-path.json", args.triangles, args.seed));
+    if path_file.exists() && tw_runtime::CameraPath::load(&path_file).is_ok() {
+        println!("4. path: cached at {}", path_file.display());
+    } else {
+        let t = Instant::now();
+        let options = tw_runtime::pathgen::PathOptions { frames: args.frames, ..Default::default() };
+        let g = tw_runtime::pathgen::generate_path(&opened, &options, &mut |_, _, _| {})?;
+        g.path.save(&path_file)?;
+        println!(
+            "4. path: {} frames ({} walking inside at eye height, {} flying over) in {:.1} s -> {}",
+            g.path.frames.len(),
+            g.report.walk_frames,
+            g.report.fly_frames,
+            t.elapsed().as_secs_f64(),
+            path_file.display()
+        );
     }
+    drop(opened);
+
+    // The benchmark walkthrough on the GPU (Mesa's CPU drivers where there is no GPU): each
+    // occlusion strategy, and the full-detail reference every 30th frame for PSNR.
+    let out = args.dir.join("bench-report");
+    println!("5. bench: rendering the path headless at 1280x720, 1 px error:");
+    let bench = crate::cli::BenchArgs {
+        store: store.clone(),
+        path: Some(path_file.clone()),
+        frames: None,
+        out: out.clone(),
+        size: (1280, 720),
+        error: 1.0,
+        memory: 1 << 30,
+        occlusion: tw_frame::Occlusion::ALL.to_vec(),
+        reference: false,
+        compare: Some(30),
+        exact: false,
+        wait: false,
+        gpu_memory: 512 << 20,
+        warmup: 3,
+        images: 4,
+        color: crate::cli::RenderColoring::Material,
+    };
+    let outcome = crate::commands::bench::run(bench)?;
+    crate::commands::bench::print_comparison(&outcome.report);
 
     println!(
         "done in {:.1} s, peak memory {}",
         start.elapsed().as_secs_f64(),
         tw_core::mem::peak_rss_bytes().map(fmt_bytes).unwrap_or_else(|| "unknown".into())
     );
+    println!("report: open {} in a browser", outcome.html.display());
     println!(
-        "next: `terawalk info {} --verify`, `terawalk preview {} -o view.png`",
+        "next: `terawalk view {}` (a window; fly with WASD and the mouse), `terawalk bench {} --path {} --exact`",
         store.display(),
-        model.display()
+        store.display(),
+        path_file.display()
     );
     Ok(())
 }

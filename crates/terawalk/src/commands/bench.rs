@@ -1,0 +1,289 @@
+//! `terawalk bench`: renders a camera path headless through the frame pipeline (tw-frame) and
+//! writes a self-contained report (tw-report: index.html with SVG plots, report.json with every
+//! figure).
+//!
+//! Runs, all in one process so that their ratios are measured under the same conditions:
+//! - one run per `--occlusion` strategy (default: the default strategy), each over the whole
+//!   path after `--warmup` frames at the first camera;
+//! - `--reference`: the main run is the reference itself (full detail, no culling);
+//! - `--compare K`: every K-th frame of the first run is also rendered as the reference; the
+//!   frame records get PSNR and the share of differing pixels, and a "reference" run holds the
+//!   reference frame times (same frames), so the speed-up is a ratio of the same frames;
+//! - `--exact`: on the same frames, the item buffer at full detail gives the exact visible
+//!   objects and triangles, and the culling efficiency (drawn ÷ exact visible).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use anyhow::{bail, Context, Result};
+use tw_frame::{FrameInfo, FrameSettings, Occlusion, Walkthrough};
+use tw_gpu::{ColorMode, Image, Renderer};
+use tw_report::{BenchReport, FrameRecord, ReportImage, Run, RunMeta};
+use tw_runtime::pathgen::{generate_path, PathOptions};
+use tw_runtime::{Camera, CameraPath, StreamOptions};
+use tw_store::Store;
+
+use crate::cli::{BenchArgs, RenderColoring};
+use crate::units::fmt_count;
+
+/// What `run` measured, for callers such as `demo`.
+pub struct BenchOutcome {
+    pub report: BenchReport,
+    pub html: PathBuf,
+}
+
+pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
+    if !(args.error.is_finite() && args.error >= 0.0) {
+        bail!("--error must be a finite number ≥ 0, got {}", args.error);
+    }
+    if args.compare == Some(0) {
+        bail!("--compare K needs K ≥ 1 (every K-th frame)");
+    }
+    let store =
+        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    let path = match &args.path {
+        Some(p) => CameraPath::load(p)?,
+        None => {
+            let options = PathOptions { frames: args.frames.unwrap_or(300).max(2), ..Default::default() };
+            let generated = generate_path(&store, &options, &mut |_, _, _| {})
+                .with_context(|| format!("cannot generate a camera path for {}", args.store.display()))?;
+            let r = &generated.report;
+            println!(
+                "path: generated {} frames ({} walking, {} flying){}",
+                generated.path.frames.len(),
+                r.walk_frames,
+                r.fly_frames,
+                r.fallback.as_ref().map(|f| format!("; {f}")).unwrap_or_default()
+            );
+            generated.path
+        }
+    };
+    let mut frames = path.frames.clone();
+    if let Some(n) = args.frames {
+        frames.truncate(n);
+    }
+    if frames.is_empty() {
+        bail!("the camera path has no frames");
+    }
+    let cameras: Vec<Camera> = frames
+        .iter()
+        .enumerate()
+        .map(|(i, f)| f.to_scene(store.header()).with_context(|| format!("path frame {i}")))
+        .collect::<Result<_>>()?;
+
+    let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+    renderer.set_gpu_budget(args.gpu_memory);
+    let adapter = renderer.adapter_summary();
+    println!("adapter: {adapter}");
+    let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
+    let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
+    walk.set_color_mode(color_mode(args.color));
+
+    let strategies: Vec<Occlusion> =
+        if args.reference { vec![Occlusion::None] } else { args.occlusion.clone() };
+    let every = args.compare.or(if args.exact { Some(10) } else { None });
+    let image_frames = image_frames(cameras.len(), args.images);
+    let mut images = Vec::new();
+    let mut runs = Vec::new();
+    let mut reference_frames = Vec::new();
+    for (ri, &strategy) in strategies.iter().enumerate() {
+        let name = if args.reference { "reference".to_string() } else { strategy.name().to_string() };
+        let settings = FrameSettings {
+            tau: args.error,
+            frustum_culling: true,
+            occlusion: strategy,
+            wait_for_pages: args.wait,
+        };
+        walk.reset();
+        for _ in 0..args.warmup {
+            frame(&mut walk, &cameras[0], &settings, args.reference)?;
+        }
+        let mut records = Vec::with_capacity(cameras.len());
+        let bar = crate::progress::count(cameras.len() as u64, name.clone());
+        for (i, camera) in cameras.iter().enumerate() {
+            let (image, info) = frame(&mut walk, camera, &settings, args.reference)?;
+            let mut rec = record(i, &frames[i].segment, &info);
+            if ri == 0 && image_frames.contains(&i) {
+                images.push(ReportImage {
+                    caption: format!("{name}, frame {i} ({})", frames[i].segment),
+                    png: image.png_bytes()?,
+                });
+            }
+            if ri == 0 && !args.reference && every.is_some_and(|k| i % k == 0) {
+                let (reference, rinfo) = walk.reference(camera)?;
+                if args.compare.is_some() {
+                    rec.psnr_db = Some(image.psnr(&reference)?.min(99.0));
+                    rec.differing_pixels = Some(image.differing_share(&reference)?);
+                }
+                if args.exact {
+                    let exact = walk.exact_visibility(camera)?;
+                    rec.exact_visible_triangles = Some(exact.triangles);
+                    rec.exact_visible_objects = Some(exact.objects);
+                    rec.culling_efficiency = Some(info.triangles as f64 / exact.triangles.max(1) as f64);
+                }
+                reference_frames.push(record(i, &frames[i].segment, &rinfo));
+                walk.reset();
+            }
+            records.push(rec);
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        let description = if args.reference {
+            "full detail, no culling (τ = 0, frustum and occlusion culling off)".to_string()
+        } else {
+            format!("LOD cut at {} px, frustum culling, occlusion culling: {}", args.error, strategy.name())
+        };
+        let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
+        print_run(&run);
+        runs.push(run);
+    }
+    if !reference_frames.is_empty() {
+        let run = Run::new(
+            "reference",
+            "full detail, no culling, on the compared frames",
+            reference_frames,
+            tw_report::peak_rss_bytes(),
+        );
+        print_run(&run);
+        runs.push(run);
+    }
+
+    let store_name = args.store.display().to_string();
+    let meta = RunMeta {
+        store: store_name,
+        command_line: std::env::args().collect::<Vec<_>>().join(" "),
+        adapter,
+        size: [args.size.0, args.size.1],
+        error_px: args.error as f64,
+        memory_budget_bytes: args.memory,
+        date: tw_report::utc_now(),
+        machine: machine(),
+        path: args.path.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "generated".into()),
+        extra: vec![("frames".into(), cameras.len().to_string()), ("warmup".into(), args.warmup.to_string())],
+    };
+    let report = BenchReport::new(meta, runs);
+    print_comparison(&report);
+    let files = tw_report::write_report(&args.out, &report, &images)?;
+    println!("report: {} (open it in a browser), figures in {}", files.html.display(), files.json.display());
+    Ok(BenchOutcome { report, html: files.html })
+}
+
+fn frame(
+    walk: &mut Walkthrough,
+    camera: &Camera,
+    settings: &FrameSettings,
+    reference: bool,
+) -> Result<(Image, FrameInfo)> {
+    Ok(if reference { walk.reference(camera)? } else { walk.frame(camera, settings)? })
+}
+
+fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    let st = &info.stream;
+    FrameRecord {
+        frame: i as u32,
+        segment: segment.to_string(),
+        frame_ms: ms(info.times.total),
+        select_ms: ms(info.times.select),
+        cull_ms: ms(info.times.cull),
+        upload_ms: ms(info.times.upload),
+        render_ms: ms(info.times.render),
+        triangles: info.triangles,
+        clusters: info.clusters,
+        nodes_visited: info.select.nodes_visited,
+        nodes_culled_frustum: info.select.nodes_culled_frustum,
+        nodes_culled_lod: info.select.nodes_culled_lod,
+        nodes_culled_occlusion: info.occlusion.culled,
+        occlusion_queries: info.occlusion.queries,
+        culling_ms: ms(info.times.cull),
+        resident_mb: st.resident_bytes as f64 / 1e6,
+        gpu_resident_mb: info.gpu.resident_bytes as f64 / 1e6,
+        disk_read_mb: st.bytes_read as f64 / 1e6,
+        pages_requested: st.pages_requested,
+        pages_loaded: st.pages_loaded,
+        pages_evicted: st.pages_evicted,
+        stalls_avoided: st.stalls_avoided,
+        ..Default::default()
+    }
+}
+
+/// Ratios between the runs of one report (measured in the same process on the same frames):
+/// each strategy against the first run and against the reference, and the fidelity figures.
+pub fn print_comparison(report: &BenchReport) {
+    let Some(first) = report.runs.first() else { return };
+    for run in &report.runs[1..] {
+        if run.name == "reference" {
+            // The reference ran on every K-th frame only: compare the same frames.
+            let frames: std::collections::HashSet<u32> = run.frames.iter().map(|f| f.frame).collect();
+            let same: Vec<f64> =
+                first.frames.iter().filter(|f| frames.contains(&f.frame)).map(|f| f.frame_ms).collect();
+            if let Some(m) = tw_report::stats::median(&same) {
+                println!(
+                    "{:>10}: {} is {:.1}x faster than the reference on the same {} frames",
+                    "speed-up",
+                    first.name,
+                    run.summary.median_ms / m.max(1e-9),
+                    same.len()
+                );
+            }
+        } else {
+            println!(
+                "{:>10}: {} is {:.2}x the speed of {} (median frame time)",
+                "ratio",
+                run.name,
+                first.summary.median_ms / run.summary.median_ms.max(1e-9),
+                first.name
+            );
+        }
+    }
+    let psnr: Vec<f64> = first.frames.iter().filter_map(|f| f.psnr_db).collect();
+    if let (Some(med), Some(min)) = (tw_report::stats::median(&psnr), psnr.iter().cloned().reduce(f64::min)) {
+        println!("{:>10}: PSNR against the reference: median {med:.1} dB, worst {min:.1} dB", "fidelity");
+    }
+    if let Some(e) = first.summary.median_culling_efficiency {
+        println!("{:>10}: triangles drawn / exact visible triangles: median {e:.1}", "culling");
+    }
+}
+
+fn print_run(run: &Run) {
+    let s = &run.summary;
+    println!(
+        "{:>10}: {} frames, median {:.1} ms ({:.1} fps), p99 {:.1} ms, median {} triangles, peak RSS {}",
+        run.name,
+        s.frames,
+        s.median_ms,
+        s.median_fps,
+        s.p99_ms,
+        fmt_count(s.median_triangles as u64),
+        s.peak_rss_mb.map(|m| format!("{m:.0} MB")).unwrap_or_else(|| "?".into())
+    );
+}
+
+/// Up to `n` frames spread evenly over `len`.
+fn image_frames(len: usize, n: usize) -> Vec<usize> {
+    if n == 0 || len == 0 {
+        return Vec::new();
+    }
+    let n = n.min(len);
+    (0..n).map(|k| k * (len - 1) / (n - 1).max(1)).collect()
+}
+
+fn color_mode(c: RenderColoring) -> ColorMode {
+    match c {
+        RenderColoring::Material => ColorMode::Material,
+        RenderColoring::Object => ColorMode::Object,
+        RenderColoring::Level => ColorMode::Level,
+        RenderColoring::Cluster => ColorMode::Cluster,
+    }
+}
+
+fn machine() -> String {
+    let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
+    let mem = std::fs::read_to_string("/proc/meminfo")
+        .ok()
+        .and_then(|s| s.lines().next().map(|l| l.split_whitespace().nth(1).unwrap_or("0").to_string()))
+        .and_then(|kb| kb.parse::<u64>().ok())
+        .map(|kb| format!(", {:.0} GB RAM", kb as f64 / 1048576.0))
+        .unwrap_or_default();
+    format!("{cores} cores{mem}, {}", std::env::consts::OS)
+}

@@ -1,0 +1,370 @@
+//! terawalk's frame pipeline (DESIGN "Data flow": camera → select → occlude → stream → draw),
+//! shared by `terawalk bench`, `terawalk render` and the viewer, so that every front end draws a
+//! frame the same way and measures it the same way (DESIGN "Measuring": frame time is from the
+//! camera update to the image complete, waiting for the GPU).
+//!
+//! [`Walkthrough`] owns a store's [`Streamer`] (page cache, loader threads, selector) and a
+//! [`Renderer`]. One [`Walkthrough::frame`]:
+//! 1. **select and stream** ([`Streamer::frame`]): the LOD cut by pixel error with frustum
+//!    culling over the resident pages — missing pages are requested by priority and their
+//!    groups drawn by their best resident ancestors (the availability rule of docs/FORMAT.md), so
+//!    the frame never waits for the disk; with [`FrameSettings::wait_for_pages`] the complete
+//!    cut is loaded on the spot instead (`render`, tests, images compared across strategies);
+//! 2. **occlude and draw** ([`occlude::draw`]): the [`Occlusion`] strategy decides which clusters
+//!    of the cut are drawn, then the image is read back;
+//! 3. statistics of every stage in a [`FrameInfo`].
+//!
+//! [`Walkthrough::reference`] draws the full-detail scene without any culling (τ = 0, no
+//! frustum, no occlusion), in chunks of pages so that memory stays within the budget whatever
+//! the scene size: the image every fidelity figure is measured against.
+//! [`Walkthrough::exact_visibility`] draws the same into the item buffer: the exact visible
+//! objects and triangles (DESIGN "Measuring").
+
+pub mod occlude;
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use serde::{Deserialize, Serialize};
+use tw_gpu::{ColorMode, GpuError, Image, PoolStats, Renderer, Target};
+use tw_runtime::{
+    Camera, ClusterRef, ResidentPage, RuntimeError, SelectOptions, SelectStats, Selection, StreamOptions,
+    StreamStats, Streamer,
+};
+use tw_store::{PageCluster, Store};
+
+pub use occlude::{Occlusion, OcclusionStats};
+
+/// What a frame draws, apart from the camera.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FrameSettings {
+    /// Pixel error threshold τ (DESIGN decision 3).
+    pub tau: f32,
+    pub frustum_culling: bool,
+    pub occlusion: Occlusion,
+    /// Load every page of the cut before drawing (the frame may wait for the disk) instead of
+    /// streaming.
+    pub wait_for_pages: bool,
+}
+
+impl Default for FrameSettings {
+    fn default() -> Self {
+        FrameSettings { tau: 1.0, frustum_culling: true, occlusion: Occlusion::None, wait_for_pages: false }
+    }
+}
+
+/// Wall-clock time of each stage of one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct FrameTimes {
+    /// Selection and streaming requests.
+    pub select: Duration,
+    /// Occlusion culling: tests and the depth read-back or queries they need (drawing excluded).
+    pub cull: Duration,
+    /// Making clusters resident on the GPU.
+    pub upload: Duration,
+    /// Drawing, waiting for the GPU, reading the image back.
+    pub render: Duration,
+    /// Camera update to image complete.
+    pub total: Duration,
+}
+
+/// Everything one frame did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct FrameInfo {
+    pub times: FrameTimes,
+    /// The LOD cut and frustum culling.
+    pub select: SelectStats,
+    /// Streaming: pages requested, loaded, evicted, bytes read, residency, stalls avoided.
+    pub stream: StreamStats,
+    /// Triangles and clusters drawn (after occlusion culling).
+    pub triangles: u64,
+    pub clusters: u64,
+    pub draw_calls: u64,
+    pub occlusion: OcclusionStats,
+    /// The GPU cluster pool after the frame.
+    pub gpu: PoolStats,
+}
+
+/// Errors of a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum FrameError {
+    #[error(transparent)]
+    Gpu(#[from] GpuError),
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+}
+
+/// Exact visibility of one camera (full detail, no culling, item buffer).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ExactVisibility {
+    /// Distinct objects with at least one visible pixel.
+    pub objects: u64,
+    /// Distinct full-resolution triangles with at least one visible pixel.
+    pub triangles: u64,
+    /// Distinct clusters with at least one visible pixel.
+    pub clusters: u64,
+    pub covered_pixels: u64,
+}
+
+/// A store being walked through: the per-frame pipeline of the crate documentation.
+pub struct Walkthrough {
+    streamer: Streamer,
+    renderer: Renderer,
+    occlusion: occlude::OcclusionState,
+    selection: Selection,
+}
+
+impl Walkthrough {
+    /// Prepares `store` for walking with `renderer`: decoded pages stay under
+    /// `stream.budget_bytes` (root pages are loaded now and stay resident).
+    pub fn new(
+        store: Arc<Store>,
+        mut renderer: Renderer,
+        stream: StreamOptions,
+    ) -> Result<Walkthrough, FrameError> {
+        renderer.set_store_colors(&store);
+        let streamer = Streamer::new(store, stream)?;
+        Ok(Walkthrough {
+            streamer,
+            renderer,
+            occlusion: occlude::OcclusionState::default(),
+            selection: Selection::default(),
+        })
+    }
+
+    pub fn store(&self) -> &Arc<Store> {
+        self.streamer.store()
+    }
+
+    pub fn streamer(&self) -> &Streamer {
+        &self.streamer
+    }
+
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
+    pub fn renderer_mut(&mut self) -> &mut Renderer {
+        &mut self.renderer
+    }
+
+    pub fn set_color_mode(&mut self, mode: ColorMode) {
+        self.renderer.set_color_mode(mode);
+    }
+
+    /// The clusters the last frame selected (its LOD cut within the frustum).
+    pub fn selection(&self) -> &Selection {
+        &self.selection
+    }
+
+    /// Forgets frame-to-frame state (occlusion history, camera history for prefetching): after
+    /// a teleport or a change of settings.
+    pub fn reset(&mut self) {
+        self.occlusion.reset();
+        self.streamer.reset_history();
+    }
+
+    /// Draws one frame of `camera` and returns its image and statistics.
+    pub fn frame(
+        &mut self,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<(Image, FrameInfo), FrameError> {
+        let start = Instant::now();
+        let (w, h) = self.renderer.size();
+        let options =
+            SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
+        let store = self.streamer.store().clone();
+        let mut stream = StreamStats::default();
+        let pages: Vec<(u32, Arc<ResidentPage>)> = if settings.wait_for_pages {
+            self.selection = self.streamer.select_blocking(camera, &options);
+            resident_pages(&self.streamer, &self.selection.clusters)
+        } else {
+            let frame = self.streamer.frame(camera, &options);
+            stream = frame.stats;
+            self.selection = frame.selection;
+            frame.pages
+        };
+        let select = start.elapsed();
+        let clusters = lookup(&pages, &self.selection.clusters);
+        let bounds = |c: &ClusterRef| {
+            let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+            pages[i].1.bounds.get(c.index_in_page as usize).copied()
+        };
+        let drawn = occlude::draw(
+            settings.occlusion,
+            &mut self.occlusion,
+            &mut self.renderer,
+            &store,
+            camera,
+            &clusters,
+            bounds,
+        )?;
+        let gpu = self.renderer.stats();
+        let total = start.elapsed();
+        let info = FrameInfo {
+            times: FrameTimes {
+                select,
+                cull: drawn.cull_time,
+                upload: gpu.upload,
+                render: gpu.render,
+                total,
+            },
+            select: self.selection.stats,
+            stream,
+            triangles: gpu.triangles,
+            clusters: gpu.clusters,
+            draw_calls: gpu.draw_calls,
+            occlusion: drawn.stats,
+            gpu: gpu.pool,
+        };
+        Ok((drawn.image, info))
+    }
+
+    /// The reference image of `camera`: every full-resolution cluster, without frustum, LOD or
+    /// occlusion culling, drawn in chunks of pages (decoded pages stay within the budget).
+    pub fn reference(&mut self, camera: &Camera) -> Result<(Image, FrameInfo), FrameError> {
+        let start = Instant::now();
+        let selection = self.full_detail(camera);
+        let select = start.elapsed();
+        let grid_step = self.streamer.store().header().grid_step;
+        self.renderer.begin_frame();
+        let mut first = true;
+        let mut drawn = 0u64;
+        self.for_each_chunk(&selection, |renderer, clusters| {
+            renderer.draw(Target::Own, camera, grid_step, clusters, first)?;
+            first = false;
+            drawn += clusters.len() as u64;
+            Ok(())
+        })?;
+        if first {
+            self.renderer.draw(Target::Own, camera, grid_step, &[], true)?;
+        }
+        let image = self.renderer.read_color()?;
+        let gpu = self.renderer.stats();
+        let info = FrameInfo {
+            times: FrameTimes {
+                select,
+                cull: Duration::ZERO,
+                upload: gpu.upload,
+                render: gpu.render,
+                total: start.elapsed(),
+            },
+            select: selection.stats,
+            stream: StreamStats::default(),
+            triangles: gpu.triangles,
+            clusters: gpu.clusters,
+            draw_calls: gpu.draw_calls,
+            occlusion: OcclusionStats::default(),
+            gpu: gpu.pool,
+        };
+        Ok((image, info))
+    }
+
+    /// Exact visibility of `camera`: the full-detail scene without culling drawn into the item
+    /// buffer (in chunks, like [`reference`](Self::reference)); the ids left in it are the
+    /// visible objects, clusters and triangles.
+    pub fn exact_visibility(&mut self, camera: &Camera) -> Result<ExactVisibility, FrameError> {
+        let selection = self.full_detail(camera);
+        let grid_step = self.streamer.store().header().grid_step;
+        self.renderer.begin_frame();
+        let mut first = true;
+        let mut offset = 0u32;
+        self.for_each_chunk(&selection, |renderer, clusters| {
+            renderer.draw_items(camera, grid_step, clusters, offset, first)?;
+            first = false;
+            offset += clusters.len() as u32;
+            Ok(())
+        })?;
+        if first {
+            return Ok(ExactVisibility::default());
+        }
+        let items = self.renderer.read_items(&selection.clusters)?;
+        let v = items.visible();
+        Ok(ExactVisibility {
+            objects: v.objects.len() as u64,
+            triangles: v.triangles,
+            clusters: v.clusters.len() as u64,
+            covered_pixels: v.covered_pixels,
+        })
+    }
+
+    /// The full-detail, unculled cut (τ = 0, frustum off), pages loaded as needed.
+    fn full_detail(&mut self, camera: &Camera) -> Selection {
+        let (w, h) = self.renderer.size();
+        let options = SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false };
+        self.occlusion.reset();
+        self.streamer.select_blocking(camera, &options)
+    }
+
+    /// Calls `draw` on consecutive chunks of `selection`'s clusters, each chunk's pages taking at
+    /// most a quarter of the cache budget, so the pages held while drawing stay bounded.
+    fn for_each_chunk(
+        &mut self,
+        selection: &Selection,
+        mut draw: impl FnMut(&mut Renderer, &[(ClusterRef, &PageCluster)]) -> Result<(), GpuError>,
+    ) -> Result<(), FrameError> {
+        let limit = (self.streamer.options().budget_bytes / 4).max(1);
+        let store = self.streamer.store().clone();
+        let cache = self.streamer.cache().clone();
+        let mut rest = &selection.clusters[..];
+        while !rest.is_empty() {
+            let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
+            let mut bytes = 0u64;
+            let mut n = 0;
+            for c in rest {
+                if pages.last().map(|(p, _)| *p) != Some(c.page) {
+                    if bytes >= limit {
+                        break;
+                    }
+                    match cache.get(&store, c.page) {
+                        Ok(p) => {
+                            bytes += p.bytes() as u64;
+                            pages.push((c.page, p));
+                        }
+                        Err(e) => tracing::error!("cluster {c:?} skipped: {e}"),
+                    }
+                }
+                n += 1;
+            }
+            pages.sort_by_key(|(p, _)| *p);
+            pages.dedup_by_key(|(p, _)| *p);
+            let clusters = lookup(&pages, &rest[..n]);
+            draw(&mut self.renderer, &clusters)?;
+            rest = &rest[n..];
+        }
+        Ok(())
+    }
+}
+
+/// The resident pages of `clusters` (loaded through the cache where needed), sorted by page.
+fn resident_pages(streamer: &Streamer, clusters: &[ClusterRef]) -> Vec<(u32, Arc<ResidentPage>)> {
+    let (store, cache) = (streamer.store(), streamer.cache());
+    let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
+    for c in clusters {
+        if pages.last().map(|(p, _)| *p) != Some(c.page) {
+            match cache.get(store, c.page) {
+                Ok(p) => pages.push((c.page, p)),
+                Err(e) => tracing::error!("cluster {c:?} skipped: {e}"),
+            }
+        }
+    }
+    pages.sort_by_key(|(p, _)| *p);
+    pages.dedup_by_key(|(p, _)| *p);
+    pages
+}
+
+/// The decoded clusters of `clusters`, in order, from `pages` (sorted by page); clusters whose
+/// page is not there (failed) are skipped.
+fn lookup<'a>(
+    pages: &'a [(u32, Arc<ResidentPage>)],
+    clusters: &[ClusterRef],
+) -> Vec<(ClusterRef, &'a PageCluster)> {
+    clusters
+        .iter()
+        .filter_map(|c| {
+            let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+            pages[i].1.clusters.get(c.index_in_page as usize).map(|pc| (*c, pc))
+        })
+        .collect()
+}

@@ -1,0 +1,174 @@
+//! Occlusion culling strategies behind one interface (DESIGN decision 6), applied to a frame's
+//! LOD cut. All of them are two-pass and conservative:
+//!
+//! 1. **occluders**: the clusters of this frame's cut that were visible last frame
+//!    ([`OcclusionHistory::split`]) — taken from *this* frame's cut, so they are drawn at the
+//!    frame's own LOD, the condition under which GigaWalk's test gives the same image as no
+//!    culling (Baxter et al. 2002 §4, "same LOD for occluders and display");
+//! 2. the occluders are drawn (colour and depth);
+//! 3. the other clusters of the cut (the candidates) are tested against that depth:
+//!    - [`Occlusion::Hzb`] (GigaWalk §4.2): the depth is read back, a hierarchical Z pyramid is
+//!      built on the CPU ([`tw_runtime::Hzb`]) and each candidate's box is tested there in
+//!      parallel ([`tw_runtime::occlusion::test_clusters`]);
+//!    - [`Occlusion::Queries`] (Yoon et al. 2003 §5.3; Govindaraju's occlusion switch): one
+//!      batch of hardware occlusion queries of the candidates' boxes against the depth buffer
+//!      (sample counts on Vulkan, booleans on GL);
+//! 4. the visible candidates are drawn on top in the same frame (nothing is missing when
+//!    visibility changes: the papers' one-frame-late artefacts do not occur);
+//! 5. the history becomes the candidates drawn plus the occluders still visible (the HZB tests
+//!    the occluders too; with queries every occluder stays), so it follows visibility.
+//!
+//! Candidates are clusters, the finest unit the cut has; a cluster's box is its vertex grid box.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use serde::{Deserialize, Serialize};
+use tw_gpu::{Image, Renderer, Target};
+use tw_runtime::frustum::grid_box;
+use tw_runtime::occlusion::test_clusters;
+use tw_runtime::{Camera, ClusterRef, Hzb, OcclusionHistory};
+use tw_store::{PageCluster, Store};
+
+use crate::FrameError;
+
+/// The occlusion culling strategy (`--occlusion`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Occlusion {
+    /// No occlusion culling: the whole LOD cut is drawn.
+    #[default]
+    None,
+    /// Two-pass culling against a CPU hierarchical Z-buffer of last frame's visible set.
+    Hzb,
+    /// Two-pass culling with hardware occlusion queries of the candidates' boxes.
+    Queries,
+}
+
+impl Occlusion {
+    pub const ALL: [Occlusion; 3] = [Occlusion::None, Occlusion::Hzb, Occlusion::Queries];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Occlusion::None => "none",
+            Occlusion::Hzb => "hzb",
+            Occlusion::Queries => "queries",
+        }
+    }
+
+    pub fn description(self) -> &'static str {
+        match self {
+            Occlusion::None => "no occlusion culling",
+            Occlusion::Hzb => "two-pass, CPU hierarchical Z-buffer (GigaWalk)",
+            Occlusion::Queries => "two-pass, hardware occlusion queries (Yoon 2003, occlusion switch)",
+        }
+    }
+}
+
+/// What occlusion culling did in one frame.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OcclusionStats {
+    /// Clusters drawn in the first pass (visible last frame).
+    pub occluders: u64,
+    /// Clusters tested against the occluders' depth.
+    pub tested: u64,
+    /// Tested clusters hidden behind the occluders (not drawn).
+    pub culled: u64,
+    /// Tested clusters covering no pixel centre (not drawn; HZB only).
+    pub no_pixels: u64,
+    /// Hardware occlusion queries issued.
+    pub queries: u64,
+}
+
+/// Frame-to-frame state of the strategies.
+#[derive(Debug, Default)]
+pub struct OcclusionState {
+    history: OcclusionHistory,
+}
+
+impl OcclusionState {
+    pub fn reset(&mut self) {
+        self.history.clear();
+    }
+}
+
+/// The image of a frame, what culling did and how long the culling took (tests, read-backs
+/// and queries; drawing excluded).
+pub struct Drawn {
+    pub image: Image,
+    pub stats: OcclusionStats,
+    pub cull_time: Duration,
+}
+
+/// Draws the frame's cut `clusters` (decoded, in selection order) with `strategy` and reads the
+/// image back; `bounds` gives a cluster's inclusive grid box ([`tw_runtime::ResidentPage`]
+/// keeps them). Begins the renderer's frame.
+pub fn draw(
+    strategy: Occlusion,
+    state: &mut OcclusionState,
+    renderer: &mut Renderer,
+    store: &Store,
+    camera: &Camera,
+    clusters: &[(ClusterRef, &PageCluster)],
+    bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync,
+) -> Result<Drawn, FrameError> {
+    let grid_step = store.header().grid_step;
+    renderer.begin_frame();
+    if strategy == Occlusion::None {
+        renderer.draw(Target::Own, camera, grid_step, clusters, true)?;
+        let image = renderer.read_color()?;
+        return Ok(Drawn { image, stats: OcclusionStats::default(), cull_time: Duration::ZERO });
+    }
+    let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
+    let split = state.history.split(&refs);
+    let by_key: std::collections::HashMap<(u32, u32), &PageCluster> =
+        clusters.iter().map(|(k, c)| ((k.page, k.index_in_page), *c)).collect();
+    let decoded = |list: &[ClusterRef]| -> Vec<(ClusterRef, &PageCluster)> {
+        list.iter().filter_map(|k| by_key.get(&(k.page, k.index_in_page)).map(|c| (*k, *c))).collect()
+    };
+    let cluster_box =
+        |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
+
+    renderer.draw(Target::Own, camera, grid_step, &decoded(&split.occluders), true)?;
+    let mut stats = OcclusionStats {
+        occluders: split.occluders.len() as u64,
+        tested: split.candidates.len() as u64,
+        ..Default::default()
+    };
+    let (w, h) = renderer.size();
+    let cull_start = Instant::now();
+    let (visible, still_visible) = match strategy {
+        Occlusion::None => unreachable!("handled above"),
+        Occlusion::Hzb => {
+            let depth = renderer.read_depth()?;
+            let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
+                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?;
+            let view_proj = camera.projection_reverse_z(w as f32 / h as f32) * camera.view();
+            let t = test_clusters(&split.candidates, &hzb, &view_proj, cluster_box);
+            let o = test_clusters(&split.occluders, &hzb, &view_proj, cluster_box);
+            stats.culled = t.occluded.len() as u64;
+            stats.no_pixels = t.no_pixels.len() as u64;
+            (t.visible, o.visible)
+        }
+        Occlusion::Queries => {
+            let boxes: Vec<(Vec3, Vec3)> = split
+                .candidates
+                .iter()
+                .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
+                .collect();
+            let samples = renderer.query_boxes(camera, &boxes)?;
+            stats.queries = boxes.len() as u64;
+            let visible: Vec<ClusterRef> =
+                split.candidates.iter().zip(&samples).filter(|(_, &s)| s > 0).map(|(k, _)| *k).collect();
+            stats.culled = stats.tested - visible.len() as u64;
+            (visible, split.occluders.clone())
+        }
+    };
+    let mut cull_time = cull_start.elapsed();
+    renderer.draw(Target::Own, camera, grid_step, &decoded(&visible), false)?;
+    let image = renderer.read_color()?;
+    let t = Instant::now();
+    state.history.update(&still_visible, &visible);
+    cull_time += t.elapsed();
+    Ok(Drawn { image, stats, cull_time })
+}
