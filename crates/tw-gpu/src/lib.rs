@@ -374,6 +374,7 @@ impl Renderer {
                 self.last_own = true;
                 let size = (self.width, self.height);
                 self.draw_pass(
+                    None,
                     Pass::Shade { view: &view, format: COLOR_FORMAT },
                     size,
                     camera,
@@ -384,7 +385,7 @@ impl Renderer {
             }
             Target::View { view, format, size } => {
                 self.last_own = false;
-                self.draw_pass(Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
+                self.draw_pass(None, Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
             }
         }
     }
@@ -486,6 +487,27 @@ impl Renderer {
         self.draw(Target::View { view, format, size }, camera, grid_step, clusters, true)
     }
 
+    /// Like [`render_to_view`](Self::render_to_view), but records the frame's one render pass
+    /// into the caller's `encoder` (submitted by the caller; uploads go through the queue and
+    /// land before that submit). The frame must fit the GPU budget in one batch, else
+    /// [`GpuError::OverBudget`] (and nothing is recorded; use `render_to_view` or a larger
+    /// budget).
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_to_view(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        self.begin_frame();
+        self.last_own = false;
+        self.draw_pass(Some(encoder), Pass::Shade { view, format }, size, camera, grid_step, clusters, true)
+    }
+
     /// Renders a [`Selection`] over `store` into the own target, taking the decoded pages from
     /// `cache` (clusters whose page cannot be loaded are skipped and logged).
     pub fn render_selection(
@@ -510,7 +532,7 @@ impl Renderer {
     ) -> Result<ItemBuffer, GpuError> {
         self.begin_frame();
         let size = (self.width, self.height);
-        self.draw_pass(Pass::Items, size, camera, grid_step, clusters, true)?;
+        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, true)?;
         let start = Instant::now();
         let Some((texture, _)) = &self.items else { return Err(GpuError::Gpu("no item target".into())) };
         let mut encoder = self.device.create_command_encoder(&Default::default());
@@ -583,8 +605,10 @@ impl Renderer {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn draw_pass(
         &mut self,
+        mut external: Option<&mut wgpu::CommandEncoder>,
         pass: Pass<'_>,
         size: (u32, u32),
         camera: &Camera,
@@ -653,8 +677,11 @@ impl Renderer {
                         break;
                     }
                     Ensure::Empty => break,
+                    Ensure::Full if external.is_some() => {
+                        return Err(GpuError::OverBudget { budget: self.pool.budget() });
+                    }
                     Ensure::Full if !retried && !batch.is_empty() => {
-                        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+                        self.flush(None, &color_view, format, &depth_view, &batch, clear && first)?;
                         first = false;
                         if gl {
                             self.wait_idle()?;
@@ -673,7 +700,7 @@ impl Renderer {
                 }
             }
         }
-        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+        self.flush(external.take(), &color_view, format, &depth_view, &batch, clear && first)?;
         self.stats.upload += upload;
         Ok(())
     }
@@ -688,6 +715,7 @@ impl Renderer {
     /// Encodes and submits one batch. `format` is `None` for the item buffer.
     fn flush(
         &mut self,
+        external: Option<&mut wgpu::CommandEncoder>,
         color_view: &wgpu::TextureView,
         format: Option<wgpu::TextureFormat>,
         depth_view: &wgpu::TextureView,
@@ -710,8 +738,14 @@ impl Renderer {
             Some(f) => self.pipelines.shaded(&self.device, f).clone(),
             None => self.pipelines.item(&self.device).clone(),
         };
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") });
+        let mut own = None;
+        let encoder = match external {
+            Some(e) => e,
+            None => own.insert(
+                self.device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") }),
+            ),
+        };
         {
             let load_color =
                 if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
@@ -741,7 +775,9 @@ impl Renderer {
                 draw::encode_batch(&mut pass, arena, batch, indirect.as_ref());
             }
         }
-        self.queue.submit([encoder.finish()]);
+        if let Some(e) = own {
+            self.queue.submit([e.finish()]);
+        }
         self.pool.note_batch();
         self.stats.draw_calls += match (self.draw_mode, batch.is_empty()) {
             (_, true) => 0,
