@@ -24,6 +24,16 @@
 //!
 //! Depth is reverse-Z ([`tw_runtime::Camera::projection_reverse_z`], `Greater`, clear 0).
 //! Images: RGBA8 sRGB, rows from the top; alpha 255 where geometry was drawn, 0 elsewhere.
+//!
+//! What each backend gives (Mesa 22.3.6, tested by tests/frame.rs):
+//!
+//! | | Vulkan (lavapipe) | GL (llvmpipe) |
+//! |---|---|---|
+//! | batched draws | `multi_draw_indexed_indirect` | the same (wgpu loops over `glDrawElementsIndirect`); [`Renderer::from_device`] on GL needs [`Renderer::set_downlevel`] to use it |
+//! | triangle ids in the item buffer | yes (`PRIMITIVE_INDEX`) | yes |
+//! | depth readback | compute copy | compute copy |
+//! | occlusion queries | sample counts | 0/1 |
+//! | reuse of evicted pool ranges | ordered by wgpu | the renderer waits for earlier GPU work first (see `draw_pass`) |
 
 pub mod color;
 pub mod depth;
@@ -367,6 +377,7 @@ impl Renderer {
                 self.last_own = true;
                 let size = (self.width, self.height);
                 self.draw_pass(
+                    None,
                     Pass::Shade { view: &view, format: COLOR_FORMAT },
                     size,
                     camera,
@@ -377,7 +388,7 @@ impl Renderer {
             }
             Target::View { view, format, size } => {
                 self.last_own = false;
-                self.draw_pass(Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
+                self.draw_pass(None, Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
             }
         }
     }
@@ -479,6 +490,27 @@ impl Renderer {
         self.draw(Target::View { view, format, size }, camera, grid_step, clusters, true)
     }
 
+    /// Like [`render_to_view`](Self::render_to_view), but records the frame's one render pass
+    /// into the caller's `encoder` (submitted by the caller; uploads go through the queue and
+    /// land before that submit). The frame must fit the GPU budget in one batch, else
+    /// [`GpuError::OverBudget`] (and nothing is recorded; use `render_to_view` or a larger
+    /// budget).
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_to_view(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        self.begin_frame();
+        self.last_own = false;
+        self.draw_pass(Some(encoder), Pass::Shade { view, format }, size, camera, grid_step, clusters, true)
+    }
+
     /// Renders a [`Selection`] over `store` into the own target, taking the decoded pages from
     /// `cache` (clusters whose page cannot be loaded are skipped and logged).
     pub fn render_selection(
@@ -522,7 +554,7 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let size = (self.width, self.height);
         self.item_base = first_number;
-        self.draw_pass(Pass::Items, size, camera, grid_step, clusters, clear)
+        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, clear)
     }
 
     /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
@@ -595,8 +627,10 @@ impl Renderer {
         }
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn draw_pass(
         &mut self,
+        mut external: Option<&mut wgpu::CommandEncoder>,
         pass: Pass<'_>,
         size: (u32, u32),
         camera: &Camera,
@@ -665,8 +699,11 @@ impl Renderer {
                         break;
                     }
                     Ensure::Empty => break,
+                    Ensure::Full if external.is_some() => {
+                        return Err(GpuError::OverBudget { budget: self.pool.budget() });
+                    }
                     Ensure::Full if !retried && !batch.is_empty() => {
-                        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+                        self.flush(None, &color_view, format, &depth_view, &batch, clear && first)?;
                         first = false;
                         if gl {
                             self.wait_idle()?;
@@ -685,7 +722,7 @@ impl Renderer {
                 }
             }
         }
-        self.flush(&color_view, format, &depth_view, &batch, clear && first)?;
+        self.flush(external.take(), &color_view, format, &depth_view, &batch, clear && first)?;
         // Submitted: a later draw of the same frame (the second pass of occlusion culling, the
         // next chunk of a reference frame) may evict these if it needs the room.
         self.pool.release_batch(&keys);
@@ -703,6 +740,7 @@ impl Renderer {
     /// Encodes and submits one batch. `format` is `None` for the item buffer.
     fn flush(
         &mut self,
+        external: Option<&mut wgpu::CommandEncoder>,
         color_view: &wgpu::TextureView,
         format: Option<wgpu::TextureFormat>,
         depth_view: &wgpu::TextureView,
@@ -725,8 +763,14 @@ impl Renderer {
             Some(f) => self.pipelines.shaded(&self.device, f).clone(),
             None => self.pipelines.item(&self.device).clone(),
         };
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") });
+        let mut own = None;
+        let encoder = match external {
+            Some(e) => e,
+            None => own.insert(
+                self.device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") }),
+            ),
+        };
         {
             let load_color =
                 if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
@@ -756,7 +800,9 @@ impl Renderer {
                 draw::encode_batch(&mut pass, arena, batch, indirect.as_ref());
             }
         }
-        self.queue.submit([encoder.finish()]);
+        if let Some(e) = own {
+            self.queue.submit([e.finish()]);
+        }
         self.pool.note_batch();
         self.stats.draw_calls += match (self.draw_mode, batch.is_empty()) {
             (_, true) => 0,

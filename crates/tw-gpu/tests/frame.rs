@@ -468,6 +468,23 @@ fn external(backends: wgpu::Backends) {
     assert_eq!(read_texture(&device, &queue, &tex), headless.rgba);
     assert_eq!(r.stats().pool.uploaded_clusters, 0, "already resident");
     assert!(matches!(r.read_color(), Err(GpuError::NotOwnTarget { .. })));
+    // The same into the caller's encoder.
+    let tex3 = target(&device, format, W, H);
+    let mut enc = device.create_command_encoder(&Default::default());
+    r.encode_to_view(&mut enc, &cam, 1.0, &list, &tex3.create_view(&Default::default()), format, (W, H))
+        .unwrap();
+    queue.submit([enc.finish()]);
+    assert_eq!(read_texture(&device, &queue, &tex3), headless.rgba);
+    // More than the budget holds cannot go into one caller-owned pass.
+    let mut small = Renderer::from_device(device.clone(), queue.clone(), adapter.get_info(), W, H).unwrap();
+    small.set_gpu_budget(0);
+    let many: Vec<PageCluster> = (0..40).map(|i| strip(i * 2, i * 2 + 2, 20 + i, 100 + i)).collect();
+    let many: Vec<(ClusterRef, &PageCluster)> =
+        many.iter().enumerate().map(|(i, c)| (key(i as u32 + 10), c)).collect();
+    let mut enc = device.create_command_encoder(&Default::default());
+    let view3 = tex3.create_view(&Default::default());
+    let err = small.encode_to_view(&mut enc, &cam, 1.0, &many, &view3, format, (W, H));
+    assert!(matches!(err, Err(GpuError::OverBudget { .. })), "{err:?}");
 
     // A linear target of another size (a surface): sRGB-encoded in the shader.
     let format = wgpu::TextureFormat::Rgba8Unorm;
