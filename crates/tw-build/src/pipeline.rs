@@ -27,8 +27,8 @@ use tw_store::{PageCluster, StoreInfo, StoreWriter};
 use crate::cells::CellFiles;
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
-use crate::hlod::{build_hlod, roots_of, HlodParams, Roots};
-use crate::lod::{build_cell_lod, LodParams};
+use crate::hlod::{build_hlod, roots_of, HlodOutcome, HlodParams, Roots};
+use crate::lod::{build_cell_lod_with_seams, LodParams};
 use crate::pages::{PagePacker, PageParams};
 use crate::redefine::{redefine, RedefineParams, RedefineReport};
 use crate::types::{LodCluster, LodDag, LodGroup};
@@ -125,6 +125,28 @@ pub struct BuildReport {
     pub root_pages: u32,
     pub file_bytes: u64,
     pub peak_rss: Option<u64>,
+    /// HLOD counters by hierarchy depth (index = depth of the node; leaves have none).
+    pub hlod: Vec<HlodDepthStats>,
+}
+
+/// What HLOD did at the nodes of one hierarchy depth (logged at info level, `-v`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HlodDepthStats {
+    pub nodes: u64,
+    pub triangles_in: u64,
+    pub target: u64,
+    pub triangles_out: u64,
+    /// Nodes whose result is within 1/8 of their target.
+    pub on_target: u64,
+    pub regular: u64,
+    pub sloppy: u64,
+    /// Nodes that kept their merged mesh (every simplification broke an edge).
+    pub merged: u64,
+    pub unchanged: u64,
+    /// Triangles dropped as whole small parts.
+    pub pruned: u64,
+    /// Largest node error at this depth (scene units).
+    pub max_error: f32,
 }
 
 impl BuildReport {
@@ -225,7 +247,7 @@ fn build_with_pool(
         for_each_in_order(
             pool,
             ids.len(),
-            |i| build_cell_lod(&bucket.mesh(ids[i]), &grid, &options.lod),
+            |i| build_cell_lod_with_seams(&bucket.mesh(ids[i]), &grid, &options.lod, &external),
             |i, dag| {
                 let cell = ids[i];
                 let leaf = state.leaf_of_cell[cell as usize];
@@ -239,10 +261,29 @@ fn build_with_pool(
     }
     progress.end_phase();
     t.lap("lod+hlod+pages");
+    let (cell_count, cell_triangles, cell_root_triangles) = state.cell_counts;
+    tracing::info!(cells = cell_count, cell_triangles, cell_root_triangles, "cell lod roots");
+    for (depth, d) in state.hlod.iter().enumerate().filter(|(_, d)| d.nodes > 0) {
+        tracing::info!(
+            depth,
+            nodes = d.nodes,
+            triangles_in = d.triangles_in,
+            target = d.target,
+            triangles_out = d.triangles_out,
+            on_target = d.on_target,
+            regular = d.regular,
+            sloppy = d.sloppy,
+            merged = d.merged,
+            unchanged = d.unchanged,
+            pruned = d.pruned,
+            max_error = d.max_error,
+            "hlod depth"
+        );
+    }
 
     // 6. Tables and the file.
     progress.phase("write", 0, "");
-    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, .. } = state;
+    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, hlod, .. } = state;
     let (placements, pages, root_pages) = packer.finish(&mut writer)?;
     let mut table: Vec<tw_store::Group> = groups;
     for p in placements {
@@ -283,6 +324,7 @@ fn build_with_pool(
     report.root_pages = root_pages;
     report.file_bytes = summary.file_bytes;
     report.peak_rss = tw_core::mem::peak_rss_bytes();
+    report.hlod = hlod;
     Ok(report)
 }
 
@@ -381,6 +423,9 @@ struct LodState<'h> {
     root_depth: usize,
     clusters: u64,
     stored_triangles: u64,
+    hlod: Vec<HlodDepthStats>,
+    /// Cells, their level-0 triangles and their root groups' triangles (where the cell DAG stops).
+    cell_counts: (u64, u64, u64),
 }
 
 impl<'h> LodState<'h> {
@@ -411,6 +456,8 @@ impl<'h> LodState<'h> {
             root_depth: options.root_depth,
             clusters: 0,
             stored_triangles: 0,
+            hlod: Vec::new(),
+            cell_counts: (0, 0, 0),
         }
     }
 
@@ -455,7 +502,21 @@ impl<'h> LodState<'h> {
 
     fn add_cell(&mut self, writer: &mut StoreWriter, leaf: u32, dag: LodDag) -> Result<(), BuildError> {
         let base = self.emit(writer, leaf, &dag, true)?;
-        self.roots[leaf as usize] = Some(roots_of(&dag, base));
+        let roots = roots_of(&dag, base);
+        let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
+        if std::env::var_os("TW_DEBUG_CELLS").is_some() {
+            let err = roots.dag.clusters.iter().map(|c| c.self_error).fold(0.0f32, f32::max);
+            let rad = roots.dag.groups.iter().map(|g| g.sphere.radius).fold(0.0f32, f32::max);
+            let lv = roots.dag.clusters.iter().map(|c| c.level).max().unwrap_or(0);
+            eprintln!(
+                "cell {leaf} level0 {level0} roots {} err {err} radius {rad} levels {lv}",
+                roots.triangle_count()
+            );
+        }
+        self.cell_counts.0 += 1;
+        self.cell_counts.1 += level0 as u64;
+        self.cell_counts.2 += roots.triangle_count() as u64;
+        self.roots[leaf as usize] = Some(roots);
         Ok(())
     }
 
@@ -480,6 +541,24 @@ impl<'h> LodState<'h> {
             let child_roots: Vec<Roots> =
                 children.map(|c| self.roots[c].take().expect("checked above")).collect();
             let hl = build_hlod(&child_roots, grid, params, external);
+            let depth = self.depth[parent as usize] as usize;
+            if self.hlod.len() <= depth {
+                self.hlod.resize(depth + 1, HlodDepthStats::default());
+            }
+            let (d, st) = (&mut self.hlod[depth], &hl.stats);
+            d.nodes += 1;
+            d.triangles_in += st.triangles_in as u64;
+            d.target += st.target as u64;
+            d.triangles_out += st.triangles_out as u64;
+            d.on_target += (st.triangles_out <= st.target + st.target / 8) as u64;
+            match st.outcome {
+                HlodOutcome::Unchanged => d.unchanged += 1,
+                HlodOutcome::Regular => d.regular += 1,
+                HlodOutcome::Sloppy => d.sloppy += 1,
+                HlodOutcome::Merged => d.merged += 1,
+            }
+            d.max_error = d.max_error.max(st.error);
+            d.pruned += st.pruned as u64;
             for &g in &hl.replaced {
                 let e = &mut self.groups[g as usize];
                 e.error = hl.error;
