@@ -427,10 +427,8 @@ fn prune_components(
         p.triangles += 1;
         for &v in t {
             let q = local[v as usize];
-            for i in 0..3 {
-                p.min[i] = p.min[i].min(q[i]);
-                p.max[i] = p.max[i].max(q[i]);
-            }
+            p.min = std::array::from_fn(|i| p.min[i].min(q[i]));
+            p.max = std::array::from_fn(|i| p.max[i].max(q[i]));
             p.pinned |= pinned.get(v as usize) == Some(&true);
         }
         tri_part.push(part_of[r]);

@@ -237,7 +237,7 @@ fn build_with_pool(
     progress.phase("lod", ing.triangles, "triangles");
     let mut state = LodState::new(&hierarchy, options);
     let grid = ing.grid;
-    let external = |p: [u32; 3]| seams.binary_search(&p).is_ok();
+    let external = |p: [u32; 3]| seams.contains(p);
     let mut done_triangles = 0u64;
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
@@ -252,7 +252,7 @@ fn build_with_pool(
                 let cell = ids[i];
                 let leaf = state.leaf_of_cell[cell as usize];
                 state.add_cell(&mut writer, leaf, dag)?;
-                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &external)?;
+                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &seams)?;
                 done_triangles += red.cells[cell as usize].triangles;
                 progress.advance(done_triangles);
                 Ok(())
@@ -383,26 +383,62 @@ where
     })
 }
 
-/// Open-boundary vertices shared by at least two cells, sorted.
+/// Open-boundary vertices shared by at least two cells, sorted, each with the first and last
+/// cell (leaf order) that has it: a position is shared with a cell outside a node's subtree
+/// (whose cells are a contiguous range in leaf order) iff one of the two is outside the range.
+struct Seams {
+    positions: Vec<[u32; 3]>,
+    cells: Vec<(u32, u32)>,
+}
+
+impl Seams {
+    fn contains(&self, p: [u32; 3]) -> bool {
+        self.positions.binary_search(&p).is_ok()
+    }
+
+    /// Whether `p` is on a seam with a cell outside `range`.
+    fn external(&self, p: [u32; 3], range: (u32, u32)) -> bool {
+        self.positions.binary_search(&p).is_ok_and(|i| {
+            let (first, last) = self.cells[i];
+            first < range.0 || last >= range.1
+        })
+    }
+}
+
 fn find_seams(
     cells: &CellFiles,
     progress: &mut dyn BuildProgress,
     pool: &rayon::ThreadPool,
-) -> Result<Vec<[u32; 3]>, BuildError> {
-    let mut all: Vec<[u32; 3]> = Vec::new();
+) -> Result<Seams, BuildError> {
+    use rayon::slice::ParallelSliceMut;
+    let mut all: Vec<([u32; 3], u32)> = Vec::new();
     let mut done = 0u64;
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
         let ids: Vec<u32> = bucket.cells().collect();
         let per_cell: Vec<Vec<[u32; 3]>> =
             pool.install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
-        for v in per_cell {
-            all.extend(v);
+        for (v, &c) in per_cell.into_iter().zip(&ids) {
+            all.extend(v.into_iter().map(|p| (p, c)));
         }
         done += ids.len() as u64;
         progress.advance(done);
     }
-    Ok(pool.install(|| crate::hlod::shared_positions(all)))
+    pool.install(|| all.par_sort_unstable());
+    let mut seams = Seams { positions: Vec::new(), cells: Vec::new() };
+    let mut i = 0;
+    while i < all.len() {
+        let mut j = i + 1;
+        while j < all.len() && all[j].0 == all[i].0 {
+            j += 1;
+        }
+        if j - i > 1 {
+            seams.positions.push(all[i].0);
+            seams.cells.push((all[i].1, all[j - 1].1));
+        }
+        i = j;
+    }
+    Ok(seams)
 }
 
 /// The bottom-up state of phase 5.
@@ -411,6 +447,8 @@ struct LodState<'h> {
     parent: Vec<u32>,
     depth: Vec<u32>,
     leaf_of_cell: Vec<u32>,
+    /// The cells (leaf order) under each node: `first..last + 1`.
+    cell_range: Vec<(u32, u32)>,
     /// Roots of completed subtrees, by node.
     roots: Vec<Option<Roots>>,
     /// The group table (page references filled in at the end).
@@ -443,11 +481,24 @@ impl<'h> LodState<'h> {
                 leaf_of_cell[cell as usize] = i as u32;
             }
         }
+        // Children come after parents: a reverse sweep sees every child before its parent.
+        let mut cell_range = vec![(u32::MAX, 0u32); n];
+        for i in (0..n).rev() {
+            let node = &hierarchy.nodes[i];
+            if let Some(cell) = node.cell {
+                cell_range[i] = (cell, cell + 1);
+            }
+            for c in node.children() {
+                let (lo, hi) = cell_range[c];
+                cell_range[i] = (cell_range[i].0.min(lo), cell_range[i].1.max(hi));
+            }
+        }
         LodState {
             hierarchy,
             parent,
             depth,
             leaf_of_cell,
+            cell_range,
             roots: vec![None; n],
             groups: Vec::new(),
             sources: Vec::new(),
@@ -504,15 +555,6 @@ impl<'h> LodState<'h> {
         let base = self.emit(writer, leaf, &dag, true)?;
         let roots = roots_of(&dag, base);
         let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
-        if std::env::var_os("TW_DEBUG_CELLS").is_some() {
-            let err = roots.dag.clusters.iter().map(|c| c.self_error).fold(0.0f32, f32::max);
-            let rad = roots.dag.groups.iter().map(|g| g.sphere.radius).fold(0.0f32, f32::max);
-            let lv = roots.dag.clusters.iter().map(|c| c.level).max().unwrap_or(0);
-            eprintln!(
-                "cell {leaf} level0 {level0} roots {} err {err} radius {rad} levels {lv}",
-                roots.triangle_count()
-            );
-        }
         self.cell_counts.0 += 1;
         self.cell_counts.1 += level0 as u64;
         self.cell_counts.2 += roots.triangle_count() as u64;
@@ -527,7 +569,7 @@ impl<'h> LodState<'h> {
         mut node: u32,
         grid: &crate::types::Grid,
         params: &HlodParams,
-        external: &dyn Fn([u32; 3]) -> bool,
+        seams: &Seams,
     ) -> Result<(), BuildError> {
         loop {
             let parent = self.parent[node as usize];
@@ -540,7 +582,10 @@ impl<'h> LodState<'h> {
             }
             let child_roots: Vec<Roots> =
                 children.map(|c| self.roots[c].take().expect("checked above")).collect();
-            let hl = build_hlod(&child_roots, grid, params, external);
+            // Only seams with cells outside this node's subtree stay locked.
+            let range = self.cell_range[parent as usize];
+            let external = |p: [u32; 3]| seams.external(p, range);
+            let hl = build_hlod(&child_roots, grid, params, &external);
             let depth = self.depth[parent as usize] as usize;
             if self.hlod.len() <= depth {
                 self.hlod.resize(depth + 1, HlodDepthStats::default());
