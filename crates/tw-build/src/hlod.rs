@@ -18,7 +18,11 @@
 //!    but along an object border (meshopt's topology rules are per directed half-edge, and
 //!    the double-sided and non-manifold parts left by earlier levels fool them; the sloppy
 //!    simplifier has none). A result that fails is simplified again with the neighbourhood of
-//!    the broken edges locked (a few rounds), else the node keeps its merged mesh;
+//!    the broken edges locked (a few rounds), else the node keeps its merged mesh. If the result
+//!    is still above the target, whole connected parts that share no vertex with a cell outside
+//!    the node are dropped, smallest first (`prune_components`; the error grows to the largest
+//!    dropped part's radius). On the generated plants this rarely applies: what a stalled node
+//!    keeps is mostly fans around seam vertices shared with cells outside the node;
 //! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
@@ -162,7 +166,8 @@ impl HlodNode {
 /// Builds the HLOD clusters of one hierarchy node from its children's roots. Deterministic.
 ///
 /// `external(p)` tells whether grid point `p` is shared with a cell outside this node's subtree
-/// (see [`seam_positions`]); such vertices on the merged mesh's open edges are locked, so that a
+/// (the pipeline knows each seam position's first and last cell; [`seam_positions`] is the
+/// conservative scene-wide set); such vertices on the merged mesh's open edges are locked, so that a
 /// cut that is coarse here and fine in a neighbouring subtree does not crack. Everything else,
 /// open object borders included, may be simplified.
 pub fn build_hlod(

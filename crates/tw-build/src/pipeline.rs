@@ -4,8 +4,11 @@
 //! 2. redefine ([`crate::redefine`]) → cells; hierarchy ([`crate::hierarchy`]) over them, cells
 //!    renumbered in leaf order;
 //! 3. distribute ([`crate::cells`]) → one bucket file per range of cells;
-//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), which HLOD
-//!    must keep where a neighbouring subtree may be drawn finer ([`crate::hlod::build_hlod`]);
+//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), with the
+//!    first and last cell (leaf order) that has each: cells lock them
+//!    ([`crate::lod::build_cell_lod_with_seams`]), and a node's HLOD keeps those shared with a
+//!    cell outside the node's cell range, where a neighbouring subtree may be drawn finer
+//!    ([`crate::hlod::build_hlod`]);
 //! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
 //!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
 //!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
