@@ -18,7 +18,11 @@
 //!    but along an object border (meshopt's topology rules are per directed half-edge, and
 //!    the double-sided and non-manifold parts left by earlier levels fool them; the sloppy
 //!    simplifier has none). A result that fails is simplified again with the neighbourhood of
-//!    the broken edges locked (a few rounds), else the node keeps its merged mesh;
+//!    the broken edges locked (a few rounds), else the node keeps its merged mesh. If the result
+//!    is still above the target, whole connected parts that share no vertex with a cell outside
+//!    the node are dropped, smallest first (`prune_components`; the error grows to the largest
+//!    dropped part's radius). On the generated plants this rarely applies: what a stalled node
+//!    keeps is mostly fans around seam vertices shared with cells outside the node;
 //! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
@@ -118,6 +122,38 @@ pub struct HlodNode {
     /// The error and sphere to give every replaced group.
     pub error: f32,
     pub sphere: Sphere,
+    /// How the simplification went (for the build's counters and logs).
+    pub stats: HlodStats,
+}
+
+/// How one node's simplification went.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum HlodOutcome {
+    /// Nothing to simplify (no triangles, or already at or below the target).
+    #[default]
+    Unchanged,
+    /// The regular simplifier's result (within 1/8 of the target or not), checked.
+    Regular,
+    /// The sloppy simplifier's result, checked.
+    Sloppy,
+    /// Every result broke an edge: the merged mesh itself.
+    Merged,
+}
+
+/// Triangles in and out of one node, and how they were reduced.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HlodStats {
+    pub triangles_in: usize,
+    pub target: usize,
+    pub triangles_out: usize,
+    pub outcome: HlodOutcome,
+    /// Simplification rounds run (each repair round is one).
+    pub rounds: usize,
+    /// Triangles of the whole parts dropped after simplification (`prune_components`).
+    pub pruned: usize,
+    /// The node's error and the largest child cluster error (scene units).
+    pub error: f32,
+    pub child_error: f32,
 }
 
 impl HlodNode {
@@ -130,7 +166,8 @@ impl HlodNode {
 /// Builds the HLOD clusters of one hierarchy node from its children's roots. Deterministic.
 ///
 /// `external(p)` tells whether grid point `p` is shared with a cell outside this node's subtree
-/// (see [`seam_positions`]); such vertices on the merged mesh's open edges are locked, so that a
+/// (the pipeline knows each seam position's first and last cell; [`seam_positions`] is the
+/// conservative scene-wide set); such vertices on the merged mesh's open edges are locked, so that a
 /// cut that is coarse here and fine in a neighbouring subtree does not crack. Everything else,
 /// open object borders included, may be simplified.
 pub fn build_hlod(
@@ -178,7 +215,9 @@ pub fn build_hlod(
     }
     let sphere = enclosing_sphere(&spheres);
     if indices.is_empty() {
-        return HlodNode { dag: LodDag::default(), replaced, error: child_error.max(MIN_ERROR), sphere };
+        let error = child_error.max(MIN_ERROR);
+        let stats = HlodStats { error, child_error, ..HlodStats::default() };
+        return HlodNode { dag: LodDag::default(), replaced, error, sphere, stats };
     }
 
     // 2. Simplify across borders.
@@ -203,8 +242,13 @@ pub fn build_hlod(
     let broken = |out: &[u32]| broken_edges(&indices, out, &locks, &border);
     let mut simplified = indices.clone();
     let mut sim_locks = locks.clone();
+    let mut outcome = HlodOutcome::Unchanged;
+    let mut rounds = 0;
+    let mut pruned = 0;
     if target < tri_count {
+        outcome = HlodOutcome::Merged;
         for _ in 0..REPAIR_ROUNDS {
+            rounds += 1;
             let simplify = |options: SimplifyOptions, error: &mut f32| {
                 meshopt::simplify_with_locks(
                     &indices,
@@ -229,6 +273,7 @@ pub fn build_hlod(
             if !out.is_empty() && bad.is_empty() {
                 simplified = out;
                 error_local = err;
+                outcome = HlodOutcome::Regular;
                 break;
             }
             // The vertices that collapsed to break an edge are among its ends' neighbours.
@@ -265,6 +310,17 @@ pub fn build_hlod(
             if !sloppy.is_empty() && sloppy.len() < simplified.len() && broken(&sloppy).is_empty() {
                 simplified = sloppy;
                 error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
+                outcome = HlodOutcome::Sloppy;
+            }
+        }
+        // Still above the target: the rest is many small disjoint parts (bolts, pipe pieces, each
+        // already at the few triangles a closed part keeps). Drop whole parts, smallest first.
+        if simplified.len() / 3 > target + target / 8 {
+            let pinned: Vec<bool> = positions.iter().map(|&p| external(p)).collect();
+            let (radius, removed) = prune_components(&mut simplified, &local, &pinned, target);
+            if removed > 0 {
+                error_local = error_local.max(radius);
+                pruned = removed;
             }
         }
     }
@@ -301,7 +357,121 @@ pub fn build_hlod(
         dag.groups[gi].clusters.push(dag.clusters.len() as u32);
         dag.clusters.push(cluster);
     }
-    HlodNode { dag, replaced, error, sphere }
+    let stats = HlodStats {
+        triangles_in: tri_count,
+        target,
+        triangles_out: simplified.len() / 3,
+        outcome,
+        rounds,
+        pruned,
+        error,
+        child_error,
+    };
+    tracing::debug!(?stats, "hlod node");
+    HlodNode { dag, replaced, error, sphere, stats }
+}
+
+/// Removes whole connected parts of `indices` (triangles sharing vertices) that have no vertex
+/// `pinned` (shared with a cell outside the node), smallest bounding radius first, until at most
+/// `target` triangles are left; a part is skipped if removing it would leave fewer than half the
+/// target. Returns the largest removed part's radius (half its box diagonal, local units: every
+/// removed point was within it of the part's centre, the error of seeing nothing there) and the
+/// triangles removed. Safe for cuts: a removed part shares no edge with what is left (no new
+/// boundary edge) nor with any cell outside the node (no open seam); its own open borders go
+/// with it. Deterministic (ties by first triangle).
+fn prune_components(
+    indices: &mut Vec<u32>,
+    local: &[[f32; 3]],
+    pinned: &[bool],
+    target: usize,
+) -> (f32, usize) {
+    let n = local.len();
+    let mut parent: Vec<u32> = (0..n as u32).collect();
+    fn find(parent: &mut [u32], mut v: u32) -> u32 {
+        while parent[v as usize] != v {
+            let g = parent[parent[v as usize] as usize];
+            parent[v as usize] = g;
+            v = g;
+        }
+        v
+    }
+    for t in indices.chunks_exact(3) {
+        let a = find(&mut parent, t[0]);
+        for &v in &t[1..] {
+            let b = find(&mut parent, v);
+            if a != b {
+                let (lo, hi) = (a.min(b), a.max(b));
+                parent[hi as usize] = lo;
+            }
+        }
+    }
+    // Per part (by root): triangles, first triangle, box, pinned.
+    struct Part {
+        triangles: usize,
+        first: usize,
+        min: [f32; 3],
+        max: [f32; 3],
+        pinned: bool,
+    }
+    let mut part_of: Vec<u32> = vec![u32::MAX; n];
+    let mut parts: Vec<Part> = Vec::new();
+    let mut tri_part: Vec<u32> = Vec::with_capacity(indices.len() / 3);
+    for (ti, t) in indices.chunks_exact(3).enumerate() {
+        let r = find(&mut parent, t[0]) as usize;
+        if part_of[r] == u32::MAX {
+            part_of[r] = parts.len() as u32;
+            parts.push(Part {
+                triangles: 0,
+                first: ti,
+                min: [f32::MAX; 3],
+                max: [f32::MIN; 3],
+                pinned: false,
+            });
+        }
+        let p = &mut parts[part_of[r] as usize];
+        p.triangles += 1;
+        for &v in t {
+            let q = local[v as usize];
+            p.min = std::array::from_fn(|i| p.min[i].min(q[i]));
+            p.max = std::array::from_fn(|i| p.max[i].max(q[i]));
+            p.pinned |= pinned.get(v as usize) == Some(&true);
+        }
+        tri_part.push(part_of[r]);
+    }
+    let radius = |p: &Part| {
+        let d2: f64 = (0..3).map(|i| (p.max[i] as f64 - p.min[i] as f64).powi(2)).sum();
+        round_up(d2.sqrt() * 0.5)
+    };
+    let mut order: Vec<usize> = (0..parts.len()).filter(|&i| !parts[i].pinned).collect();
+    order.sort_by(|&a, &b| {
+        radius(&parts[a]).total_cmp(&radius(&parts[b])).then(parts[a].first.cmp(&parts[b].first))
+    });
+    let mut count = indices.len() / 3;
+    let keep_at_least = (target / 2).max(1);
+    let mut remove = vec![false; parts.len()];
+    let mut max_radius = 0.0f32;
+    for i in order {
+        if count <= target {
+            break;
+        }
+        if count - parts[i].triangles < keep_at_least {
+            continue;
+        }
+        count -= parts[i].triangles;
+        remove[i] = true;
+        max_radius = max_radius.max(radius(&parts[i]));
+    }
+    let removed = indices.len() / 3 - count;
+    if removed > 0 {
+        let mut out = Vec::with_capacity(count * 3);
+        for (t, &p) in indices.chunks_exact(3).zip(&tri_part) {
+            if !remove[p as usize] {
+                out.extend_from_slice(t);
+            }
+        }
+        *indices = out;
+    }
+    (max_radius, removed)
 }
 
 /// Triangles with their vertices rotated so the smallest comes first (winding kept), sorted and

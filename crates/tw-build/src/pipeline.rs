@@ -4,8 +4,11 @@
 //! 2. redefine ([`crate::redefine`]) → cells; hierarchy ([`crate::hierarchy`]) over them, cells
 //!    renumbered in leaf order;
 //! 3. distribute ([`crate::cells`]) → one bucket file per range of cells;
-//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), which HLOD
-//!    must keep where a neighbouring subtree may be drawn finer ([`crate::hlod::build_hlod`]);
+//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), with the
+//!    first and last cell (leaf order) that has each: cells lock them
+//!    ([`crate::lod::build_cell_lod_with_seams`]), and a node's HLOD keeps those shared with a
+//!    cell outside the node's cell range, where a neighbouring subtree may be drawn finer
+//!    ([`crate::hlod::build_hlod`]);
 //! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
 //!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
 //!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
@@ -27,8 +30,8 @@ use tw_store::{PageCluster, StoreInfo, StoreWriter};
 use crate::cells::CellFiles;
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
-use crate::hlod::{build_hlod, roots_of, HlodParams, Roots};
-use crate::lod::{build_cell_lod, LodParams};
+use crate::hlod::{build_hlod, roots_of, HlodOutcome, HlodParams, Roots};
+use crate::lod::{build_cell_lod_with_seams, LodParams};
 use crate::pages::{PagePacker, PageParams};
 use crate::redefine::{redefine, RedefineParams, RedefineReport};
 use crate::types::{LodCluster, LodDag, LodGroup};
@@ -125,6 +128,28 @@ pub struct BuildReport {
     pub root_pages: u32,
     pub file_bytes: u64,
     pub peak_rss: Option<u64>,
+    /// HLOD counters by hierarchy depth (index = depth of the node; leaves have none).
+    pub hlod: Vec<HlodDepthStats>,
+}
+
+/// What HLOD did at the nodes of one hierarchy depth (logged at info level, `-v`).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HlodDepthStats {
+    pub nodes: u64,
+    pub triangles_in: u64,
+    pub target: u64,
+    pub triangles_out: u64,
+    /// Nodes whose result is within 1/8 of their target.
+    pub on_target: u64,
+    pub regular: u64,
+    pub sloppy: u64,
+    /// Nodes that kept their merged mesh (every simplification broke an edge).
+    pub merged: u64,
+    pub unchanged: u64,
+    /// Triangles dropped as whole small parts.
+    pub pruned: u64,
+    /// Largest node error at this depth (scene units).
+    pub max_error: f32,
 }
 
 impl BuildReport {
@@ -215,7 +240,7 @@ fn build_with_pool(
     progress.phase("lod", ing.triangles, "triangles");
     let mut state = LodState::new(&hierarchy, options);
     let grid = ing.grid;
-    let external = |p: [u32; 3]| seams.binary_search(&p).is_ok();
+    let external = |p: [u32; 3]| seams.contains(p);
     let mut done_triangles = 0u64;
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
@@ -225,12 +250,12 @@ fn build_with_pool(
         for_each_in_order(
             pool,
             ids.len(),
-            |i| build_cell_lod(&bucket.mesh(ids[i]), &grid, &options.lod),
+            |i| build_cell_lod_with_seams(&bucket.mesh(ids[i]), &grid, &options.lod, &external),
             |i, dag| {
                 let cell = ids[i];
                 let leaf = state.leaf_of_cell[cell as usize];
                 state.add_cell(&mut writer, leaf, dag)?;
-                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &external)?;
+                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &seams)?;
                 done_triangles += red.cells[cell as usize].triangles;
                 progress.advance(done_triangles);
                 Ok(())
@@ -239,10 +264,29 @@ fn build_with_pool(
     }
     progress.end_phase();
     t.lap("lod+hlod+pages");
+    let (cell_count, cell_triangles, cell_root_triangles) = state.cell_counts;
+    tracing::info!(cells = cell_count, cell_triangles, cell_root_triangles, "cell lod roots");
+    for (depth, d) in state.hlod.iter().enumerate().filter(|(_, d)| d.nodes > 0) {
+        tracing::info!(
+            depth,
+            nodes = d.nodes,
+            triangles_in = d.triangles_in,
+            target = d.target,
+            triangles_out = d.triangles_out,
+            on_target = d.on_target,
+            regular = d.regular,
+            sloppy = d.sloppy,
+            merged = d.merged,
+            unchanged = d.unchanged,
+            pruned = d.pruned,
+            max_error = d.max_error,
+            "hlod depth"
+        );
+    }
 
     // 6. Tables and the file.
     progress.phase("write", 0, "");
-    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, .. } = state;
+    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, hlod, .. } = state;
     let (placements, pages, root_pages) = packer.finish(&mut writer)?;
     let mut table: Vec<tw_store::Group> = groups;
     for p in placements {
@@ -283,6 +327,7 @@ fn build_with_pool(
     report.root_pages = root_pages;
     report.file_bytes = summary.file_bytes;
     report.peak_rss = tw_core::mem::peak_rss_bytes();
+    report.hlod = hlod;
     Ok(report)
 }
 
@@ -341,26 +386,62 @@ where
     })
 }
 
-/// Open-boundary vertices shared by at least two cells, sorted.
+/// Open-boundary vertices shared by at least two cells, sorted, each with the first and last
+/// cell (leaf order) that has it: a position is shared with a cell outside a node's subtree
+/// (whose cells are a contiguous range in leaf order) iff one of the two is outside the range.
+struct Seams {
+    positions: Vec<[u32; 3]>,
+    cells: Vec<(u32, u32)>,
+}
+
+impl Seams {
+    fn contains(&self, p: [u32; 3]) -> bool {
+        self.positions.binary_search(&p).is_ok()
+    }
+
+    /// Whether `p` is on a seam with a cell outside `range`.
+    fn external(&self, p: [u32; 3], range: (u32, u32)) -> bool {
+        self.positions.binary_search(&p).is_ok_and(|i| {
+            let (first, last) = self.cells[i];
+            first < range.0 || last >= range.1
+        })
+    }
+}
+
 fn find_seams(
     cells: &CellFiles,
     progress: &mut dyn BuildProgress,
     pool: &rayon::ThreadPool,
-) -> Result<Vec<[u32; 3]>, BuildError> {
-    let mut all: Vec<[u32; 3]> = Vec::new();
+) -> Result<Seams, BuildError> {
+    use rayon::slice::ParallelSliceMut;
+    let mut all: Vec<([u32; 3], u32)> = Vec::new();
     let mut done = 0u64;
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
         let ids: Vec<u32> = bucket.cells().collect();
         let per_cell: Vec<Vec<[u32; 3]>> =
             pool.install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
-        for v in per_cell {
-            all.extend(v);
+        for (v, &c) in per_cell.into_iter().zip(&ids) {
+            all.extend(v.into_iter().map(|p| (p, c)));
         }
         done += ids.len() as u64;
         progress.advance(done);
     }
-    Ok(pool.install(|| crate::hlod::shared_positions(all)))
+    pool.install(|| all.par_sort_unstable());
+    let mut seams = Seams { positions: Vec::new(), cells: Vec::new() };
+    let mut i = 0;
+    while i < all.len() {
+        let mut j = i + 1;
+        while j < all.len() && all[j].0 == all[i].0 {
+            j += 1;
+        }
+        if j - i > 1 {
+            seams.positions.push(all[i].0);
+            seams.cells.push((all[i].1, all[j - 1].1));
+        }
+        i = j;
+    }
+    Ok(seams)
 }
 
 /// The bottom-up state of phase 5.
@@ -369,6 +450,8 @@ struct LodState<'h> {
     parent: Vec<u32>,
     depth: Vec<u32>,
     leaf_of_cell: Vec<u32>,
+    /// The cells (leaf order) under each node: `first..last + 1`.
+    cell_range: Vec<(u32, u32)>,
     /// Roots of completed subtrees, by node.
     roots: Vec<Option<Roots>>,
     /// The group table (page references filled in at the end).
@@ -381,6 +464,9 @@ struct LodState<'h> {
     root_depth: usize,
     clusters: u64,
     stored_triangles: u64,
+    hlod: Vec<HlodDepthStats>,
+    /// Cells, their level-0 triangles and their root groups' triangles (where the cell DAG stops).
+    cell_counts: (u64, u64, u64),
 }
 
 impl<'h> LodState<'h> {
@@ -398,11 +484,24 @@ impl<'h> LodState<'h> {
                 leaf_of_cell[cell as usize] = i as u32;
             }
         }
+        // Children come after parents: a reverse sweep sees every child before its parent.
+        let mut cell_range = vec![(u32::MAX, 0u32); n];
+        for i in (0..n).rev() {
+            let node = &hierarchy.nodes[i];
+            if let Some(cell) = node.cell {
+                cell_range[i] = (cell, cell + 1);
+            }
+            for c in node.children() {
+                let (lo, hi) = cell_range[c];
+                cell_range[i] = (cell_range[i].0.min(lo), cell_range[i].1.max(hi));
+            }
+        }
         LodState {
             hierarchy,
             parent,
             depth,
             leaf_of_cell,
+            cell_range,
             roots: vec![None; n],
             groups: Vec::new(),
             sources: Vec::new(),
@@ -411,6 +510,8 @@ impl<'h> LodState<'h> {
             root_depth: options.root_depth,
             clusters: 0,
             stored_triangles: 0,
+            hlod: Vec::new(),
+            cell_counts: (0, 0, 0),
         }
     }
 
@@ -455,7 +556,12 @@ impl<'h> LodState<'h> {
 
     fn add_cell(&mut self, writer: &mut StoreWriter, leaf: u32, dag: LodDag) -> Result<(), BuildError> {
         let base = self.emit(writer, leaf, &dag, true)?;
-        self.roots[leaf as usize] = Some(roots_of(&dag, base));
+        let roots = roots_of(&dag, base);
+        let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
+        self.cell_counts.0 += 1;
+        self.cell_counts.1 += level0 as u64;
+        self.cell_counts.2 += roots.triangle_count() as u64;
+        self.roots[leaf as usize] = Some(roots);
         Ok(())
     }
 
@@ -466,7 +572,7 @@ impl<'h> LodState<'h> {
         mut node: u32,
         grid: &crate::types::Grid,
         params: &HlodParams,
-        external: &dyn Fn([u32; 3]) -> bool,
+        seams: &Seams,
     ) -> Result<(), BuildError> {
         loop {
             let parent = self.parent[node as usize];
@@ -479,7 +585,28 @@ impl<'h> LodState<'h> {
             }
             let child_roots: Vec<Roots> =
                 children.map(|c| self.roots[c].take().expect("checked above")).collect();
-            let hl = build_hlod(&child_roots, grid, params, external);
+            // Only seams with cells outside this node's subtree stay locked.
+            let range = self.cell_range[parent as usize];
+            let external = |p: [u32; 3]| seams.external(p, range);
+            let hl = build_hlod(&child_roots, grid, params, &external);
+            let depth = self.depth[parent as usize] as usize;
+            if self.hlod.len() <= depth {
+                self.hlod.resize(depth + 1, HlodDepthStats::default());
+            }
+            let (d, st) = (&mut self.hlod[depth], &hl.stats);
+            d.nodes += 1;
+            d.triangles_in += st.triangles_in as u64;
+            d.target += st.target as u64;
+            d.triangles_out += st.triangles_out as u64;
+            d.on_target += (st.triangles_out <= st.target + st.target / 8) as u64;
+            match st.outcome {
+                HlodOutcome::Unchanged => d.unchanged += 1,
+                HlodOutcome::Regular => d.regular += 1,
+                HlodOutcome::Sloppy => d.sloppy += 1,
+                HlodOutcome::Merged => d.merged += 1,
+            }
+            d.max_error = d.max_error.max(st.error);
+            d.pruned += st.pruned as u64;
             for &g in &hl.replaced {
                 let e = &mut self.groups[g as usize];
                 e.error = hl.error;
