@@ -71,6 +71,16 @@ impl StoreWriter {
     pub fn create(path: impl AsRef<Path>) -> Result<StoreWriter, StoreError> {
         let path = path.as_ref().to_path_buf();
         let io = |source| StoreError::Io { path: path.clone(), source };
+        // The finished file is renamed over `path`: refuse anything but a regular file there (a
+        // rename over /dev/null or a directory would replace it).
+        if let Ok(meta) = std::fs::metadata(&path) {
+            if !meta.is_file() {
+                return Err(io(std::io::Error::new(
+                    std::io::ErrorKind::InvalidInput,
+                    "exists and is not a regular file; give the path of a store file to write",
+                )));
+            }
+        }
         let dir = match path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),

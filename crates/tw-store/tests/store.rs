@@ -673,3 +673,16 @@ fn write_fuzz_seed() {
     }];
     std::fs::write(dir.join("seed-one-page.tw"), store_bytes(&s)).unwrap();
 }
+
+/// Regression: `terawalk build … -o /dev/null` renamed the finished store over /dev/null.
+#[test]
+fn writer_refuses_an_output_that_is_not_a_regular_file() {
+    let dir = tempfile::tempdir().unwrap();
+    let err = StoreWriter::create(dir.path()).err().expect("a directory is refused");
+    assert!(err.to_string().contains("not a regular file"), "{err}");
+    #[cfg(unix)]
+    {
+        let err = StoreWriter::create("/dev/null").err().expect("a device is refused");
+        assert!(err.to_string().contains("/dev/null"), "{err}");
+    }
+}
