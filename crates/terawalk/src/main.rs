@@ -19,6 +19,7 @@ fn main() {
         cli::Command::Build(a) => commands::build::run(a, cli.quiet),
         cli::Command::Info(a) => commands::info::run(a),
         cli::Command::Render(a) => commands::render::run(a),
+        cli::Command::View(a) => commands::view::run(a),
         cli::Command::Demo(a) => commands::demo::run(a),
     };
     if let Err(e) = result {

@@ -7,3 +7,4 @@ pub mod info;
 pub mod preview;
 pub mod render;
 pub mod stats;
+pub mod view;
