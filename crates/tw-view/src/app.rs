@@ -477,10 +477,10 @@ impl App {
         };
         let mut actions = Vec::new();
         let settings = &mut self.settings;
-        let out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
+        let mut out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
         w.egui.handle_platform_output(&w.window, out.platform_output);
         let jobs = w.egui.egui_ctx().tessellate(out.shapes, out.pixels_per_point);
-        w.gfx.present(&w.window, &jobs, &out.textures_delta, out.pixels_per_point)?;
+        w.gfx.present(&w.window, &jobs, &mut out.textures_delta, out.pixels_per_point)?;
         let repaint_now =
             out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero());
         for a in actions {

@@ -89,6 +89,22 @@ impl Gfx {
         &mut self,
         window: &Window,
         jobs: &[egui::ClippedPrimitive],
+        textures: &mut egui::TexturesDelta,
+        pixels_per_point: f32,
+    ) -> Result<bool, ViewError> {
+        let r = self.present_inner(window, jobs, textures, pixels_per_point);
+        for id in &textures.free {
+            self.egui.free_texture(id);
+        }
+        // egui insists that every delta is marked handled.
+        textures.clear();
+        r
+    }
+
+    fn present_inner(
+        &mut self,
+        window: &Window,
+        jobs: &[egui::ClippedPrimitive],
         textures: &egui::TexturesDelta,
         pixels_per_point: f32,
     ) -> Result<bool, ViewError> {
@@ -99,9 +115,6 @@ impl Gfx {
             }
         }
         if size.width == 0 || size.height == 0 {
-            for id in &textures.free {
-                self.egui.free_texture(id);
-            }
             return Ok(false);
         }
         if size.width != self.config.width || size.height != self.config.height {
@@ -149,9 +162,6 @@ impl Gfx {
         self.queue.submit(extra.into_iter().chain([encoder.finish()]));
         window.pre_present_notify();
         self.queue.present(frame);
-        for id in &textures.free {
-            self.egui.free_texture(id);
-        }
         Ok(true)
     }
 }
