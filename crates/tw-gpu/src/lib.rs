@@ -204,7 +204,12 @@ pub struct Renderer {
     depth_view: wgpu::TextureView,
     readback: wgpu::Buffer,
     padded_row: u32,
-    pipeline: wgpu::RenderPipeline,
+    /// The cluster pipeline per colour target format (the own target's first).
+    pipelines: Vec<(wgpu::TextureFormat, wgpu::RenderPipeline)>,
+    pipeline_layout: wgpu::PipelineLayout,
+    shader: wgpu::ShaderModule,
+    /// A depth target for caller-supplied views of another size than the own target.
+    extra_depth: Option<(u32, u32, wgpu::TextureView)>,
     uniforms: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     /// Vertex buffer chunks with their capacity in vertices; `draws` says how many vertices of
@@ -257,7 +262,25 @@ impl Renderer {
         }))
         .map_err(|source| GpuError::Device { adapter: adapter_summary(&info), source })?;
         tracing::info!("GPU adapter: {}", adapter_summary(&info));
+        Renderer::from_device(device, queue, info, width, height)
+    }
 
+    /// A renderer on a device the caller already has (a viewer's winit surface or egui-wgpu
+    /// device). `width` × `height` is the size of the renderer's own offscreen target, used by
+    /// [`render`](Self::render); [`render_to_view`](Self::render_to_view) draws into any
+    /// caller-supplied view instead. wgpu devices and queues are reference-counted handles:
+    /// pass clones.
+    pub fn from_device(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+        width: u32,
+        height: u32,
+    ) -> Result<Renderer, GpuError> {
+        let max = device.limits().max_texture_dimension_2d.min(MAX_SIDE);
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(GpuError::Size { width, height, max });
+        }
         let extent = wgpu::Extent3d { width, height, depth_or_array_layers: 1 };
         let color = device.create_texture(&wgpu::TextureDescriptor {
             label: Some("colour target"),
@@ -269,16 +292,7 @@ impl Renderer {
             usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
-        let depth = device.create_texture(&wgpu::TextureDescriptor {
-            label: Some("depth target"),
-            size: extent,
-            mip_level_count: 1,
-            sample_count: 1,
-            dimension: wgpu::TextureDimension::D2,
-            format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
-            view_formats: &[],
-        });
+        let depth = depth_texture(&device, width, height);
         let padded_row =
             (width * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
         let readback = device.create_buffer(&wgpu::BufferDescriptor {
@@ -320,45 +334,7 @@ impl Renderer {
             label: Some("clusters"),
             source: wgpu::ShaderSource::Wgsl(include_str!("shader.wgsl").into()),
         });
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("clusters"),
-            layout: Some(&layout),
-            vertex: wgpu::VertexState {
-                module: &shader,
-                entry_point: Some("vs_main"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: VERTEX_SIZE,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Unorm8x4],
-                })],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: Default::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &shader,
-                entry_point: Some("fs_main"),
-                compilation_options: Default::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: COLOR_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let pipeline = cluster_pipeline(&device, &layout, &shader, COLOR_FORMAT);
         let color_view = color.create_view(&Default::default());
         let depth_view = depth.create_view(&Default::default());
         Ok(Renderer {
@@ -372,7 +348,10 @@ impl Renderer {
             depth_view,
             readback,
             padded_row,
-            pipeline,
+            pipelines: vec![(COLOR_FORMAT, pipeline)],
+            pipeline_layout: layout,
+            shader,
+            extra_depth: None,
             uniforms,
             bind_group,
             chunks: Vec::new(),
@@ -497,54 +476,126 @@ impl Renderer {
         self.scratch.clear();
     }
 
-    /// Draws the uploaded geometry from `camera`, waits for the GPU and reads the image back.
-    pub fn render(&mut self, camera: &Camera) -> Result<Image, GpuError> {
-        let start = Instant::now();
-        let aspect = self.width as f32 / self.height as f32;
+    /// Writes the uniforms for `camera` drawing into a target of `width` × `height` pixels and
+    /// `format` (formats without sRGB encoding get it in the shader).
+    fn write_uniforms(&self, camera: &Camera, width: u32, height: u32, format: wgpu::TextureFormat) {
+        let aspect = width as f32 / height as f32;
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
         // The sun: from above (the camera's up), tilted towards a fixed scene direction.
         let up = camera.up.normalize_or(Vec3::Z);
         let tilt = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
         let sun = (up * 0.8 + (tilt - up * tilt.dot(up)).normalize_or_zero() * 0.35).normalize_or(up);
+        let encode = if format.is_srgb() { 0.0 } else { 1.0 };
         let u = Uniforms {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
-            sun: sun.extend(0.0).to_array(),
+            sun: sun.extend(encode).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// The cluster pipeline for `format`, created on first use.
+    fn pipeline_for(&mut self, format: wgpu::TextureFormat) -> usize {
+        if let Some(i) = self.pipelines.iter().position(|(f, _)| *f == format) {
+            return i;
+        }
+        let p = cluster_pipeline(&self.device, &self.pipeline_layout, &self.shader, format);
+        self.pipelines.push((format, p));
+        self.pipelines.len() - 1
+    }
+
+    /// Records the frame's draws into `encoder`, into the caller's colour `view` (`format`,
+    /// `width` × `height`, cleared to transparent black) with a depth target of the renderer's
+    /// own (kept between calls while the size stays). Nothing is submitted: for callers that
+    /// own the encoder (e.g. an egui-wgpu paint callback or a surface frame loop). The camera's
+    /// uniforms are written through the queue, so they take effect at the next submit.
+    pub fn encode_to_view(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        (width, height): (u32, u32),
+    ) -> Result<(), GpuError> {
+        let max = self.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(GpuError::Size { width, height, max });
+        }
+        self.write_uniforms(camera, width, height, format);
+        let pipeline = self.pipeline_for(format);
+        if (width, height) != (self.width, self.height)
+            && !matches!(&self.extra_depth, Some((w, h, _)) if (*w, *h) == (width, height))
+        {
+            let tex = depth_texture(&self.device, width, height);
+            self.extra_depth = Some((width, height, tex.create_view(&Default::default())));
+        }
+        let depth_view = match &self.extra_depth {
+            Some((w, h, v)) if (*w, *h) == (width, height) => v,
+            _ => &self.depth_view,
+        };
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("clusters"),
+            color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: None,
+                ops: wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.0, g: 0.0, b: 0.0, a: 0.0 }),
+                    store: wgpu::StoreOp::Store,
+                },
+            })],
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: depth_view,
+                depth_ops: Some(wgpu::Operations {
+                    load: wgpu::LoadOp::Clear(0.0),
+                    store: wgpu::StoreOp::Discard,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        pass.set_pipeline(&self.pipelines[pipeline].1);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        for (&n, (buffer, _)) in self.draws.iter().zip(&self.chunks) {
+            pass.set_vertex_buffer(0, buffer.slice(..n as u64 * VERTEX_SIZE));
+            pass.draw(0..n, 0..1);
+        }
+        Ok(())
+    }
+
+    /// Draws the uploaded geometry from `camera` into the caller's colour `view` (see
+    /// [`encode_to_view`](Self::encode_to_view)) and submits, without waiting and without
+    /// readback: the caller presents the surface texture or shows the egui texture.
+    pub fn render_to_view(
+        &mut self,
+        camera: &Camera,
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        let start = Instant::now();
         let mut encoder =
             self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
-        {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("clusters"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color_view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.0, g: 0.0, b: 0.0, a: 0.0 }),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
-                    depth_ops: Some(wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(0.0),
-                        store: wgpu::StoreOp::Discard,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            for (&n, (buffer, _)) in self.draws.iter().zip(&self.chunks) {
-                pass.set_vertex_buffer(0, buffer.slice(..n as u64 * VERTEX_SIZE));
-                pass.draw(0..n, 0..1);
-            }
-        }
+        self.encode_to_view(&mut encoder, camera, view, format, size)?;
+        self.queue.submit([encoder.finish()]);
+        self.stats.render = start.elapsed();
+        Ok(())
+    }
+
+    /// The device and queue in use (for callers that share them).
+    pub fn device(&self) -> (&wgpu::Device, &wgpu::Queue) {
+        (&self.device, &self.queue)
+    }
+
+    /// Draws the uploaded geometry from `camera`, waits for the GPU and reads the image back.
+    pub fn render(&mut self, camera: &Camera) -> Result<Image, GpuError> {
+        let start = Instant::now();
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        let view = self.color_view.clone();
+        self.encode_to_view(&mut encoder, camera, &view, COLOR_FORMAT, (self.width, self.height))?;
         encoder.copy_texture_to_buffer(
             wgpu::TexelCopyTextureInfo {
                 texture: &self.color,
@@ -636,6 +687,67 @@ impl Renderer {
             .collect();
         self.render_clusters(camera, store.header().grid_step, &clusters)
     }
+}
+
+/// The cluster pipeline drawing into `format` (depth `Depth32Float`, reverse-Z).
+fn cluster_pipeline(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    shader: &wgpu::ShaderModule,
+    format: wgpu::TextureFormat,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some("clusters"),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module: shader,
+            entry_point: Some("vs_main"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: VERTEX_SIZE,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Unorm8x4],
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(wgpu::CompareFunction::Greater),
+            stencil: Default::default(),
+            bias: Default::default(),
+        }),
+        multisample: Default::default(),
+        fragment: Some(wgpu::FragmentState {
+            module: shader,
+            entry_point: Some("fs_main"),
+            compilation_options: Default::default(),
+            targets: &[Some(wgpu::ColorTargetState {
+                format,
+                blend: None,
+                write_mask: wgpu::ColorWrites::ALL,
+            })],
+        }),
+        multiview_mask: None,
+        cache: None,
+    })
+}
+
+fn depth_texture(device: &wgpu::Device, width: u32, height: u32) -> wgpu::Texture {
+    device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("depth target"),
+        size: wgpu::Extent3d { width, height, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: DEPTH_FORMAT,
+        usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+        view_formats: &[],
+    })
 }
 
 fn adapter_summary(info: &wgpu::AdapterInfo) -> String {

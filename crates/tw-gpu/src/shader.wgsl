@@ -5,7 +5,7 @@ struct Uniforms {
     view_proj: mat4x4<f32>,
     // xyz: eye in scene space.
     eye: vec4<f32>,
-    // xyz: unit direction towards the sun.
+    // xyz: unit direction towards the sun; w: 1 when the target needs sRGB encoding here.
     sun: vec4<f32>,
 };
 
@@ -43,5 +43,10 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     let sun = max(dot(n, u.sun.xyz), 0.0);
     let base = pow(in.color.rgb, vec3<f32>(2.2));
     let lit = base * (0.18 + 0.62 * head + 0.35 * sun);
-    return vec4<f32>(min(lit, vec3<f32>(1.0)), 1.0);
+    var rgb = min(lit, vec3<f32>(1.0));
+    if (u.sun.w > 0.5) {
+        // A non-sRGB target (e.g. a Bgra8Unorm surface): encode here.
+        rgb = pow(rgb, vec3<f32>(1.0 / 2.2));
+    }
+    return vec4<f32>(rgb, 1.0);
 }
