@@ -36,7 +36,8 @@ struct Window3 {
     window: Arc<Window>,
     gfx: Gfx,
     egui: egui_winit::State,
-    scene_tex: Option<egui::TextureHandle>,
+    /// The scene texture registered with egui-wgpu, and the target generation it shows.
+    scene_tex: Option<(egui::TextureId, u64)>,
 }
 
 pub(crate) struct App {
@@ -126,6 +127,8 @@ impl App {
         let window = Arc::new(event_loop.create_window(attrs).map_err(|e| ViewError::Window(e.to_string()))?);
         let gfx = Gfx::new(window.clone(), event_loop.owned_display_handle())?;
         tracing::info!("window adapter: {}", gfx.adapter_summary());
+        // One device for the window, egui and the scene.
+        self.scene.attach(gfx.device.clone(), gfx.queue.clone(), gfx.adapter.get_info())?;
         let ctx = egui::Context::default();
         let max_side = gfx.device.limits().max_texture_dimension_2d as usize;
         let egui = egui_winit::State::new(
@@ -260,15 +263,12 @@ impl App {
     }
 
     fn screenshot(&mut self, path: &std::path::Path) {
-        match self.scene.image() {
-            Some(img) => match img.save_png(path) {
-                Ok(()) => {
-                    self.report.screenshot = Some(path.to_path_buf());
-                    self.say(format!("screenshot {}", path.display()));
-                }
-                Err(e) => self.say(format!("screenshot failed: {e}")),
-            },
-            None => self.say("no frame to save yet".into()),
+        match self.scene.read_image().and_then(|img| Ok(img.save_png(path)?)) {
+            Ok(()) => {
+                self.report.screenshot = Some(path.to_path_buf());
+                self.say(format!("screenshot {}", path.display()));
+            }
+            Err(e) => self.say(format!("screenshot failed: {e}")),
         }
     }
 
@@ -412,19 +412,23 @@ impl App {
             }
         }
 
-        // 4. The scene image as an egui texture.
-        if rendered {
-            if let Some(img) = self.scene.image() {
-                let ci = egui::ColorImage::from_rgba_unmultiplied(
-                    [img.width as usize, img.height as usize],
-                    &img.opaque(),
-                );
-                match w.scene_tex.as_mut() {
-                    Some(t) => t.set(ci, egui::TextureOptions::LINEAR),
-                    None => {
-                        w.scene_tex =
-                            Some(w.egui.egui_ctx().load_texture("scene", ci, egui::TextureOptions::LINEAR))
-                    }
+        // 4. The scene texture, registered with egui-wgpu (again when it was made anew).
+        if let Some((view, _, generation)) = self.scene.target() {
+            match w.scene_tex {
+                Some((_, g)) if g == generation => {}
+                Some((id, _)) => {
+                    w.gfx.egui.update_egui_texture_from_wgpu_texture(
+                        &w.gfx.device,
+                        view,
+                        wgpu::FilterMode::Linear,
+                        id,
+                    );
+                    w.scene_tex = Some((id, generation));
+                }
+                None => {
+                    let id =
+                        w.gfx.egui.register_native_texture(&w.gfx.device, view, wgpu::FilterMode::Linear);
+                    w.scene_tex = Some((id, generation));
                 }
             }
         }
@@ -472,7 +476,7 @@ impl App {
             }),
             has_path: self.player.is_some(),
             message: self.message.as_ref().map(|(m, _)| m.as_str()),
-            scene: w.scene_tex.as_ref().map(|t| t.id()),
+            scene: w.scene_tex.map(|(id, _)| id),
             lines: &lines,
         };
         let mut actions = Vec::new();

@@ -6,10 +6,12 @@
 //!   the [`PageCache`] (a miss loads the page on this thread). The asynchronous `Streamer`
 //!   (background loaders, non-blocking select that draws the best resident ancestor) replaces
 //!   that call and the cache field; the HUD's "pages loading" then reads its queue.
-//! - **Rendering**: [`SceneRenderer`] wraps `tw_gpu::Renderer`. Stopgap until
-//!   `Renderer::from_device` lands: a headless renderer on its own device renders and reads
-//!   back an [`Image`], which the UI shows as an egui texture. With `from_device` the renderer
-//!   shares the window's device and draws into a texture egui samples directly.
+//! - **Rendering**: [`SceneRenderer`] wraps a `tw_gpu::Renderer` made with
+//!   `Renderer::from_device` on the window's device ([`Scene::attach`]); each frame it uploads
+//!   the cut and draws it with `render_to_view` into the scene's own colour texture
+//!   (`Rgba8UnormSrgb`, alpha 0 where nothing was drawn), which egui samples as a native
+//!   texture behind the UI. Nothing waits for the GPU and nothing is read back, except for a
+//!   screenshot ([`Scene::read_image`]).
 //! - **Occlusion**: [`crate::settings::OcclusionStrategy`]; only `None` is wired, the frustum-
 //!   and LOD-culled cut is drawn as it is (occlusion-culled counts stay 0).
 
@@ -45,31 +47,64 @@ struct SelectKey {
     viewport: [u32; 2],
 }
 
+/// Format of the scene's colour texture.
+pub const SCENE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
+
+/// The scene's colour texture.
+struct Target {
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+    size: [u32; 2],
+}
+
 /// The renderer behind the viewer (see the module documentation).
 pub struct SceneRenderer {
-    renderer: Option<Renderer>,
-    image: Option<Image>,
+    renderer: Renderer,
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    target: Option<Target>,
+    /// Bumped whenever the target texture is made again (egui must be told).
+    generation: u64,
 }
 
 impl SceneRenderer {
-    fn new() -> SceneRenderer {
-        SceneRenderer { renderer: None, image: None }
+    /// A renderer on the caller's device.
+    pub fn new(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+        store: &Store,
+    ) -> Result<SceneRenderer, ViewError> {
+        // The renderer's own offscreen target is unused here (we draw into ours): keep it tiny.
+        let mut renderer = Renderer::from_device(device.clone(), queue.clone(), info, 8, 8)?;
+        renderer.set_store_colors(store);
+        Ok(SceneRenderer { renderer, device, queue, target: None, generation: 0 })
     }
 
-    /// A renderer of `size` pixels (made again when the size changes).
-    fn ensure(&mut self, size: [u32; 2], store: &Store) -> Result<&mut Renderer, ViewError> {
-        let ok = self.renderer.as_ref().is_some_and(|r| r.size() == (size[0], size[1]));
-        if !ok {
-            self.renderer = None;
-            let mut r = Renderer::new_headless(size[0], size[1])?;
-            r.set_store_colors(store);
-            self.renderer = Some(r);
+    /// The colour texture, made again when the size changes.
+    fn ensure_target(&mut self, size: [u32; 2]) -> &Target {
+        if self.target.as_ref().is_none_or(|t| t.size != size) {
+            let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+                label: Some("scene colour"),
+                size: wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D2,
+                format: SCENE_FORMAT,
+                usage: wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC,
+                view_formats: &[],
+            });
+            let view = texture.create_view(&Default::default());
+            self.target = Some(Target { texture, view, size });
+            self.generation += 1;
         }
-        Ok(self.renderer.as_mut().expect("made above"))
+        self.target.as_ref().expect("made above")
     }
 
     pub fn adapter(&self) -> String {
-        self.renderer.as_ref().map(|r| r.adapter_summary()).unwrap_or_default()
+        self.renderer.adapter_summary()
     }
 }
 
@@ -80,7 +115,7 @@ pub struct Scene {
     selector: Selector,
     selection: Selection,
     key: Option<SelectKey>,
-    renderer: SceneRenderer,
+    renderer: Option<SceneRenderer>,
     last: FrameInfo,
 }
 
@@ -97,7 +132,7 @@ impl Scene {
             selector,
             selection: Selection::default(),
             key: None,
-            renderer: SceneRenderer::new(),
+            renderer: None,
             last: FrameInfo::default(),
         }
     }
@@ -160,13 +195,33 @@ impl Scene {
         self.last
     }
 
-    pub fn adapter(&self) -> String {
-        self.renderer.adapter()
+    /// Draws with a renderer on the window's device (before this, [`frame`](Self::frame)
+    /// fails).
+    pub fn attach(
+        &mut self,
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        info: wgpu::AdapterInfo,
+    ) -> Result<(), ViewError> {
+        self.renderer = Some(SceneRenderer::new(device, queue, info, &self.store)?);
+        Ok(())
     }
 
-    /// The last rendered image.
-    pub fn image(&self) -> Option<&Image> {
-        self.renderer.image.as_ref()
+    pub fn adapter(&self) -> String {
+        self.renderer.as_ref().map(|r| r.adapter()).unwrap_or_default()
+    }
+
+    /// The scene's colour texture, its size and generation (changes when it is made again).
+    pub fn target(&self) -> Option<(&wgpu::TextureView, [u32; 2], u64)> {
+        let r = self.renderer.as_ref()?;
+        r.target.as_ref().map(|t| (&t.view, t.size, r.generation))
+    }
+
+    /// Reads the last frame back (for screenshots): waits for the GPU.
+    pub fn read_image(&self) -> Result<Image, ViewError> {
+        let r = self.renderer.as_ref().ok_or_else(|| ViewError::NoFrame("no renderer".into()))?;
+        let t = r.target.as_ref().ok_or_else(|| ViewError::NoFrame("nothing drawn yet".into()))?;
+        read_texture(&r.device, &r.queue, &t.texture, t.size)
     }
 
     /// Bytes of vertex data the last frame uploaded (48 a triangle, see tw-gpu).
@@ -209,11 +264,13 @@ impl Scene {
         }
         info.select_ms = t.elapsed().as_secs_f32() * 1e3;
         let t = Instant::now();
-        let renderer = self.renderer.ensure(size, &self.store)?;
-        renderer.set_color_mode(settings.coloring.to_gpu());
-        let image = renderer.render_selection(&self.store, &self.cache, draw, &self.selection)?;
-        let rs = renderer.stats();
-        self.renderer.image = Some(image);
+        let r = self.renderer.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
+        r.renderer.set_color_mode(settings.coloring.to_gpu());
+        upload_selection(&mut r.renderer, &self.store, &self.cache, &self.selection);
+        r.ensure_target(size);
+        let target = r.target.as_ref().expect("made above");
+        r.renderer.render_to_view(draw, &target.view, SCENE_FORMAT, (size[0], size[1]))?;
+        let rs = r.renderer.stats();
         info.render_ms = t.elapsed().as_secs_f32() * 1e3;
         info.triangles = rs.triangles;
         info.clusters = rs.clusters;
@@ -263,4 +320,87 @@ impl Scene {
             .map(|n| tw_runtime::frustum::grid_box(n.min, n.max, step))
             .collect()
     }
+}
+
+/// Uploads the clusters of `selection` (pages from `cache`; clusters whose page cannot be
+/// loaded are skipped and logged).
+fn upload_selection(renderer: &mut Renderer, store: &Store, cache: &PageCache, selection: &Selection) {
+    let mut pages: Vec<(u32, std::sync::Arc<tw_runtime::ResidentPage>)> = Vec::new();
+    let mut refs = Vec::with_capacity(selection.clusters.len());
+    for r in &selection.clusters {
+        if pages.last().is_none_or(|(p, _)| *p != r.page) {
+            match cache.get(store, r.page) {
+                Ok(p) => pages.push((r.page, p)),
+                Err(e) => {
+                    tracing::debug!("cluster {r:?} skipped: {e}");
+                    continue;
+                }
+            }
+        }
+        refs.push((*r, pages.len() - 1));
+    }
+    let clusters: Vec<(tw_gpu::ClusterKey, &tw_store::PageCluster)> = refs
+        .iter()
+        .filter_map(|&(k, slot)| pages[slot].1.clusters.get(k.index_in_page as usize).map(|c| (k, c)))
+        .collect();
+    renderer.upload_clusters(store.header().grid_step, &clusters);
+}
+
+/// Copies an `Rgba8UnormSrgb` texture into an [`Image`] (waits for the GPU).
+fn read_texture(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    texture: &wgpu::Texture,
+    size: [u32; 2],
+) -> Result<Image, ViewError> {
+    let [w, h] = size;
+    let padded = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
+    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("screenshot"),
+        size: padded as u64 * h as u64,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("screenshot") });
+    encoder.copy_texture_to_buffer(
+        wgpu::TexelCopyTextureInfo {
+            texture,
+            mip_level: 0,
+            origin: wgpu::Origin3d::ZERO,
+            aspect: wgpu::TextureAspect::All,
+        },
+        wgpu::TexelCopyBufferInfo {
+            buffer: &buffer,
+            layout: wgpu::TexelCopyBufferLayout {
+                offset: 0,
+                bytes_per_row: Some(padded),
+                rows_per_image: Some(h),
+            },
+        },
+        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
+    );
+    queue.submit([encoder.finish()]);
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| ViewError::Gpu(format!("waiting for the screenshot: {e}")))?;
+    rx.recv()
+        .map_err(|_| ViewError::Gpu("the screenshot buffer was never mapped".into()))?
+        .map_err(|e| ViewError::Gpu(format!("mapping the screenshot buffer: {e}")))?;
+    let row = w as usize * 4;
+    let mut rgba = Vec::with_capacity(row * h as usize);
+    {
+        let view = buffer
+            .get_mapped_range(..)
+            .map_err(|e| ViewError::Gpu(format!("reading the screenshot: {e}")))?;
+        for r in view.chunks(padded as usize).take(h as usize) {
+            rgba.extend_from_slice(&r[..row]);
+        }
+    }
+    buffer.unmap();
+    Ok(Image { width: w, height: h, rgba })
 }
