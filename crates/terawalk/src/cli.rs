@@ -242,6 +242,9 @@ pub struct ViewArgs {
     /// Save the last frame as PNG on exit (with --exit-after).
     #[arg(long)]
     pub screenshot: Option<PathBuf>,
+    /// Save the whole window (HUD and panels included) as PNG just before exit (with --exit-after).
+    #[arg(long)]
+    pub screenshot_window: Option<PathBuf>,
     /// Where a recorded path (R) is saved (default: --output-dir/terawalk-path-TIME.json).
     #[arg(long)]
     pub record: Option<PathBuf>,

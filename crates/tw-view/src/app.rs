@@ -63,6 +63,8 @@ pub(crate) struct App {
     frames: u64,
     drawn_key: Option<(Camera, Camera, Settings, [u32; 2])>,
     message: Option<(String, Instant)>,
+    /// A window screenshot (UI included) to take at the next present.
+    window_shot: Option<std::path::PathBuf>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -100,6 +102,7 @@ impl App {
             frames: 0,
             drawn_key: None,
             message: None,
+            window_shot: None,
             error: None,
             report: Default::default(),
         })
@@ -196,11 +199,7 @@ impl App {
     fn act(&mut self, a: Action) {
         match a {
             Action::Screenshot => {
-                let secs = std::time::SystemTime::now()
-                    .duration_since(std::time::UNIX_EPOCH)
-                    .map(|d| d.as_secs())
-                    .unwrap_or(0);
-                let p = self.options.output_dir.join(format!("terawalk-{secs}-{}.png", self.frames));
+                let p = self.timestamped("terawalk", "png");
                 self.screenshot(&p);
             }
             Action::ToggleRecording => match self.recorder.take() {
@@ -211,13 +210,11 @@ impl App {
                 Some(r) if r.is_empty() => self.say("nothing recorded".into()),
                 Some(r) => {
                     let path = r.finish();
-                    let file = self.options.record.clone().unwrap_or_else(|| {
-                        let secs = std::time::SystemTime::now()
-                            .duration_since(std::time::UNIX_EPOCH)
-                            .map(|d| d.as_secs())
-                            .unwrap_or(0);
-                        self.options.output_dir.join(format!("terawalk-path-{secs}.json"))
-                    });
+                    let file = self
+                        .options
+                        .record
+                        .clone()
+                        .unwrap_or_else(|| self.timestamped("terawalk-path", "json"));
                     match path.save(&file) {
                         Ok(()) => {
                             self.say(format!("saved {} frames to {}", path.frames.len(), file.display()));
@@ -262,6 +259,15 @@ impl App {
         }
     }
 
+    /// `output_dir/PREFIX-<unix seconds>-<frame>.EXT`.
+    fn timestamped(&self, prefix: &str, ext: &str) -> std::path::PathBuf {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0);
+        self.options.output_dir.join(format!("{prefix}-{secs}-{}.{ext}", self.frames))
+    }
+
     fn screenshot(&mut self, path: &std::path::Path) {
         match self.scene.read_image().and_then(|img| Ok(img.save_png(path)?)) {
             Ok(()) => {
@@ -284,6 +290,11 @@ impl App {
         match code {
             KeyCode::Escape => event_loop.exit(),
             KeyCode::F1 => self.settings.show_help = !self.settings.show_help,
+            KeyCode::F12
+                if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) =>
+            {
+                self.window_shot = Some(self.timestamped("terawalk-window", "png"));
+            }
             KeyCode::F12 => self.act(Action::Screenshot),
             KeyCode::Digit1 => self.act(Action::SetMode(Mode::Fly)),
             KeyCode::Digit2 => self.act(Action::SetMode(Mode::Walk)),
@@ -459,7 +470,10 @@ impl App {
                 if self.frozen.is_some() { ", debug view" } else { "" },
                 if self.settings.lod_freeze { ", LOD frozen" } else { "" }
             ),
-            adapter: format!("{} / window {}", self.scene.adapter(), w.gfx.adapter_summary()),
+            adapter: {
+                let i = w.gfx.adapter.get_info();
+                format!("{} ({:?})", i.name.split(" (").next().unwrap_or(&i.name), i.backend)
+            },
         };
         if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
             self.message = None;
@@ -484,15 +498,34 @@ impl App {
         let mut out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
         w.egui.handle_platform_output(&w.window, out.platform_output);
         let jobs = w.egui.egui_ctx().tessellate(out.shapes, out.pixels_per_point);
-        w.gfx.present(&w.window, &jobs, &mut out.textures_delta, out.pixels_per_point)?;
+        let want_window = self.window_shot.is_some();
+        let mut captured = None;
+        w.gfx.present(
+            &w.window,
+            &jobs,
+            &mut out.textures_delta,
+            out.pixels_per_point,
+            want_window.then_some(&mut captured),
+        )?;
+        if let (Some(p), Some(img)) = (self.window_shot.take(), captured) {
+            match img.save_png(&p) {
+                Ok(()) => self.say(format!("window screenshot {}", p.display())),
+                Err(e) => self.say(format!("window screenshot failed: {e}")),
+            }
+        }
         let repaint_now =
             out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero());
         for a in actions {
             self.act(a);
         }
 
-        // 6. Scripted runs: stop after N frames with a screenshot.
+        // 6. Scripted runs: stop after N frames with a screenshot (the window's at frame N-1).
         self.frames += 1;
+        if let (Some(n), Some(p)) = (self.options.exit_after, &self.options.window_screenshot) {
+            if self.frames + 1 == n {
+                self.window_shot = Some(p.clone());
+            }
+        }
         self.report.frames = self.frames;
         if let Some(n) = self.options.exit_after {
             if self.frames >= n {

@@ -18,6 +18,8 @@ pub struct Gfx {
     pub queue: wgpu::Queue,
     pub config: wgpu::SurfaceConfiguration,
     pub egui: egui_wgpu::Renderer,
+    /// Whether the surface can be copied from (window screenshots).
+    pub can_capture: bool,
 }
 
 impl Gfx {
@@ -58,14 +60,18 @@ impl Gfx {
             .get_default_config(&adapter, size.width.max(1), size.height.max(1))
             .ok_or_else(|| ViewError::Gpu(format!("{} cannot present to this window", info.name)))?;
         config.format = format;
+        let can_capture = caps.usages.contains(wgpu::TextureUsages::COPY_SRC);
         config.usage = wgpu::TextureUsages::RENDER_ATTACHMENT;
+        if can_capture {
+            config.usage |= wgpu::TextureUsages::COPY_SRC;
+        }
         config.present_mode = wgpu::PresentMode::AutoVsync;
         config.view_formats = vec![];
         if size.width > 0 && size.height > 0 {
             surface.configure(&device, &config);
         }
         let egui = egui_wgpu::Renderer::new(&device, format, egui_wgpu::RendererOptions::default());
-        Ok(Gfx { instance, surface, adapter, device, queue, config, egui })
+        Ok(Gfx { instance, surface, adapter, device, queue, config, egui, can_capture })
     }
 
     /// "name (backend, device type)" of the window's adapter.
@@ -84,15 +90,17 @@ impl Gfx {
     }
 
     /// Draws egui's output into the next surface texture and presents it. Returns false when
-    /// the frame was skipped (minimised, occluded, timeout, outdated surface).
+    /// the frame was skipped (minimised, occluded, timeout, outdated surface). With `capture`
+    /// (and a surface that allows it) the finished window image is read back into `captured`.
     pub fn present(
         &mut self,
         window: &Window,
         jobs: &[egui::ClippedPrimitive],
         textures: &mut egui::TexturesDelta,
         pixels_per_point: f32,
+        captured: Option<&mut Option<tw_gpu::Image>>,
     ) -> Result<bool, ViewError> {
-        let r = self.present_inner(window, jobs, textures, pixels_per_point);
+        let r = self.present_inner(window, jobs, textures, pixels_per_point, captured);
         for id in &textures.free {
             self.egui.free_texture(id);
         }
@@ -107,6 +115,7 @@ impl Gfx {
         jobs: &[egui::ClippedPrimitive],
         textures: &egui::TexturesDelta,
         pixels_per_point: f32,
+        captured: Option<&mut Option<tw_gpu::Image>>,
     ) -> Result<bool, ViewError> {
         let size = window.inner_size();
         for (id, deltas) in &textures.set {
@@ -160,6 +169,14 @@ impl Gfx {
             self.egui.render(&mut pass, jobs, &screen);
         }
         self.queue.submit(extra.into_iter().chain([encoder.finish()]));
+        if let (Some(out), true) = (captured, self.can_capture) {
+            *out = Some(crate::readback::read_texture(
+                &self.device,
+                &self.queue,
+                &frame.texture,
+                [self.config.width, self.config.height],
+            )?);
+        }
         window.pre_present_notify();
         self.queue.present(frame);
         Ok(true)

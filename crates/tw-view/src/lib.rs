@@ -12,6 +12,7 @@
 //! - [`scene`]: the store, cache, selector and renderer; the streaming and renderer
 //!   integration points;
 //! - [`gfx`]: window surface, device and egui-wgpu;
+//! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;
 //! - `app`: the winit event loop tying them together.
 //!
@@ -24,6 +25,7 @@ pub mod error;
 pub mod gfx;
 pub mod hud;
 pub mod pick;
+pub mod readback;
 pub mod recorder;
 pub mod scene;
 pub mod settings;
@@ -50,6 +52,8 @@ pub struct ViewOptions {
     pub exit_after: Option<u64>,
     /// Write the last frame here on exit (with `exit_after`).
     pub screenshot: Option<PathBuf>,
+    /// Write the whole window (UI included) here just before exit (with `exit_after`).
+    pub window_screenshot: Option<PathBuf>,
     /// Where a recording is saved (default: `output_dir/terawalk-path-<time>.json`).
     pub record: Option<PathBuf>,
     /// Where F12 screenshots and recordings go.

@@ -221,7 +221,7 @@ impl Scene {
     pub fn read_image(&self) -> Result<Image, ViewError> {
         let r = self.renderer.as_ref().ok_or_else(|| ViewError::NoFrame("no renderer".into()))?;
         let t = r.target.as_ref().ok_or_else(|| ViewError::NoFrame("nothing drawn yet".into()))?;
-        read_texture(&r.device, &r.queue, &t.texture, t.size)
+        crate::readback::read_texture(&r.device, &r.queue, &t.texture, t.size)
     }
 
     /// Bytes of vertex data the last frame uploaded (48 a triangle, see tw-gpu).
@@ -344,63 +344,4 @@ fn upload_selection(renderer: &mut Renderer, store: &Store, cache: &PageCache, s
         .filter_map(|&(k, slot)| pages[slot].1.clusters.get(k.index_in_page as usize).map(|c| (k, c)))
         .collect();
     renderer.upload_clusters(store.header().grid_step, &clusters);
-}
-
-/// Copies an `Rgba8UnormSrgb` texture into an [`Image`] (waits for the GPU).
-fn read_texture(
-    device: &wgpu::Device,
-    queue: &wgpu::Queue,
-    texture: &wgpu::Texture,
-    size: [u32; 2],
-) -> Result<Image, ViewError> {
-    let [w, h] = size;
-    let padded = (w * 4).div_ceil(wgpu::COPY_BYTES_PER_ROW_ALIGNMENT) * wgpu::COPY_BYTES_PER_ROW_ALIGNMENT;
-    let buffer = device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("screenshot"),
-        size: padded as u64 * h as u64,
-        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
-        mapped_at_creation: false,
-    });
-    let mut encoder =
-        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("screenshot") });
-    encoder.copy_texture_to_buffer(
-        wgpu::TexelCopyTextureInfo {
-            texture,
-            mip_level: 0,
-            origin: wgpu::Origin3d::ZERO,
-            aspect: wgpu::TextureAspect::All,
-        },
-        wgpu::TexelCopyBufferInfo {
-            buffer: &buffer,
-            layout: wgpu::TexelCopyBufferLayout {
-                offset: 0,
-                bytes_per_row: Some(padded),
-                rows_per_image: Some(h),
-            },
-        },
-        wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
-    );
-    queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| ViewError::Gpu(format!("waiting for the screenshot: {e}")))?;
-    rx.recv()
-        .map_err(|_| ViewError::Gpu("the screenshot buffer was never mapped".into()))?
-        .map_err(|e| ViewError::Gpu(format!("mapping the screenshot buffer: {e}")))?;
-    let row = w as usize * 4;
-    let mut rgba = Vec::with_capacity(row * h as usize);
-    {
-        let view = buffer
-            .get_mapped_range(..)
-            .map_err(|e| ViewError::Gpu(format!("reading the screenshot: {e}")))?;
-        for r in view.chunks(padded as usize).take(h as usize) {
-            rgba.extend_from_slice(&r[..row]);
-        }
-    }
-    buffer.unmap();
-    Ok(Image { width: w, height: h, rgba })
 }

@@ -61,7 +61,7 @@ pub const HELP: &[(&str, &str)] = &[
     ("P", "play / stop the loaded path"),
     ("H", "hide / show the panels"),
     ("Home", "back to the starting view"),
-    ("F12", "screenshot (PNG)"),
+    ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
     ("F1", "this help"),
     ("Esc", "quit"),
 ];

@@ -24,7 +24,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
     if !occlusion.available() {
         anyhow::bail!("--occlusion {} is not available in the viewer yet (use none)", occlusion.name());
     }
-    if args.screenshot.is_some() && args.exit_after.is_none() {
+    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && args.exit_after.is_none() {
         anyhow::bail!("--screenshot needs --exit-after N (press F12 for screenshots while viewing)");
     }
     let store =
@@ -72,6 +72,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         play: args.play,
         exit_after: args.exit_after,
         screenshot: args.screenshot.clone(),
+        window_screenshot: args.screenshot_window.clone(),
         record: args.record.clone(),
         output_dir: args.output_dir.clone(),
         size: args.size,
