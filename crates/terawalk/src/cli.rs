@@ -272,6 +272,23 @@ pub struct ViewArgs {
     /// Scene resolution as a fraction of the window (0.25..=1; CPU rasterizers like 0.5).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f32,
+    /// Camera mode at the start.
+    #[arg(long, value_enum, default_value = "fly")]
+    pub mode: CameraModeArg,
+    /// Start in the third-person debug view: culling from the starting camera, drawn from a
+    /// second camera behind it, with its frustum and the boxes of the visible nodes.
+    #[arg(long)]
+    pub debug_view: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraModeArg {
+    /// WASD + mouse look.
+    Fly,
+    /// Eye height above the ground, gravity along the up axis.
+    Walk,
+    /// Around a point (right click picks one).
+    Orbit,
 }
 
 #[derive(Args, Debug)]

@@ -75,11 +75,14 @@ impl App {
             Some(p) => Some(Player::new(p, scene.header())?),
             None => None,
         };
-        let controller = Controller::new(&options.camera, scene.bounds(), scene.up());
+        let mut controller = Controller::new(&options.camera, scene.bounds(), scene.up());
+        controller.set_mode(options.mode, None);
         let mut settings = options.settings.clone();
         settings.memory_budget = scene.memory_budget();
+        let start_debug = settings.debug_view;
+        settings.debug_view = false;
         let playing = player.is_some() && (options.play || options.exit_after.is_some());
-        Ok(App {
+        let mut app = App {
             start_camera: options.camera,
             controller,
             settings,
@@ -105,7 +108,11 @@ impl App {
             window_shot: None,
             error: None,
             report: Default::default(),
-        })
+        };
+        if start_debug {
+            app.act(Action::ToggleDebugView);
+        }
+        Ok(app)
     }
 
     fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {

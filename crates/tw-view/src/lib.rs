@@ -62,6 +62,9 @@ pub struct ViewOptions {
     pub size: (u32, u32),
     /// Shown in the title bar (the store's file name).
     pub title: String,
+    /// Camera mode at the start (orbit: around the point ahead).
+    pub mode: controller::Mode,
+    /// `settings.debug_view` starts the third-person debug view from the starting camera.
     pub settings: Settings,
 }
 

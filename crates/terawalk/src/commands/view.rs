@@ -7,7 +7,7 @@ use tw_runtime::{CameraPath, InputCamera};
 use tw_store::Store;
 use tw_view::{Coloring, OcclusionStrategy, Scene, Settings, ViewOptions};
 
-use crate::cli::{OcclusionArg, RenderColoring, ViewArgs};
+use crate::cli::{CameraModeArg, OcclusionArg, RenderColoring, ViewArgs};
 use crate::commands::render::default_camera;
 
 pub fn run(args: ViewArgs) -> Result<()> {
@@ -62,6 +62,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
             RenderColoring::Cluster => Coloring::Cluster,
         },
         render_scale: args.render_scale,
+        debug_view: args.debug_view,
         ..Settings::default()
     };
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -77,6 +78,11 @@ pub fn run(args: ViewArgs) -> Result<()> {
         output_dir: args.output_dir.clone(),
         size: args.size,
         title,
+        mode: match args.mode {
+            CameraModeArg::Fly => tw_view::controller::Mode::Fly,
+            CameraModeArg::Walk => tw_view::controller::Mode::Walk,
+            CameraModeArg::Orbit => tw_view::controller::Mode::Orbit,
+        },
         settings,
     };
     let report = tw_view::run(scene, options)?;
