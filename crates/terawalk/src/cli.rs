@@ -245,7 +245,8 @@ pub struct ViewArgs {
     /// Save the whole window (HUD and panels included) as PNG just before exit (with --exit-after).
     #[arg(long)]
     pub screenshot_window: Option<PathBuf>,
-    /// Where a recorded path (R) is saved (default: --output-dir/terawalk-path-TIME.json).
+    /// Record the camera path from the start into this file (saved on R or at exit). Without
+    /// it, R records into --output-dir/terawalk-path-TIME.json.
     #[arg(long)]
     pub record: Option<PathBuf>,
     /// Folder for F12 screenshots and recordings.

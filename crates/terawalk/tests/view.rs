@@ -157,7 +157,8 @@ fn scripted_run(backend: &str) {
     scripted_run_with(backend, &[], true);
 }
 
-fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) {
+/// The run's folder, or None when it was skipped.
+fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) -> Option<tempfile::TempDir> {
     // One Xvfb at a time: `xvfb-run -a` picks a free display number racily.
     static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
@@ -167,7 +168,7 @@ fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) {
             "TERAWALK_REQUIRE_GPU is set but xvfb-run is missing (apt-get install xvfb xauth)"
         );
         eprintln!("skipped: xvfb-run not found (apt-get install xvfb xauth)");
-        return;
+        return None;
     };
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("path.json"), circle_path(store(), 6)).unwrap();
@@ -191,17 +192,18 @@ fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) {
         let no_device = err.contains("no GPU adapter") || err.contains("cannot open a window");
         assert!(no_device && !require_gpu(), "view failed ({backend}): {err}");
         eprintln!("skipped ({backend}): no display or adapter: {err}");
-        return;
+        return None;
     }
     assert!(!err.contains("panicked"), "{err}");
     assert!(text(&o.stdout).contains("8 frames"), "{}", text(&o.stdout));
     if !check_image {
-        return;
+        return Some(dir);
     }
     let (covered, colours) = coverage(&shot);
     eprintln!("{backend}: {:.1} % covered, {colours} colours", covered * 100.0);
     assert!(covered > 0.05, "the screenshot shows almost nothing ({:.2} %)", covered * 100.0);
     assert!(colours >= 8, "the screenshot has only {colours} colours");
+    Some(dir)
 }
 
 #[test]
@@ -217,6 +219,21 @@ fn scripted_path_under_xvfb_shows_the_model_gl() {
 #[test]
 fn walk_orbit_and_debug_view_run_under_xvfb() {
     // The path drives the first frames; the modes and the debug view must not fail or panic.
-    scripted_run_with("vulkan", &["--mode", "walk", "--color", "level"], false);
-    scripted_run_with("vulkan", &["--mode", "orbit", "--debug-view", "--screenshot-window", "win.png"], true);
+    // --record records every frame and saves at exit, in the format --path reads.
+    if let Some(dir) =
+        scripted_run_with("vulkan", &["--mode", "walk", "--color", "level", "--record", "rec.json"], false)
+    {
+        let rec = tw_runtime::CameraPath::load(&dir.path().join("rec.json")).expect("recorded path");
+        assert_eq!(rec.frames.len(), 8);
+        assert_eq!(rec.frames[0].segment, "recorded");
+    }
+    if let Some(dir) = scripted_run_with(
+        "vulkan",
+        &["--mode", "orbit", "--debug-view", "--screenshot-window", "win.png"],
+        true,
+    ) {
+        // The HUD and panels (text) over the model and its debug lines: many colours.
+        let (covered, colours) = coverage(&dir.path().join("win.png"));
+        assert!(covered > 0.05 && colours >= 20, "window screenshot: {covered} covered, {colours} colours");
+    }
 }

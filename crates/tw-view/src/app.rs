@@ -112,6 +112,9 @@ impl App {
         if start_debug {
             app.act(Action::ToggleDebugView);
         }
+        if app.options.record.is_some() {
+            app.recorder = Some(Recorder::default());
+        }
         Ok(app)
     }
 
@@ -209,30 +212,7 @@ impl App {
                 let p = self.timestamped("terawalk", "png");
                 self.screenshot(&p);
             }
-            Action::ToggleRecording => match self.recorder.take() {
-                None => {
-                    self.recorder = Some(Recorder::default());
-                    self.say("recording the camera path (R to stop)".into());
-                }
-                Some(r) if r.is_empty() => self.say("nothing recorded".into()),
-                Some(r) => {
-                    let path = r.finish();
-                    let file = self
-                        .options
-                        .record
-                        .clone()
-                        .unwrap_or_else(|| self.timestamped("terawalk-path", "json"));
-                    match path.save(&file) {
-                        Ok(()) => {
-                            self.say(format!("saved {} frames to {}", path.frames.len(), file.display()));
-                            if let Ok(p) = Player::new(&path, self.scene.header()) {
-                                self.player = Some(p);
-                            }
-                        }
-                        Err(e) => self.say(format!("recording not saved: {e}")),
-                    }
-                }
-            },
+            Action::ToggleRecording => self.toggle_recording(),
             Action::TogglePlayback => {
                 if self.playing {
                     self.playing = false;
@@ -273,6 +253,41 @@ impl App {
             .map(|d| d.as_secs())
             .unwrap_or(0);
         self.options.output_dir.join(format!("{prefix}-{secs}-{}.{ext}", self.frames))
+    }
+
+    /// R: starts recording, or saves the recording (`--record` or a timestamped file).
+    fn toggle_recording(&mut self) {
+        match self.recorder.take() {
+            None => {
+                self.recorder = Some(Recorder::default());
+                self.say("recording the camera path (R to stop)".into());
+            }
+            Some(r) if r.is_empty() => self.say("nothing recorded".into()),
+            Some(r) => {
+                let path = r.finish();
+                let file =
+                    self.options.record.clone().unwrap_or_else(|| self.timestamped("terawalk-path", "json"));
+                match path.save(&file) {
+                    Ok(()) => {
+                        self.say(format!("saved {} frames to {}", path.frames.len(), file.display()));
+                        if let Ok(p) = Player::new(&path, self.scene.header()) {
+                            self.player = Some(p);
+                        }
+                    }
+                    Err(e) => self.say(format!("recording not saved: {e}")),
+                }
+            }
+        }
+    }
+
+    /// At exit: a recording in progress is saved.
+    pub(crate) fn finish(&mut self) {
+        if self.recorder.is_some() {
+            self.toggle_recording();
+            if let Some((m, _)) = &self.message {
+                eprintln!("{m}");
+            }
+        }
     }
 
     fn screenshot(&mut self, path: &std::path::Path) {

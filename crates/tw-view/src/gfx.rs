@@ -35,7 +35,7 @@ impl Gfx {
         let size = window.inner_size();
         let surface = instance
             .create_surface(window)
-            .map_err(|e| ViewError::Window(format!("creating the surface: {e}")))?;
+            .map_err(|e| ViewError::Adapter(format!("creating the window surface: {e}")))?;
         let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
             power_preference: wgpu::PowerPreference::HighPerformance,
             force_fallback_adapter: false,
@@ -78,6 +78,24 @@ impl Gfx {
     pub fn adapter_summary(&self) -> String {
         let i = self.adapter.get_info();
         format!("{} ({:?}, {:?})", i.name, i.backend, i.device_type)
+    }
+
+    /// [`tw_gpu::BACKGROUND`] as the clear colour of the surface (where the scene drew
+    /// nothing, the window shows the same colour as a screenshot).
+    fn background(&self) -> wgpu::Color {
+        let [r, g, b] = tw_gpu::BACKGROUND.map(|c| {
+            let v = c as f64 / 255.0;
+            if self.config.format.is_srgb() {
+                if v <= 0.04045 {
+                    v / 12.92
+                } else {
+                    ((v + 0.055) / 1.055).powf(2.4)
+                }
+            } else {
+                v
+            }
+        });
+        wgpu::Color { r, g, b, a: 1.0 }
     }
 
     /// Reconfigures the surface; a zero size (minimised) is remembered and skipped.
@@ -156,7 +174,7 @@ impl Gfx {
                     depth_slice: None,
                     resolve_target: None,
                     ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color { r: 0.6, g: 0.68, b: 0.8, a: 1.0 }),
+                        load: wgpu::LoadOp::Clear(self.background()),
                         store: wgpu::StoreOp::Store,
                     },
                 })],

@@ -54,7 +54,8 @@ pub struct ViewOptions {
     pub screenshot: Option<PathBuf>,
     /// Write the whole window (UI included) here just before exit (with `exit_after`).
     pub window_screenshot: Option<PathBuf>,
-    /// Where a recording is saved (default: `output_dir/terawalk-path-<time>.json`).
+    /// Where a recording is saved (default: `output_dir/terawalk-path-<time>.json`); when
+    /// given, recording starts at once and is saved at exit at the latest.
     pub record: Option<PathBuf>,
     /// Where F12 screenshots and recordings go.
     pub output_dir: PathBuf,
@@ -80,7 +81,9 @@ pub struct ViewReport {
 pub fn run(scene: Scene, options: ViewOptions) -> Result<ViewReport, ViewError> {
     let event_loop = winit::event_loop::EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
     let mut app = app::App::new(scene, options)?;
-    event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()))?;
+    let result = event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()));
+    app.finish();
+    result?;
     if let Some(e) = app.error.take() {
         return Err(e);
     }
