@@ -151,6 +151,10 @@ impl Controller {
             let p = pivot.unwrap_or(self.eye + self.forward() * (self.scene_size * 0.25));
             self.set_pivot(p);
         }
+        if mode == Mode::Walk {
+            // Walkers look ahead, not down.
+            self.pitch = 0.0;
+        }
         self.vertical_speed = 0.0;
         self.velocity = Vec3::ZERO;
         self.mode = mode;

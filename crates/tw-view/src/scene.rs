@@ -3,9 +3,15 @@
 //!
 //! Integration points (each a single function, so the planned changes stay small):
 //! - **Streaming**: [`Scene::select_cut`] calls the synchronous [`Selector::select_into`] over
-//!   the [`PageCache`] (a miss loads the page on this thread). The asynchronous `Streamer`
-//!   (background loaders, non-blocking select that draws the best resident ancestor) replaces
-//!   that call and the cache field; the HUD's "pages loading" then reads its queue.
+//!   the [`PageCache`] (a miss loads the page on this thread, so a frame that needs new pages
+//!   waits for them). The switch to tw-runtime's `Streamer` (branch helper-stream) is local to
+//!   this module: the `cache`/`selector` fields become one `Streamer` (made from an
+//!   `Arc<Store>` and `StreamOptions { budget_bytes, .. }`; [`Scene::set_memory_budget`] makes
+//!   a new one), `select_cut` becomes `streamer.frame(camera, options)` keeping the
+//!   `StreamFrame` (its `pages` feed [`upload_selection`] instead of `cache.get`),
+//!   [`Scene::pages_loading`] returns `stats.pending + stats.in_flight`, the HUD's disk rate
+//!   sums `stats.bytes_read`, and [`Scene::frame`] re-selects while pages are pending (the app
+//!   already redraws while anything changes).
 //! - **Rendering**: [`SceneRenderer`] wraps a `tw_gpu::Renderer` made with
 //!   `Renderer::from_device` on the window's device ([`Scene::attach`]); each frame it uploads
 //!   the cut and draws it with `render_to_view` into the scene's own colour texture
