@@ -475,7 +475,7 @@ impl App {
             render_ms: info.render_ms,
             triangles: info.triangles,
             clusters: info.clusters,
-            nodes_visible: st.nodes_visited - st.nodes_culled_frustum - st.nodes_culled_lod,
+            nodes_visible: st.nodes_visited.saturating_sub(st.nodes_culled_frustum + st.nodes_culled_lod),
             nodes_frustum_culled: st.nodes_culled_frustum,
             nodes_lod_culled: st.nodes_culled_lod,
             nodes_occlusion_culled: 0,
