@@ -482,7 +482,7 @@ impl App {
             resident_bytes: cs.resident_bytes,
             memory_budget: self.scene.memory_budget(),
             gpu_bytes: self.scene.gpu_bytes(),
-            gpu_budget: tw_gpu::MAX_CHUNK_BYTES * 4,
+            gpu_budget: 0,
             pages_loading: self.scene.pages_loading(),
             pages_failed: cs.failed_pages,
             disk_bytes_per_s: self.disk.per_second(),

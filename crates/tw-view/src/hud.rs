@@ -110,7 +110,9 @@ pub struct HudFrame {
     pub nodes_occlusion_culled: u64,
     pub resident_bytes: u64,
     pub memory_budget: u64,
+    /// Vertex data uploaded for the frame.
     pub gpu_bytes: u64,
+    /// 0 while the renderer has no GPU memory budget (tw-gpu rebuilds its buffers per frame).
     pub gpu_budget: u64,
     pub pages_loading: u64,
     pub pages_failed: u64,
@@ -132,7 +134,14 @@ impl HudFrame {
             ("LOD-culled", count(self.nodes_lod_culled)),
             ("occlusion-culled", count(self.nodes_occlusion_culled)),
             ("resident memory", format!("{} / {}", bytes(self.resident_bytes), bytes(self.memory_budget))),
-            ("GPU memory", format!("{} / {}", bytes(self.gpu_bytes), bytes(self.gpu_budget))),
+            (
+                "GPU memory",
+                if self.gpu_budget > 0 {
+                    format!("{} / {}", bytes(self.gpu_bytes), bytes(self.gpu_budget))
+                } else {
+                    format!("{} vertex data (no budget yet)", bytes(self.gpu_bytes))
+                },
+            ),
             ("pages loading", format!("{} ({} failed)", self.pages_loading, self.pages_failed)),
             ("disk", format!("{}/s", bytes(self.disk_bytes_per_s as u64))),
             ("camera", self.mode.clone()),
@@ -221,6 +230,7 @@ mod tests {
         let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
         assert_eq!(get("triangles drawn"), "1.50 M");
         assert_eq!(get("resident memory"), "3.0 MiB / 1.0 GiB");
+        assert_eq!(get("GPU memory"), "0 B vertex data (no budget yet)");
         assert!(lines.iter().any(|l| l.0 == "occlusion-culled"));
         assert_eq!(bytes(10), "10 B");
         assert_eq!(count(12_345), "12.3 k");
