@@ -57,6 +57,8 @@ pub(crate) struct App {
     dragging: bool,
     cursor: Option<[f32; 2]>,
     last_time: Instant,
+    /// The last frame asked for no next one (the loop then waited for events).
+    idle: bool,
     started: Instant,
     times: FrameTimes,
     disk: Throughput,
@@ -99,6 +101,7 @@ impl App {
             dragging: false,
             cursor: None,
             last_time: Instant::now(),
+            idle: true,
             started: Instant::now(),
             times: FrameTimes::default(),
             disk: Throughput::default(),
@@ -356,8 +359,12 @@ impl App {
 
     fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
         let now = Instant::now();
-        let dt = (now - self.last_time).as_secs_f32();
+        let mut dt = (now - self.last_time).as_secs_f32();
         self.last_time = now;
+        if self.idle {
+            // After waiting for events, the time since the last frame is not motion time.
+            dt = dt.min(1.0 / 60.0);
+        }
         let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
         if size.width == 0 || size.height == 0 {
             return Ok(()); // minimised
@@ -562,6 +569,7 @@ impl App {
                 return Ok(());
             }
         }
+        self.idle = !self.animating();
         if repaint_now || self.animating() {
             if let Some(w) = &self.win {
                 w.window.request_redraw();
