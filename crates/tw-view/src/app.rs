@@ -32,7 +32,8 @@ use crate::ViewOptions;
 /// The most node boxes the debug view draws.
 const MAX_BOXES: usize = 4000;
 
-struct Window3 {
+/// The window and what draws into it (made when the event loop resumes).
+struct WindowState {
     window: Arc<Window>,
     gfx: Gfx,
     egui: egui_winit::State,
@@ -44,7 +45,7 @@ pub(crate) struct App {
     options: ViewOptions,
     scene: Scene,
     settings: Settings,
-    win: Option<Window3>,
+    win: Option<WindowState>,
     controller: Controller,
     start_camera: Camera,
     frozen: Option<Camera>,
@@ -155,7 +156,7 @@ impl App {
             None,
             Some(max_side),
         );
-        self.win = Some(Window3 { window, gfx, egui, scene_tex: None });
+        self.win = Some(WindowState { window, gfx, egui, scene_tex: None });
         Ok(())
     }
 
