@@ -70,6 +70,16 @@ pub enum Command {
                             terawalk bench plant.tw --path path.json --reference --frames 20\n  \
                             terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
     Bench(BenchArgs),
+    /// Open a store in an interactive window: fly, walk or orbit; HUD, controls, debug view.
+    #[command(after_help = "Examples:\n  terawalk view plant.tw\n  \
+                            terawalk view plant.tw --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --error 2\n  \
+                            terawalk view plant.tw --path walk.json --play\n  \
+                            xvfb-run -a terawalk view plant.tw --path walk.json --exit-after 30 --screenshot out.png\n  \
+                            WGPU_BACKEND=gl terawalk view plant.tw --render-scale 0.5\n\n\
+                            Keys: WASD move, mouse drag look, wheel speed, 1/2/3 fly/walk/orbit, right click \
+                            orbit around a point, F debug view, L freeze LOD, R record, P play, F12 screenshot, \
+                            F1 help, Esc quit.")]
+    View(ViewArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
@@ -215,6 +225,84 @@ pub struct RenderArgs {
     /// Memory budget of the decoded page cache.
     #[arg(long, default_value = "1G", value_parser = parse_bytes)]
     pub memory: u64,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OcclusionArg {
+    /// No occlusion culling.
+    None,
+    /// GigaWalk's hierarchical Z-buffer (not in the viewer yet).
+    Hzb,
+}
+
+#[derive(Args, Debug)]
+pub struct ViewArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees".
+    /// Default: the first frame of --path, else the whole scene from an oblique direction.
+    #[arg(long)]
+    pub camera: Option<String>,
+    /// A camera path (JSON, as `terawalk path` writes and `bench` reads) to play back.
+    #[arg(long)]
+    pub path: Option<PathBuf>,
+    /// Play --path at once (also implied by --exit-after).
+    #[arg(long)]
+    pub play: bool,
+    /// Quit after this many frames (scripted runs: one path frame per frame).
+    #[arg(long)]
+    pub exit_after: Option<u64>,
+    /// Save the last frame as PNG on exit (with --exit-after).
+    #[arg(long)]
+    pub screenshot: Option<PathBuf>,
+    /// Save the whole window (HUD and panels included) as PNG just before exit (with --exit-after).
+    #[arg(long)]
+    pub screenshot_window: Option<PathBuf>,
+    /// Record the camera path from the start into this file (saved on R or at exit). Without
+    /// it, R records into --output-dir/terawalk-path-TIME.json.
+    #[arg(long)]
+    pub record: Option<PathBuf>,
+    /// Folder for F12 screenshots and recordings.
+    #[arg(long, default_value = ".")]
+    pub output_dir: PathBuf,
+    /// Window size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Pixel error threshold τ of the LOD cut (0 = full resolution).
+    #[arg(long, default_value_t = 1.0)]
+    pub error: f32,
+    /// Occlusion culling strategy.
+    #[arg(long, value_enum, default_value = "none")]
+    pub occlusion: OcclusionArg,
+    /// Turn view-frustum culling off.
+    #[arg(long)]
+    pub no_frustum: bool,
+    /// How to colour triangles.
+    #[arg(long, value_enum, default_value = "material")]
+    pub color: RenderColoring,
+    /// Memory budget of the decoded page cache.
+    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    pub memory: u64,
+    /// Scene resolution as a fraction of the window (0.25..=1; CPU rasterizers like 0.5).
+    #[arg(long, default_value_t = 1.0)]
+    pub render_scale: f32,
+    /// Camera mode at the start.
+    #[arg(long, value_enum, default_value = "fly")]
+    pub mode: CameraModeArg,
+    /// Start in the third-person debug view: culling from the starting camera, drawn from a
+    /// second camera behind it, with its frustum and the boxes of the visible nodes.
+    #[arg(long)]
+    pub debug_view: bool,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CameraModeArg {
+    /// WASD + mouse look.
+    Fly,
+    /// Eye height above the ground, gravity along the up axis.
+    Walk,
+    /// Around a point (right click picks one).
+    Orbit,
 }
 
 #[derive(Args, Debug)]

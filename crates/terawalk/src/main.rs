@@ -20,6 +20,7 @@ fn main() {
         cli::Command::Info(a) => commands::info::run(a),
         cli::Command::Render(a) => commands::render::run(a),
         cli::Command::Bench(a) => commands::bench::run(a).map(|_| ()),
+        cli::Command::View(a) => commands::view::run(a),
         cli::Command::Demo(a) => commands::demo::run(a),
         cli::Command::Path(a) => commands::path::run(a, cli.quiet),
     };

@@ -9,3 +9,4 @@ pub mod path;
 pub mod preview;
 pub mod render;
 pub mod stats;
+pub mod view;

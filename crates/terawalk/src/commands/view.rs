@@ -1,0 +1,96 @@
+//! `terawalk view`: the interactive viewer (tw-view). Everything that can be wrong with the
+//! user's input — a missing or corrupt store, a bad camera or path file, a bad option — is
+//! checked here and reported with a clear message and exit code 1 before any window opens.
+
+use anyhow::{Context, Result};
+use tw_runtime::{CameraPath, InputCamera};
+use tw_store::Store;
+use tw_view::{Coloring, OcclusionStrategy, Scene, Settings, ViewOptions};
+
+use crate::cli::{CameraModeArg, OcclusionArg, RenderColoring, ViewArgs};
+use crate::commands::render::default_camera;
+
+pub fn run(args: ViewArgs) -> Result<()> {
+    if !(args.error.is_finite() && args.error >= 0.0) {
+        anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
+    }
+    if !(0.1..=1.0).contains(&args.render_scale) {
+        anyhow::bail!("--render-scale must be in 0.1..=1, got {}", args.render_scale);
+    }
+    let occlusion = match args.occlusion {
+        OcclusionArg::None => OcclusionStrategy::None,
+        OcclusionArg::Hzb => OcclusionStrategy::Hzb,
+    };
+    if !occlusion.available() {
+        anyhow::bail!("--occlusion {} is not available in the viewer yet (use none)", occlusion.name());
+    }
+    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && args.exit_after.is_none() {
+        anyhow::bail!("--screenshot needs --exit-after N (press F12 for screenshots while viewing)");
+    }
+    let store =
+        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    let path = match &args.path {
+        Some(p) => Some(CameraPath::load(p)?),
+        None => None,
+    };
+    if args.play && path.is_none() {
+        anyhow::bail!("--play needs --path FILE");
+    }
+    let header = store.header();
+    let camera = match (&args.camera, &path) {
+        (Some(s), _) => InputCamera::parse(s)?.to_scene(header)?,
+        (None, Some(p)) => p.frames[0]
+            .to_scene(header)
+            .with_context(|| format!("first frame of {}", args.path.as_ref().expect("path").display()))?,
+        (None, None) => default_camera(header, args.size)?,
+    };
+    if let Some(p) = &path {
+        // Check every frame now: a bad one is an error before the window opens.
+        for (i, f) in p.frames.iter().enumerate() {
+            f.to_scene(header).with_context(|| format!("path frame {i}"))?;
+        }
+    }
+    let settings = Settings {
+        pixel_error: args.error,
+        occlusion,
+        frustum_culling: !args.no_frustum,
+        memory_budget: args.memory,
+        coloring: match args.color {
+            RenderColoring::Material => Coloring::Material,
+            RenderColoring::Object => Coloring::Object,
+            RenderColoring::Level => Coloring::Level,
+            RenderColoring::Cluster => Coloring::Cluster,
+        },
+        render_scale: args.render_scale,
+        debug_view: args.debug_view,
+        ..Settings::default()
+    };
+    let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let scene = Scene::new(store, args.memory);
+    let options = ViewOptions {
+        camera,
+        path,
+        play: args.play,
+        exit_after: args.exit_after,
+        screenshot: args.screenshot.clone(),
+        window_screenshot: args.screenshot_window.clone(),
+        record: args.record.clone(),
+        output_dir: args.output_dir.clone(),
+        size: args.size,
+        title,
+        mode: match args.mode {
+            CameraModeArg::Fly => tw_view::controller::Mode::Fly,
+            CameraModeArg::Walk => tw_view::controller::Mode::Walk,
+            CameraModeArg::Orbit => tw_view::controller::Mode::Orbit,
+        },
+        settings,
+    };
+    let report = tw_view::run(scene, options)?;
+    if let Some(s) = &report.screenshot {
+        println!("wrote {}", s.display());
+    }
+    if args.exit_after.is_some() {
+        println!("{} frames, {} triangles in the last", report.frames, report.last_triangles);
+    }
+    Ok(())
+}

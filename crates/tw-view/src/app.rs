@@ -1,0 +1,669 @@
+//! The viewer's event loop (winit 0.30 `ApplicationHandler`): it opens the window, routes input
+//! to egui first and to the camera controller when egui does not want it, and on each redraw
+//! moves the camera (or plays the path), lets [`crate::scene::Scene`] select and draw, builds the
+//! debug view's lines, runs the UI and presents. It redraws continuously only while something
+//! moves (keys held, smoothing, playback, recording, a scripted run); otherwise it waits for
+//! events, so an idle viewer costs nothing. Minimising (zero size) skips frames; closing or Esc
+//! ends the loop; errors end it and are returned from [`crate::run`].
+
+use std::collections::HashSet;
+use std::sync::Arc;
+use std::time::Instant;
+
+use tw_runtime::Camera;
+use winit::application::ApplicationHandler;
+use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event_loop::{ActiveEventLoop, ControlFlow};
+use winit::keyboard::{KeyCode, PhysicalKey};
+use winit::window::{Window, WindowId};
+
+use crate::controller::{Controller, Input, Mode};
+use crate::debug_view;
+use crate::error::ViewError;
+use crate::gfx::Gfx;
+use crate::hud::{FrameTimes, HudFrame, Throughput};
+use crate::pick::{camera_ray, Ray};
+use crate::recorder::{Player, Recorder};
+use crate::scene::Scene;
+use crate::settings::{Coloring, Settings};
+use crate::ui::{self, Action, Line};
+use crate::ViewOptions;
+
+/// The most node boxes the debug view draws.
+const MAX_BOXES: usize = 4000;
+
+/// The window and what draws into it (made when the event loop resumes).
+struct WindowState {
+    window: Arc<Window>,
+    gfx: Gfx,
+    egui: egui_winit::State,
+    /// The scene texture registered with egui-wgpu, and the target generation it shows.
+    scene_tex: Option<(egui::TextureId, u64)>,
+}
+
+pub(crate) struct App {
+    options: ViewOptions,
+    scene: Scene,
+    settings: Settings,
+    win: Option<WindowState>,
+    controller: Controller,
+    start_camera: Camera,
+    frozen: Option<Camera>,
+    player: Option<Player>,
+    playing: bool,
+    recorder: Option<Recorder>,
+    keys: HashSet<KeyCode>,
+    look: [f32; 2],
+    scroll: f32,
+    dragging: bool,
+    cursor: Option<[f32; 2]>,
+    last_time: Instant,
+    /// The last frame asked for no next one (the loop then waited for events).
+    idle: bool,
+    started: Instant,
+    times: FrameTimes,
+    disk: Throughput,
+    frames: u64,
+    drawn_key: Option<(Camera, Camera, Settings, [u32; 2])>,
+    message: Option<(String, Instant)>,
+    /// A window screenshot (UI included) to take at the next present.
+    window_shot: Option<std::path::PathBuf>,
+    pub(crate) error: Option<ViewError>,
+    pub(crate) report: crate::ViewReport,
+}
+
+impl App {
+    pub(crate) fn new(scene: Scene, options: ViewOptions) -> Result<App, ViewError> {
+        let player = match &options.path {
+            Some(p) => Some(Player::new(p, scene.header())?),
+            None => None,
+        };
+        let mut controller = Controller::new(&options.camera, scene.bounds(), scene.up());
+        controller.set_mode(options.mode, None);
+        let mut settings = options.settings.clone();
+        settings.memory_budget = scene.memory_budget();
+        let start_debug = settings.debug_view;
+        settings.debug_view = false;
+        let playing = player.is_some() && (options.play || options.exit_after.is_some());
+        let mut app = App {
+            start_camera: options.camera,
+            controller,
+            settings,
+            player,
+            playing,
+            scene,
+            options,
+            win: None,
+            frozen: None,
+            recorder: None,
+            keys: HashSet::new(),
+            look: [0.0; 2],
+            scroll: 0.0,
+            dragging: false,
+            cursor: None,
+            last_time: Instant::now(),
+            idle: true,
+            started: Instant::now(),
+            times: FrameTimes::default(),
+            disk: Throughput::default(),
+            frames: 0,
+            drawn_key: None,
+            message: None,
+            window_shot: None,
+            error: None,
+            report: Default::default(),
+        };
+        if start_debug {
+            app.act(Action::ToggleDebugView);
+        }
+        if app.options.record.is_some() {
+            app.recorder = Some(Recorder::default());
+        }
+        Ok(app)
+    }
+
+    fn fail(&mut self, event_loop: &ActiveEventLoop, e: ViewError) {
+        tracing::error!("{e}");
+        if self.error.is_none() {
+            self.error = Some(e);
+        }
+        event_loop.exit();
+    }
+
+    fn say(&mut self, m: String) {
+        tracing::info!("{m}");
+        self.message = Some((m, Instant::now()));
+    }
+
+    fn open_window(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
+        let (w, h) = self.options.size;
+        let title = format!("terawalk — {}", self.options.title);
+        let attrs = Window::default_attributes()
+            .with_title(title)
+            .with_inner_size(winit::dpi::PhysicalSize::new(w, h));
+        let window = Arc::new(event_loop.create_window(attrs).map_err(|e| ViewError::Window(e.to_string()))?);
+        let gfx = Gfx::new(window.clone(), event_loop.owned_display_handle())?;
+        tracing::info!("window adapter: {}", gfx.adapter_summary());
+        // One device for the window, egui and the scene.
+        self.scene.attach(gfx.device.clone(), gfx.queue.clone(), gfx.adapter.get_info())?;
+        let ctx = egui::Context::default();
+        let max_side = gfx.device.limits().max_texture_dimension_2d as usize;
+        let egui = egui_winit::State::new(
+            ctx,
+            egui::ViewportId::ROOT,
+            &*window,
+            Some(window.scale_factor() as f32),
+            None,
+            Some(max_side),
+        );
+        self.win = Some(WindowState { window, gfx, egui, scene_tex: None });
+        Ok(())
+    }
+
+    /// Whether the next frame must follow at once.
+    fn animating(&self) -> bool {
+        self.options.exit_after.is_some()
+            || self.playing
+            || self.recorder.is_some()
+            || self.dragging
+            || self.controller.is_moving()
+            || self.keys.iter().any(|k| {
+                matches!(
+                    k,
+                    KeyCode::KeyW
+                        | KeyCode::KeyA
+                        | KeyCode::KeyS
+                        | KeyCode::KeyD
+                        | KeyCode::KeyQ
+                        | KeyCode::KeyE
+                        | KeyCode::ArrowUp
+                        | KeyCode::ArrowDown
+                        | KeyCode::ArrowLeft
+                        | KeyCode::ArrowRight
+                )
+            })
+    }
+
+    fn input(&mut self, ground: Option<f32>) -> Input {
+        let axis = |p: &[KeyCode], n: &[KeyCode], keys: &HashSet<KeyCode>| {
+            (p.iter().any(|k| keys.contains(k)) as i32 - n.iter().any(|k| keys.contains(k)) as i32) as f32
+        };
+        let input = Input {
+            forward: axis(
+                &[KeyCode::KeyW, KeyCode::ArrowUp],
+                &[KeyCode::KeyS, KeyCode::ArrowDown],
+                &self.keys,
+            ),
+            right: axis(
+                &[KeyCode::KeyD, KeyCode::ArrowRight],
+                &[KeyCode::KeyA, KeyCode::ArrowLeft],
+                &self.keys,
+            ),
+            up: axis(&[KeyCode::KeyE, KeyCode::PageUp], &[KeyCode::KeyQ, KeyCode::PageDown], &self.keys),
+            fast: self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight),
+            look: self.look,
+            scroll: self.scroll,
+            ground,
+        };
+        self.look = [0.0; 2];
+        self.scroll = 0.0;
+        input
+    }
+
+    fn act(&mut self, a: Action) {
+        match a {
+            Action::Screenshot => {
+                let p = self.timestamped("terawalk", "png");
+                self.screenshot(&p);
+            }
+            Action::ToggleRecording => self.toggle_recording(),
+            Action::TogglePlayback => {
+                if self.playing {
+                    self.playing = false;
+                } else if let Some(p) = self.player.as_mut() {
+                    p.rewind();
+                    self.playing = true;
+                }
+            }
+            Action::SetMode(m) => self.controller.set_mode(m, None),
+            Action::ToggleDebugView => {
+                if let Some(f) = self.frozen.take() {
+                    self.settings.debug_view = false;
+                    self.controller = Controller::new(&f, self.scene.bounds(), self.scene.up());
+                } else {
+                    let f = self.controller.camera();
+                    self.frozen = Some(f);
+                    self.settings.debug_view = true;
+                    let mode = self.controller.mode;
+                    let third = debug_view::third_person(&f, self.controller.scene_size);
+                    self.controller = Controller::new(&third, self.scene.bounds(), self.scene.up());
+                    if mode == Mode::Orbit {
+                        self.controller.set_mode(Mode::Orbit, Some(f.eye));
+                    }
+                }
+            }
+            Action::ResetView => {
+                self.frozen = None;
+                self.settings.debug_view = false;
+                self.controller = Controller::new(&self.start_camera, self.scene.bounds(), self.scene.up());
+            }
+        }
+    }
+
+    /// `output_dir/PREFIX-<unix seconds>-<frame>.EXT`.
+    fn timestamped(&self, prefix: &str, ext: &str) -> std::path::PathBuf {
+        let secs = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_secs())
+            .unwrap_or(0);
+        self.options.output_dir.join(format!("{prefix}-{secs}-{}.{ext}", self.frames))
+    }
+
+    /// R: starts recording, or saves the recording (`--record` or a timestamped file).
+    fn toggle_recording(&mut self) {
+        match self.recorder.take() {
+            None => {
+                self.recorder = Some(Recorder::default());
+                self.say("recording the camera path (R to stop)".into());
+            }
+            Some(r) if r.is_empty() => self.say("nothing recorded".into()),
+            Some(r) => {
+                let path = r.finish();
+                let file =
+                    self.options.record.clone().unwrap_or_else(|| self.timestamped("terawalk-path", "json"));
+                match path.save(&file) {
+                    Ok(()) => {
+                        self.say(format!("saved {} frames to {}", path.frames.len(), file.display()));
+                        if let Ok(p) = Player::new(&path, self.scene.header()) {
+                            self.player = Some(p);
+                        }
+                    }
+                    Err(e) => self.say(format!("recording not saved: {e}")),
+                }
+            }
+        }
+    }
+
+    /// At exit: a recording in progress is saved.
+    pub(crate) fn finish(&mut self) {
+        if self.recorder.is_some() {
+            self.toggle_recording();
+            if let Some((m, _)) = &self.message {
+                eprintln!("{m}");
+            }
+        }
+    }
+
+    fn screenshot(&mut self, path: &std::path::Path) {
+        match self.scene.read_image().and_then(|img| Ok(img.save_png(path)?)) {
+            Ok(()) => {
+                self.report.screenshot = Some(path.to_path_buf());
+                self.say(format!("screenshot {}", path.display()));
+            }
+            Err(e) => self.say(format!("screenshot failed: {e}")),
+        }
+    }
+
+    fn key(&mut self, code: KeyCode, pressed: bool, repeat: bool, event_loop: &ActiveEventLoop) {
+        if !pressed {
+            self.keys.remove(&code);
+            return;
+        }
+        self.keys.insert(code);
+        if repeat {
+            return;
+        }
+        match code {
+            KeyCode::Escape => event_loop.exit(),
+            KeyCode::F1 => self.settings.show_help = !self.settings.show_help,
+            KeyCode::F12
+                if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) =>
+            {
+                self.window_shot = Some(self.timestamped("terawalk-window", "png"));
+            }
+            KeyCode::F12 => self.act(Action::Screenshot),
+            KeyCode::Digit1 => self.act(Action::SetMode(Mode::Fly)),
+            KeyCode::Digit2 => self.act(Action::SetMode(Mode::Walk)),
+            KeyCode::Digit3 => self.act(Action::SetMode(Mode::Orbit)),
+            KeyCode::KeyF => self.act(Action::ToggleDebugView),
+            KeyCode::KeyL => self.settings.lod_freeze = !self.settings.lod_freeze,
+            KeyCode::KeyR => self.act(Action::ToggleRecording),
+            KeyCode::KeyP => self.act(Action::TogglePlayback),
+            KeyCode::Home => self.act(Action::ResetView),
+            KeyCode::KeyH => {
+                let show = !(self.settings.show_hud || self.settings.show_controls);
+                self.settings.show_hud = show;
+                self.settings.show_controls = show;
+            }
+            KeyCode::KeyC => {
+                let i = Coloring::ALL.iter().position(|c| *c == self.settings.coloring).unwrap_or(0);
+                self.settings.coloring = Coloring::ALL[(i + 1) % Coloring::ALL.len()];
+            }
+            _ => {}
+        }
+    }
+
+    /// Right click: orbit around the point under the cursor.
+    fn pick_pivot(&mut self) {
+        let (Some([x, y]), Some(w)) = (self.cursor, &self.win) else { return };
+        let size = w.window.inner_size();
+        let cam = self.controller.camera();
+        let ray = camera_ray(&cam, x, y, size.width as f32, size.height as f32);
+        match self.scene.pick(&ray, cam.far) {
+            Some(t) => {
+                self.controller.set_mode(Mode::Orbit, Some(ray.at(t)));
+                self.say(format!("orbiting around the point {:.2} away", t));
+            }
+            None => self.say("nothing under the cursor to orbit around".into()),
+        }
+    }
+
+    fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
+        let now = Instant::now();
+        let mut dt = (now - self.last_time).as_secs_f32();
+        self.last_time = now;
+        if self.idle {
+            // After waiting for events, the time since the last frame is not motion time.
+            dt = dt.min(1.0 / 60.0);
+        }
+        let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
+        if size.width == 0 || size.height == 0 {
+            return Ok(()); // minimised
+        }
+
+        // 1. The camera: the path, or the controller.
+        let mut camera = None;
+        if self.playing {
+            let scripted = self.options.exit_after.is_some();
+            let p = self.player.as_mut().expect("playing needs a path");
+            camera = if scripted { p.step() } else { p.advance(dt as f64) };
+            if camera.is_none() {
+                self.playing = false;
+                self.say("path finished".into());
+            }
+        }
+        let draw = match camera {
+            Some(c) => {
+                self.controller = {
+                    let mut k = Controller::new(&c, self.scene.bounds(), self.scene.up());
+                    k.mode = self.controller.mode;
+                    k.speed = self.controller.speed;
+                    k
+                };
+                c
+            }
+            None => {
+                let ground = if self.controller.mode == Mode::Walk {
+                    let c = &self.controller;
+                    let ray = Ray { origin: c.eye, dir: -c.up };
+                    self.scene.pick(&ray, c.scene_size).map(|t| c.eye.dot(c.up) - t)
+                } else {
+                    None
+                };
+                let input = self.input(ground);
+                self.controller.update(dt, &input);
+                self.controller.camera()
+            }
+        };
+        if let Some(r) = self.recorder.as_mut() {
+            r.push(&draw, self.scene.header(), dt as f64);
+        }
+        let cull = self.frozen.unwrap_or(draw);
+
+        // 2. Select and draw the scene when anything changed.
+        let scale = self.settings.render_scale.clamp(0.1, 1.0);
+        let px = [((size.width as f32 * scale) as u32).max(1), ((size.height as f32 * scale) as u32).max(1)];
+        if self.settings.memory_budget != self.scene.memory_budget() {
+            self.scene.set_memory_budget(self.settings.memory_budget);
+            self.drawn_key = None;
+        }
+        let key = (cull, draw, self.settings.clone(), px);
+        let rendered = self.drawn_key.as_ref() != Some(&key);
+        if rendered {
+            self.scene.frame(&cull, &draw, &self.settings, px)?;
+            self.drawn_key = Some(key);
+            self.times.push(dt);
+        }
+        let info = self.scene.last_frame();
+        let cs = self.scene.cache_stats();
+        self.disk.push(self.started.elapsed().as_secs_f64(), cs.bytes_read);
+
+        // 3. Debug view lines (in window points).
+        let w = self.win.as_mut().expect("checked above");
+        let ppp = egui_winit::pixels_per_point(w.egui.egui_ctx(), &w.window);
+        let view_size = [size.width as f32 / ppp, size.height as f32 / ppp];
+        let mut lines = Vec::new();
+        if let Some(f) = &self.frozen {
+            let vp = draw.view_projection(view_size[0] / view_size[1]);
+            let aspect = px[0] as f32 / px[1] as f32;
+            let corners = debug_view::frustum_corners(f, aspect, Some(self.controller.scene_size * 0.5));
+            let mut add = |segs: &[debug_view::Segment], color| {
+                for s in segs {
+                    if let Some((a, b)) = debug_view::project_segment(&vp, *s, view_size) {
+                        lines.push(Line { a, b, color });
+                    }
+                }
+            };
+            add(&debug_view::frustum_edges(&corners), debug_view::FRUSTUM_COLOR);
+            if self.settings.show_boxes {
+                for (lo, hi) in self.scene.visible_node_boxes(MAX_BOXES) {
+                    add(&debug_view::box_edges(lo, hi), debug_view::VISIBLE_COLOR);
+                }
+                // Occluded nodes (yellow) come with an occlusion strategy; none is wired yet.
+            }
+        }
+
+        // 4. The scene texture, registered with egui-wgpu (again when it was made anew).
+        if let Some((view, _, generation)) = self.scene.target() {
+            match w.scene_tex {
+                Some((_, g)) if g == generation => {}
+                Some((id, _)) => {
+                    w.gfx.egui.update_egui_texture_from_wgpu_texture(
+                        &w.gfx.device,
+                        view,
+                        wgpu::FilterMode::Linear,
+                        id,
+                    );
+                    w.scene_tex = Some((id, generation));
+                }
+                None => {
+                    let id =
+                        w.gfx.egui.register_native_texture(&w.gfx.device, view, wgpu::FilterMode::Linear);
+                    w.scene_tex = Some((id, generation));
+                }
+            }
+        }
+
+        // 5. HUD and UI.
+        let st = info.stats;
+        let hud = HudFrame {
+            fps: self.times.fps(),
+            frame_ms: self.times.times().last().unwrap_or(0.0) * 1e3,
+            select_ms: info.select_ms,
+            render_ms: info.render_ms,
+            triangles: info.triangles,
+            clusters: info.clusters,
+            nodes_visible: st.nodes_visited.saturating_sub(st.nodes_culled_frustum + st.nodes_culled_lod),
+            nodes_frustum_culled: st.nodes_culled_frustum,
+            nodes_lod_culled: st.nodes_culled_lod,
+            nodes_occlusion_culled: 0,
+            resident_bytes: cs.resident_bytes,
+            memory_budget: self.scene.memory_budget(),
+            gpu_bytes: self.scene.gpu_bytes(),
+            gpu_budget: 0,
+            pages_loading: self.scene.pages_loading(),
+            pages_failed: cs.failed_pages,
+            disk_bytes_per_s: self.disk.per_second(),
+            mode: format!(
+                "{}{}{}",
+                self.controller.mode.name(),
+                if self.frozen.is_some() { ", debug view" } else { "" },
+                if self.settings.lod_freeze { ", LOD frozen" } else { "" }
+            ),
+            adapter: {
+                let i = w.gfx.adapter.get_info();
+                format!("{} ({:?})", i.name.split(" (").next().unwrap_or(&i.name), i.backend)
+            },
+        };
+        if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
+            self.message = None;
+        }
+        let raw = w.egui.take_egui_input(&w.window);
+        let view = ui::View {
+            hud: &hud,
+            times: &self.times,
+            mode: self.controller.mode,
+            recording: self.recorder.as_ref().map(|r| r.len()),
+            playing: self.playing.then(|| {
+                let p = self.player.as_ref().expect("playing");
+                (p.position(), p.len())
+            }),
+            has_path: self.player.is_some(),
+            message: self.message.as_ref().map(|(m, _)| m.as_str()),
+            scene: w.scene_tex.map(|(id, _)| id),
+            lines: &lines,
+        };
+        let mut actions = Vec::new();
+        let settings = &mut self.settings;
+        let mut out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
+        w.egui.handle_platform_output(&w.window, out.platform_output);
+        let jobs = w.egui.egui_ctx().tessellate(out.shapes, out.pixels_per_point);
+        let want_window = self.window_shot.is_some();
+        let mut captured = None;
+        w.gfx.present(
+            &w.window,
+            &jobs,
+            &mut out.textures_delta,
+            out.pixels_per_point,
+            want_window.then_some(&mut captured),
+        )?;
+        if let (Some(p), Some(img)) = (self.window_shot.take(), captured) {
+            match img.save_png(&p) {
+                Ok(()) => self.say(format!("window screenshot {}", p.display())),
+                Err(e) => self.say(format!("window screenshot failed: {e}")),
+            }
+        }
+        let repaint_now =
+            out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero());
+        for a in actions {
+            self.act(a);
+        }
+
+        // 6. Scripted runs: stop after N frames with a screenshot (the window's at frame N-1).
+        self.frames += 1;
+        if let (Some(n), Some(p)) = (self.options.exit_after, &self.options.window_screenshot) {
+            if self.frames + 1 == n {
+                self.window_shot = Some(p.clone());
+            }
+        }
+        self.report.frames = self.frames;
+        if let Some(n) = self.options.exit_after {
+            if self.frames >= n {
+                if let Some(p) = self.options.screenshot.clone() {
+                    self.screenshot(&p);
+                    if self.report.screenshot.is_none() {
+                        return Err(ViewError::NoFrame(format!("cannot write {}", p.display())));
+                    }
+                }
+                self.report.last_triangles = info.triangles;
+                event_loop.exit();
+                return Ok(());
+            }
+        }
+        self.idle = !self.animating();
+        if repaint_now || self.animating() {
+            if let Some(w) = &self.win {
+                w.window.request_redraw();
+            }
+        }
+        Ok(())
+    }
+}
+
+impl ApplicationHandler for App {
+    fn resumed(&mut self, event_loop: &ActiveEventLoop) {
+        if self.win.is_none() {
+            if let Err(e) = self.open_window(event_loop) {
+                self.fail(event_loop, e);
+                return;
+            }
+        }
+        if let Some(w) = &self.win {
+            w.window.request_redraw();
+        }
+    }
+
+    fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
+        let Some(w) = self.win.as_mut() else { return };
+        let response = w.egui.on_window_event(&w.window, &event);
+        if response.repaint {
+            w.window.request_redraw();
+        }
+        let egui_pointer =
+            w.egui.egui_ctx().egui_wants_pointer_input() || w.egui.egui_ctx().is_pointer_over_egui();
+        let egui_keys = w.egui.egui_ctx().egui_wants_keyboard_input();
+        match event {
+            WindowEvent::CloseRequested => event_loop.exit(),
+            WindowEvent::Resized(size) => {
+                w.gfx.resize(size.width, size.height);
+                w.window.request_redraw();
+            }
+            WindowEvent::RedrawRequested => {
+                if let Err(e) = self.redraw(event_loop) {
+                    self.fail(event_loop, e);
+                }
+            }
+            WindowEvent::KeyboardInput { event, .. } => {
+                if let PhysicalKey::Code(code) = event.physical_key {
+                    let pressed = event.state == ElementState::Pressed;
+                    if !pressed || !egui_keys {
+                        self.key(code, pressed, event.repeat, event_loop);
+                    }
+                }
+                if let Some(w) = &self.win {
+                    w.window.request_redraw();
+                }
+            }
+            WindowEvent::MouseInput { state, button, .. } => {
+                let pressed = state == ElementState::Pressed;
+                match button {
+                    MouseButton::Left if !pressed => self.dragging = false,
+                    MouseButton::Left if !egui_pointer => self.dragging = true,
+                    MouseButton::Right if pressed && !egui_pointer => self.pick_pivot(),
+                    _ => {}
+                }
+                if let Some(w) = &self.win {
+                    w.window.request_redraw();
+                }
+            }
+            WindowEvent::CursorMoved { position, .. } => {
+                let p = [position.x as f32, position.y as f32];
+                if let (true, Some(last)) = (self.dragging, self.cursor) {
+                    self.look[0] += p[0] - last[0];
+                    self.look[1] += p[1] - last[1];
+                    w.window.request_redraw();
+                }
+                self.cursor = Some(p);
+            }
+            WindowEvent::CursorLeft { .. } => self.cursor = None,
+            WindowEvent::MouseWheel { delta, .. } if !egui_pointer => {
+                self.scroll += match delta {
+                    MouseScrollDelta::LineDelta(_, y) => y,
+                    MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
+                };
+                w.window.request_redraw();
+            }
+            WindowEvent::Focused(false) => self.keys.clear(),
+            _ => {}
+        }
+    }
+
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        event_loop.set_control_flow(ControlFlow::Wait);
+        if self.animating() {
+            if let Some(w) = &self.win {
+                w.window.request_redraw();
+            }
+        }
+    }
+}

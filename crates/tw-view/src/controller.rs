@@ -1,0 +1,348 @@
+//! Camera controllers (fly, walk, orbit) as plain data: [`Controller::update`] takes the frame
+//! time and an [`Input`] (keys held, mouse motion, scroll) and moves the camera; no window is
+//! involved, so the motion is unit-tested.
+//!
+//! - **Fly**: WASD (and Q/E down/up) along the view, mouse look (yaw about the scene's up axis,
+//!   pitch clamped short of the poles), speed scaled by the scroll wheel, starting at a fraction
+//!   of the model's size; velocity is smoothed (exponential approach), so motion starts and stops
+//!   softly.
+//! - **Walk**: as fly but horizontal; the eye is held at `eye_height` above the ground below it
+//!   (the caller finds it by casting a ray down, [`Input::ground`]; without one the floor is the
+//!   bottom of the model's bounds), falling under gravity along the up axis when the ground drops
+//!   away. Walls are not collided with (optional in the issue).
+//! - **Orbit**: around a pivot (a clicked point): mouse drag turns, scroll and W/S change the
+//!   distance (smoothed), A/D turn.
+
+use glam::Vec3;
+use tw_runtime::Camera;
+
+/// Camera mode.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Mode {
+    #[default]
+    Fly,
+    Walk,
+    Orbit,
+}
+
+impl Mode {
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Fly => "fly",
+            Mode::Walk => "walk",
+            Mode::Orbit => "orbit",
+        }
+    }
+}
+
+/// One frame's input, already reduced to axes.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Input {
+    /// +1 forward (W), −1 back (S).
+    pub forward: f32,
+    /// +1 right (D), −1 left (A).
+    pub right: f32,
+    /// +1 up (E), −1 down (Q).
+    pub up: f32,
+    /// Shift: four times faster.
+    pub fast: bool,
+    /// Mouse motion while looking, pixels (x right, y down).
+    pub look: [f32; 2],
+    /// Scroll wheel steps (positive = away from the user / up).
+    pub scroll: f32,
+    /// Height (along up) of the ground below the eye, if a ray down hit something.
+    pub ground: Option<f32>,
+}
+
+/// Radians of turn per pixel of mouse motion.
+pub const LOOK_SENSITIVITY: f32 = 0.004;
+/// Pitch limit (radians): just short of straight up/down.
+pub const MAX_PITCH: f32 = 1.54;
+/// Velocity smoothing rate (1/s): higher is snappier.
+pub const SMOOTHING: f32 = 10.0;
+
+/// The camera state and its controller; see the module documentation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Controller {
+    pub mode: Mode,
+    pub eye: Vec3,
+    /// Angle about `up` from `e1` towards `e2`.
+    pub yaw: f32,
+    /// Angle above the horizontal plane.
+    pub pitch: f32,
+    /// Unit scene up axis and two unit horizontal axes (right-handed: e1 × e2 = up).
+    pub up: Vec3,
+    e1: Vec3,
+    e2: Vec3,
+    pub fovy: f32,
+    /// Fly/walk speed, scene units per second.
+    pub speed: f32,
+    /// Diagonal of the model's bounds (scales speeds and limits).
+    pub scene_size: f32,
+    /// Scene bounds (for clip planes and the default floor).
+    pub bounds: (Vec3, Vec3),
+    velocity: Vec3,
+    pub eye_height: f32,
+    vertical_speed: f32,
+    pub pivot: Vec3,
+    pub distance: f32,
+    target_distance: f32,
+}
+
+impl Controller {
+    /// A controller at `camera` for a scene with `bounds` and `up` axis.
+    pub fn new(camera: &Camera, bounds: (Vec3, Vec3), up: Vec3) -> Controller {
+        let up = up.normalize_or(Vec3::Z);
+        let e1 = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
+        let e1 = (e1 - up * e1.dot(up)).normalize();
+        let e2 = up.cross(e1);
+        let scene_size = (bounds.1 - bounds.0).length().max(1e-6);
+        let eye_height = (scene_size * 0.01).min(1.7);
+        let mut c = Controller {
+            mode: Mode::Fly,
+            eye: camera.eye,
+            yaw: 0.0,
+            pitch: 0.0,
+            up,
+            e1,
+            e2,
+            fovy: camera.fovy,
+            speed: scene_size * 0.05,
+            scene_size,
+            bounds,
+            velocity: Vec3::ZERO,
+            eye_height,
+            vertical_speed: 0.0,
+            pivot: camera.target,
+            distance: (camera.target - camera.eye).length(),
+            target_distance: (camera.target - camera.eye).length(),
+        };
+        c.look_at(camera.target);
+        c
+    }
+
+    /// Turns the view towards `target` (keeps the eye).
+    pub fn look_at(&mut self, target: Vec3) {
+        let d = (target - self.eye).normalize_or(self.e1);
+        self.pitch = d.dot(self.up).clamp(-1.0, 1.0).asin().clamp(-MAX_PITCH, MAX_PITCH);
+        self.yaw = d.dot(self.e2).atan2(d.dot(self.e1));
+    }
+
+    /// Unit view direction.
+    pub fn forward(&self) -> Vec3 {
+        let h = self.e1 * self.yaw.cos() + self.e2 * self.yaw.sin();
+        h * self.pitch.cos() + self.up * self.pitch.sin()
+    }
+
+    /// Unit horizontal direction of view.
+    pub fn forward_horizontal(&self) -> Vec3 {
+        self.e1 * self.yaw.cos() + self.e2 * self.yaw.sin()
+    }
+
+    /// Unit right direction (horizontal).
+    pub fn right(&self) -> Vec3 {
+        self.forward_horizontal().cross(self.up).normalize()
+    }
+
+    /// Switches mode. Into orbit: the pivot is `pivot` if given, else the point `distance`
+    /// ahead; into walk: falling starts from rest.
+    pub fn set_mode(&mut self, mode: Mode, pivot: Option<Vec3>) {
+        if mode == Mode::Orbit {
+            let p = pivot.unwrap_or(self.eye + self.forward() * (self.scene_size * 0.25));
+            self.set_pivot(p);
+        }
+        if mode == Mode::Walk {
+            // Walkers look ahead, not down.
+            self.pitch = 0.0;
+        }
+        self.vertical_speed = 0.0;
+        self.velocity = Vec3::ZERO;
+        self.mode = mode;
+    }
+
+    /// Orbit around `p` from the current eye.
+    pub fn set_pivot(&mut self, p: Vec3) {
+        self.pivot = p;
+        self.distance = (p - self.eye).length().max(self.scene_size * 1e-4);
+        self.target_distance = self.distance;
+        self.look_at(p);
+    }
+
+    /// Advances by `dt` seconds.
+    pub fn update(&mut self, dt: f32, input: &Input) {
+        let dt = dt.clamp(0.0, 0.25);
+        let [dx, dy] = input.look;
+        self.yaw -= dx * LOOK_SENSITIVITY;
+        self.pitch = (self.pitch - dy * LOOK_SENSITIVITY).clamp(-MAX_PITCH, MAX_PITCH);
+        let blend = 1.0 - (-SMOOTHING * dt).exp();
+        let boost = if input.fast { 4.0 } else { 1.0 };
+        match self.mode {
+            Mode::Fly | Mode::Walk => {
+                if input.scroll != 0.0 {
+                    self.speed = (self.speed * 1.2f32.powf(input.scroll))
+                        .clamp(self.scene_size * 1e-5, self.scene_size * 10.0);
+                }
+                let (fwd, vert) = if self.mode == Mode::Fly {
+                    (self.forward(), input.up)
+                } else {
+                    (self.forward_horizontal(), 0.0)
+                };
+                let wish = (fwd * input.forward + self.right() * input.right + self.up * vert)
+                    .clamp_length_max(1.0)
+                    * self.speed
+                    * boost;
+                self.velocity += (wish - self.velocity) * blend;
+                self.eye += self.velocity * dt;
+                if self.mode == Mode::Walk {
+                    self.apply_gravity(dt, input.ground);
+                }
+            }
+            Mode::Orbit => {
+                self.yaw -= input.right * 1.5 * dt;
+                if input.scroll != 0.0 || input.forward != 0.0 {
+                    let steps = input.scroll + input.forward * dt * 4.0 * boost;
+                    self.target_distance = (self.target_distance * 0.85f32.powf(steps))
+                        .clamp(self.scene_size * 1e-4, self.scene_size * 10.0);
+                }
+                self.distance += (self.target_distance - self.distance) * blend;
+                self.eye = self.pivot - self.forward() * self.distance;
+            }
+        }
+    }
+
+    /// Walk mode: hold the eye `eye_height` above the ground, falling at g towards it.
+    fn apply_gravity(&mut self, dt: f32, ground: Option<f32>) {
+        let floor = ground.unwrap_or_else(|| self.bounds.0.dot(self.up).min(self.bounds.1.dot(self.up)));
+        let want = floor + self.eye_height;
+        let h = self.eye.dot(self.up);
+        if h > want {
+            // g = 9.81 m/s² for an eye height of 1.7 m, scaled with the eye height.
+            let g = 9.81 * self.eye_height / 1.7;
+            self.vertical_speed -= g * dt;
+            let new_h = (h + self.vertical_speed * dt).max(want);
+            self.eye += self.up * (new_h - h);
+            if new_h <= want {
+                self.vertical_speed = 0.0;
+            }
+        } else {
+            // Steps up onto higher ground at once.
+            self.eye += self.up * (want - h);
+            self.vertical_speed = 0.0;
+        }
+    }
+
+    /// Whether the camera is still moving (smoothing or falling): the viewer keeps redrawing.
+    pub fn is_moving(&self) -> bool {
+        self.velocity.length() > self.speed * 1e-3
+            || self.vertical_speed != 0.0
+            || (self.mode == Mode::Orbit
+                && (self.distance - self.target_distance).abs() > self.distance * 1e-4)
+    }
+
+    /// The scene camera: clip planes from the eye's distance to the farthest bounds corner
+    /// (as [`Camera::from_input_coordinates`]).
+    pub fn camera(&self) -> Camera {
+        let (near, far) = clip_planes(self.eye, self.bounds);
+        Camera { eye: self.eye, target: self.eye + self.forward(), up: self.up, fovy: self.fovy, near, far }
+    }
+}
+
+/// Near and far planes seeing all of `bounds` from `eye`.
+pub fn clip_planes(eye: Vec3, bounds: (Vec3, Vec3)) -> (f32, f32) {
+    let (lo, hi) = bounds;
+    let corner = (eye - lo).abs().max((eye - hi).abs()).length();
+    let far = (corner * 1.01).max((hi - lo).length() * 1e-3).max(1e-3);
+    (far * tw_runtime::camera::NEAR_FAR_RATIO, far)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ctl() -> Controller {
+        let cam =
+            Camera::new(Vec3::new(0.0, -10.0, 2.0), Vec3::new(0.0, 0.0, 2.0), Vec3::Z, 1.0, 0.01, 100.0)
+                .unwrap();
+        Controller::new(&cam, (Vec3::splat(-10.0), Vec3::splat(10.0)), Vec3::Z)
+    }
+
+    #[test]
+    fn starts_looking_at_the_target() {
+        let c = ctl();
+        assert!((c.forward() - Vec3::Y).length() < 1e-5, "{:?}", c.forward());
+        let cam = c.camera();
+        assert!(cam.validate().is_ok());
+        assert!(cam.far > 20.0);
+    }
+
+    #[test]
+    fn fly_moves_forward_smoothly_and_stops() {
+        let mut c = ctl();
+        let start = c.eye;
+        let w = Input { forward: 1.0, ..Default::default() };
+        c.update(0.016, &w);
+        let first = (c.eye - start).length();
+        for _ in 0..60 {
+            c.update(0.016, &w);
+        }
+        let moved = c.eye - start;
+        assert!(moved.y > 0.0 && moved.x.abs() < 1e-4, "{moved:?}");
+        // Smooth: the first frame moves less than full speed would.
+        assert!(first < c.speed * 0.016 * 0.5);
+        for _ in 0..120 {
+            c.update(0.016, &Input::default());
+        }
+        assert!(!c.is_moving());
+    }
+
+    #[test]
+    fn scroll_changes_speed_and_look_turns() {
+        let mut c = ctl();
+        let s = c.speed;
+        c.update(0.016, &Input { scroll: 2.0, ..Default::default() });
+        assert!((c.speed / s - 1.44).abs() < 1e-3);
+        // Mouse right turns right (yaw decreases: from +Y towards +X).
+        c.update(0.016, &Input { look: [100.0, 0.0], ..Default::default() });
+        assert!(c.forward().x > 0.3, "{:?}", c.forward());
+        // Pitch is clamped.
+        c.update(0.016, &Input { look: [0.0, -1e6], ..Default::default() });
+        assert!(c.pitch <= MAX_PITCH && c.camera().validate().is_ok());
+    }
+
+    #[test]
+    fn walk_falls_to_eye_height_above_the_ground() {
+        let mut c = ctl();
+        c.set_mode(Mode::Walk, None);
+        for _ in 0..600 {
+            c.update(0.016, &Input { ground: Some(1.0), ..Default::default() });
+        }
+        assert!((c.eye.z - (1.0 + c.eye_height)).abs() < 1e-4, "{:?}", c.eye);
+        // Walking forward while looking up stays horizontal.
+        c.pitch = 1.0;
+        let z = c.eye.z;
+        for _ in 0..30 {
+            c.update(0.016, &Input { forward: 1.0, ground: Some(1.0), ..Default::default() });
+        }
+        assert!((c.eye.z - z).abs() < 1e-4);
+        // Without a ground the floor is the bottom of the bounds.
+        for _ in 0..600 {
+            c.update(0.016, &Input::default());
+        }
+        assert!((c.eye.z - (-10.0 + c.eye_height)).abs() < 1e-3, "{:?}", c.eye);
+    }
+
+    #[test]
+    fn orbit_keeps_the_distance_to_the_pivot() {
+        let mut c = ctl();
+        let p = Vec3::new(1.0, 2.0, 0.0);
+        c.set_mode(Mode::Orbit, Some(p));
+        let d = (c.eye - p).length();
+        c.update(0.016, &Input { look: [50.0, 20.0], ..Default::default() });
+        assert!(((c.eye - p).length() - d).abs() < 1e-3);
+        assert!((c.camera().target - c.eye).normalize().dot((p - c.eye).normalize()) > 0.999);
+        for _ in 0..100 {
+            c.update(0.016, &Input { scroll: 1.0, ..Default::default() });
+        }
+        assert!((c.eye - p).length() < d);
+    }
+}

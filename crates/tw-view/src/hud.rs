@@ -1,0 +1,238 @@
+//! The HUD's model, plain data: a ring of recent frame times (fps and the frame-time graph), a
+//! disk throughput meter (bytes/s from the cache's cumulative read counter), and [`HudFrame`],
+//! the figures of one frame turned into labelled lines. [`crate::ui`] draws them.
+
+use std::collections::VecDeque;
+
+/// Frame times kept for the graph.
+pub const HISTORY: usize = 240;
+
+/// Recent frame times (seconds), newest last.
+#[derive(Clone, Debug, Default)]
+pub struct FrameTimes {
+    times: VecDeque<f32>,
+}
+
+impl FrameTimes {
+    pub fn push(&mut self, dt: f32) {
+        if self.times.len() == HISTORY {
+            self.times.pop_front();
+        }
+        self.times.push_back(dt.max(0.0));
+    }
+
+    pub fn len(&self) -> usize {
+        self.times.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.times.is_empty()
+    }
+
+    pub fn times(&self) -> impl Iterator<Item = f32> + '_ {
+        self.times.iter().copied()
+    }
+
+    /// Frames per second over the last second of frames (at least one frame).
+    pub fn fps(&self) -> f32 {
+        let mut total = 0.0;
+        let mut n = 0;
+        for &t in self.times.iter().rev() {
+            total += t;
+            n += 1;
+            if total >= 1.0 {
+                break;
+            }
+        }
+        if total > 0.0 {
+            n as f32 / total
+        } else {
+            0.0
+        }
+    }
+
+    /// Largest frame time kept (seconds).
+    pub fn max(&self) -> f32 {
+        self.times.iter().copied().fold(0.0, f32::max)
+    }
+
+    /// Points of the frame-time graph in a `w` × `h` box, y down, scaled so that
+    /// `max(largest, 1/30 s)` is the top: one point per frame, newest at the right.
+    pub fn graph(&self, w: f32, h: f32) -> Vec<[f32; 2]> {
+        let top = self.max().max(1.0 / 30.0);
+        let n = self.times.len();
+        self.times
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| {
+                let x = w * (HISTORY - n + i) as f32 / (HISTORY - 1) as f32;
+                [x.min(w), h - h * (t / top).min(1.0)]
+            })
+            .collect()
+    }
+}
+
+/// Bytes per second from a cumulative counter, averaged over about a second.
+#[derive(Clone, Debug, Default)]
+pub struct Throughput {
+    samples: VecDeque<(f64, u64)>,
+}
+
+impl Throughput {
+    /// Records the counter `total` at time `t` seconds.
+    pub fn push(&mut self, t: f64, total: u64) {
+        self.samples.push_back((t, total));
+        while self.samples.len() > 2 && self.samples[1].0 <= t - 1.0 {
+            self.samples.pop_front();
+        }
+    }
+
+    pub fn per_second(&self) -> f64 {
+        match (self.samples.front(), self.samples.back()) {
+            (Some(&(t0, b0)), Some(&(t1, b1))) if t1 > t0 => b1.saturating_sub(b0) as f64 / (t1 - t0),
+            _ => 0.0,
+        }
+    }
+}
+
+/// What one frame did, for the HUD.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HudFrame {
+    pub fps: f32,
+    pub frame_ms: f32,
+    pub select_ms: f32,
+    pub render_ms: f32,
+    pub triangles: u64,
+    pub clusters: u64,
+    pub nodes_visible: u64,
+    pub nodes_frustum_culled: u64,
+    pub nodes_lod_culled: u64,
+    pub nodes_occlusion_culled: u64,
+    pub resident_bytes: u64,
+    pub memory_budget: u64,
+    /// Vertex data uploaded for the frame.
+    pub gpu_bytes: u64,
+    /// 0 while the renderer has no GPU memory budget (tw-gpu rebuilds its buffers per frame).
+    pub gpu_budget: u64,
+    pub pages_loading: u64,
+    pub pages_failed: u64,
+    pub disk_bytes_per_s: f64,
+    pub mode: String,
+    pub adapter: String,
+}
+
+impl HudFrame {
+    /// Labelled lines, in display order.
+    pub fn lines(&self) -> Vec<(&'static str, String)> {
+        vec![
+            ("fps", format!("{:.1} ({:.1} ms)", self.fps, self.frame_ms)),
+            ("select / draw", format!("{:.1} / {:.1} ms", self.select_ms, self.render_ms)),
+            ("triangles drawn", count(self.triangles)),
+            ("clusters drawn", count(self.clusters)),
+            ("nodes visible", count(self.nodes_visible)),
+            ("frustum-culled", count(self.nodes_frustum_culled)),
+            ("LOD-culled", count(self.nodes_lod_culled)),
+            ("occlusion-culled", count(self.nodes_occlusion_culled)),
+            ("resident memory", format!("{} / {}", bytes(self.resident_bytes), bytes(self.memory_budget))),
+            (
+                "GPU memory",
+                if self.gpu_budget > 0 {
+                    format!("{} / {}", bytes(self.gpu_bytes), bytes(self.gpu_budget))
+                } else {
+                    format!("{} vertex data (no budget yet)", bytes(self.gpu_bytes))
+                },
+            ),
+            ("pages loading", format!("{} ({} failed)", self.pages_loading, self.pages_failed)),
+            ("disk", format!("{}/s", bytes(self.disk_bytes_per_s as u64))),
+            ("camera", self.mode.clone()),
+            ("adapter", self.adapter.clone()),
+        ]
+    }
+}
+
+/// `1234567` → `"1.23 M"`.
+pub fn count(n: u64) -> String {
+    match n {
+        0..=9_999 => n.to_string(),
+        10_000..=999_999 => format!("{:.1} k", n as f64 / 1e3),
+        1_000_000..=999_999_999 => format!("{:.2} M", n as f64 / 1e6),
+        _ => format!("{:.2} G", n as f64 / 1e9),
+    }
+}
+
+/// Bytes in binary units.
+pub fn bytes(n: u64) -> String {
+    const UNITS: [&str; 5] = ["B", "KiB", "MiB", "GiB", "TiB"];
+    let mut v = n as f64;
+    let mut u = 0;
+    while v >= 1024.0 && u < UNITS.len() - 1 {
+        v /= 1024.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{n} B")
+    } else {
+        format!("{v:.1} {}", UNITS[u])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fps_over_the_last_second() {
+        let mut f = FrameTimes::default();
+        assert_eq!(f.fps(), 0.0);
+        for _ in 0..100 {
+            f.push(0.02);
+        }
+        assert!((f.fps() - 50.0).abs() < 0.5);
+        for _ in 0..1000 {
+            f.push(0.01);
+        }
+        assert_eq!(f.len(), HISTORY);
+        assert!((f.fps() - 100.0).abs() < 1.0);
+    }
+
+    #[test]
+    fn graph_fits_its_box() {
+        let mut f = FrameTimes::default();
+        for i in 0..10 {
+            f.push(0.01 * i as f32);
+        }
+        let g = f.graph(200.0, 50.0);
+        assert_eq!(g.len(), 10);
+        assert!(g.iter().all(|p| (0.0..=200.0).contains(&p[0]) && (0.0..=50.0).contains(&p[1])));
+        assert_eq!(g.last().unwrap()[0], 200.0);
+        assert_eq!(g.last().unwrap()[1], 0.0, "the largest frame reaches the top");
+    }
+
+    #[test]
+    fn throughput_is_bytes_per_second() {
+        let mut t = Throughput::default();
+        assert_eq!(t.per_second(), 0.0);
+        for i in 0..=20 {
+            t.push(i as f64 * 0.1, i * 1000);
+        }
+        assert!((t.per_second() - 10_000.0).abs() < 1.0, "{}", t.per_second());
+    }
+
+    #[test]
+    fn lines_name_every_figure() {
+        let h = HudFrame {
+            triangles: 1_500_000,
+            resident_bytes: 3 << 20,
+            memory_budget: 1 << 30,
+            ..Default::default()
+        };
+        let lines = h.lines();
+        let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
+        assert_eq!(get("triangles drawn"), "1.50 M");
+        assert_eq!(get("resident memory"), "3.0 MiB / 1.0 GiB");
+        assert_eq!(get("GPU memory"), "0 B vertex data (no budget yet)");
+        assert!(lines.iter().any(|l| l.0 == "occlusion-culled"));
+        assert_eq!(bytes(10), "10 B");
+        assert_eq!(count(12_345), "12.3 k");
+    }
+}

@@ -1,0 +1,91 @@
+//! terawalk's interactive viewer (`terawalk view scene.tw`): a winit window drawn with wgpu, a
+//! UI in egui, and the runtime's per-frame pipeline (camera → select → draw) behind it.
+//!
+//! Modules, one concern each:
+//! - [`settings`]: every control as plain data (pixel error, occlusion strategy, culling, LOD
+//!   freeze, memory budget, colourings, debug view);
+//! - [`controller`]: fly / walk / orbit camera controllers (plain data, unit-tested);
+//! - [`hud`]: fps, frame-time graph, disk throughput and the HUD's figures;
+//! - [`debug_view`]: the third-person debug view's geometry (frustum, node boxes, projection);
+//! - [`pick`]: CPU ray casting for the orbit pivot and walk mode's ground;
+//! - [`recorder`]: camera path recording and playback (the `path`/`bench` JSON format);
+//! - [`scene`]: the store, cache, selector and renderer; the streaming and renderer
+//!   integration points;
+//! - [`gfx`]: window surface, device and egui-wgpu;
+//! - [`readback`]: textures to images (screenshots);
+//! - [`ui`]: the egui panels;
+//! - `app`: the winit event loop tying them together.
+//!
+//! [`run`] opens the window and returns when it is closed, after `exit_after` frames of a
+//! scripted run, or with the first error (no panics on user input).
+
+pub mod controller;
+pub mod debug_view;
+pub mod error;
+pub mod gfx;
+pub mod hud;
+pub mod pick;
+pub mod readback;
+pub mod recorder;
+pub mod scene;
+pub mod settings;
+pub mod ui;
+
+mod app;
+
+use std::path::PathBuf;
+
+pub use error::ViewError;
+pub use scene::Scene;
+pub use settings::{Coloring, OcclusionStrategy, Settings};
+use tw_runtime::{Camera, CameraPath};
+
+/// How to start the viewer.
+#[derive(Clone, Debug)]
+pub struct ViewOptions {
+    /// The starting camera (scene space).
+    pub camera: Camera,
+    /// A path to play (`--path`); with `play` or `exit_after` it plays at once.
+    pub path: Option<CameraPath>,
+    pub play: bool,
+    /// Stop after this many frames (scripted runs: one path frame per rendered frame).
+    pub exit_after: Option<u64>,
+    /// Write the last frame here on exit (with `exit_after`).
+    pub screenshot: Option<PathBuf>,
+    /// Write the whole window (UI included) here just before exit (with `exit_after`).
+    pub window_screenshot: Option<PathBuf>,
+    /// Where a recording is saved (default: `output_dir/terawalk-path-<time>.json`); when
+    /// given, recording starts at once and is saved at exit at the latest.
+    pub record: Option<PathBuf>,
+    /// Where F12 screenshots and recordings go.
+    pub output_dir: PathBuf,
+    /// Window size in pixels.
+    pub size: (u32, u32),
+    /// Shown in the title bar (the store's file name).
+    pub title: String,
+    /// Camera mode at the start (orbit: around the point ahead).
+    pub mode: controller::Mode,
+    /// `settings.debug_view` starts the third-person debug view from the starting camera.
+    pub settings: Settings,
+}
+
+/// What a viewer session did.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ViewReport {
+    pub frames: u64,
+    pub screenshot: Option<PathBuf>,
+    pub last_triangles: u64,
+}
+
+/// Opens the window over `scene` and runs until it is closed (see the crate documentation).
+pub fn run(scene: Scene, options: ViewOptions) -> Result<ViewReport, ViewError> {
+    let event_loop = winit::event_loop::EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
+    let mut app = app::App::new(scene, options)?;
+    let result = event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()));
+    app.finish();
+    result?;
+    if let Some(e) = app.error.take() {
+        return Err(e);
+    }
+    Ok(app.report.clone())
+}

@@ -1,0 +1,207 @@
+//! The egui user interface: the scene image in the background layer with the debug view's
+//! lines over it, the HUD window (figures and the frame-time graph), the controls window (every
+//! technique's switch, camera mode, recording and playback) and the F1 help overlay. It edits
+//! [`Settings`] in place and returns the buttons pressed as [`Action`]s for the app to carry out.
+
+use egui::{Color32, Pos2, Rect, Stroke};
+
+use crate::controller::Mode;
+use crate::hud::{FrameTimes, HudFrame};
+use crate::settings::{Coloring, OcclusionStrategy, Settings, MEMORY_RANGE, PIXEL_ERROR_RANGE};
+
+/// A button or key the app acts on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action {
+    Screenshot,
+    ToggleRecording,
+    TogglePlayback,
+    SetMode(Mode),
+    ToggleDebugView,
+    ResetView,
+}
+
+/// A 2D line in window points with its colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Line {
+    pub a: [f32; 2],
+    pub b: [f32; 2],
+    pub color: [u8; 4],
+}
+
+/// What the UI shows besides the settings.
+pub struct View<'a> {
+    pub hud: &'a HudFrame,
+    pub times: &'a FrameTimes,
+    pub mode: Mode,
+    /// Frames recorded so far, while recording.
+    pub recording: Option<usize>,
+    /// (frame, frames) while a path plays.
+    pub playing: Option<(usize, usize)>,
+    /// Whether a path is loaded (playback possible).
+    pub has_path: bool,
+    pub message: Option<&'a str>,
+    /// The scene image and its size in pixels.
+    pub scene: Option<egui::TextureId>,
+    pub lines: &'a [Line],
+}
+
+/// Keyboard help (F1).
+pub const HELP: &[(&str, &str)] = &[
+    ("W A S D", "move (fly, walk); orbit: W/S zoom, A/D turn"),
+    ("Q / E", "down / up (fly)"),
+    ("Shift", "four times faster"),
+    ("left drag", "look around (orbit: turn around the pivot)"),
+    ("right click", "orbit around the clicked point"),
+    ("scroll wheel", "speed (fly, walk); distance (orbit)"),
+    ("1 / 2 / 3", "fly / walk / orbit"),
+    ("F", "debug view: freeze the culling camera, move a second one out"),
+    ("L", "freeze the LOD cut"),
+    ("C", "next debug colouring"),
+    ("R", "start / stop recording a path"),
+    ("P", "play / stop the loaded path"),
+    ("H", "hide / show the panels"),
+    ("Home", "back to the starting view"),
+    ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
+    ("F1", "this help"),
+    ("Esc", "quit"),
+];
+
+/// Builds this frame's UI.
+pub fn draw(ctx: &egui::Context, settings: &mut Settings, view: &View) -> Vec<Action> {
+    let mut actions = Vec::new();
+    let screen = ctx.content_rect();
+    let bg = ctx.layer_painter(egui::LayerId::background());
+    if let Some(tex) = view.scene {
+        bg.image(tex, screen, Rect::from_min_max(Pos2::ZERO, Pos2::new(1.0, 1.0)), Color32::WHITE);
+    }
+    for l in view.lines {
+        let [r, g, b, a] = l.color;
+        bg.line_segment(
+            [
+                Pos2::new(l.a[0], l.a[1]) + screen.min.to_vec2(),
+                Pos2::new(l.b[0], l.b[1]) + screen.min.to_vec2(),
+            ],
+            Stroke::new(1.0, Color32::from_rgba_unmultiplied(r, g, b, a)),
+        );
+    }
+    if settings.show_hud {
+        egui::Window::new("HUD").default_pos([8.0, 8.0]).resizable(false).show(ctx, |ui| hud(ui, view));
+    }
+    if settings.show_controls {
+        egui::Window::new("Controls")
+            .default_pos([screen.max.x - 290.0, 8.0])
+            .default_width(270.0)
+            .show(ctx, |ui| controls(ui, settings, view, &mut actions));
+    }
+    if settings.show_help {
+        egui::Window::new("Keys (F1)")
+            .collapsible(false)
+            .anchor(egui::Align2::CENTER_CENTER, [0.0, 0.0])
+            .show(ctx, |ui| {
+                egui::Grid::new("help").striped(true).show(ui, |ui| {
+                    for (k, what) in HELP {
+                        ui.strong(*k);
+                        ui.label(*what);
+                        ui.end_row();
+                    }
+                });
+            });
+    }
+    if let Some(m) = view.message {
+        egui::Area::new(egui::Id::unique("terawalk message"))
+            .anchor(egui::Align2::CENTER_BOTTOM, [0.0, -12.0])
+            .show(ctx, |ui| {
+                egui::Frame::popup(ui.style()).show(ui, |ui| ui.label(m));
+            });
+    }
+    actions
+}
+
+fn hud(ui: &mut egui::Ui, view: &View) {
+    egui::Grid::new("hud").num_columns(2).show(ui, |ui| {
+        for (k, v) in view.hud.lines() {
+            ui.label(k);
+            ui.monospace(v);
+            ui.end_row();
+        }
+    });
+    ui.label("frame time (top = max(largest, 33 ms))");
+    let (rect, _) = ui.allocate_exact_size(egui::vec2(240.0, 50.0), egui::Sense::hover());
+    let p = ui.painter_at(rect);
+    p.rect_filled(rect, 2.0, Color32::from_black_alpha(120));
+    let pts: Vec<Pos2> = view
+        .times
+        .graph(rect.width(), rect.height())
+        .into_iter()
+        .map(|[x, y]| rect.min + egui::vec2(x, y))
+        .collect();
+    if pts.len() > 1 {
+        p.add(egui::Shape::line(pts, Stroke::new(1.0, Color32::LIGHT_GREEN)));
+    }
+    if let Some(n) = view.recording {
+        ui.colored_label(Color32::RED, format!("● recording, {n} frames"));
+    }
+    if let Some((i, n)) = view.playing {
+        ui.colored_label(Color32::LIGHT_BLUE, format!("▶ playing frame {i} / {n}"));
+    }
+}
+
+fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<Action>) {
+    ui.horizontal(|ui| {
+        ui.label("camera");
+        for m in [Mode::Fly, Mode::Walk, Mode::Orbit] {
+            if ui.selectable_label(view.mode == m, m.name()).clicked() {
+                actions.push(Action::SetMode(m));
+            }
+        }
+    });
+    ui.add(egui::Slider::new(&mut s.pixel_error, PIXEL_ERROR_RANGE).logarithmic(true).text("pixel error"));
+    egui::ComboBox::from_label("occlusion").selected_text(s.occlusion.name()).show_ui(ui, |ui| {
+        for o in OcclusionStrategy::ALL {
+            ui.add_enabled_ui(o.available(), |ui| {
+                ui.selectable_value(&mut s.occlusion, o, o.name());
+            });
+        }
+    });
+    ui.checkbox(&mut s.frustum_culling, "frustum culling");
+    ui.checkbox(&mut s.lod_freeze, "freeze LOD cut (L)");
+    let mut mib = (s.memory_budget >> 20).max(1);
+    let (lo, hi) = (*MEMORY_RANGE.start() >> 20, *MEMORY_RANGE.end() >> 20);
+    if ui.add(egui::Slider::new(&mut mib, lo..=hi).logarithmic(true).text("memory MiB")).changed() {
+        s.memory_budget = mib << 20;
+    }
+    egui::ComboBox::from_label("colour").selected_text(s.coloring.name()).show_ui(ui, |ui| {
+        for c in Coloring::ALL {
+            ui.selectable_value(&mut s.coloring, c, c.name());
+        }
+    });
+    ui.add(egui::Slider::new(&mut s.render_scale, 0.25..=1.0).text("render scale"));
+    ui.separator();
+    let mut debug = s.debug_view;
+    if ui.checkbox(&mut debug, "third-person debug view (F)").changed() {
+        actions.push(Action::ToggleDebugView);
+    }
+    ui.checkbox(&mut s.show_boxes, "node boxes (pink visible, yellow occluded)");
+    ui.separator();
+    ui.horizontal(|ui| {
+        let rec = if view.recording.is_some() { "stop recording" } else { "record (R)" };
+        if ui.button(rec).clicked() {
+            actions.push(Action::ToggleRecording);
+        }
+        let play = if view.playing.is_some() { "stop" } else { "play (P)" };
+        if ui.add_enabled(view.has_path || view.playing.is_some(), egui::Button::new(play)).clicked() {
+            actions.push(Action::TogglePlayback);
+        }
+    });
+    ui.horizontal(|ui| {
+        if ui.button("screenshot (F12)").clicked() {
+            actions.push(Action::Screenshot);
+        }
+        if ui.button("reset view").clicked() {
+            actions.push(Action::ResetView);
+        }
+        if ui.button("help (F1)").clicked() {
+            s.show_help = !s.show_help;
+        }
+    });
+}
