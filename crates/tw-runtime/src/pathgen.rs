@@ -177,6 +177,15 @@ pub fn metres_per_unit(units: &str) -> Option<f64> {
     })
 }
 
+/// A length for messages: three significant digits at any scale (`16.8`, `0.00212`, `1520`).
+pub fn format_length(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let digits = (2 - x.abs().log10().floor() as i64).clamp(0, 15) as usize;
+    format!("{x:.digits$}")
+}
+
 // ---------------------------------------------------------------------------------------------
 // Voxel grid
 // ---------------------------------------------------------------------------------------------
@@ -1142,8 +1151,9 @@ pub fn generate_path(
             .fold(0.0, f64::max);
         if horiz < 4.0 * eye {
             report.fallback = Some(format!(
-                "the scene is {horiz:.3} {u} across, less than 4 eye heights ({eye} {u}; units {units:?}): \
+                "the scene is {} {u} across, less than 4 eye heights ({eye} {u}; units {units:?}): \
                  nothing to walk through (give --eye-height in the model's units?)",
+                format_length(horiz),
                 u = if store.units().is_empty() { "units" } else { store.units() },
                 units = store.units(),
             ));
@@ -1296,8 +1306,9 @@ fn walk_path(
 ) -> Result<(Vec<PathFrame>, WalkEnd), String> {
     if g.v > g.eye / 3.0 {
         return Err(format!(
-            "the voxel cap leaves voxels of {:.3}, too coarse for an eye height of {} (raise --max-voxels)",
-            g.v, g.eye
+            "the voxel cap leaves voxels of {}, too coarse for an eye height of {} (raise --max-voxels)",
+            format_length(g.v),
+            g.eye
         ));
     }
     if g.nodes.is_empty() {
@@ -1317,10 +1328,10 @@ fn walk_path(
                 Some(c) if area(sizes_a[c]) >= min_outdoor => (comp_a, c, RegionKind::Outdoor),
                 Some(c) => {
                     return Err(format!(
-                        "no walkable space: the largest walkable region has {:.1} square units of \
-                         floor, less than the {:.1} (100 eye heights squared) a walk in the open needs",
-                        area(sizes_a[c]),
-                        min_outdoor
+                        "no walkable space: the largest walkable region has {} square units of \
+                         floor, less than the {} (100 eye heights squared) a walk in the open needs",
+                        format_length(area(sizes_a[c])),
+                        format_length(min_outdoor)
                     ))
                 }
                 None => return Err("no walkable space".into()),
@@ -1455,6 +1466,14 @@ mod tests {
         for (a, b) in p.iter().zip(&s).skip(10).take(30) {
             assert!(dist3(*a, *b) < 1e-9);
         }
+    }
+
+    #[test]
+    fn lengths_have_three_significant_digits() {
+        assert_eq!(format_length(16.84), "16.8");
+        assert_eq!(format_length(0.0021234), "0.00212");
+        assert_eq!(format_length(1516.3), "1516");
+        assert_eq!(format_length(0.0), "0");
     }
 
     #[test]
