@@ -25,7 +25,7 @@
 //!    columns connect when their floors differ by at most a step and their free intervals
 //!    overlap by the body height (diagonals also need both orthogonal moves), so stairs work.
 //! 5. **Region**: the largest connected region of *covered* walkable spans (something above within
-//!    ten eye heights: inside buildings); if there is none of useful size, the largest walkable
+//!    three eye heights: inside buildings, not under a pipe rack); if there is none of useful size, the largest walkable
 //!    region in the open; if neither, no walk (the fly-around fallback says why).
 //! 6. **Route**: waypoints by farthest-point sampling over graph distances (seeded start),
 //!    connected by A* shortest paths whose edge costs grow near the region's border (so walks
@@ -619,7 +619,8 @@ impl WalkGrid {
         let r = self.radius as i32;
         let mut node_of = vec![NONE; self.spans.len()];
         let mut nodes = Vec::new();
-        let cover_max = ((10.0 * self.eye) / self.v) as usize;
+        // A ceiling within three eye heights (5.1 m: storeys, not the sky under a pipe rack).
+        let cover_max = ((3.0 * self.eye) / self.v).ceil() as usize;
         for col in 0..self.nx * self.ny {
             'span: for s in self.col_spans(col) {
                 let sp = self.spans[s];
@@ -1342,7 +1343,7 @@ fn walk_path(
     report.region = Some(kind);
     report.region_spans = region.nodes.len();
     let step = speed / fps;
-    let length = step * (frames - 1) as f64;
+    let length = step * (frames.max(2) - 1) as f64;
     let (points, waypoints) = route(&region, rng, length);
     report.waypoints = waypoints;
     if points.len() < 2 || polyline_length(&points) <= 0.0 {
