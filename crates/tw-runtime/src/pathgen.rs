@@ -25,7 +25,7 @@
 //!    columns connect when their floors differ by at most a step and their free intervals
 //!    overlap by the body height (diagonals also need both orthogonal moves), so stairs work.
 //! 5. **Region**: the largest connected region of *covered* walkable spans (something above within
-//!    ten eye heights: inside buildings); if there is none of useful size, the largest walkable
+//!    three eye heights: inside buildings, not under a pipe rack); if there is none of useful size, the largest walkable
 //!    region in the open; if neither, no walk (the fly-around fallback says why).
 //! 6. **Route**: waypoints by farthest-point sampling over graph distances (seeded start),
 //!    connected by A* shortest paths whose edge costs grow near the region's border (so walks
@@ -175,6 +175,15 @@ pub fn metres_per_unit(units: &str) -> Option<f64> {
         "yd" | "yard" | "yards" => 0.9144,
         _ => return None,
     })
+}
+
+/// A length for messages: three significant digits at any scale (`16.8`, `0.00212`, `1520`).
+pub fn format_length(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    let digits = (2 - x.abs().log10().floor() as i64).clamp(0, 15) as usize;
+    format!("{x:.digits$}")
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -610,7 +619,8 @@ impl WalkGrid {
         let r = self.radius as i32;
         let mut node_of = vec![NONE; self.spans.len()];
         let mut nodes = Vec::new();
-        let cover_max = ((10.0 * self.eye) / self.v) as usize;
+        // A ceiling within three eye heights (5.1 m: storeys, not the sky under a pipe rack).
+        let cover_max = ((3.0 * self.eye) / self.v).ceil() as usize;
         for col in 0..self.nx * self.ny {
             'span: for s in self.col_spans(col) {
                 let sp = self.spans[s];
@@ -1142,8 +1152,9 @@ pub fn generate_path(
             .fold(0.0, f64::max);
         if horiz < 4.0 * eye {
             report.fallback = Some(format!(
-                "the scene is {horiz:.3} {u} across, less than 4 eye heights ({eye} {u}; units {units:?}): \
+                "the scene is {} {u} across, less than 4 eye heights ({eye} {u}; units {units:?}): \
                  nothing to walk through (give --eye-height in the model's units?)",
+                format_length(horiz),
                 u = if store.units().is_empty() { "units" } else { store.units() },
                 units = store.units(),
             ));
@@ -1296,8 +1307,9 @@ fn walk_path(
 ) -> Result<(Vec<PathFrame>, WalkEnd), String> {
     if g.v > g.eye / 3.0 {
         return Err(format!(
-            "the voxel cap leaves voxels of {:.3}, too coarse for an eye height of {} (raise --max-voxels)",
-            g.v, g.eye
+            "the voxel cap leaves voxels of {}, too coarse for an eye height of {} (raise --max-voxels)",
+            format_length(g.v),
+            g.eye
         ));
     }
     if g.nodes.is_empty() {
@@ -1317,10 +1329,10 @@ fn walk_path(
                 Some(c) if area(sizes_a[c]) >= min_outdoor => (comp_a, c, RegionKind::Outdoor),
                 Some(c) => {
                     return Err(format!(
-                        "no walkable space: the largest walkable region has {:.1} square units of \
-                         floor, less than the {:.1} (100 eye heights squared) a walk in the open needs",
-                        area(sizes_a[c]),
-                        min_outdoor
+                        "no walkable space: the largest walkable region has {} square units of \
+                         floor, less than the {} (100 eye heights squared) a walk in the open needs",
+                        format_length(area(sizes_a[c])),
+                        format_length(min_outdoor)
                     ))
                 }
                 None => return Err("no walkable space".into()),
@@ -1331,7 +1343,7 @@ fn walk_path(
     report.region = Some(kind);
     report.region_spans = region.nodes.len();
     let step = speed / fps;
-    let length = step * (frames - 1) as f64;
+    let length = step * (frames.max(2) - 1) as f64;
     let (points, waypoints) = route(&region, rng, length);
     report.waypoints = waypoints;
     if points.len() < 2 || polyline_length(&points) <= 0.0 {
@@ -1455,6 +1467,14 @@ mod tests {
         for (a, b) in p.iter().zip(&s).skip(10).take(30) {
             assert!(dist3(*a, *b) < 1e-9);
         }
+    }
+
+    #[test]
+    fn lengths_have_three_significant_digits() {
+        assert_eq!(format_length(16.84), "16.8");
+        assert_eq!(format_length(0.0021234), "0.00212");
+        assert_eq!(format_length(1516.3), "1516");
+        assert_eq!(format_length(0.0), "0");
     }
 
     #[test]

@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use tw_runtime::pathgen::{generate_path, PathOptions, PathPart, RegionKind};
+use tw_runtime::pathgen::{format_length as len, generate_path, PathOptions, PathPart, RegionKind};
 use tw_store::Store;
 
 use crate::cli::{PathArgs, PathPartArg};
@@ -57,12 +57,12 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     }
     if r.walk_frames > 0 {
         println!(
-            "walk: {} frames, {:.1} {unit_name} at {:.2} {unit_name}/s, eye height {} {unit_name}, {} region of \
-             {} walkable spans ({} in all), {} waypoints",
+            "walk: {} frames, {} {unit_name} at {} {unit_name}/s, eye height {} {unit_name}, {} region of {} \
+             walkable spans ({} in all), {} waypoints",
             r.walk_frames,
-            r.walk_length,
-            r.walk_length / (r.walk_frames.max(2) - 1) as f64 * args.fps,
-            r.eye_height,
+            len(r.walk_length),
+            len(r.walk_length / (r.walk_frames.max(2) - 1) as f64 * args.fps),
+            len(r.eye_height),
             match r.region {
                 Some(RegionKind::Interior) => "interior",
                 Some(RegionKind::Outdoor) => "outdoor",
@@ -73,8 +73,8 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
             r.waypoints
         );
         println!(
-            "  voxels: {:.3} {unit_name}, grid {} x {} x {}{}; {} coarse triangles from {} pages{}",
-            r.voxel_size,
+            "  voxels: {} {unit_name}, grid {} x {} x {}{}; {} coarse triangles from {} pages{}",
+            len(r.voxel_size),
             r.grid[0],
             r.grid[1],
             r.grid[2],
@@ -89,17 +89,17 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
         );
     }
     if r.fly_frames > 0 {
-        println!("fly: {} frames, {:.1} {unit_name}", r.fly_frames, r.fly_length);
+        println!("fly: {} frames, {} {unit_name}", r.fly_frames, len(r.fly_length));
     }
     println!(
-        "wrote {}: {} frames ({:.1} s at {} fps; walk {} / fly {}), {:.1} {unit_name} in {:.2} s",
+        "wrote {}: {} frames ({:.1} s at {} fps; walk {} / fly {}), {} {unit_name} in {:.2} s",
         args.output.display(),
         path.frames.len(),
         path.duration_s(),
         args.fps,
         r.walk_frames,
         r.fly_frames,
-        r.walk_length + r.fly_length,
+        len(r.walk_length + r.fly_length),
         start.elapsed().as_secs_f64()
     );
     Ok(())
