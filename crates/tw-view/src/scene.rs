@@ -276,7 +276,14 @@ impl Scene {
         r.ensure_target(size);
         let target = r.target.as_ref().expect("made above");
         let grid_step = self.store.header().grid_step;
-        r.renderer.render_to_view(draw, grid_step, &pages.clusters(), &target.view, SCENE_FORMAT, (size[0], size[1]))?;
+        r.renderer.render_to_view(
+            draw,
+            grid_step,
+            &pages.clusters(),
+            &target.view,
+            SCENE_FORMAT,
+            (size[0], size[1]),
+        )?;
         let rs = r.renderer.stats();
         info.render_ms = t.elapsed().as_secs_f32() * 1e3;
         info.triangles = rs.triangles;
