@@ -7,7 +7,7 @@
 //!
 //! CAMERA is "eye;target;up;fovy" in input coordinates (as `terawalk render --camera`); `iso`
 //! (the default) frames the whole store like `terawalk render` without `--camera`. The backend
-//! comes from WGPU_BACKEND. Prints per frame: upload, render (encode + submit + GPU + readback)
+//! comes from WGPU_BACKEND; TW_DRAW_MODE=direct draws with a `draw_indexed` loop. Prints per frame: upload, render (encode + submit + GPU + readback)
 //! and the wall time of `render_selection`, then the median of the warm frames (all but the first).
 
 use std::time::Instant;
@@ -50,6 +50,10 @@ fn main() {
         t.elapsed().as_secs_f64() * 1e3
     );
     renderer.set_store_colors(&store);
+    if std::env::var("TW_DRAW_MODE").as_deref() == Ok("direct") {
+        renderer.set_draw_mode(tw_gpu::DrawMode::Direct);
+    }
+    eprintln!("draw mode: {:?}", renderer.draw_mode());
     let cache = PageCache::new(&store, 1 << 30);
     cache.load_root_pages(&store);
     let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true };
