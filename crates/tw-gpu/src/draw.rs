@@ -45,7 +45,9 @@ pub(crate) struct Pipelines {
 fn storage_entry(binding: u32) -> wgpu::BindGroupLayoutEntry {
     wgpu::BindGroupLayoutEntry {
         binding,
-        visibility: wgpu::ShaderStages::FRAGMENT,
+        // Vertex: the shaded pipeline looks colours up per vertex (draw.wgsl vs_shade);
+        // fragment: the item buffer reads the slot table (ids.wgsl).
+        visibility: wgpu::ShaderStages::VERTEX_FRAGMENT,
         ty: wgpu::BindingType::Buffer {
             ty: wgpu::BufferBindingType::Storage { read_only: true },
             has_dynamic_offset: false,
@@ -99,7 +101,7 @@ impl Pipelines {
         let i = match self.shaded.iter().position(|(f, _)| *f == format) {
             Some(i) => i,
             None => {
-                let p = pipeline(device, &self.layout, &self.shade, "fs_main", format);
+                let p = pipeline(device, &self.layout, &self.shade, "vs_shade", "fs_main", format);
                 self.shaded.push((format, p));
                 self.shaded.len() - 1
             }
@@ -123,7 +125,7 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item = Some(pipeline(device, &self.layout, &module, "fs_items", ITEM_FORMAT));
+            self.item = Some(pipeline(device, &self.layout, &module, "vs_main", "fs_items", ITEM_FORMAT));
         }
         self.item.as_ref().expect("just created")
     }
@@ -133,6 +135,7 @@ fn pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
+    vertex: &str,
     fragment: &str,
     format: wgpu::TextureFormat,
 ) -> wgpu::RenderPipeline {
@@ -141,7 +144,7 @@ fn pipeline(
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some("vs_main"),
+            entry_point: Some(vertex),
             compilation_options: Default::default(),
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: UNIT,

@@ -58,8 +58,32 @@ fn base_color(object: u32, slot: u32) -> vec3<f32> {
     return unpack_srgb(u.params.z);
 }
 
+// The shaded pipeline's vertex stage: common.wgsl's, plus the triangle's linear base colour.
+// Every vertex of a triangle has the triangle's object and slot (pool.rs), so the flat colour
+// is the triangle's whichever vertex provokes. Computed per vertex rather than per fragment:
+// on CPU rasterizers (llvmpipe) the storage-buffer lookups with a varying index and the pow()
+// were most of the fragment cost, and interior views shade each pixel many times.
+struct ShadeOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) @interpolate(flat) base: vec3<f32>,
+};
+
+@vertex
+fn vs_shade(
+    @location(0) position: vec3<f32>,
+    @location(1) object: u32,
+    @location(2) slot: u32,
+) -> ShadeOut {
+    var out: ShadeOut;
+    out.clip = u.view_proj * vec4<f32>(position, 1.0);
+    out.world = position;
+    out.base = pow(base_color(object, slot), vec3<f32>(2.2));
+    return out;
+}
+
 @fragment
-fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
+fn fs_main(in: ShadeOut) -> @location(0) vec4<f32> {
     let to_eye = normalize(u.eye.xyz - in.world);
     let c = cross(dpdx(in.world), dpdy(in.world));
     let len = length(c);
@@ -73,8 +97,7 @@ fn fs_main(in: VertexOut) -> @location(0) vec4<f32> {
     }
     let head = max(dot(n, to_eye), 0.0);
     let sun = max(dot(n, u.sun.xyz), 0.0);
-    let base = pow(base_color(in.object, in.slot), vec3<f32>(2.2));
-    var rgb = min(base * (0.18 + 0.62 * head + 0.35 * sun), vec3<f32>(1.0));
+    var rgb = min(in.base * (0.18 + 0.62 * head + 0.35 * sun), vec3<f32>(1.0));
     if (u.sun.w > 0.5) {
         // A non-sRGB target (e.g. a Bgra8Unorm surface): encode here.
         rgb = pow(rgb, vec3<f32>(1.0 / 2.2));
