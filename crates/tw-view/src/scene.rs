@@ -135,6 +135,8 @@ pub struct Scene {
     bytes_read: u64,
     /// One more frame wanted (occlusion history after a change).
     settle: bool,
+    /// The cut of the last selected frame (to see whether it changed).
+    prev_cut: Vec<ClusterRef>,
     /// The GPU budget last asked for (the pool may clamp it to the device's limits).
     gpu_request: u64,
     last: FrameInfo,
@@ -155,6 +157,7 @@ impl Scene {
             bytes_read: 0,
             settle: false,
             gpu_request: 0,
+            prev_cut: Vec::new(),
             last: FrameInfo::default(),
         }
     }
@@ -339,8 +342,15 @@ impl Scene {
             self.bytes_read += d.info.stream.bytes_read;
             self.drawn = d.drawn;
             self.occluded = d.occluded;
+            // Occlusion culling tests what was not visible last frame: after a change of the camera
+            // or of the cut (pages arrived), one more frame gives the settled counts.
+            let cut = &walk.selection().clusters;
+            let cut_changed = *cut != self.prev_cut;
+            if cut_changed {
+                self.prev_cut.clone_from(cut);
+            }
             self.settle = settings.occlusion != crate::settings::OcclusionStrategy::None
-                && self.key.as_ref() != Some(&key);
+                && (self.key.as_ref() != Some(&key) || cut_changed);
             self.key = Some(key);
         }
         g.ensure_target(size);
