@@ -87,20 +87,66 @@ fn generate_then_stats_then_preview_round_trip() {
 #[test]
 fn demo_runs_on_a_small_plant_and_reuses_its_cache() {
     let dir = tempfile::tempdir().unwrap();
-    let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
+    let demo = ["demo", "--triangles", "30k", "--dir", "cache", "--frames", "12"];
+    let o = terawalk(&demo, dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
     assert!(out.contains("generated"), "{out}");
-    assert!(dir.path().join("cache/plant-outside.png").exists());
-    assert!(dir.path().join("cache/plant-inside.png").exists());
     assert!(dir.path().join("cache/plant-30000-s1.tw").exists());
-    if std::env::var("TERAWALK_REQUIRE_GPU").is_ok_and(|v| v == "1") {
-        assert!(dir.path().join("cache/plant-render-lod.png").exists(), "{out}");
-    }
+    assert!(dir.path().join("cache/plant-30000-s1-path.json").exists());
     assert!(out.contains("verified"), "{out}");
-    let o = terawalk(&["demo", "--triangles", "30k", "--dir", "cache"], dir.path());
+    // The bench ran every strategy and the reference, and wrote its report.
+    let report = std::fs::read_to_string(dir.path().join("cache/bench-report/report.json")).unwrap();
+    for run in ["\"none\"", "\"hzb\"", "\"queries\"", "\"reference\""] {
+        assert!(report.contains(run), "report.json lacks the run {run}");
+    }
+    let html = std::fs::read_to_string(dir.path().join("cache/bench-report/index.html")).unwrap();
+    assert!(
+        html.contains("<svg") && html.contains("data:image/png;base64,"),
+        "index.html lacks plots or frames"
+    );
+    assert!(out.contains("faster than the reference") && out.contains("PSNR"), "{out}");
+    let o = terawalk(&demo, dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(stdout(&o).contains("store: cached"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("store: cached") && stdout(&o).contains("path: cached"), "{}", stdout(&o));
+}
+
+#[test]
+fn path_then_bench_with_exact_visibility_and_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["path", "p.tw", "-o", "path.json", "--frames", "40"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("40 frames"), "{}", stdout(&o));
+    let bench = [
+        "bench",
+        "p.tw",
+        "--path",
+        "path.json",
+        "--frames",
+        "6",
+        "--exact",
+        "--size",
+        "320x180",
+        "--out",
+        "rep",
+    ];
+    let o = terawalk(&bench, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(dir.path().join("rep/report.json")).unwrap();
+    assert!(report.contains("exact_visible_triangles") && report.contains("culling_efficiency"), "{report}");
+    // Bad input: a clear error and a non-zero exit, no report written.
+    let o = terawalk(&["bench", "p.tw", "--path", "missing.json", "--out", "rep2"], dir.path());
+    assert!(!o.status.success() && stderr(&o).contains("missing.json"), "{}", stderr(&o));
+    let o = terawalk(&["bench", "p.tw", "--occlusion", "magic", "--out", "rep2"], dir.path());
+    assert!(!o.status.success() && stderr(&o).contains("magic"), "{}", stderr(&o));
+    std::fs::write(dir.path().join("bad.json"), "{\"format\": \"terawalk-path\", \"frames\": [").unwrap();
+    let o = terawalk(&["bench", "p.tw", "--path", "bad.json", "--out", "rep2"], dir.path());
+    assert!(!o.status.success() && stderr(&o).contains("bad.json"), "{}", stderr(&o));
+    assert!(!dir.path().join("rep2").exists());
 }
 
 #[test]

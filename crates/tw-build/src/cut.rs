@@ -181,6 +181,54 @@ pub fn check_dag(dag: &LodDag, grid: Option<&Grid>) -> Result<(), String> {
             return Err(format!("group {gi}: error {} but replaced = {}", g.error, replaced[gi]));
         }
     }
+    check_steps(dag)
+}
+
+/// The store tells the simplification steps apart by error and sphere alone (docs/FORMAT.md,
+/// invariant 12): the sources of one group with equal error and sphere must have the same
+/// parents, so that the availability rule replaces them together. Two different steps whose
+/// input groups share a parent and whose error and sphere are equal break this.
+pub fn check_steps(dag: &LodDag) -> Result<(), String> {
+    let sources: Vec<Vec<u32>> = dag
+        .groups
+        .iter()
+        .map(|g| {
+            let mut s: Vec<u32> = g
+                .clusters
+                .iter()
+                .filter_map(|&c| dag.clusters.get(c as usize))
+                .flat_map(|c| c.refined_from.iter().copied())
+                .collect();
+            s.sort_unstable();
+            s.dedup();
+            s
+        })
+        .collect();
+    let mut parents: Vec<Vec<u32>> = vec![Vec::new(); dag.groups.len()];
+    for (gi, s) in sources.iter().enumerate() {
+        for &r in s {
+            if let Some(p) = parents.get_mut(r as usize) {
+                p.push(gi as u32);
+            }
+        }
+    }
+    let key = |s: u32| {
+        let g = &dag.groups[s as usize];
+        (g.error.to_bits(), g.sphere.center.map(f32::to_bits), g.sphere.radius.to_bits())
+    };
+    for (gi, s) in sources.iter().enumerate() {
+        let mut s: Vec<u32> = s.iter().copied().filter(|&r| (r as usize) < dag.groups.len()).collect();
+        s.sort_by_key(|&r| (key(r), r));
+        for w in s.windows(2) {
+            if key(w[0]) == key(w[1]) && parents[w[0] as usize] != parents[w[1] as usize] {
+                return Err(format!(
+                    "group {gi}: sources {} and {} have the same error and sphere but different parents \
+                     {:?} and {:?}",
+                    w[0], w[1], parents[w[0] as usize], parents[w[1] as usize]
+                ));
+            }
+        }
+    }
     Ok(())
 }
 

@@ -18,6 +18,19 @@
 //! contains member self spheres, finite errors ≥ [`MIN_ERROR`] so that τ = 0 selects exactly the
 //! input clusters), in group order, so that the equalities above still hold.
 //!
+//! Step identity: the store tells a cluster's simplification step (its source group, here) by
+//! error and sphere alone (docs/FORMAT.md, "Links" and invariant 12), so no two groups of a cell
+//! with a finite error may have equal ones. meshopt can give them equal ones: a group's bounds
+//! are the merge of its clusters' bounds, which are the bounds of the group they were simplified
+//! from, so a group whose clusters all come from one step (often a single cluster) gets that
+//! step's sphere exactly, and its error too when its own simplification error is smaller. Two
+//! such groups made from one step then have equal error and sphere but different parents, and
+//! the runtime's availability rule could replace one without the other (measured: 2 of 16
+//! plant cells of 20k–65k triangles; stores of 10M-triangle plants failed `--verify`). Where a
+//! group's error and sphere equal an earlier group's, its error is raised by one ulp until they
+//! are unique (in group order, before any cluster copies it, so the equalities and monotonicity
+//! above still hold).
+//!
 //! Geometry: meshopt works on cell-local grid coordinates as f32 (exact: they fit in 24 bits);
 //! errors and spheres are converted to scene units (`grid * step`). Simplification only keeps
 //! existing vertices, so every output vertex is an input grid point (checked). Locked at every
@@ -179,6 +192,7 @@ pub fn build_cell_lod_with_seams(
 
     // Map onto the model, in group order (a cluster's source group precedes its own group).
     let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
+    let mut steps: std::collections::HashSet<(u32, [u32; 4])> = std::collections::HashSet::new();
     for raw in raw_groups {
         let mut g = LodGroup { error: raw.error, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
         for &ci in &g.clusters {
@@ -206,11 +220,21 @@ pub fn build_cell_lod_with_seams(
         }
         if g.error.is_finite() {
             g.error = g.error.max(MIN_ERROR);
+            // One step, one (error, sphere): see the module comment ("Step identity").
+            while !steps.insert(step_key(&g)) {
+                g.error = g.error.next_up();
+            }
         }
         groups.push(g);
     }
     debug_assert!(originals.all_taken());
     LodDag { clusters, groups }
+}
+
+/// The bits of a group's error and sphere: what the store identifies a simplification step by.
+fn step_key(g: &LodGroup) -> (u32, [u32; 4]) {
+    let s = &g.sphere;
+    (g.error.to_bits(), [s.center[0], s.center[1], s.center[2], s.radius].map(f32::to_bits))
 }
 
 /// Non-degenerate, in-range triangles and their objects.
@@ -588,6 +612,36 @@ mod tests {
         let dag = build_cell_lod(&mesh, &grid, &LodParams { max_triangles: 64, max_vertices: 64 });
         assert!(dag.clusters.iter().all(|c| c.indices.len() <= 64 * 3 && c.positions.len() <= 64));
         check_cell(&mesh, &grid, &dag);
+    }
+
+    /// Regression: `terawalk info --verify` rejected stores of 10M-triangle plants ("sources
+    /// 8295 and 8296 have the same error and sphere (one simplification step) but different
+    /// parents"): meshopt gave two groups made from one step that step's bounds, so two steps
+    /// had equal error and sphere. These two cells had such pairs before the fix.
+    #[test]
+    fn sources_with_equal_error_and_sphere_have_the_same_parents() {
+        for (triangles, seed) in [(20_000, 4), (65_000, 3)] {
+            let soup = plant(triangles, seed);
+            let grid = grid_for(&[&soup]);
+            let mesh = cell(&soup, &grid);
+            let dag = build(&mesh, &grid);
+            check_steps(&dag).unwrap_or_else(|e| panic!("plant {triangles} seed {seed}: {e}"));
+            let mut keys: Vec<_> = dag.groups.iter().filter(|g| g.error.is_finite()).map(step_key).collect();
+            let steps = keys.len();
+            keys.sort_unstable();
+            keys.dedup();
+            assert_eq!(
+                keys.len(),
+                steps,
+                "plant {triangles} seed {seed}: every step has its own error and sphere"
+            );
+            // Not check_cell: plant(20_000, 4) has 6 crack edges at τ ≈ 17.99 with and without
+            // this fix (a separate, pre-existing problem).
+            check_dag(&dag, Some(&grid)).unwrap();
+            for tau in taus(&dag) {
+                check_complete(&dag, tau).unwrap();
+            }
+        }
     }
 
     /// Throughput on a ~1.3M-triangle sphere; run with

@@ -46,6 +46,8 @@ pub struct Availability {
     group_avail: Vec<bool>,
     walk_stamp: Vec<u32>,
     stack: Vec<u32>,
+    /// Whether looking a page up marks it used in the cache (LRU); off for prefetch views.
+    peek_only: bool,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -101,6 +103,7 @@ impl Availability {
         for p in self.touched.drain(..) {
             self.page_state[p as usize] = Snap::Missing;
         }
+        self.peek_only = false;
         self.frame = self.frame.wrapping_add(1);
         if self.frame == 0 {
             // Stamps wrapped: clear them so that no stale entry reads as current.
@@ -111,6 +114,12 @@ impl Availability {
         }
     }
 
+    /// With `true`, pages first looked up from now on are not marked used in the cache (for the
+    /// prefetch views, which must not change what LRU evicts). Reset by [`begin`](Self::begin).
+    pub fn set_peek_only(&mut self, peek_only: bool) {
+        self.peek_only = peek_only;
+    }
+
     fn snap(&mut self, cache: &PageCache, page: u32) -> &Snap {
         let i = page as usize;
         if i >= self.page_stamp.len() {
@@ -118,7 +127,8 @@ impl Availability {
         }
         if self.page_stamp[i] != self.frame {
             self.page_stamp[i] = self.frame;
-            self.page_state[i] = match cache.state(page) {
+            let state = if self.peek_only { cache.peek_state(page) } else { cache.state(page) };
+            self.page_state[i] = match state {
                 PageState::Resident(p) => {
                     self.touched.push(page);
                     Snap::Resident(p)

@@ -352,6 +352,16 @@ impl PageCache {
         }
     }
 
+    /// Like [`state`](Self::state) but without marking the page used (prefetch views look at
+    /// pages without making them recently used).
+    pub fn peek_state(&self, page: u32) -> PageState {
+        match self.lock().slots.get(page as usize) {
+            Some(Slot::Resident { page, .. }) => PageState::Resident(page.clone()),
+            Some(Slot::Empty) => PageState::Missing,
+            Some(Slot::Failed(_)) | None => PageState::Failed,
+        }
+    }
+
     /// Whether `page` is resident or has failed (nothing left to load), or does not exist.
     pub fn is_settled(&self, page: u32) -> bool {
         !matches!(self.lock().slots.get(page as usize), Some(Slot::Empty))

@@ -341,6 +341,8 @@ impl Streamer {
         );
         let mut prefetch = Requests::default();
         if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below {
+            // Prefetch views do not refresh pages in the LRU order.
+            self.availability.set_peek_only(true);
             for (cam, opts) in prefetch_views(camera, &self.history, options, &self.options.prefetch) {
                 self.selector.select_available(
                     store,
@@ -353,6 +355,7 @@ impl Streamer {
                 );
             }
             prefetch.0.retain(|p, _| !demand.0.contains_key(p));
+            self.availability.set_peek_only(false);
         }
         self.history.push(*camera);
         let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();

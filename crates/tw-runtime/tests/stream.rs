@@ -357,20 +357,35 @@ fn corrupt_page_while_streaming_falls_back_to_ancestors() {
 
 /// Stalls over a smooth path with a slow loader (a few pages per frame, loaded on the test's
 /// thread so the figures are deterministic), with and without prefetch.
-fn smooth_path_stalls(prefetch: bool, pages_per_frame: usize, budget_share: f64) -> (u64, u64, u64, u64) {
+fn smooth_path_stalls(
+    prefetch: PrefetchOptions,
+    pages_per_frame: usize,
+    budget_share: f64,
+) -> (u64, u64, u64, u64) {
     let store = open(small_pages_plant_path());
     let sizes = page_sizes(&store);
     let budget = (sizes.iter().sum::<u64>() as f64 * budget_share) as u64;
     let mut streamer = Streamer::new(store.clone(), manual(budget)).unwrap();
-    streamer.set_prefetch(PrefetchOptions { enabled: prefetch, ..Default::default() });
+    streamer.set_prefetch(prefetch);
     let (c, r) = scene_sphere(&store);
+    // Towards the centre while circling: 1.6 r to 0.5 r in 100 frames, a quarter turn.
+    let at = |i: usize| {
+        let t = i as f32 / 100.0;
+        let a = t * 1.5;
+        let eye = c + Vec3::new(a.cos(), a.sin(), 0.3).normalize() * r * (1.6 - 1.1 * t);
+        camera(eye, c + Vec3::new(0.0, 0.0, 0.1 * r))
+    };
+    // Warm start: the first view is loaded before the walk starts (as far as the budget allows).
+    for _ in 0..50 {
+        let f = streamer.frame(&at(0), &opts(1.0, true));
+        if f.stats.pages_requested == 0 {
+            break;
+        }
+        streamer.load_queued(usize::MAX);
+    }
     let (mut stalls, mut loaded, mut prefetched, mut dropped) = (0, 0, 0, 0);
     for i in 0..100 {
-        // Towards the centre and turning a little: 2 r to 0.8 r in 100 frames.
-        let t = i as f32 / 100.0;
-        let a = t * 0.6;
-        let eye = c + Vec3::new(a.cos(), a.sin(), 0.3).normalize() * r * (2.0 - 1.2 * t);
-        let cam = camera(eye, c + Vec3::new(0.0, 0.0, 0.1 * r));
+        let cam = at(i);
         let f = streamer.frame(&cam, &opts(1.0, true));
         stalls += f.stats.stalls_avoided;
         loaded += f.stats.pages_loaded;
@@ -386,9 +401,18 @@ fn prefetch_reduces_stalls_on_a_smooth_path() {
     let store = open(small_pages_plant_path());
     let roots = store.pages().iter().filter(|p| p.is_root()).count();
     eprintln!("small-pages plant: {} pages, {roots} root pages", store.pages().len());
-    for (k, share) in [(1, 2.0), (2, 2.0), (4, 2.0), (4, 0.5)] {
-        let (without, lw, _, _) = smooth_path_stalls(false, k, share);
-        let (with, l, p, d) = smooth_path_stalls(true, k, share);
+    let off = PrefetchOptions { enabled: false, ..Default::default() };
+    for (k, share) in [(1, 2.0), (2, 2.0), (4, 2.0), (2, 0.3)] {
+        let (without, lw, _, _) = smooth_path_stalls(off, k, share);
+        let (with, l, p, d) = smooth_path_stalls(PrefetchOptions::default(), k, share);
+        for (name, variant) in [
+            ("always", PrefetchOptions { idle_below: usize::MAX, ..Default::default() }),
+            ("8 frames ahead", PrefetchOptions { frames_ahead: 8.0, ..Default::default() }),
+            ("no tau/2", PrefetchOptions { tau_scale: 1.0, ..Default::default() }),
+        ] {
+            let (st, l, p, d) = smooth_path_stalls(variant, k, share);
+            eprintln!("  variant {name}: {st} stalls ({l} loaded, {p} prefetched, {d} dropped)");
+        }
         eprintln!(
             "smooth path, {k} pages/frame, budget {share} of the pages: stalls avoided {without} without prefetch \
              ({lw} pages loaded), {with} with ({l} loaded, {p} of them prefetched, {d} prefetched pages dropped)"

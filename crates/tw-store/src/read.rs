@@ -34,6 +34,24 @@ impl Data {
             Data::Vec(v) => v,
         }
     }
+
+    /// Drops the mapped file pages of `start..start + len` from the process's resident set once
+    /// they are decoded, so that reading a store larger than memory does not grow the resident
+    /// set with the file (memory budgets are checked against it). The mapping is read-only and
+    /// shared, so the bytes are read again from the file if they are touched later.
+    fn release(&self, start: usize, len: usize) {
+        #[cfg(unix)]
+        if let Data::Mmap(m) = self {
+            if len > 0 && start.saturating_add(len) <= m.len() {
+                // SAFETY: DontNeed on a read-only shared file mapping only drops clean pages;
+                // later reads fault them in from the file with the same content, so no
+                // reference into the map observes a change.
+                #[allow(unsafe_code)]
+                let _ = unsafe { m.unchecked_advise_range(memmap2::UncheckedAdvice::DontNeed, start, len) };
+            }
+        }
+        let _ = (start, len);
+    }
 }
 
 /// An open store. Cheap to query; pages are decoded on demand.
@@ -384,7 +402,9 @@ impl Store {
         let err =
             |offset: u64, msg: String| StoreError::Page { path: self.path.clone(), page: index, offset, msg };
         let clusters = codec::decode_page(bytes, p.cluster_count as usize)
-            .map_err(|e| err(p.offset + e.offset as u64, e.msg))?;
+            .map_err(|e| err(p.offset + e.offset as u64, e.msg));
+        self.data.release(p.offset as usize, p.compressed_len as usize);
+        let clusters = clusters?;
         let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
         let decoded: usize =
             clusters.iter().map(|c| codec::decoded_len(c.positions.len(), c.triangle_count())).sum();
