@@ -231,8 +231,10 @@ pub struct RenderArgs {
 pub enum OcclusionArg {
     /// No occlusion culling.
     None,
-    /// GigaWalk's hierarchical Z-buffer (not in the viewer yet).
+    /// Two-pass, GigaWalk's CPU hierarchical Z-buffer.
     Hzb,
+    /// Two-pass, hardware occlusion queries (Yoon et al. 2003).
+    Queries,
 }
 
 #[derive(Args, Debug)]

@@ -159,6 +159,16 @@ fn scripted_run(backend: &str) {
 
 /// The run's folder, or None when it was skipped.
 fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) -> Option<tempfile::TempDir> {
+    scripted_run_on(store(), backend, extra, check_image).map(|(dir, _)| dir)
+}
+
+/// [`scripted_run_with`] on any store; also returns the viewer's stderr.
+fn scripted_run_on(
+    store_file: &Path,
+    backend: &str,
+    extra: &[&str],
+    check_image: bool,
+) -> Option<(tempfile::TempDir, String)> {
     // One Xvfb at a time: `xvfb-run -a` picks a free display number racily.
     static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
@@ -171,11 +181,11 @@ fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) -> Option
         return None;
     };
     let dir = tempfile::tempdir().unwrap();
-    std::fs::write(dir.path().join("path.json"), circle_path(store(), 6)).unwrap();
+    std::fs::write(dir.path().join("path.json"), circle_path(store_file, 6)).unwrap();
     let shot = dir.path().join("shot.png");
     let mut cmd = Command::new(xvfb_run);
     cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view"])
-        .arg(store())
+        .arg(store_file)
         .args(["--path", "path.json", "--exit-after", "8", "--size", "480x320", "--screenshot"])
         .arg(&shot)
         .args(extra)
@@ -197,13 +207,13 @@ fn scripted_run_with(backend: &str, extra: &[&str], check_image: bool) -> Option
     assert!(!err.contains("panicked"), "{err}");
     assert!(text(&o.stdout).contains("8 frames"), "{}", text(&o.stdout));
     if !check_image {
-        return Some(dir);
+        return Some((dir, err));
     }
     let (covered, colours) = coverage(&shot);
-    eprintln!("{backend}: {:.1} % covered, {colours} colours", covered * 100.0);
+    eprintln!("{backend} {extra:?}: {:.1} % covered, {colours} colours", covered * 100.0);
     assert!(covered > 0.05, "the screenshot shows almost nothing ({:.2} %)", covered * 100.0);
     assert!(colours >= 8, "the screenshot has only {colours} colours");
-    Some(dir)
+    Some((dir, err))
 }
 
 #[test]
@@ -235,5 +245,50 @@ fn walk_orbit_and_debug_view_run_under_xvfb() {
         // The HUD and panels (text) over the model and its debug lines: many colours.
         let (covered, colours) = coverage(&dir.path().join("win.png"));
         assert!(covered > 0.05 && colours >= 20, "window screenshot: {covered} covered, {colours} colours");
+    }
+}
+
+#[test]
+fn occlusion_culling_under_xvfb_shows_the_model() {
+    // hzb reads the own depth back and queries test against it: the frame is drawn into the
+    // renderer's own target and copied into the window's texture.
+    scripted_run_with("vulkan", &["--occlusion", "hzb"], true);
+    // Queries in the third-person debug view (occluded node boxes in yellow).
+    if let Some(dir) = scripted_run_with(
+        "vulkan",
+        &["--occlusion", "queries", "--debug-view", "--screenshot-window", "win.png"],
+        true,
+    ) {
+        let (covered, colours) = coverage(&dir.path().join("win.png"));
+        assert!(covered > 0.05 && colours >= 20, "window screenshot: {covered} covered, {colours} colours");
+    }
+}
+
+#[test]
+fn a_corrupt_page_does_not_stop_the_viewer() {
+    // One finest-level page's bytes are damaged after the store was written: the store opens
+    // (the page table is intact), the page fails its checksum when streamed, is logged, and its
+    // groups are drawn by their ancestors.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("damaged.tw");
+    std::fs::copy(store(), &file).unwrap();
+    let page = {
+        let st = tw_store::Store::open(&file).unwrap();
+        let pages = st.pages();
+        let p = pages
+            .iter()
+            .filter(|p| !p.is_root() && p.compressed_len > 16)
+            .min_by_key(|p| p.level_min)
+            .copied()
+            .expect("a non-root page");
+        (p.offset, p.compressed_len)
+    };
+    let mut bytes = std::fs::read(&file).unwrap();
+    for b in &mut bytes[(page.0 + page.1 as u64 / 4) as usize..][..8] {
+        *b ^= 0xa5;
+    }
+    std::fs::write(&file, &bytes).unwrap();
+    if let Some((_, err)) = scripted_run_on(&file, "vulkan", &["--error", "0"], true) {
+        assert!(err.contains("failed to load"), "the damaged page was not reported: {err}");
     }
 }

@@ -368,3 +368,100 @@ fn lookup<'a>(
         })
         .collect()
 }
+
+pub use occlude::Culled;
+
+/// One frame drawn by [`Walkthrough::draw_frame`]: its statistics and which clusters were
+/// drawn and found occluded; the image is in the renderer's own colour target.
+#[derive(Clone, Debug, Default)]
+pub struct DrawnFrame {
+    pub info: FrameInfo,
+    /// Clusters drawn (the cut after occlusion culling).
+    pub drawn: Vec<ClusterRef>,
+    /// Clusters of the cut hidden by occlusion culling.
+    pub occluded: Vec<ClusterRef>,
+}
+
+/// For interactive front ends (the viewer): frames without readback, a new streamer or
+/// renderer without a new walkthrough.
+impl Walkthrough {
+    /// Replaces the streamer by one with `stream`'s options (a new memory budget, say): the
+    /// resident pages are dropped (root pages loaded again) and the frame-to-frame state is
+    /// forgotten. The old streamer's loaders finish their current page and stop.
+    pub fn set_stream_options(&mut self, stream: StreamOptions) -> Result<(), FrameError> {
+        let store = self.streamer.store().clone();
+        self.streamer = Streamer::new(store, stream)?;
+        self.selection = Selection::default();
+        self.occlusion.reset();
+        Ok(())
+    }
+
+    /// Replaces the renderer (an own target of another size, on the same device, say) and
+    /// returns the old one; the store's object colours are set on the new one and the
+    /// occlusion history is forgotten.
+    pub fn replace_renderer(&mut self, mut renderer: Renderer) -> Renderer {
+        renderer.set_store_colors(self.streamer.store());
+        self.occlusion.reset();
+        std::mem::replace(&mut self.renderer, renderer)
+    }
+
+    /// [`frame`](Self::frame) without reading the image back: the frame is left in the
+    /// renderer's own colour target ([`Renderer::color_texture`]) for the caller to show or
+    /// copy. With streaming it never waits for the disk; it waits for the GPU only where the
+    /// occlusion strategy does (depth read-back for `hzb`, query results for `queries`).
+    /// `times.render` and `times.total` therefore do not include the GPU finishing the frame.
+    pub fn draw_frame(
+        &mut self,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<DrawnFrame, FrameError> {
+        let start = Instant::now();
+        let (w, h) = self.renderer.size();
+        let options =
+            SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
+        let store = self.streamer.store().clone();
+        let mut stream = StreamStats::default();
+        let pages: Vec<(u32, Arc<ResidentPage>)> = if settings.wait_for_pages {
+            self.selection = self.streamer.select_blocking(camera, &options);
+            resident_pages(&self.streamer, &self.selection.clusters)
+        } else {
+            let frame = self.streamer.frame(camera, &options);
+            stream = frame.stats;
+            self.selection = frame.selection;
+            frame.pages
+        };
+        let select = start.elapsed();
+        let clusters = lookup(&pages, &self.selection.clusters);
+        let bounds = |c: &ClusterRef| {
+            let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+            pages[i].1.bounds.get(c.index_in_page as usize).copied()
+        };
+        let culled = occlude::draw_culled(
+            settings.occlusion,
+            &mut self.occlusion,
+            &mut self.renderer,
+            &store,
+            camera,
+            &clusters,
+            bounds,
+        )?;
+        let gpu = self.renderer.stats();
+        let info = FrameInfo {
+            times: FrameTimes {
+                select,
+                cull: culled.cull_time,
+                upload: gpu.upload,
+                render: gpu.render,
+                total: start.elapsed(),
+            },
+            select: self.selection.stats,
+            stream,
+            triangles: gpu.triangles,
+            clusters: gpu.clusters,
+            draw_calls: gpu.draw_calls,
+            occlusion: culled.stats,
+            gpu: gpu.pool,
+        };
+        Ok(DrawnFrame { info, drawn: culled.drawn, occluded: culled.occluded })
+    }
+}

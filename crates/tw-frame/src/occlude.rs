@@ -172,3 +172,90 @@ pub fn draw(
     cull_time += t.elapsed();
     Ok(Drawn { image, stats, cull_time })
 }
+
+/// What [`draw_culled`] did: the occlusion statistics and which clusters were drawn or hidden.
+#[derive(Clone, Debug, Default)]
+pub struct Culled {
+    pub stats: OcclusionStats,
+    pub cull_time: Duration,
+    /// The clusters drawn (both passes; with [`Occlusion::None`] the whole cut).
+    pub drawn: Vec<ClusterRef>,
+    /// Tested clusters hidden behind the occluders (HZB: not those covering no pixel centre).
+    pub occluded: Vec<ClusterRef>,
+}
+
+/// [`draw`] without reading the image back: the frame stays in the renderer's own colour
+/// target ([`Renderer::color_texture`]), for a viewer that shows it without waiting (only the
+/// strategies' own read-backs wait: the depth for `hzb`, the query results for `queries`).
+/// Also returns the clusters drawn and those found occluded (the debug view's boxes).
+pub fn draw_culled(
+    strategy: Occlusion,
+    state: &mut OcclusionState,
+    renderer: &mut Renderer,
+    store: &Store,
+    camera: &Camera,
+    clusters: &[(ClusterRef, &PageCluster)],
+    bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync,
+) -> Result<Culled, FrameError> {
+    let grid_step = store.header().grid_step;
+    renderer.begin_frame();
+    if strategy == Occlusion::None {
+        renderer.draw(Target::Own, camera, grid_step, clusters, true)?;
+        return Ok(Culled { drawn: clusters.iter().map(|c| c.0).collect(), ..Default::default() });
+    }
+    let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
+    let split = state.history.split(&refs);
+    let by_key: std::collections::HashMap<(u32, u32), &PageCluster> =
+        clusters.iter().map(|(k, c)| ((k.page, k.index_in_page), *c)).collect();
+    let decoded = |list: &[ClusterRef]| -> Vec<(ClusterRef, &PageCluster)> {
+        list.iter().filter_map(|k| by_key.get(&(k.page, k.index_in_page)).map(|c| (*k, *c))).collect()
+    };
+    let cluster_box =
+        |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
+
+    renderer.draw(Target::Own, camera, grid_step, &decoded(&split.occluders), true)?;
+    let mut stats = OcclusionStats {
+        occluders: split.occluders.len() as u64,
+        tested: split.candidates.len() as u64,
+        ..Default::default()
+    };
+    let (w, h) = renderer.size();
+    let cull_start = Instant::now();
+    let (visible, still_visible, occluded) = match strategy {
+        Occlusion::None => unreachable!("handled above"),
+        Occlusion::Hzb => {
+            let depth = renderer.read_depth()?;
+            let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
+                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?;
+            let view_proj = camera.projection_reverse_z(w as f32 / h as f32) * camera.view();
+            let t = test_clusters(&split.candidates, &hzb, &view_proj, cluster_box);
+            let o = test_clusters(&split.occluders, &hzb, &view_proj, cluster_box);
+            stats.culled = t.occluded.len() as u64;
+            stats.no_pixels = t.no_pixels.len() as u64;
+            (t.visible, o.visible, t.occluded)
+        }
+        Occlusion::Queries => {
+            let boxes: Vec<(Vec3, Vec3)> = split
+                .candidates
+                .iter()
+                .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
+                .collect();
+            let samples = renderer.query_boxes(camera, &boxes)?;
+            stats.queries = boxes.len() as u64;
+            let (visible, occluded): (Vec<_>, Vec<_>) =
+                split.candidates.iter().zip(&samples).partition(|(_, &s)| s > 0);
+            let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
+            let occluded: Vec<ClusterRef> = occluded.into_iter().map(|(k, _)| *k).collect();
+            stats.culled = occluded.len() as u64;
+            (visible, split.occluders.clone(), occluded)
+        }
+    };
+    let mut cull_time = cull_start.elapsed();
+    renderer.draw(Target::Own, camera, grid_step, &decoded(&visible), false)?;
+    let t = Instant::now();
+    state.history.update(&still_visible, &visible);
+    cull_time += t.elapsed();
+    let mut drawn = split.occluders;
+    drawn.extend_from_slice(&visible);
+    Ok(Culled { stats, cull_time, drawn, occluded })
+}

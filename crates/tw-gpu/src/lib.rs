@@ -316,6 +316,13 @@ impl Renderer {
         (&self.device, &self.queue)
     }
 
+    /// The own colour target (`Rgba8UnormSrgb`, usage `RENDER_ATTACHMENT | COPY_SRC`): a viewer
+    /// copies it into the texture it shows after drawing to [`Target::Own`] (no readback, no
+    /// wait).
+    pub fn color_texture(&self) -> &wgpu::Texture {
+        &self.color
+    }
+
     /// Size of the own target.
     pub fn size(&self) -> (u32, u32) {
         (self.width, self.height)

@@ -167,6 +167,7 @@ impl App {
             || self.recorder.is_some()
             || self.dragging
             || self.controller.is_moving()
+            || self.scene.wants_redraw()
             || self.keys.iter().any(|k| {
                 matches!(
                     k,
@@ -414,19 +415,20 @@ impl App {
         let scale = self.settings.render_scale.clamp(0.1, 1.0);
         let px = [((size.width as f32 * scale) as u32).max(1), ((size.height as f32 * scale) as u32).max(1)];
         if self.settings.memory_budget != self.scene.memory_budget() {
-            self.scene.set_memory_budget(self.settings.memory_budget);
+            self.scene.set_memory_budget(self.settings.memory_budget)?;
             self.drawn_key = None;
         }
         let key = (cull, draw, self.settings.clone(), px);
-        let rendered = self.drawn_key.as_ref() != Some(&key);
+        // Drawn again while the last frame is not final (pages arriving, occlusion settling).
+        let rendered = self.drawn_key.as_ref() != Some(&key) || self.scene.wants_redraw();
         if rendered {
             self.scene.frame(&cull, &draw, &self.settings, px)?;
             self.drawn_key = Some(key);
             self.times.push(dt);
         }
         let info = self.scene.last_frame();
-        let cs = self.scene.cache_stats();
-        self.disk.push(self.started.elapsed().as_secs_f64(), cs.bytes_read);
+        let ss = self.scene.stream_stats();
+        self.disk.push(self.started.elapsed().as_secs_f64(), self.scene.bytes_read());
 
         // 3. Debug view lines (in window points).
         let w = self.win.as_mut().expect("checked above");
@@ -449,7 +451,9 @@ impl App {
                 for (lo, hi) in self.scene.visible_node_boxes(MAX_BOXES) {
                     add(&debug_view::box_edges(lo, hi), debug_view::VISIBLE_COLOR);
                 }
-                // Occluded nodes (yellow) come with an occlusion strategy; none is wired yet.
+                for (lo, hi) in self.scene.occluded_node_boxes(MAX_BOXES) {
+                    add(&debug_view::box_edges(lo, hi), debug_view::OCCLUDED_COLOR);
+                }
             }
         }
 
@@ -486,13 +490,16 @@ impl App {
             nodes_visible: st.nodes_visited.saturating_sub(st.nodes_culled_frustum + st.nodes_culled_lod),
             nodes_frustum_culled: st.nodes_culled_frustum,
             nodes_lod_culled: st.nodes_culled_lod,
-            nodes_occlusion_culled: 0,
-            resident_bytes: cs.resident_bytes,
+            occlusion: self.settings.occlusion.name().to_string(),
+            occlusion_tested: info.occlusion.tested,
+            occlusion_culled: info.occlusion.culled,
+            cull_ms: info.cull_ms,
+            resident_bytes: ss.resident_bytes,
             memory_budget: self.scene.memory_budget(),
             gpu_bytes: self.scene.gpu_bytes(),
-            gpu_budget: 0,
+            gpu_budget: self.scene.gpu_budget(),
             pages_loading: self.scene.pages_loading(),
-            pages_failed: cs.failed_pages,
+            pages_failed: ss.failed_pages,
             disk_bytes_per_s: self.disk.per_second(),
             mode: format!(
                 "{}{}{}",

@@ -15,6 +15,8 @@ pub enum ViewError {
     Renderer(#[from] tw_gpu::GpuError),
     #[error(transparent)]
     Runtime(#[from] tw_runtime::RuntimeError),
+    #[error(transparent)]
+    Frame(#[from] tw_frame::FrameError),
     #[error("no frame was drawn before exit: {0}")]
     NoFrame(String),
 }

@@ -107,12 +107,18 @@ pub struct HudFrame {
     pub nodes_visible: u64,
     pub nodes_frustum_culled: u64,
     pub nodes_lod_culled: u64,
-    pub nodes_occlusion_culled: u64,
+    /// The occlusion strategy, clusters it tested against the occluders' depth, and those it
+    /// found hidden (not drawn).
+    pub occlusion: String,
+    pub occlusion_tested: u64,
+    pub occlusion_culled: u64,
+    /// Occlusion tests with their read-backs or queries.
+    pub cull_ms: f32,
     pub resident_bytes: u64,
     pub memory_budget: u64,
-    /// Vertex data uploaded for the frame.
+    /// Cluster geometry resident on the GPU.
     pub gpu_bytes: u64,
-    /// 0 while the renderer has no GPU memory budget (tw-gpu rebuilds its buffers per frame).
+    /// The GPU pool's budget (0 before the first frame).
     pub gpu_budget: u64,
     pub pages_loading: u64,
     pub pages_failed: u64,
@@ -126,20 +132,35 @@ impl HudFrame {
     pub fn lines(&self) -> Vec<(&'static str, String)> {
         vec![
             ("fps", format!("{:.1} ({:.1} ms)", self.fps, self.frame_ms)),
-            ("select / draw", format!("{:.1} / {:.1} ms", self.select_ms, self.render_ms)),
+            (
+                "select / cull / draw",
+                format!("{:.1} / {:.1} / {:.1} ms", self.select_ms, self.cull_ms, self.render_ms),
+            ),
             ("triangles drawn", count(self.triangles)),
             ("clusters drawn", count(self.clusters)),
             ("nodes visible", count(self.nodes_visible)),
             ("frustum-culled", count(self.nodes_frustum_culled)),
             ("LOD-culled", count(self.nodes_lod_culled)),
-            ("occlusion-culled", count(self.nodes_occlusion_culled)),
+            (
+                "occlusion-culled",
+                if self.occlusion.is_empty() || self.occlusion == "none" {
+                    "off".to_string()
+                } else {
+                    format!(
+                        "{} of {} clusters tested ({})",
+                        count(self.occlusion_culled),
+                        count(self.occlusion_tested),
+                        self.occlusion
+                    )
+                },
+            ),
             ("resident memory", format!("{} / {}", bytes(self.resident_bytes), bytes(self.memory_budget))),
             (
                 "GPU memory",
                 if self.gpu_budget > 0 {
                     format!("{} / {}", bytes(self.gpu_bytes), bytes(self.gpu_budget))
                 } else {
-                    format!("{} vertex data (no budget yet)", bytes(self.gpu_bytes))
+                    format!("{} (no renderer yet)", bytes(self.gpu_bytes))
                 },
             ),
             ("pages loading", format!("{} ({} failed)", self.pages_loading, self.pages_failed)),
@@ -230,7 +251,20 @@ mod tests {
         let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
         assert_eq!(get("triangles drawn"), "1.50 M");
         assert_eq!(get("resident memory"), "3.0 MiB / 1.0 GiB");
-        assert_eq!(get("GPU memory"), "0 B vertex data (no budget yet)");
+        assert_eq!(get("GPU memory"), "0 B (no renderer yet)");
+        assert_eq!(get("occlusion-culled"), "off");
+        let h = HudFrame {
+            occlusion: "hzb".into(),
+            occlusion_tested: 120,
+            occlusion_culled: 80,
+            gpu_bytes: 1 << 20,
+            gpu_budget: 512 << 20,
+            ..Default::default()
+        };
+        let lines = h.lines();
+        let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
+        assert_eq!(get("occlusion-culled"), "80 of 120 clusters tested (hzb)");
+        assert_eq!(get("GPU memory"), "1.0 MiB / 512.0 MiB");
         assert!(lines.iter().any(|l| l.0 == "occlusion-culled"));
         assert_eq!(bytes(10), "10 B");
         assert_eq!(count(12_345), "12.3 k");

@@ -1,5 +1,6 @@
 //! terawalk's interactive viewer (`terawalk view scene.tw`): a winit window drawn with wgpu, a
-//! UI in egui, and the runtime's per-frame pipeline (camera → select → draw) behind it.
+//! UI in egui, and tw-frame's per-frame pipeline (camera → select and stream → occlude → draw,
+//! the `bench` pipeline, never waiting for the disk) behind it.
 //!
 //! Modules, one concern each:
 //! - [`settings`]: every control as plain data (pixel error, occlusion strategy, culling, LOD
@@ -9,8 +10,8 @@
 //! - [`debug_view`]: the third-person debug view's geometry (frustum, node boxes, projection);
 //! - [`pick`]: CPU ray casting for the orbit pivot and walk mode's ground;
 //! - [`recorder`]: camera path recording and playback (the `path`/`bench` JSON format);
-//! - [`scene`]: the store, cache, selector and renderer; the streaming and renderer
-//!   integration points;
+//! - [`scene`]: the store and its `tw_frame::Walkthrough` (streamer, renderer, occlusion
+//!   culling), the scene texture egui shows;
 //! - [`gfx`]: window surface, device and egui-wgpu;
 //! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;

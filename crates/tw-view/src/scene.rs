@@ -1,31 +1,33 @@
-//! The scene of the viewer: the store, its page cache, the selector and the renderer, and the
-//! one place where a frame is selected and drawn ([`Scene::frame`]).
+//! The scene of the viewer: the store and its [`tw_frame::Walkthrough`] (streamer + renderer on
+//! the window's device), and the one place where a frame is selected and drawn
+//! ([`Scene::frame`]). The viewer draws frames the way `terawalk bench` does:
 //!
-//! Integration points (each a single function, so the planned changes stay small):
-//! - **Streaming**: [`Scene::select_cut`] calls the synchronous [`Selector::select_into`] over
-//!   the [`PageCache`] (a miss loads the page on this thread, so a frame that needs new pages
-//!   waits for them). The switch to tw-runtime's `Streamer` (branch helper-stream) is local to
-//!   this module: the `cache`/`selector` fields become one `Streamer` (made from an
-//!   `Arc<Store>` and `StreamOptions { budget_bytes, .. }`; [`Scene::set_memory_budget`] makes
-//!   a new one), `select_cut` becomes `streamer.frame(camera, options)` keeping the
-//!   `StreamFrame` (its `pages` feed [`upload_selection`] instead of `cache.get`),
-//!   [`Scene::pages_loading`] returns `stats.pending + stats.in_flight`, the HUD's disk rate
-//!   sums `stats.bytes_read`, and [`Scene::frame`] re-selects while pages are pending (the app
-//!   already redraws while anything changes).
-//! - **Rendering**: [`SceneRenderer`] wraps a `tw_gpu::Renderer` made with
-//!   `Renderer::from_device` on the window's device ([`Scene::attach`]); each frame it uploads
-//!   the cut and draws it with `render_to_view` into the scene's own colour texture
-//!   (`Rgba8UnormSrgb`, alpha 0 where nothing was drawn), which egui samples as a native
-//!   texture behind the UI. Nothing waits for the GPU and nothing is read back, except for a
-//!   screenshot ([`Scene::read_image`]).
-//! - **Occlusion**: [`crate::settings::OcclusionStrategy`]; only `None` is wired, the frustum-
-//!   and LOD-culled cut is drawn as it is (occlusion-culled counts stay 0).
+//! - **Streaming**: [`Walkthrough::draw_frame`] selects from the resident pages and never
+//!   waits for the disk (missing pages are requested by priority, coarser resident ancestors
+//!   drawn meanwhile). [`Scene::wants_redraw`] stays true while the cut still asks for pages or
+//!   pages are in flight, so the app keeps drawing and the picture refines as data arrives.
+//!   [`Scene::set_memory_budget`] rebuilds the streamer with the new budget. The HUD's figures
+//!   come from the frame's [`StreamStats`] (pages pending + in flight, bytes read, resident
+//!   bytes) and the renderer's [`tw_gpu::PoolStats`] (GPU memory under [`Settings::gpu_budget`]).
+//! - **Occlusion**: [`crate::settings::OcclusionStrategy`] → [`tw_frame::Occlusion`]; the
+//!   two-pass strategies need the renderer's *own* targets (depth read-back, queries against
+//!   the own depth), so the frame is drawn into the own target and its colour is then copied
+//!   into the scene's colour texture (`Rgba8UnormSrgb`, alpha 0 where nothing was drawn),
+//!   which egui samples as a native texture behind the UI. Nothing is read back except for
+//!   `hzb`'s depth, the query results and screenshots ([`Scene::read_image`]).
+//! - **Debug view** (culling camera ≠ drawing camera) and **LOD freeze**: the cut is selected
+//!   and occlusion-culled from the culling camera (into the own target), then the clusters it
+//!   drew are drawn again from the drawing camera straight into the scene texture;
+//!   [`Scene::visible_node_boxes`] / [`Scene::occluded_node_boxes`] give the nodes the debug
+//!   view outlines (pink / yellow).
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use glam::Vec3;
-use tw_gpu::{Image, Renderer};
-use tw_runtime::{CacheStats, Camera, PageCache, SelectOptions, SelectStats, Selection, Selector};
+use tw_frame::{FrameSettings, OcclusionStats, Walkthrough};
+use tw_gpu::{Image, PoolStats, Renderer, Target};
+use tw_runtime::{Camera, ClusterRef, ResidentPage, SelectStats, Selection, StreamOptions, StreamStats};
 use tw_store::{Header, Store};
 
 use crate::error::ViewError;
@@ -35,60 +37,56 @@ use crate::settings::Settings;
 /// What [`Scene::frame`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameInfo {
-    /// Whether the cut was selected again (not frozen, camera or settings changed).
+    /// Whether the cut was selected again (not frozen).
     pub selected: bool,
     pub select_ms: f32,
+    /// Occlusion tests with their read-backs / queries.
+    pub cull_ms: f32,
     pub render_ms: f32,
+    /// Triangles and clusters drawn (after occlusion culling).
     pub triangles: u64,
     pub clusters: u64,
     pub stats: SelectStats,
+    pub stream: StreamStats,
+    pub occlusion: OcclusionStats,
+    /// The GPU cluster pool after the frame.
+    pub gpu: PoolStats,
 }
 
-/// What the current selection was made from; the cut is re-selected when it changes.
+/// What the current selection was made from.
 #[derive(Clone, Debug, PartialEq)]
 struct SelectKey {
     camera: Camera,
     tau: f32,
     frustum: bool,
     viewport: [u32; 2],
+    occlusion: crate::settings::OcclusionStrategy,
 }
 
-/// Format of the scene's colour texture.
+/// Format of the scene's colour texture (the renderer's own target has the same, so it can be
+/// copied).
 pub const SCENE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 /// The scene's colour texture.
-struct Target {
+struct SceneTarget {
     texture: wgpu::Texture,
     view: wgpu::TextureView,
     size: [u32; 2],
 }
 
-/// The renderer behind the viewer (see the module documentation).
-pub struct SceneRenderer {
-    renderer: Renderer,
+/// The window's device, and what the scene made on it.
+struct SceneGfx {
     device: wgpu::Device,
     queue: wgpu::Queue,
-    target: Option<Target>,
+    info: wgpu::AdapterInfo,
+    target: Option<SceneTarget>,
     /// Bumped whenever the target texture is made again (egui must be told).
     generation: u64,
 }
 
-impl SceneRenderer {
-    /// A renderer on the caller's device.
-    pub fn new(
-        device: wgpu::Device,
-        queue: wgpu::Queue,
-        info: wgpu::AdapterInfo,
-        store: &Store,
-    ) -> Result<SceneRenderer, ViewError> {
-        // The renderer's own offscreen target is unused here (we draw into ours): keep it tiny.
-        let mut renderer = Renderer::from_device(device.clone(), queue.clone(), info, 8, 8)?;
-        renderer.set_store_colors(store);
-        Ok(SceneRenderer { renderer, device, queue, target: None, generation: 0 })
-    }
-
+impl SceneGfx {
     /// The colour texture, made again when the size changes.
-    fn ensure_target(&mut self, size: [u32; 2]) -> &Target {
+    fn ensure_target(&mut self, size: [u32; 2]) {
         if self.target.as_ref().is_none_or(|t| t.size != size) {
             let texture = self.device.create_texture(&wgpu::TextureDescriptor {
                 label: Some("scene colour"),
@@ -99,46 +97,67 @@ impl SceneRenderer {
                 format: SCENE_FORMAT,
                 usage: wgpu::TextureUsages::RENDER_ATTACHMENT
                     | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC,
+                    | wgpu::TextureUsages::COPY_SRC
+                    | wgpu::TextureUsages::COPY_DST,
                 view_formats: &[],
             });
             let view = texture.create_view(&Default::default());
-            self.target = Some(Target { texture, view, size });
+            self.target = Some(SceneTarget { texture, view, size });
             self.generation += 1;
         }
-        self.target.as_ref().expect("made above")
     }
 
-    pub fn adapter(&self) -> String {
-        self.renderer.adapter_summary()
+    fn renderer(&self, size: [u32; 2], gpu_budget: u64) -> Result<Renderer, ViewError> {
+        let mut r = Renderer::from_device(
+            self.device.clone(),
+            self.queue.clone(),
+            self.info.clone(),
+            size[0],
+            size[1],
+        )?;
+        r.set_gpu_budget(gpu_budget.max(tw_gpu::MIN_BUDGET));
+        Ok(r)
     }
 }
 
 /// The store and everything a frame needs from it.
 pub struct Scene {
-    store: Store,
-    cache: PageCache,
-    selector: Selector,
-    selection: Selection,
+    store: Arc<Store>,
+    memory_budget: u64,
+    gfx: Option<SceneGfx>,
+    /// Made at the first frame (its own target has the frame's size).
+    walk: Option<Walkthrough>,
+    /// The clusters the last selected frame drew, and those it found occluded.
+    drawn: Vec<ClusterRef>,
+    occluded: Vec<ClusterRef>,
     key: Option<SelectKey>,
-    renderer: Option<SceneRenderer>,
+    /// Encoded bytes read from the store so far (sum of the frames' `bytes_read`).
+    bytes_read: u64,
+    /// One more frame wanted (occlusion history after a change).
+    settle: bool,
+    /// The cut of the last selected frame (to see whether it changed).
+    prev_cut: Vec<ClusterRef>,
+    /// The GPU budget last asked for (the pool may clamp it to the device's limits).
+    gpu_request: u64,
     last: FrameInfo,
 }
 
 impl Scene {
-    /// A scene over an opened store with a page cache of `memory_budget` bytes (root pages
-    /// loaded now).
+    /// A scene over an opened store whose decoded pages stay within `memory_budget` bytes
+    /// (the streamer starts with the first frame).
     pub fn new(store: Store, memory_budget: u64) -> Scene {
-        let cache = PageCache::new(&store, memory_budget);
-        cache.load_root_pages(&store);
-        let selector = Selector::new(&store);
         Scene {
-            store,
-            cache,
-            selector,
-            selection: Selection::default(),
+            store: Arc::new(store),
+            memory_budget,
+            gfx: None,
+            walk: None,
+            drawn: Vec::new(),
+            occluded: Vec::new(),
             key: None,
-            renderer: None,
+            bytes_read: 0,
+            settle: false,
+            gpu_request: 0,
+            prev_cut: Vec::new(),
             last: FrameInfo::default(),
         }
     }
@@ -170,78 +189,97 @@ impl Scene {
         }
     }
 
-    pub fn cache_stats(&self) -> CacheStats {
-        self.cache.stats()
+    /// The last frame's streaming statistics.
+    pub fn stream_stats(&self) -> StreamStats {
+        self.last.stream
+    }
+
+    /// Encoded bytes read from the store so far (for the HUD's disk rate).
+    pub fn bytes_read(&self) -> u64 {
+        self.bytes_read
     }
 
     pub fn memory_budget(&self) -> u64 {
-        self.cache.budget()
+        self.memory_budget
     }
 
-    /// Pages asked for but not resident yet (0 with the synchronous cache).
+    /// The renderer's GPU memory budget (0 before the first frame).
+    pub fn gpu_budget(&self) -> u64 {
+        self.walk.as_ref().map_or(0, |w| w.renderer().gpu_budget())
+    }
+
+    /// Pages asked for but not resident yet: pending in the loaders' queues + being loaded.
     pub fn pages_loading(&self) -> u64 {
-        self.cache.pending_requests() as u64
+        self.last.stream.pending + self.last.stream.in_flight
     }
 
-    /// A new cache with `bytes` of budget (the resident pages are dropped and reloaded as
+    /// Whether the last frame is not final yet: its cut asked for pages, pages were being
+    /// loaded, or the occlusion history is settling after a change. The app keeps redrawing
+    /// meanwhile (the picture refines as the pages arrive).
+    pub fn wants_redraw(&self) -> bool {
+        self.last.selected
+            && (self.last.stream.pages_requested > 0 || self.last.stream.in_flight > 0 || self.settle)
+    }
+
+    /// A new streamer with `bytes` of budget (the resident pages are dropped and reloaded as
     /// needed).
-    pub fn set_memory_budget(&mut self, bytes: u64) {
-        if bytes != self.cache.budget() {
-            self.cache = PageCache::new(&self.store, bytes);
-            self.cache.load_root_pages(&self.store);
+    pub fn set_memory_budget(&mut self, bytes: u64) -> Result<(), ViewError> {
+        if bytes != self.memory_budget {
+            self.memory_budget = bytes;
+            if let Some(w) = self.walk.as_mut() {
+                let options = StreamOptions { budget_bytes: bytes, ..*w.streamer().options() };
+                w.set_stream_options(options)?;
+            }
             self.key = None;
         }
+        Ok(())
     }
 
-    pub fn selection(&self) -> &Selection {
-        &self.selection
+    /// The last selected cut (before occlusion culling).
+    pub fn selection(&self) -> Option<&Selection> {
+        self.walk.as_ref().map(|w| w.selection())
     }
 
     pub fn last_frame(&self) -> FrameInfo {
         self.last
     }
 
-    /// Draws with a renderer on the window's device (before this, [`frame`](Self::frame)
-    /// fails).
+    /// Draws on the window's device (before this, [`frame`](Self::frame) fails).
     pub fn attach(
         &mut self,
         device: wgpu::Device,
         queue: wgpu::Queue,
         info: wgpu::AdapterInfo,
     ) -> Result<(), ViewError> {
-        self.renderer = Some(SceneRenderer::new(device, queue, info, &self.store)?);
+        self.gfx = Some(SceneGfx { device, queue, info, target: None, generation: 0 });
+        self.walk = None;
         Ok(())
     }
 
     pub fn adapter(&self) -> String {
-        self.renderer.as_ref().map(|r| r.adapter()).unwrap_or_default()
+        self.walk.as_ref().map(|w| w.renderer().adapter_summary()).unwrap_or_default()
     }
 
     /// The scene's colour texture, its size and generation (changes when it is made again).
     pub fn target(&self) -> Option<(&wgpu::TextureView, [u32; 2], u64)> {
-        let r = self.renderer.as_ref()?;
-        r.target.as_ref().map(|t| (&t.view, t.size, r.generation))
+        let g = self.gfx.as_ref()?;
+        g.target.as_ref().map(|t| (&t.view, t.size, g.generation))
     }
 
     /// Reads the last frame back (for screenshots): waits for the GPU.
     pub fn read_image(&self) -> Result<Image, ViewError> {
-        let r = self.renderer.as_ref().ok_or_else(|| ViewError::NoFrame("no renderer".into()))?;
-        let t = r.target.as_ref().ok_or_else(|| ViewError::NoFrame("nothing drawn yet".into()))?;
-        crate::readback::read_texture(&r.device, &r.queue, &t.texture, t.size)
+        let g = self.gfx.as_ref().ok_or_else(|| ViewError::NoFrame("no renderer".into()))?;
+        let t = g.target.as_ref().ok_or_else(|| ViewError::NoFrame("nothing drawn yet".into()))?;
+        crate::readback::read_texture(&g.device, &g.queue, &t.texture, t.size)
     }
 
-    /// Bytes of vertex data the last frame uploaded (48 a triangle, see tw-gpu).
+    /// Bytes of cluster geometry resident on the GPU after the last frame.
     pub fn gpu_bytes(&self) -> u64 {
-        self.last.triangles * 48
+        self.last.gpu.resident_bytes
     }
 
-    /// THE selection call (streaming integration point, see the module documentation).
-    fn select_cut(&mut self, camera: &Camera, options: &SelectOptions) {
-        self.selector.select_into(&self.store, &self.cache, camera, options, &mut self.selection);
-    }
-
-    /// Selects the cut from `cull` (unless frozen or unchanged) and draws it from `draw` at
-    /// `size` pixels.
+    /// Selects the cut from `cull` (unless the LOD cut is frozen), culls it with the settings'
+    /// occlusion strategy, and shows it from `draw` at `size` pixels in the scene texture.
     pub fn frame(
         &mut self,
         cull: &Camera,
@@ -250,63 +288,149 @@ impl Scene {
         size: [u32; 2],
     ) -> Result<FrameInfo, ViewError> {
         let size = [size[0].clamp(1, tw_gpu::MAX_SIDE), size[1].clamp(1, tw_gpu::MAX_SIDE)];
+        let g = self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
+        // The walkthrough, its own target at the frame's size.
+        if self.walk.is_none() {
+            let renderer = g.renderer(size, settings.gpu_budget)?;
+            let options = StreamOptions { budget_bytes: self.memory_budget, ..Default::default() };
+            self.walk = Some(Walkthrough::new(self.store.clone(), renderer, options)?);
+            self.gpu_request = settings.gpu_budget;
+            self.key = None;
+        }
+        let walk = self.walk.as_mut().expect("made above");
+        let (ow, oh) = walk.renderer().size();
+        if [ow, oh] != size {
+            walk.replace_renderer(g.renderer(size, settings.gpu_budget)?);
+            self.gpu_request = settings.gpu_budget;
+            self.key = None;
+        }
+        if self.gpu_request != settings.gpu_budget {
+            walk.renderer_mut().set_gpu_budget(settings.gpu_budget.max(tw_gpu::MIN_BUDGET));
+            self.gpu_request = settings.gpu_budget;
+        }
+        walk.set_color_mode(settings.coloring.to_gpu());
         let key = SelectKey {
             camera: *cull,
             tau: settings.pixel_error,
             frustum: settings.frustum_culling,
             viewport: size,
+            occlusion: settings.occlusion,
         };
-        let mut info = FrameInfo::default();
-        let t = Instant::now();
-        if self.key.is_none() || (!settings.lod_freeze && self.key.as_ref() != Some(&key)) {
-            let options = SelectOptions {
+        let frozen = settings.lod_freeze && self.key.is_some();
+        let mut info = if frozen { FrameInfo { selected: false, ..self.last } } else { FrameInfo::default() };
+        if !frozen {
+            let fs = FrameSettings {
                 tau: settings.pixel_error,
-                viewport: size,
                 frustum_culling: settings.frustum_culling,
+                occlusion: settings.occlusion.to_frame(),
+                wait_for_pages: false,
             };
-            self.select_cut(cull, &options);
+            let d = walk.draw_frame(cull, &fs)?;
+            let t = &d.info.times;
+            info = FrameInfo {
+                selected: true,
+                select_ms: t.select.as_secs_f32() * 1e3,
+                cull_ms: t.cull.as_secs_f32() * 1e3,
+                render_ms: t.total.saturating_sub(t.select + t.cull).as_secs_f32() * 1e3,
+                triangles: d.info.triangles,
+                clusters: d.info.clusters,
+                stats: d.info.select,
+                stream: d.info.stream,
+                occlusion: d.info.occlusion,
+                gpu: d.info.gpu,
+            };
+            self.bytes_read += d.info.stream.bytes_read;
+            self.drawn = d.drawn;
+            self.occluded = d.occluded;
+            // Occlusion culling tests what was not visible last frame: after a change of the camera
+            // or of the cut (pages arrived), one more frame gives the settled counts.
+            let cut = &walk.selection().clusters;
+            let cut_changed = *cut != self.prev_cut;
+            if cut_changed {
+                self.prev_cut.clone_from(cut);
+            }
+            self.settle = settings.occlusion != crate::settings::OcclusionStrategy::None
+                && (self.key.as_ref() != Some(&key) || cut_changed);
             self.key = Some(key);
-            info.selected = true;
         }
-        info.select_ms = t.elapsed().as_secs_f32() * 1e3;
-        let t = Instant::now();
-        let r = self.renderer.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
-        r.renderer.set_color_mode(settings.coloring.to_gpu());
-        let pages = tw_gpu::SelectionPages::resolve(&self.store, &self.cache, &self.selection.clusters);
-        r.ensure_target(size);
-        let target = r.target.as_ref().expect("made above");
-        let grid_step = self.store.header().grid_step;
-        r.renderer.render_to_view(
-            draw,
-            grid_step,
-            &pages.clusters(),
-            &target.view,
-            SCENE_FORMAT,
-            (size[0], size[1]),
-        )?;
-        let rs = r.renderer.stats();
-        info.render_ms = t.elapsed().as_secs_f32() * 1e3;
-        info.triangles = rs.triangles;
-        info.clusters = rs.clusters;
-        info.stats = self.selection.stats;
+        g.ensure_target(size);
+        let target = g.target.as_ref().expect("made above");
+        if frozen || cull != draw {
+            // The clusters the culling camera drew, seen from the drawing camera.
+            let t = Instant::now();
+            let cache = walk.streamer().cache().clone();
+            let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
+            for c in &self.drawn {
+                if pages.last().is_none_or(|(p, _)| *p != c.page) {
+                    if let Some(p) = cache.try_get(c.page) {
+                        pages.push((c.page, p));
+                    }
+                }
+            }
+            pages.sort_by_key(|(p, _)| *p);
+            pages.dedup_by_key(|(p, _)| *p);
+            let clusters: Vec<_> = self
+                .drawn
+                .iter()
+                .filter_map(|c| {
+                    let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+                    pages[i].1.clusters.get(c.index_in_page as usize).map(|pc| (*c, pc))
+                })
+                .collect();
+            let grid_step = self.store.header().grid_step;
+            let r = walk.renderer_mut();
+            r.begin_frame();
+            let view = Target::View { view: &target.view, format: SCENE_FORMAT, size: (size[0], size[1]) };
+            r.draw(view, draw, grid_step, &clusters, true)?;
+            let ms = t.elapsed().as_secs_f32() * 1e3;
+            info.render_ms = if frozen { ms } else { info.render_ms + ms };
+            info.gpu = r.stats().pool;
+            if frozen {
+                info.triangles = r.stats().triangles;
+                info.clusters = r.stats().clusters;
+            }
+        } else {
+            // The own target's colour into the scene texture (no wait).
+            let own = walk.renderer().color_texture();
+            let mut encoder = g
+                .device
+                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scene copy") });
+            encoder.copy_texture_to_texture(
+                own.as_image_copy(),
+                target.texture.as_image_copy(),
+                wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
+            );
+            g.queue.submit([encoder.finish()]);
+        }
         self.last = info;
         Ok(info)
     }
 
-    /// Distance along `ray` to the nearest triangle of the current selection (resident pages
-    /// only; nothing is loaded).
-    pub fn pick(&self, ray: &Ray, max_t: f32) -> Option<f32> {
-        let step = self.header().grid_step;
-        let mut pages: Vec<(u32, std::sync::Arc<tw_runtime::ResidentPage>)> = Vec::new();
-        for r in &self.selection.clusters {
-            if pages.last().is_none_or(|(p, _)| *p != r.page) {
-                if let Some(p) = self.cache.try_get(r.page) {
-                    pages.push((r.page, p));
+    /// Decoded clusters of `list` with their resident pages (nothing is loaded).
+    fn resident<'a>(&self, list: &'a [ClusterRef]) -> Vec<(&'a ClusterRef, Arc<ResidentPage>)> {
+        let Some(w) = self.walk.as_ref() else { return Vec::new() };
+        let cache = w.streamer().cache();
+        let mut last: Option<(u32, Arc<ResidentPage>)> = None;
+        let mut out = Vec::with_capacity(list.len());
+        for r in list {
+            if last.as_ref().is_none_or(|(p, _)| *p != r.page) {
+                last = cache.try_get(r.page).map(|p| (r.page, p));
+            }
+            if let Some((p, page)) = &last {
+                if *p == r.page {
+                    out.push((r, page.clone()));
                 }
             }
         }
-        let items = self.selection.clusters.iter().filter_map(|r| {
-            let (_, page) = pages.iter().rev().find(|(p, _)| *p == r.page)?;
+        out
+    }
+
+    /// Distance along `ray` to the nearest triangle drawn by the last frame (resident pages
+    /// only; nothing is loaded).
+    pub fn pick(&self, ray: &Ray, max_t: f32) -> Option<f32> {
+        let step = self.header().grid_step;
+        let resident = self.resident(&self.drawn);
+        let items = resident.iter().filter_map(|(r, page)| {
             let c = page.clusters.get(r.index_in_page as usize)?;
             let (lo, hi) = page.bounds.get(r.index_in_page as usize)?;
             Some((tw_runtime::frustum::grid_box(*lo, *hi, step), c))
@@ -314,20 +438,34 @@ impl Scene {
         pick_clusters(ray, items.collect::<Vec<_>>(), step, max_t)
     }
 
-    /// Scene-space boxes of the nodes that own a selected group (the visible nodes of the
-    /// debug view), at most `max`.
+    /// Scene-space boxes of the nodes that own a cluster the last frame drew (the visible
+    /// nodes of the debug view, pink), at most `max`.
     pub fn visible_node_boxes(&self, max: usize) -> Vec<(Vec3, Vec3)> {
+        self.node_boxes(&self.node_ids(&self.drawn), max)
+    }
+
+    /// Scene-space boxes of the nodes of the cut whose clusters were all found occluded (the
+    /// debug view's yellow boxes), at most `max`.
+    pub fn occluded_node_boxes(&self, max: usize) -> Vec<(Vec3, Vec3)> {
+        let visible = self.node_ids(&self.drawn);
+        let ids: Vec<u32> =
+            self.node_ids(&self.occluded).into_iter().filter(|n| visible.binary_search(n).is_err()).collect();
+        self.node_boxes(&ids, max)
+    }
+
+    /// The nodes owning `clusters`' groups, sorted, without repeats.
+    fn node_ids(&self, clusters: &[ClusterRef]) -> Vec<u32> {
         let groups = self.store.groups();
-        let nodes = self.store.nodes();
-        let step = self.header().grid_step;
-        let mut ids: Vec<u32> = self
-            .selection
-            .clusters
-            .iter()
-            .filter_map(|c| groups.get(c.group as usize).map(|g| g.node))
-            .collect();
+        let mut ids: Vec<u32> =
+            clusters.iter().filter_map(|c| groups.get(c.group as usize).map(|g| g.node)).collect();
         ids.sort_unstable();
         ids.dedup();
+        ids
+    }
+
+    fn node_boxes(&self, ids: &[u32], max: usize) -> Vec<(Vec3, Vec3)> {
+        let nodes = self.store.nodes();
+        let step = self.header().grid_step;
         ids.iter()
             .filter_map(|&n| nodes.get(n as usize))
             .take(max)

@@ -3,35 +3,44 @@
 //! debug colourings, third-person debug view). The scene ([`crate::scene`]) reads it each frame;
 //! the UI ([`crate::ui`]) edits it. Nothing here touches a window or the GPU.
 
-/// Occlusion culling strategy (DESIGN decision 6). Only `None` is wired today; the others are
-/// listed so the UI and the command line have one place to grow (`hzb`, `queries`, `gpu-hzb`).
+/// Occlusion culling strategy (DESIGN decision 6), run by tw-frame's two-pass strategies
+/// ([`tw_frame::Occlusion`]) exactly as `terawalk bench` runs them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub enum OcclusionStrategy {
     /// No occlusion culling: the frustum-culled LOD cut is drawn as it is.
     #[default]
     None,
-    /// GigaWalk's CPU hierarchical Z-buffer of last frame's visible set (not wired yet).
+    /// GigaWalk's CPU hierarchical Z-buffer of last frame's visible set.
     Hzb,
+    /// Hardware occlusion queries of the candidates' boxes (Yoon et al. 2003).
+    Queries,
 }
 
 impl OcclusionStrategy {
-    pub const ALL: [OcclusionStrategy; 2] = [OcclusionStrategy::None, OcclusionStrategy::Hzb];
+    pub const ALL: [OcclusionStrategy; 3] =
+        [OcclusionStrategy::None, OcclusionStrategy::Hzb, OcclusionStrategy::Queries];
 
     /// The name `--occlusion` takes.
     pub fn name(self) -> &'static str {
-        match self {
-            OcclusionStrategy::None => "none",
-            OcclusionStrategy::Hzb => "hzb",
-        }
+        self.to_frame().name()
     }
 
-    /// Whether the viewer can run this strategy yet.
+    /// Whether the viewer can run this strategy (all of them now).
     pub fn available(self) -> bool {
-        matches!(self, OcclusionStrategy::None)
+        true
     }
 
     pub fn parse(s: &str) -> Option<OcclusionStrategy> {
         OcclusionStrategy::ALL.into_iter().find(|o| o.name() == s)
+    }
+
+    /// The frame pipeline's strategy.
+    pub fn to_frame(self) -> tw_frame::Occlusion {
+        match self {
+            OcclusionStrategy::None => tw_frame::Occlusion::None,
+            OcclusionStrategy::Hzb => tw_frame::Occlusion::Hzb,
+            OcclusionStrategy::Queries => tw_frame::Occlusion::Queries,
+        }
     }
 }
 
@@ -78,6 +87,8 @@ pub struct Settings {
     pub lod_freeze: bool,
     /// Decoded page cache budget, bytes.
     pub memory_budget: u64,
+    /// GPU memory budget for resident cluster geometry, bytes (tw-gpu's pool).
+    pub gpu_budget: u64,
     pub coloring: Coloring,
     /// Third-person debug view: culling from the frozen camera, drawing from a second one.
     pub debug_view: bool,
@@ -98,6 +109,7 @@ impl Default for Settings {
             frustum_culling: true,
             lod_freeze: false,
             memory_budget: 1 << 30,
+            gpu_budget: tw_gpu::DEFAULT_GPU_BUDGET,
             coloring: Coloring::Material,
             debug_view: false,
             show_boxes: true,
@@ -113,6 +125,8 @@ impl Default for Settings {
 pub const PIXEL_ERROR_RANGE: std::ops::RangeInclusive<f32> = 0.0..=64.0;
 /// Range of the memory budget slider (bytes).
 pub const MEMORY_RANGE: std::ops::RangeInclusive<u64> = (16 << 20)..=(64 << 30);
+/// Range of the GPU memory budget slider (bytes).
+pub const GPU_MEMORY_RANGE: std::ops::RangeInclusive<u64> = tw_gpu::MIN_BUDGET..=(16 << 30);
 
 #[cfg(test)]
 mod tests {
@@ -124,7 +138,8 @@ mod tests {
             assert_eq!(OcclusionStrategy::parse(o.name()), Some(o));
         }
         assert_eq!(OcclusionStrategy::parse("bogus"), None);
-        assert!(OcclusionStrategy::None.available());
+        assert!(OcclusionStrategy::ALL.iter().all(|o| o.available()));
+        assert_eq!(OcclusionStrategy::Queries.to_frame(), tw_frame::Occlusion::Queries);
     }
 
     #[test]
@@ -133,6 +148,7 @@ mod tests {
         assert_eq!(s.pixel_error, 1.0);
         assert!(s.frustum_culling && !s.lod_freeze && !s.debug_view);
         assert!(MEMORY_RANGE.contains(&s.memory_budget));
+        assert!(GPU_MEMORY_RANGE.contains(&s.gpu_budget));
         assert_eq!(Coloring::Level.to_gpu(), tw_gpu::ColorMode::Level);
     }
 }

@@ -7,7 +7,9 @@ use egui::{Color32, Pos2, Rect, Stroke};
 
 use crate::controller::Mode;
 use crate::hud::{FrameTimes, HudFrame};
-use crate::settings::{Coloring, OcclusionStrategy, Settings, MEMORY_RANGE, PIXEL_ERROR_RANGE};
+use crate::settings::{
+    Coloring, OcclusionStrategy, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE,
+};
 
 /// A button or key the app acts on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -169,6 +171,11 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
     let (lo, hi) = (*MEMORY_RANGE.start() >> 20, *MEMORY_RANGE.end() >> 20);
     if ui.add(egui::Slider::new(&mut mib, lo..=hi).logarithmic(true).text("memory MiB")).changed() {
         s.memory_budget = mib << 20;
+    }
+    let mut gpu_mib = (s.gpu_budget >> 20).max(1);
+    let (lo, hi) = ((*GPU_MEMORY_RANGE.start() >> 20).max(1), *GPU_MEMORY_RANGE.end() >> 20);
+    if ui.add(egui::Slider::new(&mut gpu_mib, lo..=hi).logarithmic(true).text("GPU memory MiB")).changed() {
+        s.gpu_budget = gpu_mib << 20;
     }
     egui::ComboBox::from_label("colour").selected_text(s.coloring.name()).show_ui(ui, |ui| {
         for c in Coloring::ALL {

@@ -20,10 +20,8 @@ pub fn run(args: ViewArgs) -> Result<()> {
     let occlusion = match args.occlusion {
         OcclusionArg::None => OcclusionStrategy::None,
         OcclusionArg::Hzb => OcclusionStrategy::Hzb,
+        OcclusionArg::Queries => OcclusionStrategy::Queries,
     };
-    if !occlusion.available() {
-        anyhow::bail!("--occlusion {} is not available in the viewer yet (use none)", occlusion.name());
-    }
     if (args.screenshot.is_some() || args.screenshot_window.is_some()) && args.exit_after.is_none() {
         anyhow::bail!("--screenshot needs --exit-after N (press F12 for screenshots while viewing)");
     }
