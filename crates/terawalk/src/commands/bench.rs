@@ -6,17 +6,19 @@
 //! - one run per `--occlusion` strategy (default: the default strategy), each over the whole
 //!   path after `--warmup` frames at the first camera;
 //! - `--reference`: the main run is the reference itself (full detail, no culling);
-//! - `--compare K`: every K-th frame of the first run is also rendered as the reference; the
-//!   frame records get PSNR and the share of differing pixels, and a "reference" run holds the
-//!   reference frame times (same frames), so the speed-up is a ratio of the same frames;
+//! - `--compare K`: every K-th frame is also rendered as the reference (once, during the first
+//!   run); every run's records of those frames get PSNR and the share of differing pixels, and
+//!   a "reference" run holds the reference frame times (same frames), so the speed-up is a
+//!   ratio of the same frames;
 //! - `--exact`: on the same frames, the item buffer at full detail gives the exact visible
-//!   objects and triangles, and the culling efficiency (drawn ÷ exact visible).
+//!   objects and triangles, and every run's culling efficiency (drawn ÷ exact visible).
 
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use tw_frame::{FrameInfo, FrameSettings, Occlusion, Walkthrough};
+use tw_frame::{ExactVisibility, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 use tw_gpu::{ColorMode, Image, Renderer};
 use tw_report::{BenchReport, FrameRecord, ReportImage, Run, RunMeta};
 use tw_runtime::pathgen::{generate_path, PathOptions};
@@ -86,6 +88,8 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     let mut images = Vec::new();
     let mut runs = Vec::new();
     let mut reference_frames = Vec::new();
+    let mut references: HashMap<usize, Image> = HashMap::new();
+    let mut exacts: HashMap<usize, ExactVisibility> = HashMap::new();
     for (ri, &strategy) in strategies.iter().enumerate() {
         let name = if args.reference { "reference".to_string() } else { strategy.name().to_string() };
         let settings = FrameSettings {
@@ -109,20 +113,29 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                     png: image.png_bytes()?,
                 });
             }
-            if ri == 0 && !args.reference && every.is_some_and(|k| i % k == 0) {
-                let (reference, rinfo) = walk.reference(camera)?;
-                if args.compare.is_some() {
-                    rec.psnr_db = Some(image.psnr(&reference)?.min(99.0));
-                    rec.differing_pixels = Some(image.differing_share(&reference)?);
+            if !args.reference && every.is_some_and(|k| i % k == 0) {
+                // The reference and the exact visible set depend on the camera only: made in
+                // the first run, compared with every run's frame.
+                if ri == 0 {
+                    let (reference, rinfo) = walk.reference(camera)?;
+                    reference_frames.push(record(i, &frames[i].segment, &rinfo));
+                    if args.compare.is_some() {
+                        references.insert(i, reference);
+                    }
+                    if args.exact {
+                        exacts.insert(i, walk.exact_visibility(camera)?);
+                    }
+                    walk.reset();
                 }
-                if args.exact {
-                    let exact = walk.exact_visibility(camera)?;
+                if let Some(reference) = references.get(&i) {
+                    rec.psnr_db = Some(image.psnr(reference)?.min(99.0));
+                    rec.differing_pixels = Some(image.differing_share(reference)?);
+                }
+                if let Some(exact) = exacts.get(&i) {
                     rec.exact_visible_triangles = Some(exact.triangles);
                     rec.exact_visible_objects = Some(exact.objects);
                     rec.culling_efficiency = Some(info.triangles as f64 / exact.triangles.max(1) as f64);
                 }
-                reference_frames.push(record(i, &frames[i].segment, &rinfo));
-                walk.reset();
             }
             records.push(rec);
             bar.inc(1);
@@ -236,12 +249,24 @@ pub fn print_comparison(report: &BenchReport) {
             );
         }
     }
-    let psnr: Vec<f64> = first.frames.iter().filter_map(|f| f.psnr_db).collect();
-    if let (Some(med), Some(min)) = (tw_report::stats::median(&psnr), psnr.iter().cloned().reduce(f64::min)) {
-        println!("{:>10}: PSNR against the reference: median {med:.1} dB, worst {min:.1} dB", "fidelity");
-    }
-    if let Some(e) = first.summary.median_culling_efficiency {
-        println!("{:>10}: triangles drawn / exact visible triangles: median {e:.1}", "culling");
+    for run in report.runs.iter().filter(|r| r.name != "reference") {
+        let psnr: Vec<f64> = run.frames.iter().filter_map(|f| f.psnr_db).collect();
+        if let (Some(med), Some(min)) =
+            (tw_report::stats::median(&psnr), psnr.iter().cloned().reduce(f64::min))
+        {
+            println!(
+                "{:>10}: {}: PSNR against the reference: median {med:.1} dB, worst {min:.1} dB ({} frames)",
+                "fidelity",
+                run.name,
+                psnr.len()
+            );
+        }
+        if let Some(e) = run.summary.median_culling_efficiency {
+            println!(
+                "{:>10}: {}: triangles drawn / exact visible triangles: median {e:.1}",
+                "culling", run.name
+            );
+        }
     }
 }
 
