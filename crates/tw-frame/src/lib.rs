@@ -10,7 +10,7 @@
 //!    groups drawn by their best resident ancestors (the availability rule of docs/FORMAT.md), so
 //!    the frame never waits for the disk; with [`FrameSettings::wait_for_pages`] the complete
 //!    cut is loaded on the spot instead (`render`, tests, images compared across strategies);
-//! 2. **occlude and draw** ([`occlude::draw`]): the [`Occlusion`] strategy decides which clusters
+//! 2. **occlude and draw** ([`occlude::draw_culled`]): the [`Occlusion`] strategy decides which clusters
 //!    of the cut are drawn, then the image is read back;
 //! 3. statistics of every stage in a [`FrameInfo`].
 //!
@@ -164,61 +164,20 @@ impl Walkthrough {
         self.streamer.reset_history();
     }
 
-    /// Draws one frame of `camera` and returns its image and statistics.
+    /// Draws one frame of `camera` and returns its image and statistics:
+    /// [`draw_frame`](Self::draw_frame), then the image read back (the frame time includes the
+    /// GPU finishing the frame).
     pub fn frame(
         &mut self,
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<(Image, FrameInfo), FrameError> {
         let start = Instant::now();
-        let (w, h) = self.renderer.size();
-        let options =
-            SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
-        let store = self.streamer.store().clone();
-        let mut stream = StreamStats::default();
-        let pages: Vec<(u32, Arc<ResidentPage>)> = if settings.wait_for_pages {
-            self.selection = self.streamer.select_blocking(camera, &options);
-            resident_pages(&self.streamer, &self.selection.clusters)
-        } else {
-            let frame = self.streamer.frame(camera, &options);
-            stream = frame.stats;
-            self.selection = frame.selection;
-            frame.pages
-        };
-        let select = start.elapsed();
-        let clusters = lookup(&pages, &self.selection.clusters);
-        let bounds = |c: &ClusterRef| {
-            let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
-            pages[i].1.bounds.get(c.index_in_page as usize).copied()
-        };
-        let drawn = occlude::draw(
-            settings.occlusion,
-            &mut self.occlusion,
-            &mut self.renderer,
-            &store,
-            camera,
-            &clusters,
-            bounds,
-        )?;
-        let gpu = self.renderer.stats();
-        let total = start.elapsed();
-        let info = FrameInfo {
-            times: FrameTimes {
-                select,
-                cull: drawn.cull_time,
-                upload: gpu.upload,
-                render: gpu.render,
-                total,
-            },
-            select: self.selection.stats,
-            stream,
-            triangles: gpu.triangles,
-            clusters: gpu.clusters,
-            draw_calls: gpu.draw_calls,
-            occlusion: drawn.stats,
-            gpu: gpu.pool,
-        };
-        Ok((drawn.image, info))
+        let mut drawn = self.draw_frame(camera, settings)?;
+        let image = self.renderer.read_color()?;
+        drawn.info.times.render = self.renderer.stats().render;
+        drawn.info.times.total = start.elapsed();
+        Ok((image, drawn.info))
     }
 
     /// The reference image of `camera`: every full-resolution cluster, without frustum, LOD or
@@ -230,11 +189,9 @@ impl Walkthrough {
         let grid_step = self.streamer.store().header().grid_step;
         self.renderer.begin_frame();
         let mut first = true;
-        let mut drawn = 0u64;
         self.for_each_chunk(&selection, |renderer, clusters| {
             renderer.draw(Target::Own, camera, grid_step, clusters, first)?;
             first = false;
-            drawn += clusters.len() as u64;
             Ok(())
         })?;
         if first {

@@ -24,7 +24,7 @@ use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
-use tw_gpu::{Image, Renderer, Target};
+use tw_gpu::{Renderer, Target};
 use tw_runtime::frustum::grid_box;
 use tw_runtime::occlusion::test_clusters;
 use tw_runtime::{Camera, ClusterRef, Hzb, OcclusionHistory};
@@ -90,87 +90,6 @@ impl OcclusionState {
     pub fn reset(&mut self) {
         self.history.clear();
     }
-}
-
-/// The image of a frame, what culling did and how long the culling took (tests, read-backs
-/// and queries; drawing excluded).
-pub struct Drawn {
-    pub image: Image,
-    pub stats: OcclusionStats,
-    pub cull_time: Duration,
-}
-
-/// Draws the frame's cut `clusters` (decoded, in selection order) with `strategy` and reads the
-/// image back; `bounds` gives a cluster's inclusive grid box ([`tw_runtime::ResidentPage`]
-/// keeps them). Begins the renderer's frame.
-pub fn draw(
-    strategy: Occlusion,
-    state: &mut OcclusionState,
-    renderer: &mut Renderer,
-    store: &Store,
-    camera: &Camera,
-    clusters: &[(ClusterRef, &PageCluster)],
-    bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync,
-) -> Result<Drawn, FrameError> {
-    let grid_step = store.header().grid_step;
-    renderer.begin_frame();
-    if strategy == Occlusion::None {
-        renderer.draw(Target::Own, camera, grid_step, clusters, true)?;
-        let image = renderer.read_color()?;
-        return Ok(Drawn { image, stats: OcclusionStats::default(), cull_time: Duration::ZERO });
-    }
-    let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
-    let split = state.history.split(&refs);
-    let by_key: std::collections::HashMap<(u32, u32), &PageCluster> =
-        clusters.iter().map(|(k, c)| ((k.page, k.index_in_page), *c)).collect();
-    let decoded = |list: &[ClusterRef]| -> Vec<(ClusterRef, &PageCluster)> {
-        list.iter().filter_map(|k| by_key.get(&(k.page, k.index_in_page)).map(|c| (*k, *c))).collect()
-    };
-    let cluster_box =
-        |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
-
-    renderer.draw(Target::Own, camera, grid_step, &decoded(&split.occluders), true)?;
-    let mut stats = OcclusionStats {
-        occluders: split.occluders.len() as u64,
-        tested: split.candidates.len() as u64,
-        ..Default::default()
-    };
-    let (w, h) = renderer.size();
-    let cull_start = Instant::now();
-    let (visible, still_visible) = match strategy {
-        Occlusion::None => unreachable!("handled above"),
-        Occlusion::Hzb => {
-            let depth = renderer.read_depth()?;
-            let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
-                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?;
-            let view_proj = camera.projection_reverse_z(w as f32 / h as f32) * camera.view();
-            let t = test_clusters(&split.candidates, &hzb, &view_proj, cluster_box);
-            let o = test_clusters(&split.occluders, &hzb, &view_proj, cluster_box);
-            stats.culled = t.occluded.len() as u64;
-            stats.no_pixels = t.no_pixels.len() as u64;
-            (t.visible, o.visible)
-        }
-        Occlusion::Queries => {
-            let boxes: Vec<(Vec3, Vec3)> = split
-                .candidates
-                .iter()
-                .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
-                .collect();
-            let samples = renderer.query_boxes(camera, &boxes)?;
-            stats.queries = boxes.len() as u64;
-            let visible: Vec<ClusterRef> =
-                split.candidates.iter().zip(&samples).filter(|(_, &s)| s > 0).map(|(k, _)| *k).collect();
-            stats.culled = stats.tested - visible.len() as u64;
-            (visible, split.occluders.clone())
-        }
-    };
-    let mut cull_time = cull_start.elapsed();
-    renderer.draw(Target::Own, camera, grid_step, &decoded(&visible), false)?;
-    let image = renderer.read_color()?;
-    let t = Instant::now();
-    state.history.update(&still_visible, &visible);
-    cull_time += t.elapsed();
-    Ok(Drawn { image, stats, cull_time })
 }
 
 /// What [`draw_culled`] did: the occlusion statistics and which clusters were drawn or hidden.
