@@ -380,8 +380,8 @@ pub struct DemoArgs {
     /// Cache directory for the generated model and the outputs.
     #[arg(long, default_value = ".terawalk-cache")]
     pub dir: PathBuf,
-    /// Frames of the walkthrough path.
-    #[arg(long, default_value_t = 300)]
+    /// Frames of the walkthrough path (5 s at 30 fps: 60 % walking, then flying).
+    #[arg(long, default_value_t = 150)]
     pub frames: usize,
 }
 
