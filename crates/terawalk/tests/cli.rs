@@ -93,7 +93,7 @@ fn demo_runs_on_a_small_plant_and_reuses_its_cache() {
     let out = stdout(&o);
     assert!(out.contains("generated"), "{out}");
     assert!(dir.path().join("cache/plant-30000-s1.tw").exists());
-    assert!(dir.path().join("cache/plant-30000-s1-path.json").exists());
+    assert!(dir.path().join("cache/plant-30000-s1-path12.json").exists());
     assert!(out.contains("verified"), "{out}");
     // The bench ran every strategy and the reference, and wrote its report.
     let report = std::fs::read_to_string(dir.path().join("cache/bench-report/report.json")).unwrap();

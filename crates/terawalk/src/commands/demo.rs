@@ -66,7 +66,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
     );
 
     // An automatic walkthrough path (cached): a walk at eye height inside, then a fly-over.
-    let path_file = args.dir.join(format!("plant-{}-s{}-path.json", args.triangles, args.seed));
+    let path_file =
+        args.dir.join(format!("plant-{}-s{}-path{}.json", args.triangles, args.seed, args.frames));
     if path_file.exists() && tw_runtime::CameraPath::load(&path_file).is_ok() {
         println!("4. path: cached at {}", path_file.display());
     } else {
