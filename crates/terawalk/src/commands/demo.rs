@@ -109,7 +109,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
         color: crate::cli::RenderColoring::Material,
     };
     let outcome = crate::commands::bench::run(bench)?;
-    crate::commands::bench::print_comparison(&outcome.report);
 
     println!(
         "done in {:.1} s, peak memory {}",
