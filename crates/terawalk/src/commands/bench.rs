@@ -30,7 +30,6 @@ use crate::units::fmt_count;
 
 /// What `run` measured, for callers such as `demo`.
 pub struct BenchOutcome {
-    pub report: BenchReport,
     pub html: PathBuf,
 }
 
@@ -178,7 +177,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     print_comparison(&report);
     let files = tw_report::write_report(&args.out, &report, &images)?;
     println!("report: {} (open it in a browser), figures in {}", files.html.display(), files.json.display());
-    Ok(BenchOutcome { report, html: files.html })
+    Ok(BenchOutcome { html: files.html })
 }
 
 fn frame(
@@ -222,7 +221,7 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
 
 /// Ratios between the runs of one report (measured in the same process on the same frames):
 /// each strategy against the first run and against the reference, and the fidelity figures.
-pub fn print_comparison(report: &BenchReport) {
+fn print_comparison(report: &BenchReport) {
     let Some(first) = report.runs.first() else { return };
     for run in &report.runs[1..] {
         if run.name == "reference" {
