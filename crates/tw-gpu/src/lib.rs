@@ -406,20 +406,28 @@ impl Renderer {
         if !self.last_own {
             return Err(GpuError::NotOwnTarget { what: "read_color" });
         }
+        let color = self.color.clone();
+        let rgba = self.read_texture(&color, 4)?;
+        Ok(Image { width: self.width, height: self.height, rgba })
+    }
+
+    /// Copies an own-size `texture` of `bytes_per_pixel` to the CPU (rows from the top, no
+    /// padding); waits for the GPU. The time counts as rendering.
+    fn read_texture(&mut self, texture: &wgpu::Texture, bytes_per_pixel: u32) -> Result<Vec<u8>, GpuError> {
         let start = Instant::now();
         let mut encoder = self.device.create_command_encoder(&Default::default());
-        self.readback.copy_texture(&self.device, &mut encoder, &self.color, 4);
-        let pitch = readback::padded_row(self.width, 4) as usize;
-        let rgba = self.readback.finish(
+        self.readback.copy_texture(&self.device, &mut encoder, texture, bytes_per_pixel);
+        let pitch = readback::padded_row(self.width, bytes_per_pixel) as usize;
+        let bytes = self.readback.finish(
             &self.device,
             &self.queue,
             encoder,
             pitch,
-            self.width as usize * 4,
+            self.width as usize * bytes_per_pixel as usize,
             self.height as usize,
         )?;
         self.stats.render += start.elapsed();
-        Ok(Image { width: self.width, height: self.height, rgba })
+        Ok(bytes)
     }
 
     /// Reads the own depth target back as reverse-Z f32 (see [`depth`]); waits for the GPU.
@@ -567,20 +575,9 @@ impl Renderer {
     /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
     /// keys of every cluster drawn into it, in the numbering of those calls. Waits for the GPU.
     pub fn read_items(&mut self, clusters: &[ClusterKey]) -> Result<ItemBuffer, GpuError> {
-        let start = Instant::now();
         let Some((texture, _)) = &self.items else { return Err(GpuError::Gpu("no item target".into())) };
-        let mut encoder = self.device.create_command_encoder(&Default::default());
-        self.readback.copy_texture(&self.device, &mut encoder, texture, 16);
-        let pitch = readback::padded_row(self.width, 16) as usize;
-        let bytes = self.readback.finish(
-            &self.device,
-            &self.queue,
-            encoder,
-            pitch,
-            self.width as usize * 16,
-            self.height as usize,
-        )?;
-        self.stats.render += start.elapsed();
+        let texture = texture.clone();
+        let bytes = self.read_texture(&texture, 16)?;
         let raw = bytes
             .chunks_exact(16)
             .map(|p| {
