@@ -5,59 +5,21 @@
 //! the comparison is not trivially true. On GL (llvmpipe) and Vulkan (lavapipe); without an
 //! adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.
 
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 
-use tw_frame::{FrameSettings, Occlusion, Walkthrough};
-use tw_gpu::{wgpu, GpuError, Renderer};
+use tw_frame::{FrameSettings, Occlusion};
+use tw_gpu::wgpu;
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
-use tw_runtime::{Camera, StreamOptions};
+use tw_runtime::Camera;
 use tw_store::Store;
 
-const W: u32 = 480;
-const H: u32 = 270;
+mod common;
 
-struct Built {
-    _dir: tempfile::TempDir,
-    store: Arc<Store>,
-}
+use common::{gpu_lock, Built};
 
 fn store() -> Arc<Store> {
     static STORE: OnceLock<Built> = OnceLock::new();
-    STORE
-        .get_or_init(|| {
-            let dir = tempfile::tempdir().unwrap();
-            let path = dir.path().join("plant.tw");
-            let params = tw_io::generate::PlantParams { triangles: 200_000, seed: 3 };
-            let source = tw_io::generate::PlantSource::new(params).unwrap();
-            let scene = tw_io::Scene::from_sources(vec![Box::new(source)]);
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-            Built { store: Arc::new(Store::open(&path).unwrap()), _dir: dir }
-        })
-        .store
-        .clone()
-}
-
-/// One GPU test at a time: software rasterizers use every core.
-fn gpu_lock() -> std::sync::MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-fn walkthrough(backends: wgpu::Backends, what: &str) -> Option<Walkthrough> {
-    let renderer = match Renderer::new_headless_with(W, H, backends) {
-        Ok(r) => r,
-        Err(e @ GpuError::NoAdapter { .. })
-            if std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1") =>
-        {
-            eprintln!("SKIPPED {what}: {e} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)");
-            return None;
-        }
-        Err(e) => panic!("{what}: {e}"),
-    };
-    eprintln!("{what}: {}", renderer.adapter_summary());
-    let stream = StreamOptions { budget_bytes: 256 << 20, ..Default::default() };
-    Some(Walkthrough::new(store(), renderer, stream).unwrap())
+    STORE.get_or_init(|| common::build_plant(200_000, 3)).store.clone()
 }
 
 /// A walk at eye height inside the plant (smooth), every third frame of 72.
@@ -72,7 +34,7 @@ fn walk_cameras(store: &Store) -> Vec<Camera> {
 fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<(Occlusion, u64)>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
-    let mut w = walkthrough(backends, what)?;
+    let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
     for c in cameras {
         let s = FrameSettings {
             tau: 1.0,

@@ -4,57 +4,21 @@
 //! what a frame draws; the reference drawn in chunks under a small memory budget equals the one
 //! drawn under a large budget.
 
-use std::sync::{Arc, Mutex, OnceLock};
+use std::sync::{Arc, OnceLock};
 
-use tw_frame::{FrameSettings, Occlusion, Walkthrough};
-use tw_gpu::{wgpu, GpuError, Renderer};
+use tw_frame::{FrameSettings, Occlusion};
+use tw_gpu::wgpu;
 use tw_runtime::pathgen::{generate_path, PathOptions};
-use tw_runtime::{Camera, StreamOptions};
+use tw_runtime::Camera;
 use tw_store::Store;
 
-const W: u32 = 480;
-const H: u32 = 270;
+mod common;
 
-struct Built {
-    _dir: tempfile::TempDir,
-    store: Arc<Store>,
-}
+use common::{gpu_lock, Built};
 
 fn store() -> Arc<Store> {
     static STORE: OnceLock<Built> = OnceLock::new();
-    STORE
-        .get_or_init(|| {
-            let dir = tempfile::tempdir().unwrap();
-            let path = dir.path().join("plant.tw");
-            let params = tw_io::generate::PlantParams { triangles: 100_000, seed: 5 };
-            let source = tw_io::generate::PlantSource::new(params).unwrap();
-            let scene = tw_io::Scene::from_sources(vec![Box::new(source)]);
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-            Built { store: Arc::new(Store::open(&path).unwrap()), _dir: dir }
-        })
-        .store
-        .clone()
-}
-
-fn gpu_lock() -> std::sync::MutexGuard<'static, ()> {
-    static LOCK: Mutex<()> = Mutex::new(());
-    LOCK.lock().unwrap_or_else(|e| e.into_inner())
-}
-
-fn walkthrough(backends: wgpu::Backends, what: &str, budget: u64) -> Option<Walkthrough> {
-    let renderer = match Renderer::new_headless_with(W, H, backends) {
-        Ok(r) => r,
-        Err(e @ GpuError::NoAdapter { .. })
-            if std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1") =>
-        {
-            eprintln!("SKIPPED {what}: {e} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)");
-            return None;
-        }
-        Err(e) => panic!("{what}: {e}"),
-    };
-    let stream = StreamOptions { budget_bytes: budget, ..Default::default() };
-    Some(Walkthrough::new(store(), renderer, stream).unwrap())
+    STORE.get_or_init(|| common::build_plant(100_000, 5)).store.clone()
 }
 
 /// A few cameras of the default path (walk and fly-over).
@@ -67,7 +31,7 @@ fn cameras(store: &Store) -> Vec<Camera> {
 
 fn against_the_reference(backends: wgpu::Backends, what: &str) {
     let _lock = gpu_lock();
-    let Some(mut w) = walkthrough(backends, what, 256 << 20) else { return };
+    let Some(mut w) = common::walkthrough(store(), backends, what, 256 << 20) else { return };
     let total_triangles = store().header().input_triangles;
     for (i, camera) in cameras(&store()).iter().enumerate() {
         let (reference, rinfo) = w.reference(camera).unwrap();
@@ -115,11 +79,11 @@ fn against_the_reference(backends: wgpu::Backends, what: &str) {
 fn reference_in_chunks(backends: wgpu::Backends, what: &str) {
     let _lock = gpu_lock();
     let cams = cameras(&store());
-    let Some(mut large) = walkthrough(backends, what, 256 << 20) else { return };
+    let Some(mut large) = common::walkthrough(store(), backends, what, 256 << 20) else { return };
     let big: Vec<_> = cams.iter().map(|c| large.reference(c).unwrap().0).collect();
     drop(large);
     // A budget of a few pages: the reference is drawn in many chunks.
-    let Some(mut small) = walkthrough(backends, what, 1 << 20) else { return };
+    let Some(mut small) = common::walkthrough(store(), backends, what, 1 << 20) else { return };
     for (i, c) in cams.iter().enumerate() {
         let (image, _) = small.reference(c).unwrap();
         assert_eq!(
