@@ -179,6 +179,7 @@ impl Renderer {
             label: Some("terawalk"),
             required_features: features,
             required_limits: limits,
+            memory_hints: Renderer::memory_hints(),
             ..Default::default()
         }))
         .map_err(|source| GpuError::Device { adapter: adapter_summary(&info), source })?;
@@ -186,6 +187,15 @@ impl Renderer {
         let mut r = Renderer::from_device(device, queue, info, width, height)?;
         r.set_downlevel(&adapter.get_downlevel_capabilities());
         Ok(r)
+    }
+
+    /// The memory hints to open a device with (also for [`Renderer::from_device`]): small
+    /// device-memory blocks. wgpu's default (`Performance`) sub-allocates from 128–256 MiB blocks
+    /// and keeps an emptied block for reuse; with the cluster pool's doubling arena that held
+    /// 512 MiB of memory for a 256 MiB budget (measured with heaptrack on lavapipe, where device
+    /// memory is process memory), so GPU memory would not stay within its budget.
+    pub fn memory_hints() -> wgpu::MemoryHints {
+        wgpu::MemoryHints::MemoryUsage
     }
 
     /// Features the renderer uses when the device has them (request them when opening a device

@@ -50,6 +50,7 @@ impl Gfx {
             label: Some("terawalk view"),
             required_features: wgpu::Features::empty(),
             required_limits: limits,
+            memory_hints: tw_gpu::Renderer::memory_hints(),
             ..Default::default()
         }))
         .map_err(|e| ViewError::Gpu(format!("creating a device on {}: {e}", info.name)))?;
