@@ -16,9 +16,13 @@
 //! distance, which is linear over the box, so its extreme is at a corner). The rectangle is
 //! reduced to the pixels whose *centres* it contains — the only ones rasterization can write —
 //! after widening it by [`RECT_SLACK_PX`] against rounding and the rasterizer's vertex snapping.
-//! The box is occluded when its nearest depth is strictly farther than the farthest occluder depth
-//! over those pixels, read from the level where the rectangle spans at most 2×2 texels (so a test
-//! costs at most 4 reads), with a relative margin ([`DEPTH_MARGIN`]) in the box's favour. A box
+//! The box is occluded when its nearest depth is strictly farther than the occluder depth at every
+//! one of those pixels, with a relative margin ([`DEPTH_MARGIN`]) in the box's favour. The test
+//! starts at the level where the rectangle spans at most 2×2 texels (4 reads prove most boxes
+//! occluded) and refines each texel that does not prove it into its children that meet the
+//! rectangle, down to single pixels where needed, stopping at the first pixel that could show
+//! the box — the exact answer for the rectangle, where a single coarse level would call visible
+//! every box whose 2×2 texels reach past an occluder's silhouette. A box
 //! with a corner behind the eye or in front of the near plane is reported visible.
 //!
 //! The test is therefore conservative: it never reports a box occluded if any point inside it
@@ -170,18 +174,41 @@ impl Hzb {
         while k + 1 < self.levels.len() && ((x1 >> k) - (x0 >> k) > 1 || (y1 >> k) - (y0 >> k) > 1) {
             k += 1;
         }
-        let level = &self.levels[k];
-        let mut farthest = f32::INFINITY;
+        let rect = [x0, y0, x1, y1];
+        let bound = nearest / (1.0 - DEPTH_MARGIN);
         for ty in (y0 >> k)..=(y1 >> k) {
             for tx in (x0 >> k)..=(x1 >> k) {
-                farthest = farthest.min(level.depth[(ty * level.width + tx) as usize]);
+                if !self.texel_occludes(k, tx, ty, rect, bound) {
+                    return HzbResult::Visible;
+                }
             }
         }
-        if nearest < farthest * (1.0 - DEPTH_MARGIN) {
-            HzbResult::Occluded
-        } else {
-            HzbResult::Visible
+        HzbResult::Occluded
+    }
+
+    /// Whether every pixel of `rect` (inclusive pixel bounds) under texel (`tx`, `ty`) of level
+    /// `k` holds a depth above `bound`: true at once when the texel's farthest depth is; else
+    /// its children of level `k − 1` that meet the rectangle are refined, down to the pixels.
+    /// The recursion stops at the first pixel that could show the box, so a visible box costs
+    /// one path down the pyramid, and an occluded one as many texels as its outline needs.
+    fn texel_occludes(&self, k: usize, tx: u32, ty: u32, rect: [u32; 4], bound: f32) -> bool {
+        let level = &self.levels[k];
+        if level.depth[(ty * level.width + tx) as usize] > bound {
+            return true;
         }
+        if k == 0 {
+            return false;
+        }
+        let [x0, y0, x1, y1] = rect;
+        let (c, below) = (k - 1, &self.levels[k - 1]);
+        for cy in (2 * ty).max(y0 >> c)..=(2 * ty + 1).min(y1 >> c).min(below.height - 1) {
+            for cx in (2 * tx).max(x0 >> c)..=(2 * tx + 1).min(x1 >> c).min(below.width - 1) {
+                if !self.texel_occludes(c, cx, cy, rect, bound) {
+                    return false;
+                }
+            }
+        }
+        true
     }
 }
 
@@ -268,6 +295,90 @@ mod tests {
         // A gap outside the box's rectangle does not.
         let hzb = Hzb::build(&wall(&vp, 10.0, 1..2), W, H).unwrap();
         assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Occluded);
+    }
+
+    /// The refinement: a gap right beside the box's rectangle, inside the coarse texels that
+    /// cover it, must not make the box visible; a gap one pixel inside its rectangle must.
+    #[test]
+    fn a_gap_next_to_the_rectangle_is_refined_away() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let (lo, hi) = unit_box_at(20.0);
+        // The box's pixel columns: its rectangle from the corners' projections.
+        let hzb = Hzb::build(&wall(&vp, 10.0, 0..0), W, H).unwrap();
+        let cols: Vec<u32> = (0..W)
+            .filter(|&x| {
+                let gap = Hzb::build(&wall(&vp, 10.0, x..x + 1), W, H).unwrap();
+                gap.test_box(&vp, lo, hi) == HzbResult::Visible
+            })
+            .collect();
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Occluded);
+        let (first, last) = (cols[0], *cols.last().unwrap());
+        assert_eq!(cols.len() as u32, last - first + 1, "the columns that show it are contiguous: {cols:?}");
+        // Those columns are exactly the ones the rectangle's pixel centres cover.
+        let corners: Vec<f32> = (0..8)
+            .map(|i| {
+                let p = Vec3::new(
+                    if i & 1 == 0 { lo.x } else { hi.x },
+                    if i & 2 == 0 { lo.y } else { hi.y },
+                    if i & 4 == 0 { lo.z } else { hi.z },
+                );
+                let v = vp * p.extend(1.0);
+                (v.x / v.w * 0.5 + 0.5) * W as f32
+            })
+            .collect();
+        let x_lo = corners.iter().cloned().fold(f32::INFINITY, f32::min) - RECT_SLACK_PX;
+        let x_hi = corners.iter().cloned().fold(f32::NEG_INFINITY, f32::max) + RECT_SLACK_PX;
+        assert_eq!(first, (x_lo - 0.5).ceil() as u32);
+        assert_eq!(last, (x_hi - 0.5).floor() as u32);
+        // A coarse texel holding both the last column and the next one exists at level 1 or 2:
+        // with a single coarse level the gap beside the box would have shown it.
+        assert!(first > 0 && last + 1 < W);
+    }
+
+    /// `test_rect` equals the brute-force answer over the rectangle's pixels, on random depth
+    /// buffers of odd sizes and random rectangles.
+    #[test]
+    fn rect_test_is_exact_over_the_pixels() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut next = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed
+        };
+        for _ in 0..300 {
+            let (w, h) = (1 + (next() % 37) as u32, 1 + (next() % 29) as u32);
+            // Blocky depth: regions of near and far, a few holes.
+            let depth: Vec<f32> = (0..w * h).map(|_| [0.0, 0.3, 0.6, 0.9][(next() % 4) as usize]).collect();
+            let hzb = Hzb::build(&depth, w, h).unwrap();
+            for _ in 0..20 {
+                let f = |n: u64, m: u32| (n % (m as u64 * 100)) as f32 / 100.0 - 1.0;
+                let (a, b) = (f(next(), w + 2), f(next(), w + 2));
+                let (c, d) = (f(next(), h + 2), f(next(), h + 2));
+                let (x_lo, x_hi, y_lo, y_hi) = (a.min(b), a.max(b), c.min(d), c.max(d));
+                let nearest = [0.1, 0.45, 0.75][(next() % 3) as usize];
+                let (px0, px1) = ((x_lo - RECT_SLACK_PX - 0.5).ceil(), (x_hi + RECT_SLACK_PX - 0.5).floor());
+                let (py0, py1) = ((y_lo - RECT_SLACK_PX - 0.5).ceil(), (y_hi + RECT_SLACK_PX - 0.5).floor());
+                let (px0, py0) = (px0.max(0.0) as i64, py0.max(0.0) as i64);
+                let (px1, py1) = (px1.min(w as f32 - 1.0) as i64, py1.min(h as f32 - 1.0) as i64);
+                let expected = if px0 > px1 || py0 > py1 {
+                    HzbResult::NoPixels
+                } else if (py0..=py1).all(|y| {
+                    (px0..=px1)
+                        .all(|x| nearest < depth[(y as u32 * w + x as u32) as usize] * (1.0 - DEPTH_MARGIN))
+                }) {
+                    HzbResult::Occluded
+                } else {
+                    HzbResult::Visible
+                };
+                assert_eq!(
+                    hzb.test_rect(x_lo, y_lo, x_hi, y_hi, nearest),
+                    expected,
+                    "{w}×{h}, rect ({x_lo}, {y_lo})..({x_hi}, {y_hi}), nearest {nearest}"
+                );
+            }
+        }
     }
 
     #[test]
