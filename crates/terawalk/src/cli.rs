@@ -75,6 +75,7 @@ pub enum Command {
                             terawalk view plant.tw --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --error 2\n  \
                             terawalk view plant.tw --path walk.json --play\n  \
                             xvfb-run -a terawalk view plant.tw --path walk.json --exit-after 30 --screenshot out.png\n  \
+                            terawalk view plant.tw --script tour.txt --screenshot end.png\n  \
                             WGPU_BACKEND=gl terawalk view plant.tw --render-scale 0.5\n\n\
                             Keys: WASD move, mouse drag look, wheel speed, 1/2/3 fly/walk/orbit, right click \
                             orbit around a point, F debug view, L freeze LOD, R record, P play, F12 screenshot, \
@@ -254,10 +255,17 @@ pub struct ViewArgs {
     /// Quit after this many frames (scripted runs: one path frame per frame).
     #[arg(long)]
     pub exit_after: Option<u64>,
-    /// Save the last frame as PNG on exit (with --exit-after).
+    /// Drive the session with a script and quit after its last step: one step per line —
+    /// `wait N`, `hold KEY N`, `press KEY`, `look DX DY`, `scroll LINES`, `resize WxH`,
+    /// `minimize`, `restore`, `screenshot FILE`, `screenshot-window FILE` (`#` comments). With
+    /// --path, the path advances one frame per frame.
+    #[arg(long)]
+    pub script: Option<PathBuf>,
+    /// Save the last frame as PNG on exit (with --exit-after or --script).
     #[arg(long)]
     pub screenshot: Option<PathBuf>,
-    /// Save the whole window (HUD and panels included) as PNG just before exit (with --exit-after).
+    /// Save the whole window (HUD and panels included) as PNG just before exit (with --exit-after
+    /// or --script).
     #[arg(long)]
     pub screenshot_window: Option<PathBuf>,
     /// Record the camera path from the start into this file (saved on R or at exit). Without

@@ -169,6 +169,20 @@ fn scripted_run_on(
     extra: &[&str],
     check_image: bool,
 ) -> Option<(tempfile::TempDir, String)> {
+    run_under_xvfb(store_file, backend, &["--exit-after", "8"], "8 frames", extra, check_image)
+}
+
+/// Runs the viewer under Xvfb on the circle path until `stop` says (`--exit-after N` or
+/// `--script FILE`, relative to the run's folder, where `script` is written first), checks that
+/// stdout reports `frames` and that the `--screenshot` shows the model (`check_image`).
+fn run_under_xvfb(
+    store_file: &Path,
+    backend: &str,
+    stop: &[&str],
+    frames: &str,
+    extra: &[&str],
+    check_image: bool,
+) -> Option<(tempfile::TempDir, String)> {
     // One Xvfb at a time: `xvfb-run -a` picks a free display number racily.
     static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
@@ -186,8 +200,9 @@ fn scripted_run_on(
     let mut cmd = Command::new(xvfb_run);
     cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view"])
         .arg(store_file)
-        .args(["--path", "path.json", "--exit-after", "8", "--size", "480x320", "--screenshot"])
+        .args(["--path", "path.json", "--size", "480x320", "--screenshot"])
         .arg(&shot)
+        .args(stop)
         .args(extra)
         .current_dir(dir.path())
         .env("WGPU_BACKEND", backend)
@@ -205,7 +220,7 @@ fn scripted_run_on(
         return None;
     }
     assert!(!err.contains("panicked"), "{err}");
-    assert!(text(&o.stdout).contains("8 frames"), "{}", text(&o.stdout));
+    assert!(text(&o.stdout).contains(frames), "{}", text(&o.stdout));
     if !check_image {
         return Some((dir, err));
     }
@@ -291,4 +306,47 @@ fn a_corrupt_page_does_not_stop_the_viewer() {
     if let Some((_, err)) = scripted_run_on(&file, "vulkan", &["--error", "0"], true) {
         assert!(err.contains("failed to load"), "the damaged page was not reported: {err}");
     }
+}
+
+/// The size of a PNG file (its IHDR).
+fn png_size(file: &Path) -> (u32, u32) {
+    let bytes = std::fs::read(file).unwrap_or_else(|e| panic!("{}: {e}", file.display()));
+    let be = |i: usize| u32::from_be_bytes(bytes[i..i + 4].try_into().unwrap());
+    (be(16), be(20))
+}
+
+#[test]
+fn a_script_drives_keys_resizes_and_minimising() {
+    // Keys held and pressed, mouse look, two resizes and a minimise/restore in one session:
+    // the scene follows the window's size, minimised frames are skipped without an error, and
+    // the last frame after restoring shows the model at the new size.
+    let script = "wait 2\nhold W 3\nlook 40 -10\npress C\nresize 320x200\nwait 4\nscreenshot small.png\n\
+                  minimize\nwait 3\nrestore\nresize 400x300\nwait 4\n";
+    let frames = tw_view::script::Script::parse(script, Path::new("s")).unwrap().frames();
+    assert_eq!(frames, 17);
+    for backend in ["vulkan", "gl"] {
+        let dir = tempfile::tempdir().unwrap();
+        let script_file = dir.path().join("script.txt");
+        std::fs::write(&script_file, script).unwrap();
+        let stop = ["--script", script_file.to_str().unwrap()];
+        let Some((run, _)) = run_under_xvfb(store(), backend, &stop, "17 frames (3 minimised)", &[], true)
+        else {
+            continue;
+        };
+        assert_eq!(png_size(&run.path().join("small.png")), (320, 200), "{backend}: after the first resize");
+        assert_eq!(png_size(&run.path().join("shot.png")), (400, 300), "{backend}: after restoring");
+    }
+}
+
+#[test]
+fn a_bad_script_is_a_clear_error_before_any_window() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("s.txt"), "wait 2\nhold W\n").unwrap();
+    let s = store().to_str().unwrap();
+    let o = terawalk(&["view", s, "--script", "s.txt"], dir.path());
+    assert_clean_error(&o, "s.txt:2: `hold` takes 2 argument(s), found 1");
+    let o = terawalk(&["view", s, "--script", "missing.txt"], dir.path());
+    assert_clean_error(&o, "missing.txt");
+    let o = terawalk(&["view", s, "--script", "s.txt", "--exit-after", "3"], dir.path());
+    assert_clean_error(&o, "give one of them");
 }

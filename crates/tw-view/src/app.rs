@@ -25,6 +25,7 @@ use crate::hud::{FrameTimes, HudFrame, Throughput};
 use crate::pick::{camera_ray, Ray};
 use crate::recorder::{Player, Recorder};
 use crate::scene::Scene;
+use crate::script::{ScriptRunner, Step};
 use crate::settings::{Coloring, Settings};
 use crate::ui::{self, Action, Line};
 use crate::ViewOptions;
@@ -68,6 +69,10 @@ pub(crate) struct App {
     message: Option<(String, Instant)>,
     /// A window screenshot (UI included) to take at the next present.
     window_shot: Option<std::path::PathBuf>,
+    /// The `--script` being run.
+    script: Option<ScriptRunner>,
+    /// Minimised (by a script step, or a zero-size window): frames are skipped.
+    minimized: bool,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -84,7 +89,9 @@ impl App {
         settings.memory_budget = scene.memory_budget();
         let start_debug = settings.debug_view;
         settings.debug_view = false;
-        let playing = player.is_some() && (options.play || options.exit_after.is_some());
+        let scripted = options.exit_after.is_some() || options.script.is_some();
+        let playing = player.is_some() && (options.play || scripted);
+        let script = options.script.clone().map(ScriptRunner::new);
         let mut app = App {
             start_camera: options.camera,
             controller,
@@ -110,6 +117,8 @@ impl App {
             drawn_key: None,
             message: None,
             window_shot: None,
+            script,
+            minimized: false,
             error: None,
             report: Default::default(),
         };
@@ -163,6 +172,7 @@ impl App {
     /// Whether the next frame must follow at once.
     fn animating(&self) -> bool {
         self.options.exit_after.is_some()
+            || self.script.is_some()
             || self.playing
             || self.recorder.is_some()
             || self.dragging
@@ -359,6 +369,65 @@ impl App {
         }
     }
 
+    /// Applies the script's steps for this frame (keys, look, resizes, minimising,
+    /// screenshots); returns whether this frame is the script's last.
+    fn script_steps(&mut self, event_loop: &ActiveEventLoop) -> bool {
+        let Some(runner) = self.script.as_mut() else { return false };
+        let steps = runner.next_frame();
+        if let Some(k) = steps.release {
+            self.key(k, false, false, event_loop);
+        }
+        if let Some(k) = steps.hold {
+            self.key(k, true, false, event_loop);
+        }
+        for step in steps.instant {
+            match step {
+                Step::Press(k) => {
+                    self.key(k, true, false, event_loop);
+                    self.key(k, false, false, event_loop);
+                }
+                Step::Look(dx, dy) => {
+                    self.look[0] += dx;
+                    self.look[1] += dy;
+                }
+                Step::Scroll(lines) => self.scroll += lines,
+                Step::Resize(width, height) => {
+                    if let Some(w) = self.win.as_mut() {
+                        // Applied now when the window system grants it at once, else when its
+                        // Resized event comes.
+                        if let Some(s) =
+                            w.window.request_inner_size(winit::dpi::PhysicalSize::new(width, height))
+                        {
+                            w.gfx.resize(s.width, s.height);
+                        }
+                    }
+                    self.say(format!("script: resize to {width}×{height}"));
+                }
+                Step::Minimize => {
+                    if let Some(w) = self.win.as_mut() {
+                        w.window.set_minimized(true);
+                        // The zero-size path, whatever the window system does with the request.
+                        w.gfx.resize(0, 0);
+                    }
+                    self.minimized = true;
+                }
+                Step::Restore => {
+                    if let Some(w) = self.win.as_mut() {
+                        w.window.set_minimized(false);
+                        let s = w.window.inner_size();
+                        w.gfx.resize(s.width, s.height);
+                    }
+                    self.minimized = false;
+                }
+                // The scene as the last frame drew it (before this frame's steps act).
+                Step::Screenshot(p) => self.screenshot(&p),
+                Step::WindowScreenshot(p) => self.window_shot = Some(p),
+                Step::Wait(_) | Step::Hold(..) => unreachable!("frame steps are not instant"),
+            }
+        }
+        steps.last
+    }
+
     fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
         let now = Instant::now();
         let mut dt = (now - self.last_time).as_secs_f32();
@@ -368,14 +437,27 @@ impl App {
             dt = dt.min(1.0 / 60.0);
         }
         let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
-        if size.width == 0 || size.height == 0 {
-            return Ok(()); // minimised
+        let last_step = self.script_steps(event_loop);
+        if self.minimized || size.width == 0 || size.height == 0 {
+            // Minimised: nothing to draw. A script goes on counting frames.
+            if self.script.is_some() {
+                self.frames += 1;
+                self.report.frames = self.frames;
+                self.report.minimized_frames += 1;
+                if last_step {
+                    event_loop.exit();
+                } else if let Some(w) = &self.win {
+                    w.window.request_redraw();
+                }
+            }
+            return Ok(());
         }
+        let size = self.win.as_ref().map(|w| w.window.inner_size()).unwrap_or(size);
 
         // 1. The camera: the path, or the controller.
         let mut camera = None;
         if self.playing {
-            let scripted = self.options.exit_after.is_some();
+            let scripted = self.options.exit_after.is_some() || self.script.is_some();
             let p = self.player.as_mut().expect("playing needs a path");
             camera = if scripted { p.step() } else { p.advance(dt as f64) };
             if camera.is_none() {
@@ -564,7 +646,9 @@ impl App {
             }
         }
         self.report.frames = self.frames;
-        if let Some(n) = self.options.exit_after {
+        self.report.last_size = [size.width, size.height];
+        let script_done = self.script.as_ref().is_some_and(|_| last_step);
+        if let Some(n) = self.options.exit_after.or(script_done.then_some(self.frames)) {
             if self.frames >= n {
                 if let Some(p) = self.options.screenshot.clone() {
                     self.screenshot(&p);

@@ -15,10 +15,12 @@
 //! - [`gfx`]: window surface, device and egui-wgpu;
 //! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;
+//! - [`script`]: scripted sessions (`--script`: keys, mouse look, resizes, minimising,
+//!   screenshots, frame by frame);
 //! - `app`: the winit event loop tying them together.
 //!
-//! [`run`] opens the window and returns when it is closed, after `exit_after` frames of a
-//! scripted run, or with the first error (no panics on user input).
+//! [`run`] opens the window and returns when it is closed, after `exit_after` frames or the
+//! last step of a `script`, or with the first error (no panics on user input).
 
 pub mod controller;
 pub mod debug_view;
@@ -29,6 +31,7 @@ pub mod pick;
 pub mod readback;
 pub mod recorder;
 pub mod scene;
+pub mod script;
 pub mod settings;
 pub mod ui;
 
@@ -51,6 +54,9 @@ pub struct ViewOptions {
     pub play: bool,
     /// Stop after this many frames (scripted runs: one path frame per rendered frame).
     pub exit_after: Option<u64>,
+    /// Drive the session with a script and stop after its last step (one path frame per
+    /// frame, as with `exit_after`).
+    pub script: Option<script::Script>,
     /// Write the last frame here on exit (with `exit_after`).
     pub screenshot: Option<PathBuf>,
     /// Write the whole window (UI included) here just before exit (with `exit_after`).
@@ -76,6 +82,10 @@ pub struct ViewReport {
     pub frames: u64,
     pub screenshot: Option<PathBuf>,
     pub last_triangles: u64,
+    /// Frames skipped while minimised (scripted runs count them).
+    pub minimized_frames: u64,
+    /// The window size of the last frame drawn.
+    pub last_size: [u32; 2],
 }
 
 /// Opens the window over `scene` and runs until it is closed (see the crate documentation).

@@ -22,9 +22,19 @@ pub fn run(args: ViewArgs) -> Result<()> {
         OcclusionArg::Hzb => OcclusionStrategy::Hzb,
         OcclusionArg::Queries => OcclusionStrategy::Queries,
     };
-    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && args.exit_after.is_none() {
-        anyhow::bail!("--screenshot needs --exit-after N (press F12 for screenshots while viewing)");
+    let scripted = args.exit_after.is_some() || args.script.is_some();
+    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && !scripted {
+        anyhow::bail!(
+            "--screenshot needs --exit-after N or --script FILE (press F12 for screenshots while viewing)"
+        );
     }
+    if args.exit_after.is_some() && args.script.is_some() {
+        anyhow::bail!("--exit-after and --script both say when to stop: give one of them");
+    }
+    let script = match &args.script {
+        Some(p) => Some(tw_view::script::Script::load(p)?),
+        None => None,
+    };
     let store =
         Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
     let path = match &args.path {
@@ -70,6 +80,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         path,
         play: args.play,
         exit_after: args.exit_after,
+        script,
         screenshot: args.screenshot.clone(),
         window_screenshot: args.screenshot_window.clone(),
         record: args.record.clone(),
@@ -87,8 +98,15 @@ pub fn run(args: ViewArgs) -> Result<()> {
     if let Some(s) = &report.screenshot {
         println!("wrote {}", s.display());
     }
-    if args.exit_after.is_some() {
-        println!("{} frames, {} triangles in the last", report.frames, report.last_triangles);
+    if scripted {
+        println!(
+            "{} frames ({} minimised), {} triangles in the last, window {}x{}",
+            report.frames,
+            report.minimized_frames,
+            report.last_triangles,
+            report.last_size[0],
+            report.last_size[1]
+        );
     }
     Ok(())
 }

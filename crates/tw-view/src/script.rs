@@ -1,0 +1,358 @@
+//! Scripted viewer sessions (`terawalk view --script FILE`): a text file of steps that drive
+//! the viewer as a person would — keys held for some frames, key presses, mouse look, window
+//! resizes, minimising and restoring, screenshots — one frame at a time, so that a run is
+//! reproducible (tests under Xvfb, demos, bug reports). The viewer quits after the last step.
+//!
+//! One step per line; `#` starts a comment; blank lines are ignored:
+//!
+//! ```text
+//! wait 10              # draw 10 frames (the controller or --path moves the camera)
+//! hold W 20            # hold a key for 20 frames (W A S D Q E, Up Down Left Right, Shift…)
+//! press F1             # press and release a key (any key the viewer knows: F1, L, C, 2, …)
+//! look 120 -40         # move the mouse-look by (dx, dy) pixels
+//! scroll 3             # the wheel: +3 lines (speed)
+//! resize 640x360       # ask for a new window size (applied when the window system agrees)
+//! minimize             # minimise: frames are skipped until `restore`
+//! restore
+//! screenshot a.png     # the scene image of the last frame drawn (as F12)
+//! screenshot-window b.png   # the whole window, HUD included (as Shift+F12)
+//! ```
+//!
+//! Minimising: a window system minimises a window asynchronously and differently (Windows sends
+//! a zero size; X11 without a window manager ignores the request), so `minimize` both asks the
+//! window system and takes the viewer through its zero-size path, the one a zero-sized
+//! `Resized` event takes; `restore` configures the surface for the window's size again.
+
+use std::path::{Path, PathBuf};
+
+use winit::keyboard::KeyCode;
+
+/// One step of a script.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Step {
+    Wait(u32),
+    Hold(KeyCode, u32),
+    Press(KeyCode),
+    Look(f32, f32),
+    Scroll(f32),
+    Resize(u32, u32),
+    Minimize,
+    Restore,
+    Screenshot(PathBuf),
+    WindowScreenshot(PathBuf),
+}
+
+impl Step {
+    /// Frames the step takes (0: it happens at the start of the next frame with the steps
+    /// after it, up to the next one that takes frames).
+    pub fn frames(&self) -> u32 {
+        match self {
+            Step::Wait(n) | Step::Hold(_, n) => *n,
+            _ => 0,
+        }
+    }
+}
+
+/// A parsed script.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Script {
+    pub steps: Vec<Step>,
+}
+
+/// A script that cannot be read, with the file and line.
+#[derive(Debug, thiserror::Error)]
+pub enum ScriptError {
+    #[error("cannot read the script {path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}:{line}: {msg}")]
+    Syntax { path: PathBuf, line: usize, msg: String },
+}
+
+/// The key names a script may use (winit's `KeyCode` without the prefix, case-insensitive:
+/// `W`, `F1`, `Up`, `Shift`, `Escape`, `Home`, `2`).
+pub fn parse_key(name: &str) -> Option<KeyCode> {
+    let n = name.to_ascii_lowercase();
+    let letter = |c: char| -> Option<KeyCode> {
+        use KeyCode::*;
+        const LETTERS: [KeyCode; 26] = [
+            KeyA, KeyB, KeyC, KeyD, KeyE, KeyF, KeyG, KeyH, KeyI, KeyJ, KeyK, KeyL, KeyM, KeyN, KeyO, KeyP,
+            KeyQ, KeyR, KeyS, KeyT, KeyU, KeyV, KeyW, KeyX, KeyY, KeyZ,
+        ];
+        c.is_ascii_lowercase().then(|| LETTERS[(c as u8 - b'a') as usize])
+    };
+    use KeyCode::*;
+    const DIGITS: [KeyCode; 10] =
+        [Digit0, Digit1, Digit2, Digit3, Digit4, Digit5, Digit6, Digit7, Digit8, Digit9];
+    const FKEYS: [KeyCode; 12] = [F1, F2, F3, F4, F5, F6, F7, F8, F9, F10, F11, F12];
+    let mut chars = n.chars();
+    match (chars.next(), chars.next()) {
+        (Some(c), None) if c.is_ascii_lowercase() => return letter(c),
+        (Some(c), None) if c.is_ascii_digit() => return Some(DIGITS[(c as u8 - b'0') as usize]),
+        _ => {}
+    }
+    if let Some(k) = n.strip_prefix('f').and_then(|d| d.parse::<usize>().ok()) {
+        return FKEYS.get(k.wrapping_sub(1)).copied();
+    }
+    Some(match n.as_str() {
+        "up" => ArrowUp,
+        "down" => ArrowDown,
+        "left" => ArrowLeft,
+        "right" => ArrowRight,
+        "shift" | "lshift" => ShiftLeft,
+        "rshift" => ShiftRight,
+        "space" => Space,
+        "escape" | "esc" => Escape,
+        "home" => Home,
+        "tab" => Tab,
+        _ => return None,
+    })
+}
+
+impl Script {
+    /// Reads and parses the script at `path`.
+    pub fn load(path: &Path) -> Result<Script, ScriptError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|source| ScriptError::Io { path: path.to_path_buf(), source })?;
+        Script::parse(&text, path)
+    }
+
+    /// Parses `text`; `path` names it in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Script, ScriptError> {
+        let mut steps = Vec::new();
+        for (i, raw) in text.lines().enumerate() {
+            let err = |msg: String| ScriptError::Syntax { path: path.to_path_buf(), line: i + 1, msg };
+            let line = raw.split('#').next().unwrap_or_default().trim();
+            if line.is_empty() {
+                continue;
+            }
+            let words: Vec<&str> = line.split_whitespace().collect();
+            let (cmd, args) = (words[0].to_ascii_lowercase(), &words[1..]);
+            let want = |n: usize| -> Result<(), ScriptError> {
+                if args.len() == n {
+                    Ok(())
+                } else {
+                    Err(err(format!("`{cmd}` takes {n} argument(s), found {}", args.len())))
+                }
+            };
+            let count = |s: &str| -> Result<u32, ScriptError> {
+                s.parse::<u32>()
+                    .ok()
+                    .filter(|&n| n <= 1_000_000)
+                    .ok_or_else(|| err(format!("`{s}` is not a frame count (0..=1000000)")))
+            };
+            let number = |s: &str| -> Result<f32, ScriptError> {
+                s.parse::<f32>()
+                    .ok()
+                    .filter(|v| v.is_finite() && v.abs() <= 1e6)
+                    .ok_or_else(|| err(format!("`{s}` is not a number")))
+            };
+            let key = |s: &str| parse_key(s).ok_or_else(|| err(format!("unknown key `{s}`")));
+            let step = match cmd.as_str() {
+                "wait" => {
+                    want(1)?;
+                    Step::Wait(count(args[0])?)
+                }
+                "hold" => {
+                    want(2)?;
+                    Step::Hold(key(args[0])?, count(args[1])?)
+                }
+                "press" => {
+                    want(1)?;
+                    Step::Press(key(args[0])?)
+                }
+                "look" => {
+                    want(2)?;
+                    Step::Look(number(args[0])?, number(args[1])?)
+                }
+                "scroll" => {
+                    want(1)?;
+                    Step::Scroll(number(args[0])?)
+                }
+                "resize" => {
+                    want(1)?;
+                    let size = args[0]
+                        .split_once(['x', 'X'])
+                        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+                        .filter(|&(w, h)| (1..=16384).contains(&w) && (1..=16384).contains(&h))
+                        .ok_or_else(|| {
+                            err(format!("`{}` is not a size WIDTHxHEIGHT (1..=16384)", args[0]))
+                        })?;
+                    Step::Resize(size.0, size.1)
+                }
+                "minimize" | "minimise" => {
+                    want(0)?;
+                    Step::Minimize
+                }
+                "restore" => {
+                    want(0)?;
+                    Step::Restore
+                }
+                "screenshot" => {
+                    want(1)?;
+                    Step::Screenshot(PathBuf::from(args[0]))
+                }
+                "screenshot-window" => {
+                    want(1)?;
+                    Step::WindowScreenshot(PathBuf::from(args[0]))
+                }
+                other => {
+                    return Err(err(format!(
+                        "unknown step `{other}` (wait, hold, press, look, scroll, resize, minimize, \
+                         restore, screenshot, screenshot-window)"
+                    )))
+                }
+            };
+            steps.push(step);
+        }
+        Ok(Script { steps })
+    }
+
+    /// Frames a run of the script takes: those of its waits and holds, then the last one, in
+    /// which the steps after them happen and the viewer quits.
+    pub fn frames(&self) -> u64 {
+        self.steps.iter().map(|s| s.frames() as u64).sum::<u64>() + 1
+    }
+}
+
+/// Where a running script is.
+#[derive(Clone, Debug, Default)]
+pub struct ScriptRunner {
+    steps: std::collections::VecDeque<Step>,
+    /// Frames left of the step being run (a wait or a held key), and the key held.
+    left: u32,
+    held: Option<KeyCode>,
+}
+
+/// What to do at the start of a frame.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameSteps {
+    /// Instant steps, in order (presses, looks, resizes, screenshots…).
+    pub instant: Vec<Step>,
+    /// A key to release before them (its hold ended).
+    pub release: Option<KeyCode>,
+    /// A key to press and keep down (a hold starts).
+    pub hold: Option<KeyCode>,
+    /// The script ended: this frame is the last.
+    pub last: bool,
+}
+
+impl ScriptRunner {
+    pub fn new(script: Script) -> ScriptRunner {
+        ScriptRunner { steps: script.steps.into(), left: 0, held: None }
+    }
+
+    /// The steps of the next frame.
+    pub fn next_frame(&mut self) -> FrameSteps {
+        let mut out = FrameSteps::default();
+        if self.left > 0 {
+            self.left -= 1;
+            if self.left > 0 {
+                return out;
+            }
+        }
+        out.release = self.held.take();
+        // A step's frames are counted from this frame on.
+        while let Some(step) = self.steps.pop_front() {
+            match step {
+                Step::Wait(0) | Step::Hold(_, 0) => {}
+                Step::Wait(n) => {
+                    self.left = n;
+                    break;
+                }
+                Step::Hold(k, n) => {
+                    self.left = n;
+                    self.held = Some(k);
+                    out.hold = Some(k);
+                    break;
+                }
+                s => out.instant.push(s),
+            }
+        }
+        out.last = self.left == 0 && self.steps.is_empty();
+        out
+    }
+
+    pub fn finished(&self) -> bool {
+        self.left == 0 && self.steps.is_empty()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Script, ScriptError> {
+        Script::parse(text, Path::new("s.txt"))
+    }
+
+    #[test]
+    fn parses_every_step_and_comments() {
+        let s = parse(
+            "# a walk\nwait 3\nhold w 2  # forward\npress F1\nlook 10 -5\nscroll 2\nresize 320x200\n\
+             minimize\nrestore\nscreenshot a.png\nscreenshot-window b.png\n\n",
+        )
+        .unwrap();
+        assert_eq!(
+            s.steps,
+            vec![
+                Step::Wait(3),
+                Step::Hold(KeyCode::KeyW, 2),
+                Step::Press(KeyCode::F1),
+                Step::Look(10.0, -5.0),
+                Step::Scroll(2.0),
+                Step::Resize(320, 200),
+                Step::Minimize,
+                Step::Restore,
+                Step::Screenshot("a.png".into()),
+                Step::WindowScreenshot("b.png".into()),
+            ]
+        );
+        assert_eq!(s.frames(), 6);
+    }
+
+    #[test]
+    fn errors_name_the_file_and_line() {
+        for (text, line, needle) in [
+            ("wait 2\njump 3", 2, "unknown step `jump`"),
+            ("hold W", 1, "takes 2 argument"),
+            ("\n\nhold Foo 2", 3, "unknown key `Foo`"),
+            ("resize 0x10", 1, "not a size"),
+            ("wait -1", 1, "not a frame count"),
+            ("look 1 nan", 1, "not a number"),
+        ] {
+            let e = parse(text).unwrap_err().to_string();
+            assert!(e.starts_with(&format!("s.txt:{line}: ")) && e.contains(needle), "{e}");
+        }
+    }
+
+    #[test]
+    fn keys_by_name() {
+        assert_eq!(parse_key("w"), Some(KeyCode::KeyW));
+        assert_eq!(parse_key("F12"), Some(KeyCode::F12));
+        assert_eq!(parse_key("f13"), None);
+        assert_eq!(parse_key("f0"), None);
+        assert_eq!(parse_key("Up"), Some(KeyCode::ArrowUp));
+        assert_eq!(parse_key("3"), Some(KeyCode::Digit3));
+        assert_eq!(parse_key("shift"), Some(KeyCode::ShiftLeft));
+        assert_eq!(parse_key("xyz"), None);
+    }
+
+    #[test]
+    fn the_runner_spreads_steps_over_frames() {
+        let s = parse("press F1\nhold W 2\nresize 10x10\nwait 2\nscreenshot a.png").unwrap();
+        assert_eq!(s.frames(), 5);
+        let mut r = ScriptRunner::new(s);
+        let f1 = r.next_frame();
+        assert_eq!(f1.instant, vec![Step::Press(KeyCode::F1)]);
+        assert_eq!((f1.hold, f1.release, f1.last), (Some(KeyCode::KeyW), None, false));
+        assert_eq!(r.next_frame(), FrameSteps::default(), "second frame of the hold");
+        let f3 = r.next_frame();
+        assert_eq!(f3.release, Some(KeyCode::KeyW));
+        assert_eq!(f3.instant, vec![Step::Resize(10, 10)]);
+        assert!(!f3.last);
+        assert_eq!(r.next_frame(), FrameSteps::default());
+        let f5 = r.next_frame();
+        assert_eq!(f5.instant, vec![Step::Screenshot("a.png".into())]);
+        assert!(f5.last && r.finished());
+    }
+}
