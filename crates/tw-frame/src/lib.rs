@@ -58,6 +58,12 @@ impl Default for FrameSettings {
 pub struct FrameTimes {
     /// Selection and streaming requests.
     pub select: Duration,
+    /// Of which the frame's own cut (a streamed frame; with `wait_for_pages` all of `select`).
+    #[serde(default)]
+    pub select_cut: Duration,
+    /// Of which the prefetch views' selections.
+    #[serde(default)]
+    pub select_prefetch: Duration,
     /// Occlusion culling: tests and the depth read-back or queries they need (drawing excluded).
     pub cull: Duration,
     /// Making clusters resident on the GPU.
@@ -202,6 +208,8 @@ impl Walkthrough {
         let info = FrameInfo {
             times: FrameTimes {
                 select,
+                select_cut: select,
+                select_prefetch: Duration::ZERO,
                 cull: Duration::ZERO,
                 upload: gpu.upload,
                 render: gpu.render,
@@ -378,12 +386,14 @@ impl Walkthrough {
             SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
         let store = self.streamer.store().clone();
         let mut stream = StreamStats::default();
+        let mut stream_times = None;
         let pages: Vec<(u32, Arc<ResidentPage>)> = if settings.wait_for_pages {
             self.selection = self.streamer.select_blocking(camera, &options);
             resident_pages(&self.streamer, &self.selection.clusters)
         } else {
             let frame = self.streamer.frame(camera, &options);
             stream = frame.stats;
+            stream_times = Some(frame.times);
             self.selection = frame.selection;
             frame.pages
         };
@@ -406,6 +416,8 @@ impl Walkthrough {
         let info = FrameInfo {
             times: FrameTimes {
                 select,
+                select_cut: stream_times.map_or(select, |t| t.cut),
+                select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
                 cull: culled.cull_time,
                 upload: gpu.upload,
                 render: gpu.render,

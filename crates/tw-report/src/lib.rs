@@ -71,6 +71,11 @@ pub struct FrameRecord {
     /// From camera update to image complete.
     pub frame_ms: f64,
     pub select_ms: f64,
+    /// Of `select_ms`: the frame's own cut, and the prefetch views' selections.
+    #[serde(default)]
+    pub cut_ms: f64,
+    #[serde(default)]
+    pub prefetch_ms: f64,
     pub cull_ms: f64,
     pub upload_ms: f64,
     pub render_ms: f64,

@@ -71,4 +71,4 @@ pub use pathgen::{
 };
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
-pub use stream::{StreamFrame, StreamOptions, StreamStats, Streamer};
+pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};

@@ -101,9 +101,20 @@ pub struct StreamStats {
 #[derive(Debug, Default)]
 pub struct StreamFrame {
     pub selection: Selection,
+    /// Time of the frame's cut selection and of the prefetch views' selections.
+    pub times: StreamTimes,
     /// The pages of the selection's clusters, sorted by page index.
     pub pages: Vec<(u32, Arc<ResidentPage>)>,
     pub stats: StreamStats,
+}
+
+/// Where a streamed frame's selection time went.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StreamTimes {
+    /// The residency snapshot and the frame's own cut (the traversal from the root).
+    pub cut: std::time::Duration,
+    /// The prefetch views' traversals (wider field of view at τ/2, the extrapolated camera).
+    pub prefetch: std::time::Duration,
 }
 
 impl StreamFrame {
@@ -325,6 +336,7 @@ impl Streamer {
 
     /// One frame: select without waiting, request, prefetch, statistics (module documentation).
     pub fn frame(&mut self, camera: &Camera, options: &SelectOptions) -> StreamFrame {
+        let start = std::time::Instant::now();
         self.cache.begin_frame();
         self.availability.begin(&self.store);
         let (store, cache) = (&*self.store, &*self.cache);
@@ -339,6 +351,7 @@ impl Streamer {
             options,
             &mut selection,
         );
+        let cut = start.elapsed();
         let mut prefetch = Requests::default();
         if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below {
             // Prefetch views do not refresh pages in the LRU order.
@@ -357,6 +370,7 @@ impl Streamer {
             prefetch.0.retain(|p, _| !demand.0.contains_key(p));
             self.availability.set_peek_only(false);
         }
+        let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);
         let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
         for c in &selection.clusters {
@@ -399,7 +413,7 @@ impl Streamer {
             triangles: selection.triangles,
         };
         self.frame += 1;
-        StreamFrame { selection, pages, stats }
+        StreamFrame { selection, times, pages, stats }
     }
 
     /// The blocking cut of the render rule (pages loaded on the caller's thread through the

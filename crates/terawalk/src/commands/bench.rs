@@ -197,6 +197,8 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         segment: segment.to_string(),
         frame_ms: ms(info.times.total),
         select_ms: ms(info.times.select),
+        cut_ms: ms(info.times.select_cut),
+        prefetch_ms: ms(info.times.select_prefetch),
         cull_ms: ms(info.times.cull),
         upload_ms: ms(info.times.upload),
         render_ms: ms(info.times.render),
