@@ -97,14 +97,7 @@ struct Parsed {
 pub struct Store {
     path: PathBuf,
     data: Data,
-    header: Header,
-    units: String,
-    build_options: String,
-    objects: Vec<Object>,
-    nodes: Vec<Node>,
-    groups: Vec<Group>,
-    links: GroupLinks,
-    pages: Vec<PageEntry>,
+    t: Parsed,
 }
 
 /// What [`Store::verify`] found.
@@ -135,9 +128,9 @@ impl std::fmt::Debug for Store {
         f.debug_struct("Store")
             .field("path", &self.path)
             .field("bytes", &self.data.len())
-            .field("pages", &self.pages.len())
-            .field("nodes", &self.nodes.len())
-            .field("groups", &self.groups.len())
+            .field("pages", &self.t.pages.len())
+            .field("nodes", &self.t.nodes.len())
+            .field("groups", &self.t.groups.len())
             .finish()
     }
 }
@@ -177,19 +170,8 @@ impl Store {
         Ok(Store::assemble(path, Data::Vec(bytes), parsed))
     }
 
-    fn assemble(path: PathBuf, data: Data, p: Parsed) -> Store {
-        Store {
-            path,
-            data,
-            header: p.header,
-            units: p.units,
-            build_options: p.build_options,
-            objects: p.objects,
-            nodes: p.nodes,
-            groups: p.groups,
-            links: p.links,
-            pages: p.pages,
-        }
+    fn assemble(path: PathBuf, data: Data, t: Parsed) -> Store {
+        Store { path, data, t }
     }
 
     fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed, StoreError> {
@@ -365,51 +347,51 @@ impl Store {
     }
 
     pub fn header(&self) -> &Header {
-        &self.header
+        &self.t.header
     }
 
     pub fn units(&self) -> &str {
-        &self.units
+        &self.t.units
     }
 
     pub fn build_options(&self) -> &str {
-        &self.build_options
+        &self.t.build_options
     }
 
     pub fn objects(&self) -> &[Object] {
-        &self.objects
+        &self.t.objects
     }
 
     /// The skeleton; node 0 is the root.
     pub fn nodes(&self) -> &[Node] {
-        &self.nodes
+        &self.t.nodes
     }
 
     pub fn groups(&self) -> &[Group] {
-        &self.groups
+        &self.t.groups
     }
 
     pub fn pages(&self) -> &[PageEntry] {
-        &self.pages
+        &self.t.pages
     }
 
     /// The sources of `group`: the finer groups its clusters were simplified from (sorted, each
     /// with a smaller index than `group`). Empty for a group of input clusters, or for an index
     /// beyond the group table.
     pub fn group_sources(&self, group: u32) -> &[u32] {
-        self.links.sources(group)
+        self.t.links.sources(group)
     }
 
     /// The parents of `group`: the coarser groups whose clusters were simplified from it (sorted,
     /// each with a larger index than `group`). Empty exactly for the root groups (error = +∞),
     /// or for an index beyond the group table.
     pub fn group_parents(&self, group: u32) -> &[u32] {
-        self.links.parents(group)
+        self.t.links.parents(group)
     }
 
     /// Both relations, for callers that keep them apart from the store.
     pub fn group_links(&self) -> &GroupLinks {
-        &self.links
+        &self.t.links
     }
 
     /// Size of the store in bytes.
@@ -418,11 +400,11 @@ impl Store {
     }
 
     fn page_entry(&self, index: u32) -> Result<&PageEntry, StoreError> {
-        self.pages.get(index as usize).ok_or_else(|| StoreError::Page {
+        self.t.pages.get(index as usize).ok_or_else(|| StoreError::Page {
             path: self.path.clone(),
             page: index,
             offset: 0,
-            msg: format!("no such page (the store has {})", self.pages.len()),
+            msg: format!("no such page (the store has {})", self.t.pages.len()),
         })
     }
 
@@ -493,27 +475,27 @@ impl Store {
         let invariant = |msg: String| StoreError::Invariant { path: self.path.clone(), msg };
         let mut rep = VerifyReport {
             file_bytes: self.file_len(),
-            page_bytes: self.header.section(SectionKind::Pages).length,
-            pages: self.pages.len() as u32,
-            nodes: self.nodes.len() as u32,
-            groups: self.groups.len() as u32,
-            objects: self.objects.len() as u32,
-            group_links: self.links.link_count() as u64,
+            page_bytes: self.t.header.section(SectionKind::Pages).length,
+            pages: self.t.pages.len() as u32,
+            nodes: self.t.nodes.len() as u32,
+            groups: self.t.groups.len() as u32,
+            objects: self.t.objects.len() as u32,
+            group_links: self.t.links.link_count() as u64,
             ..Default::default()
         };
         // Whether some cluster of the group was made from that source, by link.
-        let mut link_used = vec![false; self.links.link_count()];
-        let mut claimed = vec![0u32; self.groups.len()];
-        let mut group_tris = vec![0u64; self.groups.len()];
-        let total = self.pages.len() as u32;
-        for (pi, p) in self.pages.iter().enumerate() {
+        let mut link_used = vec![false; self.t.links.link_count()];
+        let mut claimed = vec![0u32; self.t.groups.len()];
+        let mut group_tris = vec![0u64; self.t.groups.len()];
+        let total = self.t.pages.len() as u32;
+        for (pi, p) in self.t.pages.iter().enumerate() {
             let pi = pi as u32;
             let clusters = self.page(pi)?;
             rep.root_pages += p.is_root() as u32;
             for (k, c) in clusters.iter().enumerate() {
                 let at = format!("page {pi} cluster {k}");
-                let g = self.groups.get(c.group as usize).ok_or_else(|| {
-                    invariant(format!("{at}: group {} beyond {} groups", c.group, self.groups.len()))
+                let g = self.t.groups.get(c.group as usize).ok_or_else(|| {
+                    invariant(format!("{at}: group {} beyond {} groups", c.group, self.t.groups.len()))
                 })?;
                 let k = k as u64;
                 if g.page != pi
@@ -539,10 +521,10 @@ impl Store {
                 // A simplified cluster (self error > 0) carries the error and sphere of the
                 // source(s) it was made from.
                 if c.self_error > 0.0 {
-                    let range = self.links.source_range(c.group);
+                    let range = self.t.links.source_range(c.group);
                     let mut matched = false;
-                    for (k, &s) in range.clone().zip(self.links.sources(c.group)) {
-                        let src = &self.groups[s as usize];
+                    for (k, &s) in range.clone().zip(self.t.links.sources(c.group)) {
+                        let src = &self.t.groups[s as usize];
                         if src.error == c.self_error && src.sphere == c.self_sphere {
                             link_used[k] = true;
                             matched = true;
@@ -553,7 +535,7 @@ impl Store {
                             "{at}: self error {} and sphere {:?} match none of the sources {:?} of its group {}",
                             c.self_error,
                             c.self_sphere,
-                            self.links.sources(c.group),
+                            self.t.links.sources(c.group),
                             c.group
                         )));
                     }
@@ -571,7 +553,7 @@ impl Store {
                     )));
                 }
                 // group.node < nodes.len(): checked at open.
-                let node = &self.nodes[g.node as usize];
+                let node = &self.t.nodes[g.node as usize];
                 if let Some(q) =
                     c.positions.iter().find(|q| (0..3).any(|a| q[a] < node.min[a] || q[a] > node.max[a]))
                 {
@@ -589,7 +571,7 @@ impl Store {
             }
             progress(pi + 1, total);
         }
-        for (i, g) in self.groups.iter().enumerate() {
+        for (i, g) in self.t.groups.iter().enumerate() {
             if claimed[i] != g.cluster_count || group_tris[i] != g.triangles as u64 {
                 return Err(invariant(format!(
                     "group {i} lists {} clusters / {} triangles, its clusters are {} / {}",
@@ -598,47 +580,49 @@ impl Store {
             }
         }
         if let Some(k) = link_used.iter().position(|&u| !u) {
-            let group = (0..self.groups.len() as u32)
-                .find(|&g| self.links.source_range(g).contains(&k))
+            let group = (0..self.t.groups.len() as u32)
+                .find(|&g| self.t.links.source_range(g).contains(&k))
                 .unwrap_or_default();
-            let s = self.links.sources(group)[k - self.links.source_range(group).start];
+            let s = self.t.links.sources(group)[k - self.t.links.source_range(group).start];
             return Err(invariant(format!(
                 "group {group}: source {s} (error {}, sphere {:?}) matches none of the group's clusters \
                  (no cluster was simplified from it)",
-                self.groups[s as usize].error, self.groups[s as usize].sphere
+                self.t.groups[s as usize].error, self.t.groups[s as usize].sphere
             )));
         }
         // The sources of one simplification step (those of a group with equal error and sphere)
         // have the same parents, so that the runtime's availability rule treats them alike.
         let step_key = |s: u32| {
-            let g = &self.groups[s as usize];
+            let g = &self.t.groups[s as usize];
             (g.error.to_bits(), g.sphere.map(f32::to_bits))
         };
         let mut step: Vec<u32> = Vec::new();
-        for group in 0..self.groups.len() as u32 {
+        for group in 0..self.t.groups.len() as u32 {
             step.clear();
-            step.extend_from_slice(self.links.sources(group));
+            step.extend_from_slice(self.t.links.sources(group));
             step.sort_by_key(|&s| (step_key(s), s));
             for w in step.windows(2) {
-                if step_key(w[0]) == step_key(w[1]) && self.links.parents(w[0]) != self.links.parents(w[1]) {
+                if step_key(w[0]) == step_key(w[1])
+                    && self.t.links.parents(w[0]) != self.t.links.parents(w[1])
+                {
                     return Err(invariant(format!(
                         "group {group}: sources {} and {} have the same error and sphere (one simplification \
                          step) but different parents {:?} and {:?}",
                         w[0],
                         w[1],
-                        self.links.parents(w[0]),
-                        self.links.parents(w[1])
+                        self.t.links.parents(w[0]),
+                        self.t.links.parents(w[1])
                     )));
                 }
             }
         }
         // Children come after their parent (checked at open): one backward pass.
-        let mut subtree = vec![0f32; self.nodes.len()];
-        for i in (0..self.nodes.len()).rev() {
-            let n = &self.nodes[i];
+        let mut subtree = vec![0f32; self.t.nodes.len()];
+        for i in (0..self.t.nodes.len()).rev() {
+            let n = &self.t.nodes[i];
             let mut m = 0f32;
             let groups = n.first_group as usize..n.first_group as usize + n.group_count as usize;
-            for g in self.groups.get(groups).unwrap_or_default() {
+            for g in self.t.groups.get(groups).unwrap_or_default() {
                 m = m.max(g.error);
             }
             let children = n.first_child as usize..n.first_child as usize + n.child_count as usize;
@@ -653,8 +637,8 @@ impl Store {
             }
             subtree[i] = m;
         }
-        if self.header.input_triangles > 0 {
-            rep.bytes_per_input_triangle = rep.file_bytes as f64 / self.header.input_triangles as f64;
+        if self.t.header.input_triangles > 0 {
+            rep.bytes_per_input_triangle = rep.file_bytes as f64 / self.t.header.input_triangles as f64;
         }
         Ok(rep)
     }
