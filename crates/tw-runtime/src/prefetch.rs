@@ -29,11 +29,23 @@ pub struct PrefetchOptions {
     /// Prefetch only when the frame requests at most this many pages of its own (the loaders
     /// are "idle enough").
     pub idle_below: usize,
+    /// Select the prefetch views every this many frames (≥ 1); the frames between submit the
+    /// last prefetch list again (less the pages that arrived). The views look `frames_ahead`
+    /// frames ahead, so one selection serves the frames until then: frame-to-frame coherence
+    /// instead of two extra traversals a frame.
+    pub every: u32,
 }
 
 impl Default for PrefetchOptions {
     fn default() -> Self {
-        PrefetchOptions { enabled: true, frames_ahead: 3.0, fov_scale: 1.2, tau_scale: 0.5, idle_below: 8 }
+        PrefetchOptions {
+            enabled: true,
+            frames_ahead: 3.0,
+            fov_scale: 1.2,
+            tau_scale: 0.5,
+            idle_below: 8,
+            every: 3,
+        }
     }
 }
 

@@ -246,6 +246,8 @@ pub struct Streamer {
     last_cache: CacheStats,
     last_prefetch: (u64, u64),
     scratch: Selection,
+    /// The last prefetch views' requests and the frame they were selected in.
+    prefetch_list: (Requests, u64),
 }
 
 impl std::fmt::Debug for Streamer {
@@ -304,6 +306,7 @@ impl Streamer {
             last_cache,
             last_prefetch: (0, 0),
             scratch: Selection::default(),
+            prefetch_list: Default::default(),
         }
     }
 
@@ -332,6 +335,7 @@ impl Streamer {
     /// Forgets the camera history (no extrapolation across a teleport).
     pub fn reset_history(&mut self) {
         self.history.clear();
+        self.prefetch_list = Default::default();
     }
 
     /// One frame: select without waiting, request, prefetch, statistics (module documentation).
@@ -353,7 +357,13 @@ impl Streamer {
         );
         let cut = start.elapsed();
         let mut prefetch = Requests::default();
-        if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below {
+        let every = self.options.prefetch.every.max(1) as u64;
+        let fresh = self.prefetch_list.0 .0.is_empty() || self.frame >= self.prefetch_list.1 + every;
+        if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below && !fresh {
+            // Between prefetch selections: the last list, less what arrived meanwhile.
+            prefetch = self.prefetch_list.0.clone();
+            prefetch.0.retain(|&p, _| !demand.0.contains_key(&p) && !cache.is_settled(p));
+        } else if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below {
             // Prefetch views do not refresh pages in the LRU order.
             self.availability.set_peek_only(true);
             for (cam, opts) in prefetch_views(camera, &self.history, options, &self.options.prefetch) {
@@ -369,6 +379,7 @@ impl Streamer {
             }
             prefetch.0.retain(|p, _| !demand.0.contains_key(p));
             self.availability.set_peek_only(false);
+            self.prefetch_list = (prefetch.clone(), self.frame);
         }
         let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);

@@ -409,6 +409,7 @@ fn prefetch_reduces_stalls_on_a_smooth_path() {
             ("always", PrefetchOptions { idle_below: usize::MAX, ..Default::default() }),
             ("8 frames ahead", PrefetchOptions { frames_ahead: 8.0, ..Default::default() }),
             ("no tau/2", PrefetchOptions { tau_scale: 1.0, ..Default::default() }),
+            ("selected every frame", PrefetchOptions { every: 1, ..Default::default() }),
         ] {
             let (st, l, p, d) = smooth_path_stalls(variant, k, share);
             eprintln!("  variant {name}: {st} stalls ({l} loaded, {p} prefetched, {d} dropped)");
