@@ -16,7 +16,7 @@
 //!    once, nothing is culled: every candidate is drawn (batched) and reported visible;
 //! 2. the pyramid is built from the own depth target ([`Pyramid::encode_build`], hzb_build.wgsl:
 //!    level 0 = the depth, each next level the minimum — reverse-Z, so the farthest — of 2×2
-//!    texels, sizes rounding up, exactly as [`Hzb::build`]);
+//!    texels, sizes rounding up, exactly as [`Hzb::build`]; levels 0 and 1 in one dispatch);
 //! 3. each candidate's box is tested against it (hzb_cull.wgsl `cs_cull`), writing a flag and
 //!    either its draw arguments in place with `instance_count` 0 when culled, or — where the
 //!    device has `Features::MULTI_DRAW_INDIRECT_COUNT` (Vulkan) — a compaction in candidate
@@ -139,7 +139,7 @@ pub(crate) struct Pyramid {
     size: (u32, u32),
     levels: Vec<(u32, u32, u32)>,
     buffer: wgpu::Buffer,
-    /// `binds[k]` writes level `k` (0: from the depth texture, else from level k − 1).
+    /// `binds[k]` writes level `k` from level k − 1 (level 0: from the depth texture).
     binds: Vec<wgpu::BindGroup>,
     _uniforms: wgpu::Buffer,
 }
@@ -150,14 +150,17 @@ impl Pyramid {
         offset as u64 + w as u64 * h as u64
     }
 
-    /// Records the build into `pass`: level 0 from the depth texture (`from_depth`) or as
-    /// already written to the buffer, then each next level.
+    /// Records the build into `pass`: levels 0 and 1 from the depth texture (`from_depth`),
+    /// else level 1 from level 0 as already written to the buffer, then each next level.
     fn encode_build(&self, pass: &mut wgpu::ComputePass<'_>, pipes: &GpuCull, from_depth: bool) {
         for (k, &(_, w, h)) in self.levels.iter().enumerate() {
-            if k == 0 && !from_depth {
-                continue;
-            }
-            pass.set_pipeline(if k == 0 { &pipes.copy } else { &pipes.reduce });
+            let pipeline = match (k, from_depth) {
+                (0, true) if self.levels.len() == 1 => &pipes.copy,
+                (0, _) => continue,
+                (1, true) => &pipes.copy2,
+                _ => &pipes.reduce,
+            };
+            pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &self.binds[k], &[]);
             pass.dispatch_workgroups(w.div_ceil(8), h.div_ceil(8), 1);
         }
@@ -233,6 +236,7 @@ impl CullSet {
 pub(crate) struct GpuCull {
     build_layout: wgpu::BindGroupLayout,
     copy: wgpu::ComputePipeline,
+    copy2: wgpu::ComputePipeline,
     reduce: wgpu::ComputePipeline,
     cull_layout: wgpu::BindGroupLayout,
     cull: wgpu::ComputePipeline,
@@ -333,6 +337,7 @@ impl GpuCull {
         });
         GpuCull {
             copy: compute_pipeline(device, &build_layout, &build, "cs_copy"),
+            copy2: compute_pipeline(device, &build_layout, &build, "cs_copy2"),
             reduce: compute_pipeline(device, &build_layout, &build, "cs_reduce"),
             cull: compute_pipeline(device, &cull_layout, &cull, "cs_cull"),
             compact: compute_pipeline(device, &cull_layout, &cull, "cs_compact"),
@@ -892,6 +897,45 @@ mod tests {
                 let depth: Vec<f32> = (0..W * H).map(|_| rng.f64() as f32).collect();
                 let gpu = gpu_pyramid(&mut r, &depth);
                 assert_eq!(gpu, Hzb::build(&depth, W, H).unwrap(), "{name}");
+            }
+        }
+    }
+
+    /// A quad at height `z` over `[x0, x1] × [y0, y1]` (grid units).
+    fn quad(x0: u32, y0: u32, x1: u32, y1: u32, z: u32) -> PageCluster {
+        PageCluster {
+            positions: vec![[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            objects: vec![0, 0],
+            self_error: 0.0,
+            self_sphere: [0.0, 0.0, 0.0, 1.0],
+            group: 0,
+            level: 0,
+        }
+    }
+
+    #[test]
+    fn pyramid_of_the_depth_target_equals_the_cpu_pyramid_at_odd_sizes() {
+        // Looking down −z at [0, 100]² from z = 200, two quads at different heights.
+        let cam = Camera {
+            eye: Vec3::new(50.0, 50.0, 200.0),
+            target: Vec3::new(50.0, 50.0, 0.0),
+            up: Vec3::Y,
+            fovy: 40f32.to_radians(),
+            near: 1.0,
+            far: 1000.0,
+        };
+        let (a, b) = (quad(0, 0, 70, 100, 10), quad(40, 20, 100, 60, 30));
+        let key = |page| ClusterKey { page, index_in_page: 0, group: 0 };
+        for (w, h) in [(W, H), (1, 1), (2, 1), (7, 3)] {
+            for (name, _) in renderers() {
+                let backends = if name == "gl" { wgpu::Backends::GL } else { wgpu::Backends::VULKAN };
+                let mut r = Renderer::new_headless_with(w, h, backends).unwrap();
+                r.begin_frame();
+                r.draw(crate::Target::Own, &cam, 1.0, &[(key(1), &a), (key(2), &b)], true).unwrap();
+                let depth = r.read_depth().unwrap();
+                let cpu = Hzb::build(&depth.depth, w, h).unwrap();
+                assert_eq!(r.read_gpu_hzb().unwrap(), cpu, "{name}, {w}×{h}");
             }
         }
     }
