@@ -21,6 +21,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         OcclusionArg::None => OcclusionStrategy::None,
         OcclusionArg::Hzb => OcclusionStrategy::Hzb,
         OcclusionArg::Queries => OcclusionStrategy::Queries,
+        OcclusionArg::GpuHzb => OcclusionStrategy::GpuHzb,
     };
     if (args.screenshot.is_some() || args.screenshot_window.is_some()) && args.exit_after.is_none() {
         anyhow::bail!("--screenshot needs --exit-after N (press F12 for screenshots while viewing)");
