@@ -1,20 +1,21 @@
 //! GPU hierarchical-Z occlusion culling, the `gpu-hzb` strategy of DESIGN decision 6: the
-//! hierarchical Z pyramid of Greene, Kass and Miller 1993 ("Hierarchical Z-Buffer Visibility",
-//! §4, the pyramid of farthest depths and the test of a box's screen rectangle against it),
-//! built and tested in compute shaders, in the two-pass form of modern GPU-driven renderers
-//! (draw last frame's visible set, build the HZB from its depth, cull the other candidates
-//! against it and draw the newly visible ones in the same frame, then rebuild the HZB from the
-//! final depth for next frame's visible set; e.g. Bevy's meshlet raster node, Wihlidal 2015
-//! "Optimizing the Graphics Pipeline with Compute"). The test is the CPU one,
+//! hierarchical Z pyramid of Greene, Kass and Miller 1993 ("Hierarchical Z-Buffer Visibility":
+//! the pyramid of farthest depths, a box culled when its nearest depth is behind the pyramid
+//! texels covering its screen rectangle, and last frame's visible geometry drawn first for
+//! temporal coherence), built and tested in compute shaders, in the two-pass form of modern
+//! GPU-driven renderers (draw last frame's visible set, build the HZB from its depth, cull the
+//! other candidates against it and draw the newly visible ones in the same frame, then rebuild
+//! the HZB from the final depth for next frame's visible set; e.g. Bevy's meshlet raster node,
+//! Wihlidal, GDC 2016, "Optimizing the Graphics Pipeline with Compute"). The test is the CPU one,
 //! [`tw_runtime::Hzb::test_box`], ported rule for rule to WGSL, with its constants passed as
 //! uniforms ([`RECT_SLACK_PX`], [`DEPTH_MARGIN`]); it is therefore conservative in the same sense.
 //!
 //! Stages of [`Renderer::draw_gpu_culled`], the second pass of a frame whose occluders were
 //! drawn into the own target, all in one submission (the image never waits for the CPU):
 //! 1. the candidates are made resident in the pool and their boxes and draw arguments written
-//!    to a storage buffer ([`CullSet::prepare`]); if they do not all fit the GPU budget at
+//!    to a storage buffer (`CullSet::prepare`); if they do not all fit the GPU budget at
 //!    once, nothing is culled: every candidate is drawn (batched) and reported visible;
-//! 2. the pyramid is built from the own depth target ([`Pyramid::encode_build`], hzb_build.wgsl:
+//! 2. the pyramid is built from the own depth target (`Pyramid::encode_build`, hzb_build.wgsl:
 //!    level 0 = the depth, each next level the minimum — reverse-Z, so the farthest — of 2×2
 //!    texels, sizes rounding up, exactly as [`Hzb::build`]; levels 0 and 1 in one dispatch);
 //! 3. each candidate's box is tested against it (hzb_cull.wgsl `cs_cull`), writing a flag and
