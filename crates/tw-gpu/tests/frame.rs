@@ -663,6 +663,51 @@ fn gpu_cull(backends: wgpu::Backends) {
     }
 }
 
+/// Candidates beyond the GPU budget: nothing is culled, everything is drawn (batched), and the
+/// image is still that of drawing it all.
+fn gpu_cull_over_budget(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    let store = Store::open(plant_path()).unwrap();
+    let cache = PageCache::new(&store, 1 << 30);
+    r.set_store_colors(&store);
+    r.set_gpu_budget(tw_gpu::MIN_BUDGET);
+    let step = store.header().grid_step;
+    let cam = &plant_cameras(&store, 1)[0];
+    let sel = select(&store, &cache, cam, 0.0);
+    let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
+    let list = pages.clusters();
+    let (a, b) = list.split_at(list.len() / 2);
+    let boxes: Vec<(Vec3, Vec3)> = b
+        .iter()
+        .map(|(k, _)| {
+            let (lo, hi) = cache.get(&store, k.page).unwrap().bounds[k.index_in_page as usize];
+            tw_runtime::frustum::grid_box(lo, hi, step)
+        })
+        .collect();
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, a, true).unwrap();
+    r.draw(Target::Own, cam, step, b, false).unwrap();
+    let reference = r.read_color().unwrap();
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, a, true).unwrap();
+    let res = r.draw_gpu_culled(cam, step, b, &boxes, &[]).unwrap();
+    assert!(res.over_budget, "{} candidates fit {} bytes", b.len(), tw_gpu::MIN_BUDGET);
+    assert!(res.candidates.iter().all(|f| *f == HzbResult::Visible));
+    assert!(r.stats().pool.batches > 2);
+    assert_eq!(r.read_color().unwrap().differing_pixels(&reference).unwrap(), 0);
+}
+
+#[test]
+fn gpu_hzb_cull_over_budget_gl() {
+    gpu_cull_over_budget(wgpu::Backends::GL);
+}
+
+#[test]
+fn gpu_hzb_cull_over_budget_vulkan() {
+    gpu_cull_over_budget(wgpu::Backends::VULKAN);
+}
+
 fn vp_of(cam: &Camera) -> glam::Mat4 {
     cam.projection_reverse_z(W as f32 / H as f32) * cam.view()
 }
