@@ -236,6 +236,8 @@ pub enum OcclusionArg {
     Hzb,
     /// Two-pass, hardware occlusion queries (Yoon et al. 2003).
     Queries,
+    /// Two-pass, hierarchical Z-buffer built and tested in compute shaders, indirect draws.
+    GpuHzb,
 }
 
 #[derive(Args, Debug)]

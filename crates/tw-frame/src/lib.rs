@@ -20,6 +20,7 @@
 //! [`Walkthrough::exact_visibility`] draws the same into the item buffer: the exact visible
 //! objects and triangles (DESIGN "Measuring").
 
+mod gpu_hzb;
 pub mod occlude;
 
 use std::sync::Arc;

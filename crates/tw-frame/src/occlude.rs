@@ -13,6 +13,9 @@
 //!    - [`Occlusion::Queries`] (Yoon et al. 2003 §5.3; Govindaraju's occlusion switch): one
 //!      batch of hardware occlusion queries of the candidates' boxes against the depth buffer
 //!      (sample counts on Vulkan, booleans on GL);
+//!    - [`Occlusion::GpuHzb`] (Greene et al. 1993, two-pass as in GPU-driven renderers): the
+//!      pyramid is built and the boxes tested in compute shaders that write the second pass's
+//!      indirect draws, with no CPU round trip in between ([`crate::gpu_hzb`]);
 //! 4. the visible candidates are drawn on top in the same frame (nothing is missing when
 //!    visibility changes: the papers' one-frame-late artefacts do not occur);
 //! 5. the history becomes the candidates drawn plus the occluders still visible (the HZB tests
@@ -43,16 +46,20 @@ pub enum Occlusion {
     Hzb,
     /// Two-pass culling with hardware occlusion queries of the candidates' boxes.
     Queries,
+    /// Two-pass culling against a hierarchical Z-buffer built and tested in compute shaders,
+    /// feeding indirect draws.
+    GpuHzb,
 }
 
 impl Occlusion {
-    pub const ALL: [Occlusion; 3] = [Occlusion::None, Occlusion::Hzb, Occlusion::Queries];
+    pub const ALL: [Occlusion; 4] = [Occlusion::None, Occlusion::Hzb, Occlusion::Queries, Occlusion::GpuHzb];
 
     pub fn name(self) -> &'static str {
         match self {
             Occlusion::None => "none",
             Occlusion::Hzb => "hzb",
             Occlusion::Queries => "queries",
+            Occlusion::GpuHzb => "gpu-hzb",
         }
     }
 
@@ -61,6 +68,7 @@ impl Occlusion {
             Occlusion::None => "no occlusion culling",
             Occlusion::Hzb => "two-pass, CPU hierarchical Z-buffer (GigaWalk)",
             Occlusion::Queries => "two-pass, hardware occlusion queries (Yoon 2003, occlusion switch)",
+            Occlusion::GpuHzb => "two-pass, hierarchical Z-buffer in compute shaders, indirect draws",
         }
     }
 }
@@ -83,7 +91,7 @@ pub struct OcclusionStats {
 /// Frame-to-frame state of the strategies.
 #[derive(Debug, Default)]
 pub struct OcclusionState {
-    history: OcclusionHistory,
+    pub(crate) history: OcclusionHistory,
 }
 
 impl OcclusionState {
@@ -122,6 +130,9 @@ pub fn draw_culled(
         renderer.draw(Target::Own, camera, grid_step, clusters, true)?;
         return Ok(Culled { drawn: clusters.iter().map(|c| c.0).collect(), ..Default::default() });
     }
+    if strategy == Occlusion::GpuHzb {
+        return crate::gpu_hzb::draw_gpu_hzb(state, renderer, grid_step, camera, clusters, bounds);
+    }
     let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
     let split = state.history.split(&refs);
     let by_key: std::collections::HashMap<(u32, u32), &PageCluster> =
@@ -141,7 +152,7 @@ pub fn draw_culled(
     let (w, h) = renderer.size();
     let cull_start = Instant::now();
     let (visible, still_visible, occluded) = match strategy {
-        Occlusion::None => unreachable!("handled above"),
+        Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
         Occlusion::Hzb => {
             let depth = renderer.read_depth()?;
             let hzb = Hzb::build(&depth.depth, depth.width, depth.height)

@@ -45,7 +45,7 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
         baseline.push(w.frame(c, &s).unwrap().0);
     }
     let mut culled = Vec::new();
-    for strategy in [Occlusion::Hzb, Occlusion::Queries] {
+    for strategy in [Occlusion::Hzb, Occlusion::Queries, Occlusion::GpuHzb] {
         w.reset();
         let mut total = 0;
         for (i, c) in cameras.iter().enumerate() {

@@ -22,6 +22,8 @@ pub enum GpuError {
     ImageMismatch { a: (u32, u32), b: (u32, u32) },
     #[error("{what} needs the renderer's own target; it was last drawn into a caller's view")]
     NotOwnTarget { what: &'static str },
+    #[error("{what} needs {missing}, which {adapter} does not have; choose another strategy")]
+    Unsupported { what: &'static str, missing: &'static str, adapter: String },
     #[error("the frame does not fit the GPU budget of {budget} bytes in one pass")]
     OverBudget { budget: u64 },
     #[error("GPU error: {0}")]

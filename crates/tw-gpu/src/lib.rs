@@ -13,6 +13,8 @@
 //! - [`ids`]: the item buffer and the exact visible sets.
 //! - [`depth`]: reverse-Z depth readback for the CPU HZB.
 //! - [`query`]: hardware occlusion queries of boxes against the frame's depth.
+//! - [`gpu_cull`]: the GPU hierarchical Z-buffer built in compute shaders, the cull of
+//!   candidate boxes against it feeding indirect draws in the same frame (`gpu-hzb`).
 //! - [`image`]: RGBA images, PNG, PSNR and pixel differences.
 //! - `readback`, [`color`], [`error`].
 //!
@@ -33,12 +35,14 @@
 //! | triangle ids in the item buffer | yes (`PRIMITIVE_INDEX`) | yes |
 //! | depth readback | compute copy | compute copy |
 //! | occlusion queries | sample counts | 0/1 |
+//! | GPU HZB cull ([`gpu_cull`]) | compacted, `multi_draw_indexed_indirect_count` | in place (culled draws get 0 instances); needs GL 4.3 compute, known after [`Renderer::set_downlevel`] |
 //! | reuse of evicted pool ranges | ordered by wgpu | the renderer waits for earlier GPU work first (see `draw_pass`) |
 
 pub mod color;
 pub mod depth;
 pub mod draw;
 pub mod error;
+pub mod gpu_cull;
 pub mod ids;
 pub mod image;
 pub mod pool;
@@ -57,6 +61,7 @@ pub use color::{hash_color, level_color, ColorMode, BACKGROUND, DEFAULT_COLOR};
 pub use depth::DepthImage;
 pub use draw::DrawMode;
 pub use error::GpuError;
+pub use gpu_cull::GpuCullResult;
 pub use ids::{ClusterVisibility, Item, ItemBuffer, VisibleSet};
 pub use image::Image;
 pub use pool::{PoolStats, MIN_BUDGET};
@@ -136,6 +141,9 @@ pub struct Renderer {
     indirect_supported: bool,
     depth_copy: Option<depth::DepthCopy>,
     box_queries: Option<query::BoxQueries>,
+    gpu_cull: Option<gpu_cull::GpuCull>,
+    /// Compute shaders (`DownlevelFlags::COMPUTE_SHADERS`; on GL known after set_downlevel).
+    compute_supported: bool,
     mode: ColorMode,
     stats: FrameStats,
     /// Whether the last draw went to the own target (so read_color / read_depth make sense).
@@ -199,9 +207,13 @@ impl Renderer {
     }
 
     /// Features the renderer uses when the device has them (request them when opening a device
-    /// for [`Renderer::from_device`]): `PRIMITIVE_INDEX` (triangle ids in the item buffer).
+    /// for [`Renderer::from_device`]): `PRIMITIVE_INDEX` (triangle ids in the item buffer),
+    /// `MULTI_DRAW_INDIRECT_COUNT` (compacted GPU-culled draws) and `TIMESTAMP_QUERY` (the GPU
+    /// cull's compute time).
     pub fn optional_features() -> wgpu::Features {
         wgpu::Features::PRIMITIVE_INDEX
+            | wgpu::Features::MULTI_DRAW_INDIRECT_COUNT
+            | wgpu::Features::TIMESTAMP_QUERY
     }
 
     /// A renderer on a device the caller already has (a viewer's winit surface or egui-wgpu
@@ -265,6 +277,8 @@ impl Renderer {
             indirect_supported,
             depth_copy: None,
             box_queries: None,
+            gpu_cull: None,
+            compute_supported: indirect_supported,
             mode: ColorMode::default(),
             stats: FrameStats::default(),
             last_own: false,
@@ -276,10 +290,11 @@ impl Renderer {
         })
     }
 
-    /// Tells the renderer what the adapter supports (indirect execution on GL), and picks
-    /// [`DrawMode::Indirect`] when it does.
+    /// Tells the renderer what the adapter supports (indirect execution and compute shaders on
+    /// GL), and picks [`DrawMode::Indirect`] when it does.
     pub fn set_downlevel(&mut self, caps: &wgpu::DownlevelCapabilities) {
         self.indirect_supported = caps.flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
+        self.compute_supported = caps.flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS);
         self.draw_mode = if self.indirect_supported { DrawMode::Indirect } else { DrawMode::Direct };
     }
 

@@ -550,3 +550,174 @@ fn occlusion_queries_gl() {
 fn occlusion_queries_vulkan() {
     queries(wgpu::Backends::VULKAN);
 }
+
+// ---------------------------------------------------------------------------------------------
+// GPU HZB culling (gpu_cull.rs): the pyramid of the depth target equals the CPU one, the cull
+// agrees with the CPU test, and the GPU-culled second pass draws the image of drawing it all.
+
+fn gpu_cull(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    r.gpu_cull_supported().unwrap();
+    eprintln!("{backends:?}: GPU cull compacts: {}", r.gpu_cull_compacts());
+    // A wall at z = 10 with a gap of one grid unit (about 1.4 px) at x = 89..90.
+    let cam = top_camera();
+    let left = quad(0, 0, 89, 100, 10, 5);
+    let right = quad(90, 0, 100, 100, 10, 5);
+    r.begin_frame();
+    r.draw(Target::Own, &cam, 1.0, &[(key(1), &left), (key(2), &right)], true).unwrap();
+    let depth = r.read_depth().unwrap();
+    let cpu = Hzb::build(&depth.depth, depth.width, depth.height).unwrap();
+    assert_eq!(r.read_gpu_hzb().unwrap(), cpu, "GPU and CPU pyramids of the same depth");
+    let boxes = [
+        (Vec3::new(20.0, 40.0, 0.0), Vec3::new(30.0, 60.0, 5.0)), // under the wall
+        (Vec3::new(84.0, 48.0, 0.0), Vec3::new(87.5, 52.0, 5.0)), // under the wall, 2 px from the gap
+        (Vec3::new(88.0, 40.0, 0.0), Vec3::new(91.0, 60.0, 5.0)), // under the gap
+        (Vec3::new(20.0, 40.0, 20.0), Vec3::new(30.0, 60.0, 30.0)), // above the wall
+        (Vec3::new(500.0, 0.0, 0.0), Vec3::new(510.0, 10.0, 5.0)), // off screen
+        (Vec3::new(40.0, 40.0, 150.0), Vec3::new(60.0, 60.0, 250.0)), // around the eye
+    ];
+    use HzbResult::*;
+    let got = r.test_boxes_gpu(&cam, &boxes).unwrap();
+    assert_eq!(got, vec![Occluded, Occluded, Visible, Visible, NoPixels, Visible]);
+    let vp = cam.projection_reverse_z(W as f32 / H as f32) * cam.view();
+    let want: Vec<HzbResult> = boxes.iter().map(|b| cpu.test_box(&vp, b.0, b.1)).collect();
+    assert_eq!(got, want);
+
+    // The plant: half of the cut as occluders, the other half GPU-culled.
+    let store = Store::open(plant_path()).unwrap();
+    let cache = PageCache::new(&store, 1 << 30);
+    r.set_store_colors(&store);
+    let step = store.header().grid_step;
+    for cam in &plant_cameras(&store, 3) {
+        let sel = select(&store, &cache, cam, 0.0);
+        let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
+        let list = pages.clusters();
+        let (a, b) = list.split_at(list.len() / 2);
+        let box_of = |(k, _): &(ClusterRef, &PageCluster)| {
+            let (lo, hi) = cache.get(&store, k.page).unwrap().bounds[k.index_in_page as usize];
+            tw_runtime::frustum::grid_box(lo, hi, step)
+        };
+        let a_boxes: Vec<(Vec3, Vec3)> = a.iter().map(box_of).collect();
+        let b_boxes: Vec<(Vec3, Vec3)> = b.iter().map(box_of).collect();
+        // Reference: both halves drawn, in the same order.
+        r.begin_frame();
+        r.draw(Target::Own, cam, step, a, true).unwrap();
+        let depth = r.read_depth().unwrap();
+        let cpu = Hzb::build(&depth.depth, depth.width, depth.height).unwrap();
+        assert_eq!(r.read_gpu_hzb().unwrap(), cpu);
+        // Random boxes around the plant's cut: the GPU never culls what the CPU test sees.
+        let mut rng = tw_core::Rng::new(3);
+        let random: Vec<(Vec3, Vec3)> = (0..4000)
+            .map(|_| {
+                let (lo, hi) = b_boxes[(rng.f64() * b_boxes.len() as f64) as usize];
+                let size = (hi - lo).max(Vec3::splat(1e-3));
+                let c = lo
+                    + (hi - lo) * 0.5
+                    + (Vec3::new(rng.f64() as f32, rng.f64() as f32, rng.f64() as f32) - 0.5) * size * 4.0;
+                let half = size * (0.05 + 2.0 * rng.f64() as f32);
+                (c - half, c + half)
+            })
+            .collect();
+        let gpu = r.test_boxes_gpu(cam, &random).unwrap();
+        let (mut agree, mut occluded) = (0, 0);
+        for (bx, g) in random.iter().zip(&gpu) {
+            // Occluded and NoPixels both mean "not drawn": a box the CPU sees, the GPU sees.
+            let c = cpu.test_box(&vp_of(cam), bx.0, bx.1);
+            if c == Visible {
+                assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
+            }
+            occluded += usize::from(*g == Occluded);
+            agree += usize::from(c == *g);
+        }
+        eprintln!("{backends:?}: random boxes: {agree} of {} agree, {occluded} occluded", random.len());
+        assert!(agree * 100 >= random.len() * 99);
+        r.draw(Target::Own, cam, step, b, false).unwrap();
+        let reference = r.read_color().unwrap();
+        // GPU-culled second pass.
+        r.begin_frame();
+        r.draw(Target::Own, cam, step, a, true).unwrap();
+        let res = r.draw_gpu_culled(cam, step, b, &b_boxes, &a_boxes).unwrap();
+        let image = r.read_color().unwrap();
+        let culled = res.candidates.iter().filter(|f| **f == Occluded).count();
+        let hidden = res.occluders.iter().filter(|f| **f != Visible).count();
+        eprintln!(
+            "{backends:?}: {} candidates, {culled} culled; {hidden} of {} occluders hidden at the end; \
+             gpu {:?}, encode {:?}, compacted {}",
+            b.len(),
+            a.len(),
+            res.gpu_time,
+            res.encode_time,
+            res.compacted
+        );
+        assert!(!res.over_budget);
+        assert_eq!(res.candidates.len(), b.len());
+        assert_eq!(image.differing_pixels(&reference).unwrap(), 0, "GPU culling changed the image");
+        // The CPU test of the same candidates against the occluders' depth: every candidate it
+        // sees, the GPU drew.
+        for (bx, g) in b_boxes.iter().zip(&res.candidates) {
+            if cpu.test_box(&vp_of(cam), bx.0, bx.1) == Visible {
+                assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
+            }
+        }
+    }
+}
+
+/// Candidates beyond the GPU budget: nothing is culled, everything is drawn (batched), and the
+/// image is still that of drawing it all.
+fn gpu_cull_over_budget(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    let store = Store::open(plant_path()).unwrap();
+    let cache = PageCache::new(&store, 1 << 30);
+    r.set_store_colors(&store);
+    r.set_gpu_budget(tw_gpu::MIN_BUDGET);
+    let step = store.header().grid_step;
+    let cam = &plant_cameras(&store, 1)[0];
+    let sel = select(&store, &cache, cam, 0.0);
+    let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
+    let list = pages.clusters();
+    let (a, b) = list.split_at(list.len() / 2);
+    let boxes: Vec<(Vec3, Vec3)> = b
+        .iter()
+        .map(|(k, _)| {
+            let (lo, hi) = cache.get(&store, k.page).unwrap().bounds[k.index_in_page as usize];
+            tw_runtime::frustum::grid_box(lo, hi, step)
+        })
+        .collect();
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, a, true).unwrap();
+    r.draw(Target::Own, cam, step, b, false).unwrap();
+    let reference = r.read_color().unwrap();
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, a, true).unwrap();
+    let res = r.draw_gpu_culled(cam, step, b, &boxes, &[]).unwrap();
+    assert!(res.over_budget, "{} candidates fit {} bytes", b.len(), tw_gpu::MIN_BUDGET);
+    assert!(res.candidates.iter().all(|f| *f == HzbResult::Visible));
+    assert!(r.stats().pool.batches > 2);
+    assert_eq!(r.read_color().unwrap().differing_pixels(&reference).unwrap(), 0);
+}
+
+#[test]
+fn gpu_hzb_cull_over_budget_gl() {
+    gpu_cull_over_budget(wgpu::Backends::GL);
+}
+
+#[test]
+fn gpu_hzb_cull_over_budget_vulkan() {
+    gpu_cull_over_budget(wgpu::Backends::VULKAN);
+}
+
+fn vp_of(cam: &Camera) -> glam::Mat4 {
+    cam.projection_reverse_z(W as f32 / H as f32) * cam.view()
+}
+
+#[test]
+fn gpu_hzb_cull_gl() {
+    gpu_cull(wgpu::Backends::GL);
+}
+
+#[test]
+fn gpu_hzb_cull_vulkan() {
+    gpu_cull(wgpu::Backends::VULKAN);
+}

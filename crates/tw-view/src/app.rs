@@ -154,7 +154,12 @@ impl App {
         let gfx = Gfx::new(window.clone(), event_loop.owned_display_handle())?;
         tracing::info!("window adapter: {}", gfx.adapter_summary());
         // One device for the window, egui and the scene.
-        self.scene.attach(gfx.device.clone(), gfx.queue.clone(), gfx.adapter.get_info())?;
+        self.scene.attach(
+            gfx.device.clone(),
+            gfx.queue.clone(),
+            gfx.adapter.get_info(),
+            gfx.adapter.get_downlevel_capabilities(),
+        )?;
         let ctx = egui::Context::default();
         let max_side = gfx.device.limits().max_texture_dimension_2d as usize;
         let egui = egui_winit::State::new(

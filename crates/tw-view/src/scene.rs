@@ -79,6 +79,8 @@ struct SceneGfx {
     device: wgpu::Device,
     queue: wgpu::Queue,
     info: wgpu::AdapterInfo,
+    /// What the adapter supports beyond the baseline (compute on GL, for `gpu-hzb`).
+    downlevel: wgpu::DownlevelCapabilities,
     target: Option<SceneTarget>,
     /// Bumped whenever the target texture is made again (egui must be told).
     generation: u64,
@@ -116,6 +118,10 @@ impl SceneGfx {
             size[1],
         )?;
         r.set_gpu_budget(gpu_budget.max(tw_gpu::MIN_BUDGET));
+        // Tells the renderer about compute on GL (gpu-hzb); the viewer keeps its draw mode.
+        let mode = r.draw_mode();
+        r.set_downlevel(&self.downlevel);
+        r.set_draw_mode(mode);
         Ok(r)
     }
 }
@@ -244,14 +250,16 @@ impl Scene {
         self.last
     }
 
-    /// Draws on the window's device (before this, [`frame`](Self::frame) fails).
+    /// Draws on the window's device (before this, [`frame`](Self::frame) fails); `downlevel`
+    /// is its adapter's (`Adapter::get_downlevel_capabilities`).
     pub fn attach(
         &mut self,
         device: wgpu::Device,
         queue: wgpu::Queue,
         info: wgpu::AdapterInfo,
+        downlevel: wgpu::DownlevelCapabilities,
     ) -> Result<(), ViewError> {
-        self.gfx = Some(SceneGfx { device, queue, info, target: None, generation: 0 });
+        self.gfx = Some(SceneGfx { device, queue, info, downlevel, target: None, generation: 0 });
         self.walk = None;
         Ok(())
     }

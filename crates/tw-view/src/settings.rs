@@ -14,11 +14,17 @@ pub enum OcclusionStrategy {
     Hzb,
     /// Hardware occlusion queries of the candidates' boxes (Yoon et al. 2003).
     Queries,
+    /// A hierarchical Z-buffer built and tested in compute shaders, feeding indirect draws.
+    GpuHzb,
 }
 
 impl OcclusionStrategy {
-    pub const ALL: [OcclusionStrategy; 3] =
-        [OcclusionStrategy::None, OcclusionStrategy::Hzb, OcclusionStrategy::Queries];
+    pub const ALL: [OcclusionStrategy; 4] = [
+        OcclusionStrategy::None,
+        OcclusionStrategy::Hzb,
+        OcclusionStrategy::Queries,
+        OcclusionStrategy::GpuHzb,
+    ];
 
     /// The name `--occlusion` takes.
     pub fn name(self) -> &'static str {
@@ -40,6 +46,7 @@ impl OcclusionStrategy {
             OcclusionStrategy::None => tw_frame::Occlusion::None,
             OcclusionStrategy::Hzb => tw_frame::Occlusion::Hzb,
             OcclusionStrategy::Queries => tw_frame::Occlusion::Queries,
+            OcclusionStrategy::GpuHzb => tw_frame::Occlusion::GpuHzb,
         }
     }
 }
@@ -140,6 +147,7 @@ mod tests {
         assert_eq!(OcclusionStrategy::parse("bogus"), None);
         assert!(OcclusionStrategy::ALL.iter().all(|o| o.available()));
         assert_eq!(OcclusionStrategy::Queries.to_frame(), tw_frame::Occlusion::Queries);
+        assert_eq!(OcclusionStrategy::parse("gpu-hzb"), Some(OcclusionStrategy::GpuHzb));
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         OcclusionArg::None => OcclusionStrategy::None,
         OcclusionArg::Hzb => OcclusionStrategy::Hzb,
         OcclusionArg::Queries => OcclusionStrategy::Queries,
+        OcclusionArg::GpuHzb => OcclusionStrategy::GpuHzb,
     };
     let scripted = args.exit_after.is_some() || args.script.is_some();
     if (args.screenshot.is_some() || args.screenshot_window.is_some()) && !scripted {
