@@ -228,18 +228,6 @@ pub struct RenderArgs {
     pub memory: u64,
 }
 
-#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum OcclusionArg {
-    /// No occlusion culling.
-    None,
-    /// Two-pass, GigaWalk's CPU hierarchical Z-buffer.
-    Hzb,
-    /// Two-pass, hardware occlusion queries (Yoon et al. 2003).
-    Queries,
-    /// Two-pass, hierarchical Z-buffer built and tested in compute shaders, indirect draws.
-    GpuHzb,
-}
-
 #[derive(Args, Debug)]
 pub struct ViewArgs {
     /// A store file written by `terawalk build`.
@@ -283,9 +271,10 @@ pub struct ViewArgs {
     /// Pixel error threshold τ of the LOD cut (0 = full resolution).
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
-    /// Occlusion culling strategy.
-    #[arg(long, value_enum, default_value = "none")]
-    pub occlusion: OcclusionArg,
+    /// Occlusion culling strategy: none, hzb, queries, gpu-hzb, or auto (the fastest
+    /// conservative one on the window's device; all of them give the image of none).
+    #[arg(long, default_value = "auto", value_parser = parse_occlusion)]
+    pub occlusion: OcclusionChoice,
     /// Turn view-frustum culling off.
     #[arg(long)]
     pub no_frustum: bool,
@@ -340,9 +329,10 @@ pub struct BenchArgs {
     /// Memory budget of the decoded page cache (RAM).
     #[arg(long, default_value = "1G", value_parser = parse_bytes)]
     pub memory: u64,
-    /// Occlusion culling strategies, comma-separated; one run each, in this order.
-    #[arg(long, value_delimiter = ',', default_value = "none", value_parser = parse_occlusion)]
-    pub occlusion: Vec<tw_frame::Occlusion>,
+    /// Occlusion culling strategies, comma-separated (none, hzb, queries, gpu-hzb; auto = the
+    /// fastest conservative one on this device); one run each, in this order.
+    #[arg(long, value_delimiter = ',', default_value = "auto", value_parser = parse_occlusion)]
+    pub occlusion: Vec<OcclusionChoice>,
     /// Render at full detail without any culling (the reference) instead.
     #[arg(long, conflicts_with_all = ["compare", "exact"])]
     pub reference: bool,
@@ -372,10 +362,30 @@ pub struct BenchArgs {
     pub color: RenderColoring,
 }
 
-fn parse_occlusion(s: &str) -> Result<tw_frame::Occlusion, String> {
-    tw_frame::Occlusion::ALL.into_iter().find(|o| o.name() == s.trim()).ok_or_else(|| {
+/// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device
+/// the command renders with, [`tw_frame::Occlusion::fastest_for`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OcclusionChoice {
+    Auto,
+    Is(tw_frame::Occlusion),
+}
+
+impl OcclusionChoice {
+    pub fn resolve(self, renderer: &tw_gpu::Renderer) -> tw_frame::Occlusion {
+        match self {
+            OcclusionChoice::Auto => tw_frame::Occlusion::fastest_for(renderer),
+            OcclusionChoice::Is(o) => o,
+        }
+    }
+}
+
+fn parse_occlusion(s: &str) -> Result<OcclusionChoice, String> {
+    if s.trim() == "auto" {
+        return Ok(OcclusionChoice::Auto);
+    }
+    tw_frame::Occlusion::parse(s).map(OcclusionChoice::Is).ok_or_else(|| {
         let names: Vec<&str> = tw_frame::Occlusion::ALL.iter().map(|o| o.name()).collect();
-        format!("unknown occlusion strategy {s:?}; one of {}", names.join(", "))
+        format!("unknown occlusion strategy {s:?}; one of auto, {}", names.join(", "))
     })
 }
 

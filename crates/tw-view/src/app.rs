@@ -160,6 +160,12 @@ impl App {
             gfx.adapter.get_info(),
             gfx.adapter.get_downlevel_capabilities(),
         )?;
+        if self.options.occlusion_auto {
+            if let Some(o) = self.scene.fastest_occlusion() {
+                self.settings.occlusion = o;
+                tracing::info!("occlusion culling: {} (the fastest conservative strategy here)", o.name());
+            }
+        }
         let ctx = egui::Context::default();
         let max_side = gfx.device.limits().max_texture_dimension_2d as usize;
         let egui = egui_winit::State::new(

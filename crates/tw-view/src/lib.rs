@@ -41,7 +41,7 @@ use std::path::PathBuf;
 
 pub use error::ViewError;
 pub use scene::Scene;
-pub use settings::{Coloring, OcclusionStrategy, Settings};
+pub use settings::{Coloring, Occlusion, Settings};
 use tw_runtime::{Camera, CameraPath};
 
 /// How to start the viewer.
@@ -74,6 +74,9 @@ pub struct ViewOptions {
     pub mode: controller::Mode,
     /// `settings.debug_view` starts the third-person debug view from the starting camera.
     pub settings: Settings,
+    /// Replace `settings.occlusion` by the fastest conservative strategy on the window's
+    /// device once it is open (`--occlusion auto`).
+    pub occlusion_auto: bool,
 }
 
 /// What a viewer session did.

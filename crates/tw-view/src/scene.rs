@@ -9,7 +9,7 @@
 //!   [`Scene::set_memory_budget`] rebuilds the streamer with the new budget. The HUD's figures
 //!   come from the frame's [`StreamStats`] (pages pending + in flight, bytes read, resident
 //!   bytes) and the renderer's [`tw_gpu::PoolStats`] (GPU memory under [`Settings::gpu_budget`]).
-//! - **Occlusion**: [`crate::settings::OcclusionStrategy`] → [`tw_frame::Occlusion`]; the
+//! - **Occlusion**: the settings' [`tw_frame::Occlusion`], as `bench` runs it; the
 //!   two-pass strategies need the renderer's *own* targets (depth read-back, queries against
 //!   the own depth), so the frame is drawn into the own target and its colour is then copied
 //!   into the scene's colour texture (`Rgba8UnormSrgb`, alpha 0 where nothing was drawn),
@@ -60,7 +60,7 @@ struct SelectKey {
     tau: f32,
     frustum: bool,
     viewport: [u32; 2],
-    occlusion: crate::settings::OcclusionStrategy,
+    occlusion: tw_frame::Occlusion,
 }
 
 /// Format of the scene's colour texture (the renderer's own target has the same, so it can be
@@ -264,6 +264,16 @@ impl Scene {
         Ok(())
     }
 
+    /// The fastest conservative occlusion strategy on the window's device
+    /// ([`tw_frame::Occlusion::fastest_conservative`]); `None` before [`attach`](Self::attach).
+    pub fn fastest_occlusion(&self) -> Option<tw_frame::Occlusion> {
+        let g = self.gfx.as_ref()?;
+        let flags = g.downlevel.flags;
+        let gpu_cull = flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
+            && flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
+        Some(tw_frame::Occlusion::fastest_conservative(g.info.device_type, gpu_cull))
+    }
+
     pub fn adapter(&self) -> String {
         self.walk.as_ref().map(|w| w.renderer().adapter_summary()).unwrap_or_default()
     }
@@ -330,7 +340,7 @@ impl Scene {
             let fs = FrameSettings {
                 tau: settings.pixel_error,
                 frustum_culling: settings.frustum_culling,
-                occlusion: settings.occlusion.to_frame(),
+                occlusion: settings.occlusion,
                 wait_for_pages: false,
             };
             let d = walk.draw_frame(cull, &fs)?;
@@ -357,7 +367,7 @@ impl Scene {
             if cut_changed {
                 self.prev_cut.clone_from(cut);
             }
-            self.settle = settings.occlusion != crate::settings::OcclusionStrategy::None
+            self.settle = settings.occlusion != tw_frame::Occlusion::None
                 && (self.key.as_ref() != Some(&key) || cut_changed);
             self.key = Some(key);
         }

@@ -3,53 +3,7 @@
 //! debug colourings, third-person debug view). The scene ([`crate::scene`]) reads it each frame;
 //! the UI ([`crate::ui`]) edits it. Nothing here touches a window or the GPU.
 
-/// Occlusion culling strategy (DESIGN decision 6), run by tw-frame's two-pass strategies
-/// ([`tw_frame::Occlusion`]) exactly as `terawalk bench` runs them.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub enum OcclusionStrategy {
-    /// No occlusion culling: the frustum-culled LOD cut is drawn as it is.
-    #[default]
-    None,
-    /// GigaWalk's CPU hierarchical Z-buffer of last frame's visible set.
-    Hzb,
-    /// Hardware occlusion queries of the candidates' boxes (Yoon et al. 2003).
-    Queries,
-    /// A hierarchical Z-buffer built and tested in compute shaders, feeding indirect draws.
-    GpuHzb,
-}
-
-impl OcclusionStrategy {
-    pub const ALL: [OcclusionStrategy; 4] = [
-        OcclusionStrategy::None,
-        OcclusionStrategy::Hzb,
-        OcclusionStrategy::Queries,
-        OcclusionStrategy::GpuHzb,
-    ];
-
-    /// The name `--occlusion` takes.
-    pub fn name(self) -> &'static str {
-        self.to_frame().name()
-    }
-
-    /// Whether the viewer can run this strategy (all of them now).
-    pub fn available(self) -> bool {
-        true
-    }
-
-    pub fn parse(s: &str) -> Option<OcclusionStrategy> {
-        OcclusionStrategy::ALL.into_iter().find(|o| o.name() == s)
-    }
-
-    /// The frame pipeline's strategy.
-    pub fn to_frame(self) -> tw_frame::Occlusion {
-        match self {
-            OcclusionStrategy::None => tw_frame::Occlusion::None,
-            OcclusionStrategy::Hzb => tw_frame::Occlusion::Hzb,
-            OcclusionStrategy::Queries => tw_frame::Occlusion::Queries,
-            OcclusionStrategy::GpuHzb => tw_frame::Occlusion::GpuHzb,
-        }
-    }
-}
+pub use tw_frame::Occlusion;
 
 /// How triangles are coloured (mirrors [`tw_gpu::ColorMode`], with names for the UI).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
@@ -88,7 +42,8 @@ impl Coloring {
 pub struct Settings {
     /// Pixel error threshold τ (DESIGN decision 3).
     pub pixel_error: f32,
-    pub occlusion: OcclusionStrategy,
+    /// The occlusion culling strategy (tw-frame's, as `terawalk bench` runs them).
+    pub occlusion: Occlusion,
     pub frustum_culling: bool,
     /// Keep the current LOD cut (selection) while the camera moves.
     pub lod_freeze: bool,
@@ -112,7 +67,7 @@ impl Default for Settings {
     fn default() -> Self {
         Settings {
             pixel_error: 1.0,
-            occlusion: OcclusionStrategy::None,
+            occlusion: Occlusion::None,
             frustum_culling: true,
             lod_freeze: false,
             memory_budget: 1 << 30,
@@ -141,13 +96,14 @@ mod tests {
 
     #[test]
     fn occlusion_names_round_trip() {
-        for o in OcclusionStrategy::ALL {
-            assert_eq!(OcclusionStrategy::parse(o.name()), Some(o));
+        for o in Occlusion::ALL {
+            assert_eq!(Occlusion::parse(o.name()), Some(o));
         }
-        assert_eq!(OcclusionStrategy::parse("bogus"), None);
-        assert!(OcclusionStrategy::ALL.iter().all(|o| o.available()));
-        assert_eq!(OcclusionStrategy::Queries.to_frame(), tw_frame::Occlusion::Queries);
-        assert_eq!(OcclusionStrategy::parse("gpu-hzb"), Some(OcclusionStrategy::GpuHzb));
+        assert_eq!(Occlusion::parse("bogus"), None);
+        assert_eq!(Occlusion::parse("gpu-hzb"), Some(Occlusion::GpuHzb));
+        assert_eq!(Occlusion::fastest_conservative(wgpu::DeviceType::Cpu, true), Occlusion::Hzb);
+        assert_eq!(Occlusion::fastest_conservative(wgpu::DeviceType::DiscreteGpu, true), Occlusion::GpuHzb);
+        assert_eq!(Occlusion::fastest_conservative(wgpu::DeviceType::IntegratedGpu, false), Occlusion::Hzb);
     }
 
     #[test]

@@ -7,9 +7,7 @@ use egui::{Color32, Pos2, Rect, Stroke};
 
 use crate::controller::Mode;
 use crate::hud::{FrameTimes, HudFrame};
-use crate::settings::{
-    Coloring, OcclusionStrategy, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE,
-};
+use crate::settings::{Coloring, Occlusion, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE};
 
 /// A button or key the app acts on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -159,10 +157,8 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
     });
     ui.add(egui::Slider::new(&mut s.pixel_error, PIXEL_ERROR_RANGE).logarithmic(true).text("pixel error"));
     egui::ComboBox::from_label("occlusion").selected_text(s.occlusion.name()).show_ui(ui, |ui| {
-        for o in OcclusionStrategy::ALL {
-            ui.add_enabled_ui(o.available(), |ui| {
-                ui.selectable_value(&mut s.occlusion, o, o.name());
-            });
+        for o in Occlusion::ALL {
+            ui.selectable_value(&mut s.occlusion, o, o.name()).on_hover_text(o.description());
         }
     });
     ui.checkbox(&mut s.frustum_culling, "frustum culling");

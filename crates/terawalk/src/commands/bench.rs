@@ -80,8 +80,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
     walk.set_color_mode(color_mode(args.color));
 
-    let strategies: Vec<Occlusion> =
-        if args.reference { vec![Occlusion::None] } else { args.occlusion.clone() };
+    let strategies: Vec<Occlusion> = if args.reference {
+        vec![Occlusion::None]
+    } else {
+        args.occlusion.iter().map(|o| o.resolve(walk.renderer())).collect()
+    };
     let every = args.compare.or(if args.exact { Some(10) } else { None });
     let image_frames = image_frames(cameras.len(), args.images);
     let mut images = Vec::new();

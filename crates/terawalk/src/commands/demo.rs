@@ -98,7 +98,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         size: (1280, 720),
         error: 1.0,
         memory: 1 << 30,
-        occlusion: tw_frame::Occlusion::ALL.to_vec(),
+        occlusion: tw_frame::Occlusion::ALL.iter().map(|&o| crate::cli::OcclusionChoice::Is(o)).collect(),
         reference: false,
         compare: Some(30),
         exact: false,

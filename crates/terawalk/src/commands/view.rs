@@ -5,9 +5,9 @@
 use anyhow::{Context, Result};
 use tw_runtime::{CameraPath, InputCamera};
 use tw_store::Store;
-use tw_view::{Coloring, OcclusionStrategy, Scene, Settings, ViewOptions};
+use tw_view::{Coloring, Occlusion, Scene, Settings, ViewOptions};
 
-use crate::cli::{CameraModeArg, OcclusionArg, RenderColoring, ViewArgs};
+use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, ViewArgs};
 use crate::commands::render::default_camera;
 
 pub fn run(args: ViewArgs) -> Result<()> {
@@ -18,10 +18,8 @@ pub fn run(args: ViewArgs) -> Result<()> {
         anyhow::bail!("--render-scale must be in 0.1..=1, got {}", args.render_scale);
     }
     let occlusion = match args.occlusion {
-        OcclusionArg::None => OcclusionStrategy::None,
-        OcclusionArg::Hzb => OcclusionStrategy::Hzb,
-        OcclusionArg::Queries => OcclusionStrategy::Queries,
-        OcclusionArg::GpuHzb => OcclusionStrategy::GpuHzb,
+        OcclusionChoice::Auto => Occlusion::None,
+        OcclusionChoice::Is(o) => o,
     };
     let scripted = args.exit_after.is_some() || args.script.is_some();
     if (args.screenshot.is_some() || args.screenshot_window.is_some()) && !scripted {
@@ -94,6 +92,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
             CameraModeArg::Orbit => tw_view::controller::Mode::Orbit,
         },
         settings,
+        occlusion_auto: args.occlusion == OcclusionChoice::Auto,
     };
     let report = tw_view::run(scene, options)?;
     if let Some(s) = &report.screenshot {
