@@ -348,6 +348,11 @@ pub struct BenchArgs {
     /// of streaming: the same cut whatever the timing, for comparing images.
     #[arg(long)]
     pub wait: bool,
+    /// queries: count a tested box visible only when more than N of its samples pass (the
+    /// occlusion switch's visible-pixel cut-off; approximate above 0, measure with --compare).
+    /// Vulkan only: GL's queries are booleans.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub visible_pixels: u32,
     /// GPU memory for resident cluster geometry.
     #[arg(long, default_value = "512M", value_parser = parse_bytes)]
     pub gpu_memory: u64,

@@ -46,11 +46,22 @@ pub struct FrameSettings {
     /// Load every page of the cut before drawing (the frame may wait for the disk) instead of
     /// streaming.
     pub wait_for_pages: bool,
+    /// `queries` only: a candidate counts as visible only when more than this many of its
+    /// samples pass — the occlusion switch's visible-pixel cut-off (Govindaraju's thesis §3.4).
+    /// 0, the default, is conservative; above 0 culling is approximate (measure it with
+    /// `bench --compare`). Needs sample counts: ignored on GL, whose queries are booleans.
+    pub visible_pixels: u32,
 }
 
 impl Default for FrameSettings {
     fn default() -> Self {
-        FrameSettings { tau: 1.0, frustum_culling: true, occlusion: Occlusion::None, wait_for_pages: false }
+        FrameSettings {
+            tau: 1.0,
+            frustum_culling: true,
+            occlusion: Occlusion::None,
+            wait_for_pages: false,
+            visible_pixels: 0,
+        }
     }
 }
 
@@ -404,6 +415,7 @@ impl Walkthrough {
             let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
             pages[i].1.bounds.get(c.index_in_page as usize).copied()
         };
+        self.occlusion.visible_pixels = settings.visible_pixels;
         let culled = occlude::draw_culled(
             settings.occlusion,
             &mut self.occlusion,

@@ -117,6 +117,8 @@ pub struct OcclusionStats {
 #[derive(Debug, Default)]
 pub struct OcclusionState {
     pub(crate) history: OcclusionHistory,
+    /// The queries' visible-pixel cut-off ([`crate::FrameSettings::visible_pixels`]).
+    pub visible_pixels: u32,
 }
 
 impl OcclusionState {
@@ -197,8 +199,10 @@ pub fn draw_culled(
                 .collect();
             let samples = renderer.query_boxes(camera, &boxes)?;
             stats.queries = boxes.len() as u64;
+            // GL's queries are booleans (1 = some sample passed): no cut-off there.
+            let cutoff = if renderer.queries_count_samples() { state.visible_pixels as u64 } else { 0 };
             let (visible, occluded): (Vec<_>, Vec<_>) =
-                split.candidates.iter().zip(&samples).partition(|(_, &s)| s > 0);
+                split.candidates.iter().zip(&samples).partition(|(_, &s)| s > cutoff);
             let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
             let occluded: Vec<ClusterRef> = occluded.into_iter().map(|(k, _)| *k).collect();
             stats.culled = occluded.len() as u64;

@@ -102,3 +102,47 @@ fn occlusion_is_conservative_on_teleports_vulkan() {
 fn occlusion_is_conservative_on_teleports_gl() {
     conservative_on_teleports(wgpu::Backends::GL, "gl");
 }
+
+/// The queries' visible-pixel cut-off: with sample counts (Vulkan) a cut-off culls at least
+/// what 0 culls and changes few pixels (it is approximate: clusters showing ≤ N samples go);
+/// with booleans (GL) it is ignored, so the images stay those of the conservative run.
+fn visible_pixel_cutoff(backends: wgpu::Backends, what: &str, counts_samples: bool) {
+    let _lock = gpu_lock();
+    let cameras = walk_cameras(&store());
+    let Some(mut w) = common::walkthrough(store(), backends, what, 256 << 20) else { return };
+    let mut run = |cutoff: u32| {
+        w.reset();
+        let s = FrameSettings {
+            occlusion: Occlusion::Queries,
+            wait_for_pages: true,
+            visible_pixels: cutoff,
+            ..Default::default()
+        };
+        let frames: Vec<_> = cameras.iter().map(|c| w.frame(c, &s).unwrap()).collect();
+        let culled: u64 = frames.iter().map(|(_, i)| i.occlusion.culled).sum();
+        (frames.into_iter().map(|(img, _)| img).collect::<Vec<_>>(), culled)
+    };
+    let (exact, culled0) = run(0);
+    let (approx, culled16) = run(16);
+    let differing: usize = exact.iter().zip(&approx).map(|(a, b)| a.differing_pixels(b).unwrap()).sum();
+    let pixels: usize = exact.iter().map(|i| (i.width * i.height) as usize).sum();
+    eprintln!(
+        "{what}: cut-off 16 samples: {culled16} culled (0: {culled0}), {differing} of {pixels} pixels differ"
+    );
+    if counts_samples {
+        assert!(culled16 >= culled0, "{what}: a cut-off culled less ({culled16} < {culled0})");
+        assert!(differing * 100 <= pixels, "{what}: {differing} of {pixels} pixels differ");
+    } else {
+        assert_eq!((culled16, differing), (culled0, 0), "{what}: GL has no sample counts");
+    }
+}
+
+#[test]
+fn visible_pixel_cutoff_vulkan() {
+    visible_pixel_cutoff(wgpu::Backends::VULKAN, "vulkan", true);
+}
+
+#[test]
+fn visible_pixel_cutoff_gl() {
+    visible_pixel_cutoff(wgpu::Backends::GL, "gl", false);
+}

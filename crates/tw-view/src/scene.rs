@@ -342,6 +342,7 @@ impl Scene {
                 frustum_culling: settings.frustum_culling,
                 occlusion: settings.occlusion,
                 wait_for_pages: false,
+                ..Default::default()
             };
             let d = walk.draw_frame(cull, &fs)?;
             let t = &d.info.times;

@@ -99,6 +99,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             frustum_culling: true,
             occlusion: strategy,
             wait_for_pages: args.wait,
+            visible_pixels: args.visible_pixels,
         };
         walk.reset();
         for _ in 0..args.warmup {
@@ -146,7 +147,16 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         let description = if args.reference {
             "full detail, no culling (τ = 0, frustum and occlusion culling off)".to_string()
         } else {
-            format!("LOD cut at {} px, frustum culling, occlusion culling: {}", args.error, strategy.name())
+            let cutoff = if strategy == Occlusion::Queries && args.visible_pixels > 0 {
+                format!(", visible-pixel cut-off {} samples (approximate)", args.visible_pixels)
+            } else {
+                String::new()
+            };
+            format!(
+                "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}",
+                args.error,
+                strategy.name()
+            )
         };
         let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
         print_run(&run);
