@@ -103,6 +103,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         compare: Some(30),
         exact: false,
         wait: false,
+        visible_pixels: 0,
         gpu_memory: 512 << 20,
         warmup: 3,
         images: 4,
