@@ -178,7 +178,7 @@ impl Renderer {
         }))
         .map_err(|e| GpuError::NoAdapter { backends: format!("{backends:?}"), reason: e.to_string() })?;
         let info = adapter.get_info();
-        let limits = wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits());
+        let limits = Renderer::device_limits(&adapter);
         if width > limits.max_texture_dimension_2d || height > limits.max_texture_dimension_2d {
             return Err(GpuError::Size { width, height, max: limits.max_texture_dimension_2d });
         }
@@ -195,6 +195,19 @@ impl Renderer {
         let mut r = Renderer::from_device(device, queue, info, width, height)?;
         r.set_downlevel(&adapter.get_downlevel_capabilities());
         Ok(r)
+    }
+
+    /// The limits to open a device with (also for [`Renderer::from_device`]): wgpu's downlevel
+    /// defaults raised to the adapter's texture size and buffer sizes. The downlevel default
+    /// `max_buffer_size` (256 MiB) would silently cap the cluster pool, whose arena is one
+    /// buffer, below a larger GPU budget.
+    pub fn device_limits(adapter: &wgpu::Adapter) -> wgpu::Limits {
+        let have = adapter.limits();
+        wgpu::Limits {
+            max_buffer_size: have.max_buffer_size,
+            max_storage_buffer_binding_size: have.max_storage_buffer_binding_size,
+            ..wgpu::Limits::downlevel_defaults().using_resolution(have)
+        }
     }
 
     /// The memory hints to open a device with (also for [`Renderer::from_device`]): small

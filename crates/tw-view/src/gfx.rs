@@ -45,7 +45,7 @@ impl Gfx {
         .map_err(|e| ViewError::Adapter(e.to_string()))?;
         let info = adapter.get_info();
         tracing::info!("window adapter: {} ({:?}, {:?})", info.name, info.backend, info.device_type);
-        let limits = wgpu::Limits::downlevel_defaults().using_resolution(adapter.limits());
+        let limits = tw_gpu::Renderer::device_limits(&adapter);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("terawalk view"),
             required_features: wgpu::Features::empty(),

@@ -74,6 +74,13 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
 
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
     renderer.set_gpu_budget(args.gpu_memory);
+    if renderer.gpu_budget() + (64 << 10) < args.gpu_memory {
+        println!(
+            "note: GPU budget {} MiB, the most one buffer can hold on this device (asked for {} MiB)",
+            renderer.gpu_budget() >> 20,
+            args.gpu_memory >> 20
+        );
+    }
     let adapter = renderer.adapter_summary();
     println!("adapter: {adapter}");
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
