@@ -305,6 +305,12 @@ impl Renderer {
 
     /// Tells the renderer what the adapter supports (indirect execution and compute shaders on
     /// GL), and picks [`DrawMode::Indirect`] when it does.
+    /// Whether a device with `caps` can run [`Renderer::draw_gpu_culled`] (compute shaders and
+    /// indirect draws): [`Renderer::gpu_cull_supported`] before a renderer exists.
+    pub fn gpu_cull_possible(caps: &wgpu::DownlevelCapabilities) -> bool {
+        caps.flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION | wgpu::DownlevelFlags::COMPUTE_SHADERS)
+    }
+
     pub fn set_downlevel(&mut self, caps: &wgpu::DownlevelCapabilities) {
         self.indirect_supported = caps.flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
         self.compute_supported = caps.flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS);

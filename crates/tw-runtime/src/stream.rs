@@ -359,11 +359,12 @@ impl Streamer {
         let mut prefetch = Requests::default();
         let every = self.options.prefetch.every.max(1) as u64;
         let fresh = self.prefetch_list.0 .0.is_empty() || self.frame >= self.prefetch_list.1 + every;
-        if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below && !fresh {
+        let wanted = self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below;
+        if wanted && !fresh {
             // Between prefetch selections: the last list, less what arrived meanwhile.
             prefetch = self.prefetch_list.0.clone();
             prefetch.0.retain(|&p, _| !demand.0.contains_key(&p) && !cache.is_settled(p));
-        } else if self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below {
+        } else if wanted {
             // Prefetch views do not refresh pages in the LRU order.
             self.availability.set_peek_only(true);
             for (cam, opts) in prefetch_views(camera, &self.history, options, &self.options.prefetch) {

@@ -157,7 +157,7 @@ impl Store {
             let map = unsafe { memmap2::Mmap::map(&file) }.map_err(io)?;
             Store::parse(&path, &map)?
         };
-        Ok(Store::assemble(path, Data::File { file, len }, parsed))
+        Ok(Store { path, data: Data::File { file, len }, t: parsed })
     }
 
     /// Opens and validates a store held in memory (tests, fuzzing, embedded stores).
@@ -166,12 +166,8 @@ impl Store {
     }
 
     fn from_vec(path: PathBuf, bytes: Vec<u8>) -> Result<Store, StoreError> {
-        let parsed = Store::parse(&path, &bytes)?;
-        Ok(Store::assemble(path, Data::Vec(bytes), parsed))
-    }
-
-    fn assemble(path: PathBuf, data: Data, t: Parsed) -> Store {
-        Store { path, data, t }
+        let t = Store::parse(&path, &bytes)?;
+        Ok(Store { path, data: Data::Vec(bytes), t })
     }
 
     fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed, StoreError> {

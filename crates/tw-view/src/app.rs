@@ -447,8 +447,9 @@ impl App {
             // After waiting for events, the time since the last frame is not motion time.
             dt = dt.min(1.0 / 60.0);
         }
-        let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
+        // The script's steps first: a resize it asks for may apply at once.
         let last_step = self.script_steps(event_loop);
+        let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
         if self.minimized || size.width == 0 || size.height == 0 {
             // Minimised: nothing to draw. A script goes on counting frames.
             if self.script.is_some() {
@@ -463,7 +464,6 @@ impl App {
             }
             return Ok(());
         }
-        let size = self.win.as_ref().map(|w| w.window.inner_size()).unwrap_or(size);
 
         // 1. The camera: the path, or the controller.
         let mut camera = None;
@@ -658,8 +658,7 @@ impl App {
         }
         self.report.frames = self.frames;
         self.report.last_size = [size.width, size.height];
-        let script_done = self.script.as_ref().is_some_and(|_| last_step);
-        if let Some(n) = self.options.exit_after.or(script_done.then_some(self.frames)) {
+        if let Some(n) = self.options.exit_after.or(last_step.then_some(self.frames)) {
             if self.frames >= n {
                 if let Some(p) = self.options.screenshot.clone() {
                     self.screenshot(&p);

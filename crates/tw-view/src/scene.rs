@@ -268,9 +268,7 @@ impl Scene {
     /// ([`tw_frame::Occlusion::fastest_conservative`]); `None` before [`attach`](Self::attach).
     pub fn fastest_occlusion(&self) -> Option<tw_frame::Occlusion> {
         let g = self.gfx.as_ref()?;
-        let flags = g.downlevel.flags;
-        let gpu_cull = flags.contains(wgpu::DownlevelFlags::COMPUTE_SHADERS)
-            && flags.contains(wgpu::DownlevelFlags::INDIRECT_EXECUTION);
+        let gpu_cull = Renderer::gpu_cull_possible(&g.downlevel);
         Some(tw_frame::Occlusion::fastest_conservative(g.info.device_type, gpu_cull))
     }
 
