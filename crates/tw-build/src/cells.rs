@@ -149,6 +149,11 @@ impl CellFiles {
     }
 
     /// Triangles in bucket `b`.
+    /// The bucket holding `cell` (buckets hold consecutive ranges of cells, in order).
+    pub fn bucket_of_cell(&self, cell: u32) -> usize {
+        self.buckets.partition_point(|b| b.cells.end <= cell).min(self.buckets.len().saturating_sub(1))
+    }
+
     pub fn bucket_triangles(&self, b: usize) -> u64 {
         self.buckets[b].triangles
     }

@@ -18,6 +18,7 @@ pub mod lod;
 pub mod pages;
 pub mod pipeline;
 pub mod redefine;
+pub mod seams;
 pub mod types;
 
 pub use error::BuildError;

@@ -4,11 +4,12 @@
 //! 2. redefine ([`crate::redefine`]) → cells; hierarchy ([`crate::hierarchy`]) over them, cells
 //!    renumbered in leaf order;
 //! 3. distribute ([`crate::cells`]) → one bucket file per range of cells;
-//! 4. seams: open-boundary vertices shared by two cells (the borders of split objects), with the
-//!    first and last cell (leaf order) that has each: cells lock them
-//!    ([`crate::lod::build_cell_lod_with_seams`]), and a node's HLOD keeps those shared with a
-//!    cell outside the node's cell range, where a neighbouring subtree may be drawn finer
-//!    ([`crate::hlod::build_hlod`]);
+//! 4. seams ([`crate::seams`], out of core): open-boundary vertices shared by two cells (the
+//!    borders of split objects), with the first and last cell (leaf order) that has each: cells
+//!    lock them ([`crate::lod::build_cell_lod_with_seams`]), and a node's HLOD keeps those shared
+//!    with a cell outside the node's cell range, where a neighbouring subtree may be drawn finer
+//!    ([`crate::hlod::build_hlod`]); each bucket reads its own seams, and a subtree passes up
+//!    only those at its roots' vertices;
 //! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
 //!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
 //!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
@@ -22,7 +23,6 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use rayon::prelude::*;
 use tw_io::scene::SceneProgress;
 use tw_io::Scene;
 use tw_store::{PageCluster, StoreInfo, StoreWriter};
@@ -34,6 +34,7 @@ use crate::hlod::{build_hlod, roots_of, HlodOutcome, HlodParams, Roots};
 use crate::lod::{build_cell_lod_with_seams, LodParams};
 use crate::pages::{PagePacker, PageParams};
 use crate::redefine::{redefine, RedefineParams, RedefineReport};
+use crate::seams::{SeamFiles, SeamTable};
 use crate::types::{LodCluster, LodDag, LodGroup};
 
 /// Everything `terawalk build` can set.
@@ -230,9 +231,15 @@ fn build_with_pool(
     progress.end_phase();
     t.lap("distribute");
 
-    // 4. Seams between cells.
+    // 4. Seams between cells, out of core: a quarter of the budget of records at a time.
     progress.phase("seams", cells.cell_count() as u64, "cells");
-    let seams = find_seams(&cells, progress, pool)?;
+    let seams = SeamFiles::find(&cells, work.path(), budget, pool, &mut |done| progress.advance(done))?;
+    tracing::info!(
+        open_positions = seams.open_positions,
+        seams = seams.seams,
+        partitions = seams.partitions,
+        "seams"
+    );
     progress.end_phase();
     t.lap("seams");
 
@@ -240,10 +247,11 @@ fn build_with_pool(
     progress.phase("lod", ing.triangles, "triangles");
     let mut state = LodState::new(&hierarchy, options);
     let grid = ing.grid;
-    let external = |p: [u32; 3]| seams.contains(p);
     let mut done_triangles = 0u64;
     for b in 0..cells.bucket_count() {
         let bucket = cells.read_bucket(b)?;
+        let bucket_seams = seams.read_bucket(b)?;
+        let external = |p: [u32; 3]| bucket_seams.contains(p);
         let ids: Vec<u32> = bucket.cells().collect();
         // The pool builds the cells' DAGs, taking cells in order; this thread consumes them in
         // cell order (pages, HLOD) as they come, so the sequential part overlaps the parallel one.
@@ -254,8 +262,8 @@ fn build_with_pool(
             |i, dag| {
                 let cell = ids[i];
                 let leaf = state.leaf_of_cell[cell as usize];
-                state.add_cell(&mut writer, leaf, dag)?;
-                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod, &seams)?;
+                state.add_cell(&mut writer, leaf, dag, &bucket_seams)?;
+                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod)?;
                 done_triangles += red.cells[cell as usize].triangles;
                 progress.advance(done_triangles);
                 Ok(())
@@ -331,11 +339,16 @@ fn build_with_pool(
     Ok(report)
 }
 
+/// Results [`for_each_in_order`] may hold ahead of the consumer.
+const IN_ORDER_WINDOW: usize = 16;
+
 /// Runs `produce(i)` for `i` in `0..n` on `pool` (workers take indices in increasing order) and
 /// hands the results to `consume` on the calling thread in index order, as soon as each is
-/// ready. Results wait only until their predecessors are consumed, so at most about a worker's
-/// lead over the slowest worker is held. On the first error of `consume` the workers stop
-/// taking new indices and the error is returned.
+/// ready. A worker does not start index `i` before `i - IN_ORDER_WINDOW` is consumed, so at most
+/// `IN_ORDER_WINDOW` + one per worker results are held, however slow `consume` is (without the
+/// window, a consumer slower than the pool let a whole bucket's cell DAGs pile up: ~250 MB on
+/// the 10^8-triangle plant). On the first error of `consume` the workers stop taking new
+/// indices and the error is returned.
 fn for_each_in_order<T, P, C>(
     pool: &rayon::ThreadPool,
     n: usize,
@@ -350,9 +363,11 @@ where
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
+    // How many results `consume` has taken, and a condition to wait for it to grow.
+    let consumed = (std::sync::Mutex::new(0usize), std::sync::Condvar::new());
     let (tx, rx) = std::sync::mpsc::channel::<(usize, T)>();
     std::thread::scope(|scope| {
-        let (next, stop, produce) = (&next, &stop, &produce);
+        let (next, stop, produce, consumed) = (&next, &stop, &produce, &consumed);
         scope.spawn(move || {
             pool.scope(|s| {
                 for _ in 0..pool.current_num_threads() {
@@ -362,7 +377,17 @@ where
                             return;
                         }
                         let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= n || tx.send((i, produce(i))).is_err() {
+                        if i >= n {
+                            return;
+                        }
+                        // The consumer always makes progress: index `done` < `i` is produced
+                        // by a worker that is not waiting here.
+                        let mut done = consumed.0.lock().unwrap_or_else(|e| e.into_inner());
+                        while i >= *done + IN_ORDER_WINDOW && !stop.load(Ordering::Relaxed) {
+                            done = consumed.1.wait(done).unwrap_or_else(|e| e.into_inner());
+                        }
+                        drop(done);
+                        if stop.load(Ordering::Relaxed) || tx.send((i, produce(i))).is_err() {
                             return;
                         }
                     });
@@ -375,73 +400,18 @@ where
         for (i, item) in rx.iter() {
             waiting.insert(i, item);
             while let Some(item) = waiting.remove(&expected) {
-                if let Err(e) = consume(expected, item) {
+                let result = consume(expected, item);
+                if result.is_err() {
                     stop.store(true, Ordering::Relaxed);
-                    return Err(e);
                 }
                 expected += 1;
+                *consumed.0.lock().unwrap_or_else(|e| e.into_inner()) = expected;
+                consumed.1.notify_all();
+                result?;
             }
         }
         Ok(())
     })
-}
-
-/// Open-boundary vertices shared by at least two cells, sorted, each with the first and last
-/// cell (leaf order) that has it: a position is shared with a cell outside a node's subtree
-/// (whose cells are a contiguous range in leaf order) iff one of the two is outside the range.
-struct Seams {
-    positions: Vec<[u32; 3]>,
-    cells: Vec<(u32, u32)>,
-}
-
-impl Seams {
-    fn contains(&self, p: [u32; 3]) -> bool {
-        self.positions.binary_search(&p).is_ok()
-    }
-
-    /// Whether `p` is on a seam with a cell outside `range`.
-    fn external(&self, p: [u32; 3], range: (u32, u32)) -> bool {
-        self.positions.binary_search(&p).is_ok_and(|i| {
-            let (first, last) = self.cells[i];
-            first < range.0 || last >= range.1
-        })
-    }
-}
-
-fn find_seams(
-    cells: &CellFiles,
-    progress: &mut dyn BuildProgress,
-    pool: &rayon::ThreadPool,
-) -> Result<Seams, BuildError> {
-    use rayon::slice::ParallelSliceMut;
-    let mut all: Vec<([u32; 3], u32)> = Vec::new();
-    let mut done = 0u64;
-    for b in 0..cells.bucket_count() {
-        let bucket = cells.read_bucket(b)?;
-        let ids: Vec<u32> = bucket.cells().collect();
-        let per_cell: Vec<Vec<[u32; 3]>> =
-            pool.install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
-        for (v, &c) in per_cell.into_iter().zip(&ids) {
-            all.extend(v.into_iter().map(|p| (p, c)));
-        }
-        done += ids.len() as u64;
-        progress.advance(done);
-    }
-    pool.install(|| all.par_sort_unstable());
-    let mut seams = Seams { positions: Vec::new(), cells: Vec::new() };
-    let mut i = 0;
-    while i < all.len() {
-        let mut j = i + 1;
-        while j < all.len() && all[j].0 == all[i].0 {
-            j += 1;
-        }
-        if j - i > 1 {
-            seams.positions.push(all[i].0);
-            seams.cells.push((all[i].1, all[j - 1].1));
-        }
-        i = j;
-    }
-    Ok(seams)
 }
 
 /// The bottom-up state of phase 5.
@@ -452,8 +422,9 @@ struct LodState<'h> {
     leaf_of_cell: Vec<u32>,
     /// The cells (leaf order) under each node: `first..last + 1`.
     cell_range: Vec<(u32, u32)>,
-    /// Roots of completed subtrees, by node.
-    roots: Vec<Option<Roots>>,
+    /// Roots of completed subtrees, by node, with the seams at their vertices that are shared
+    /// with a cell outside the subtree.
+    roots: Vec<Option<(Roots, SeamTable)>>,
     /// The group table (page references filled in at the end).
     groups: Vec<tw_store::Group>,
     /// The sources of every group, group after group (`groups[i].source_count` each).
@@ -554,14 +525,21 @@ impl<'h> LodState<'h> {
         Ok(base)
     }
 
-    fn add_cell(&mut self, writer: &mut StoreWriter, leaf: u32, dag: LodDag) -> Result<(), BuildError> {
+    fn add_cell(
+        &mut self,
+        writer: &mut StoreWriter,
+        leaf: u32,
+        dag: LodDag,
+        seams: &SeamTable,
+    ) -> Result<(), BuildError> {
         let base = self.emit(writer, leaf, &dag, true)?;
         let roots = roots_of(&dag, base);
+        let root_seams = seams.retain(root_positions(&roots), self.cell_range[leaf as usize]);
         let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
         self.cell_counts.0 += 1;
         self.cell_counts.1 += level0 as u64;
         self.cell_counts.2 += roots.triangle_count() as u64;
-        self.roots[leaf as usize] = Some(roots);
+        self.roots[leaf as usize] = Some((roots, root_seams));
         Ok(())
     }
 
@@ -572,7 +550,6 @@ impl<'h> LodState<'h> {
         mut node: u32,
         grid: &crate::types::Grid,
         params: &HlodParams,
-        seams: &Seams,
     ) -> Result<(), BuildError> {
         loop {
             let parent = self.parent[node as usize];
@@ -583,8 +560,9 @@ impl<'h> LodState<'h> {
             if children.clone().any(|c| self.roots[c].is_none()) {
                 return Ok(());
             }
-            let child_roots: Vec<Roots> =
-                children.map(|c| self.roots[c].take().expect("checked above")).collect();
+            let (child_roots, child_seams): (Vec<Roots>, Vec<SeamTable>) =
+                children.map(|c| self.roots[c].take().expect("checked above")).unzip();
+            let seams = SeamTable::merge(&child_seams);
             // Only seams with cells outside this node's subtree stay locked.
             let range = self.cell_range[parent as usize];
             let external = |p: [u32; 3]| seams.external(p, range);
@@ -613,10 +591,17 @@ impl<'h> LodState<'h> {
                 e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
             }
             let base = self.emit(writer, parent, &hl.dag, false)?;
-            self.roots[parent as usize] = Some(hl.roots(base));
+            let roots = hl.roots(base);
+            let root_seams = seams.retain(root_positions(&roots), range);
+            self.roots[parent as usize] = Some((roots, root_seams));
             node = parent;
         }
     }
+}
+
+/// Every vertex position of `roots`' clusters (repeats included).
+fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
+    roots.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
 }
 
 fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
@@ -706,6 +691,28 @@ mod tests {
             .unwrap();
             assert_eq!(got, (0..100).map(|i| (i, i * i)).collect::<Vec<_>>(), "{threads} threads");
         }
+    }
+
+    #[test]
+    fn for_each_in_order_holds_a_bounded_number_of_results_for_a_slow_consumer() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        let produced = AtomicUsize::new(0);
+        let mut most_ahead = 0;
+        for_each_in_order(
+            &pool(4),
+            200,
+            |i| {
+                produced.fetch_add(1, Ordering::SeqCst);
+                i
+            },
+            |i, _| {
+                std::thread::sleep(std::time::Duration::from_micros(200));
+                most_ahead = most_ahead.max(produced.load(Ordering::SeqCst) - i);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert!(most_ahead <= IN_ORDER_WINDOW + 4, "{most_ahead} results held");
     }
 
     #[test]

@@ -1,0 +1,363 @@
+//! Phase 4: seams between cells, found out of core.
+//!
+//! A *seam* is a grid position on the open boundary (or a non-manifold edge) of two or more
+//! cells: the border of an object that partitioning split, or where two objects of different
+//! cells meet. Cells lock their seams ([`crate::lod::build_cell_lod_with_seams`]) and a node's
+//! HLOD locks those shared with a cell outside the node's cell range
+//! ([`crate::hlod::build_hlod`]), so that a cut mixing levels across cells never cracks. Each
+//! seam carries the first and last cell (leaf order) that has it: as a node's cells are a
+//! contiguous range in leaf order, a seam is shared with a cell outside the node iff one of the
+//! two is outside the range.
+//!
+//! Memory is bounded by the build budget, not by the scene (GigaWalk §4 and Manocha §2 build
+//! out of core; the seams were the last scene-sized table of the build: 16 bytes per open
+//! position of every cell, ~450 MB on the 10^8-triangle plant):
+//!
+//! 1. every bucket's cells yield their open positions; the (position, cell) records are written
+//!    to [`SeamFiles`] *partitions* by a hash of the position, so that all records of one
+//!    position land in one partition, and a partition holds about `budget` bytes;
+//! 2. each partition is sorted on its own; a position found in two or more cells becomes a seam
+//!    `(position, first cell, last cell)`, written to the *seam file of each bucket* that has one
+//!    of those cells;
+//! 3. the LOD phase reads one bucket's seam file when it reaches the bucket ([`SeamTable`]), and
+//!    passes up the hierarchy only the seams of the roots it keeps ([`SeamTable::retain`]).
+//!
+//! Deterministic: partitions and seam files are sorted before use, whatever the thread count.
+
+use std::fs::File;
+use std::io::{BufReader, BufWriter, Read, Write};
+use std::path::Path;
+
+use rayon::prelude::*;
+use tempfile::TempPath;
+
+use crate::cells::CellFiles;
+use crate::error::BuildError;
+
+/// Bytes of one (position, cell) record in a partition file.
+const OPEN_RECORD_BYTES: usize = 16;
+/// Bytes of one (position, first, last) record in a bucket's seam file.
+const SEAM_RECORD_BYTES: usize = 20;
+
+/// Seams of some cells (sorted by position, each once) with the first and last cell that has
+/// each.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SeamTable {
+    positions: Vec<[u32; 3]>,
+    cells: Vec<(u32, u32)>,
+}
+
+impl SeamTable {
+    /// A table of `seams` in any order; duplicates (same position) must agree and are merged.
+    pub fn from_unsorted(mut seams: Vec<([u32; 3], (u32, u32))>) -> SeamTable {
+        seams.sort_unstable();
+        seams.dedup_by(|a, b| a.0 == b.0);
+        let (positions, cells) = seams.into_iter().unzip();
+        SeamTable { positions, cells }
+    }
+
+    /// The union of several tables.
+    pub fn merge<'a>(tables: impl IntoIterator<Item = &'a SeamTable>) -> SeamTable {
+        SeamTable::from_unsorted(tables.into_iter().flat_map(|t| t.entries()).collect())
+    }
+
+    pub fn len(&self) -> usize {
+        self.positions.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.positions.is_empty()
+    }
+
+    fn entries(&self) -> impl Iterator<Item = ([u32; 3], (u32, u32))> + '_ {
+        self.positions.iter().copied().zip(self.cells.iter().copied())
+    }
+
+    /// Whether `p` is a seam.
+    pub fn contains(&self, p: [u32; 3]) -> bool {
+        self.positions.binary_search(&p).is_ok()
+    }
+
+    /// Whether `p` is a seam with a cell outside `range` (first cell, one past the last).
+    pub fn external(&self, p: [u32; 3], range: (u32, u32)) -> bool {
+        self.positions.binary_search(&p).is_ok_and(|i| {
+            let (first, last) = self.cells[i];
+            first < range.0 || last >= range.1
+        })
+    }
+
+    /// The seams at `positions` that are shared with a cell outside `range`: what the subtree
+    /// of `range`, represented by geometry at `positions`, must tell the nodes above it.
+    pub fn retain(&self, positions: impl IntoIterator<Item = [u32; 3]>, range: (u32, u32)) -> SeamTable {
+        let kept: Vec<([u32; 3], (u32, u32))> = positions
+            .into_iter()
+            .filter_map(|p| {
+                let i = self.positions.binary_search(&p).ok()?;
+                let (first, last) = self.cells[i];
+                (first < range.0 || last >= range.1).then_some((p, (first, last)))
+            })
+            .collect();
+        SeamTable::from_unsorted(kept)
+    }
+}
+
+/// The seams of every bucket, one file each (deleted when dropped).
+pub struct SeamFiles {
+    buckets: Vec<(TempPath, u64)>,
+    /// Open positions over all cells, and seams over the scene (a seam counts once).
+    pub open_positions: u64,
+    pub seams: u64,
+    pub partitions: usize,
+}
+
+impl SeamFiles {
+    /// Finds the seams of `cells` with about `budget` bytes of records in memory at a time
+    /// (besides one bucket, which `cells` bounds), in `work_dir`. `advance(cells done)` reports
+    /// progress over the first pass.
+    pub fn find(
+        cells: &CellFiles,
+        work_dir: &Path,
+        budget: u64,
+        pool: &rayon::ThreadPool,
+        advance: &mut dyn FnMut(u64),
+    ) -> Result<SeamFiles, BuildError> {
+        // A cell has at most 3 open positions per triangle; the partition count assumes that
+        // bound, so a partition never exceeds the budget (most hold far less).
+        let triangles: u64 = (0..cells.bucket_count()).map(|b| cells.bucket_triangles(b)).sum();
+        let worst = triangles * 3 * OPEN_RECORD_BYTES as u64;
+        let partitions = worst.div_ceil(budget.max(1 << 20)).clamp(1, 512) as usize;
+        let mut parts: Vec<(TempPath, BufWriter<File>)> =
+            (0..partitions).map(|_| temp_writer(work_dir, "tw-open-")).collect::<Result<_, _>>()?;
+
+        // 1. Open positions of every cell, by partition.
+        let mut open_positions = 0u64;
+        let mut done = 0u64;
+        let mut record = [0u8; OPEN_RECORD_BYTES];
+        for b in 0..cells.bucket_count() {
+            let bucket = cells.read_bucket(b)?;
+            let ids: Vec<u32> = bucket.cells().collect();
+            let per_cell: Vec<Vec<[u32; 3]>> = pool
+                .install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
+            for (open, &cell) in per_cell.iter().zip(&ids) {
+                for &p in open {
+                    put_u32s(&mut record, &[p[0], p[1], p[2], cell]);
+                    let (path, w) = &mut parts[partition_of(p, partitions)];
+                    w.write_all(&record).map_err(|e| BuildError::io(&**path, e))?;
+                }
+                open_positions += open.len() as u64;
+            }
+            done += ids.len() as u64;
+            advance(done);
+        }
+
+        // 2. Seams of each partition, to the seam files of their cells' buckets.
+        let mut outs: Vec<(TempPath, BufWriter<File>)> = (0..cells.bucket_count())
+            .map(|_| temp_writer(work_dir, "tw-seams-"))
+            .collect::<Result<_, _>>()?;
+        let mut counts = vec![0u64; outs.len()];
+        let mut seams = 0u64;
+        let mut seam_record = [0u8; SEAM_RECORD_BYTES];
+        for (path, w) in parts {
+            let file = w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
+            drop(file);
+            let mut records = read_records(&path, OPEN_RECORD_BYTES, |b| {
+                let v = get_u32s::<4>(b);
+                ([v[0], v[1], v[2]], v[3])
+            })?;
+            drop(path); // deletes the partition file
+            pool.install(|| records.par_sort_unstable());
+            let mut i = 0;
+            while i < records.len() {
+                let mut j = i + 1;
+                while j < records.len() && records[j].0 == records[i].0 {
+                    j += 1;
+                }
+                if j - i > 1 {
+                    seams += 1;
+                    let p = records[i].0;
+                    let (first, last) = (records[i].1, records[j - 1].1);
+                    put_u32s(&mut seam_record, &[p[0], p[1], p[2], first, last]);
+                    let mut last_bucket = usize::MAX;
+                    for &(_, cell) in &records[i..j] {
+                        let b = cells.bucket_of_cell(cell);
+                        if b != last_bucket {
+                            let (path, w) = &mut outs[b];
+                            w.write_all(&seam_record).map_err(|e| BuildError::io(&**path, e))?;
+                            counts[b] += 1;
+                            last_bucket = b;
+                        }
+                    }
+                }
+                i = j;
+            }
+        }
+        let mut buckets = Vec::with_capacity(outs.len());
+        for ((path, w), n) in outs.into_iter().zip(counts) {
+            w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
+            buckets.push((path, n));
+        }
+        Ok(SeamFiles { buckets, open_positions, seams, partitions })
+    }
+
+    /// The seams of the cells of bucket `b`.
+    pub fn read_bucket(&self, b: usize) -> Result<SeamTable, BuildError> {
+        let (path, n) = &self.buckets[b];
+        let records = read_records(path, SEAM_RECORD_BYTES, |r| {
+            let v = get_u32s::<5>(r);
+            ([v[0], v[1], v[2]], (v[3], v[4]))
+        })?;
+        if records.len() as u64 != *n {
+            return Err(BuildError::Corrupt {
+                path: path.to_path_buf(),
+                message: format!("{} seams, expected {n}", records.len()),
+            });
+        }
+        Ok(SeamTable::from_unsorted(records))
+    }
+}
+
+/// The partition of position `p` (a multiplicative hash, the same on every machine).
+fn partition_of(p: [u32; 3], partitions: usize) -> usize {
+    let h = (p[0] as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (p[1] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (p[2] as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    ((h >> 32) % partitions as u64) as usize
+}
+
+fn temp_writer(dir: &Path, prefix: &str) -> Result<(TempPath, BufWriter<File>), BuildError> {
+    let f = tempfile::Builder::new()
+        .prefix(prefix)
+        .suffix(".work")
+        .tempfile_in(dir)
+        .map_err(|e| BuildError::io(dir, e))?;
+    let (file, path) = f.into_parts();
+    Ok((path, BufWriter::with_capacity(1 << 16, file)))
+}
+
+fn read_records<T>(path: &Path, size: usize, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>, BuildError> {
+    let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+    let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+    if len % size as u64 != 0 {
+        return Err(BuildError::Corrupt {
+            path: path.to_path_buf(),
+            message: format!("{len} bytes is not a whole number of {size}-byte records"),
+        });
+    }
+    let mut reader = BufReader::with_capacity(1 << 20, file);
+    let n = (len / size as u64) as usize;
+    let mut out = Vec::with_capacity(n);
+    let mut buf = vec![0u8; 4096 * size];
+    while out.len() < n {
+        let k = (n - out.len()).min(4096);
+        let bytes = &mut buf[..k * size];
+        reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
+        out.extend(bytes.chunks_exact(size).map(&decode));
+    }
+    Ok(out)
+}
+
+fn put_u32s(out: &mut [u8], values: &[u32]) {
+    for (k, v) in values.iter().enumerate() {
+        out[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+}
+
+fn get_u32s<const N: usize>(b: &[u8]) -> [u32; N] {
+    std::array::from_fn(|k| u32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn table(entries: &[([u32; 3], (u32, u32))]) -> SeamTable {
+        SeamTable::from_unsorted(entries.to_vec())
+    }
+
+    #[test]
+    fn external_means_a_cell_outside_the_range() {
+        let t = table(&[([1, 0, 0], (2, 3)), ([0, 0, 0], (0, 5))]);
+        assert!(t.contains([0, 0, 0]) && t.contains([1, 0, 0]) && !t.contains([2, 0, 0]));
+        assert!(!t.external([1, 0, 0], (2, 4)), "both cells inside");
+        assert!(t.external([1, 0, 0], (3, 6)), "first cell outside");
+        assert!(t.external([1, 0, 0], (0, 3)), "last cell outside");
+        assert!(t.external([0, 0, 0], (0, 5)), "last cell is one past the range");
+        assert!(!t.external([2, 0, 0], (0, 1)), "not a seam");
+    }
+
+    #[test]
+    fn retain_keeps_only_present_external_seams_and_merge_unites() {
+        let t = table(&[([0, 0, 0], (0, 1)), ([1, 0, 0], (0, 4)), ([2, 0, 0], (1, 2))]);
+        let kept = t.retain([[0, 0, 0], [1, 0, 0], [9, 9, 9]], (0, 2));
+        assert_eq!(kept, table(&[([1, 0, 0], (0, 4))]));
+        let other = table(&[([1, 0, 0], (0, 4)), ([5, 0, 0], (3, 7))]);
+        let m = SeamTable::merge([&kept, &other]);
+        assert_eq!(m.len(), 2);
+        assert!(m.external([5, 0, 0], (0, 4)));
+    }
+
+    /// The out-of-core search against the obvious in-memory one, on a plant split into many
+    /// buckets, with a budget small enough for many partitions.
+    #[test]
+    fn out_of_core_seams_equal_the_in_memory_ones() {
+        use crate::ingest::tests::ingest_plant;
+        use crate::redefine::{redefine, RedefineParams};
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 200_000);
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        r.order_by_hierarchy();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 4 << 20).unwrap();
+        assert!(files.bucket_count() > 2, "{} buckets", files.bucket_count());
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+
+        let mut expected: std::collections::BTreeMap<[u32; 3], Vec<u32>> = Default::default();
+        files
+            .for_each_cell(|c, m| {
+                for p in crate::hlod::open_positions(&m) {
+                    expected.entry(p).or_default().push(c);
+                }
+                Ok(())
+            })
+            .unwrap();
+        expected.retain(|_, cells| cells.len() > 1);
+        assert!(expected.len() > 100, "the plant has seams: {}", expected.len());
+
+        let mut progress = 0;
+        let seams = SeamFiles::find(&files, dir.path(), 1 << 20, &pool, &mut |d| progress = d).unwrap();
+        assert!(seams.partitions > 1, "{} partitions", seams.partitions);
+        assert_eq!(progress, files.cell_count() as u64);
+        assert_eq!(seams.seams, expected.len() as u64);
+        for b in 0..files.bucket_count() {
+            let table = seams.read_bucket(b).unwrap();
+            let cells = files.bucket_cells(b);
+            let want: Vec<([u32; 3], (u32, u32))> = expected
+                .iter()
+                .filter(|(_, cs)| cs.iter().any(|c| cells.contains(c)))
+                .map(|(&p, cs)| (p, (cs[0], *cs.last().unwrap())))
+                .collect();
+            assert_eq!(table, SeamTable::from_unsorted(want), "bucket {b}");
+        }
+        // Nothing of the partitions is left behind; the seam files go with `seams`.
+        drop(seams);
+        drop(files);
+        let left: Vec<_> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .filter(|n| n.starts_with("tw-open-") || n.starts_with("tw-seams-"))
+            .collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
+
+    #[test]
+    fn partitions_cover_every_index_deterministically() {
+        let mut seen = [false; 7];
+        for x in 0..200u32 {
+            let k = partition_of([x, x * 3, 7], 7);
+            assert_eq!(k, partition_of([x, x * 3, 7], 7));
+            seen[k] = true;
+        }
+        assert!(seen.iter().all(|&s| s));
+        assert_eq!(partition_of([5, 6, 7], 1), 0);
+    }
+}
