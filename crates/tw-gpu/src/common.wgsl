@@ -12,6 +12,8 @@ struct Uniforms {
     // x: colour mode (0 material, 1 object, 2 level, 3 cluster); y: object colours in the
     // table; z: default colour (RGBA8).
     params: vec4<u32>,
+    // xyz: unit direction from the view's target towards the eye (the headlight).
+    headlight: vec4<f32>,
 };
 
 // One resident cluster (pool.rs SlotInfo).

@@ -29,6 +29,8 @@ pub(crate) struct Uniforms {
     pub eye: [f32; 4],
     pub sun: [f32; 4],
     pub params: [u32; 4],
+    /// xyz: unit direction from the view's target towards the eye (the headlight).
+    pub headlight: [f32; 4],
 }
 
 /// The pipelines and their layout.
@@ -149,7 +151,7 @@ fn pipeline(
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: UNIT,
                 step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32],
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32, 3 => Uint32],
             })],
         },
         primitive: wgpu::PrimitiveState {

@@ -266,7 +266,7 @@ impl Renderer {
         });
         let object_colors = colors_buffer(&device, &queue, &[color::pack(DEFAULT_COLOR)]);
         let pipelines = Pipelines::new(&device);
-        let pool = ClusterPool::new(&device, DEFAULT_GPU_BUDGET);
+        let pool = ClusterPool::new(&device, DEFAULT_GPU_BUDGET, info.backend == wgpu::Backend::Gl);
         let bind_group = bind_group(&device, &pipelines, &uniforms, &pool, &object_colors);
         let indirect_supported = info.backend != wgpu::Backend::Gl;
         Ok(Renderer {
@@ -337,7 +337,7 @@ impl Renderer {
     /// Sets the GPU-memory budget for resident cluster geometry (bytes; at least
     /// [`MIN_BUDGET`]). Drops every resident cluster.
     pub fn set_gpu_budget(&mut self, bytes: u64) {
-        self.pool = ClusterPool::new(&self.device, bytes);
+        self.pool = ClusterPool::new(&self.device, bytes, self.info.backend == wgpu::Backend::Gl);
         self.bind_generation = u64::MAX;
     }
 
@@ -656,6 +656,7 @@ impl Renderer {
             eye: camera.eye.extend(1.0).to_array(),
             sun: sun.extend(if srgb_in_shader { 1.0 } else { 0.0 }).to_array(),
             params: [self.mode.code(), self.object_color_count, color::pack(DEFAULT_COLOR), 0],
+            headlight: (camera.eye - camera.target).normalize_or(Vec3::Z).extend(0.0).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
     }

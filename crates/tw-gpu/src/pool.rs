@@ -4,15 +4,19 @@
 //! ("out-of-core by pages": a budget, LRU eviction) applied to the GPU copy of the clusters the
 //! runtime selected, the "streaming to the GPU" that the first renderer left for later.
 //!
-//! Layout. One buffer (usage VERTEX | INDEX) is the *arena*, allocated in units of 20 bytes
-//! (one [`PoolVertex`]). A cluster takes one contiguous range: its vertices (20 bytes each:
-//! scene-space position f32×3, object id u32, pool slot u32), then its triangles' u32 indices
-//! (12 bytes a triangle, rounded up to whole units). A draw is `draw_indexed` with
-//! `base_vertex` = the range's first unit and `first_index` = 5 × the unit after the vertices.
-//! Store vertices are shared by triangles of different objects at most rarely (HLOD merges);
-//! such a vertex is duplicated per object so that every vertex of a triangle carries the
-//! triangle's object id: the flat `object` varying is then the same whichever vertex a backend
-//! takes as provoking vertex (GL and Vulkan differ). Triangle order is the store's, so the
+//! Layout. One buffer (usage VERTEX | INDEX) is the *arena*, allocated in units of 24 bytes
+//! (one [`PoolVertex`]). A cluster takes one contiguous range: its vertices (24 bytes each:
+//! scene-space position f32×3, object id u32, pool slot u32, packed normal u32), then its
+//! triangles' u32 indices (12 bytes a triangle, rounded up to whole units). A draw is
+//! `draw_indexed` with `base_vertex` = the range's first unit and `first_index` = 6 × the unit
+//! after the vertices. Store vertices are shared by triangles of different objects at most
+//! rarely (HLOD merges); such a vertex is duplicated per object so that every vertex of a
+//! triangle carries the triangle's object id. Shading is flat and computed per vertex
+//! (draw.wgsl): each triangle's provoking vertex — the one `flat` varyings come from: the first
+//! on Vulkan (WGSL's rule), the last on wgpu's GL backend (measured on llvmpipe) — carries the
+//! triangle's normal, so no two triangles may share a provoking vertex. Each triangle is
+//! rotated (keeping its winding) so that a corner no other triangle provokes with takes that
+//! place, or provokes with a copy of that corner. Triangle order is the store's, so the
 //! primitive index of a draw is the triangle's index in its cluster (the item buffer uses it).
 //! The slot is a small dense id of the resident cluster; a storage buffer indexed by slot holds
 //! (page, index in page, LOD level, frame-local cluster number) for the debug colourings and
@@ -54,6 +58,17 @@ pub struct PoolVertex {
     pub position: [f32; 3],
     pub object: u32,
     pub slot: u32,
+    /// Unit normal of the triangle this vertex is the first (provoking) vertex of, 10 bits a
+    /// component ([`pack_normal`]); 0 for a vertex that provokes no triangle.
+    pub normal: u32,
+}
+
+/// Packs the direction of `n` as three 10-bit signed-normalized components (x in the low
+/// bits); a zero vector (a degenerate triangle) packs to 0, which unpacks to (0, 0, 0).
+pub fn pack_normal(n: glam::Vec3) -> u32 {
+    let n = n.normalize_or_zero();
+    let q = |c: f32| ((c.clamp(-1.0, 1.0) * 511.0).round() as i32 as u32) & 0x3ff;
+    q(n.x) | (q(n.y) << 10) | (q(n.z) << 20)
 }
 
 /// Identifies a cluster in the pool: (page, index in page).
@@ -179,6 +194,92 @@ pub enum Ensure {
     Full,
 }
 
+/// The pool's layout of one cluster (see the module documentation): vertices duplicated per
+/// object and where needed for a provoking vertex of their own, each triangle's corners
+/// rotated so that its provoking vertex carries its normal. Plain data, reused between
+/// clusters.
+pub struct ClusterLayout {
+    pub vertices: Vec<PoolVertex>,
+    pub indices: Vec<u32>,
+    /// Per local vertex: (object, pooled index) of its first copy; further objects of the same
+    /// vertex (rare) go through `remap_more`.
+    remap: Vec<(u32, u32)>,
+    remap_more: HashMap<(u8, u32), u32>,
+    /// Per pooled vertex: whether it is the provoking vertex of a triangle already.
+    provoking: Vec<bool>,
+    /// The corner (0 or 2) the backend takes flat varyings from.
+    provoking_at: usize,
+}
+
+impl ClusterLayout {
+    /// `provoking_last`: see [`ClusterPool::new`].
+    pub fn new(provoking_last: bool) -> ClusterLayout {
+        ClusterLayout {
+            vertices: Vec::new(),
+            indices: Vec::new(),
+            remap: vec![(0, u32::MAX); 256],
+            remap_more: HashMap::new(),
+            provoking: Vec::new(),
+            provoking_at: if provoking_last { 2 } else { 0 },
+        }
+    }
+
+    /// Lays `cluster` out (positions: grid coordinates × `grid_step`); returns the number of
+    /// triangles skipped for an index beyond the vertices. `slot` of every vertex is 0.
+    pub fn build(&mut self, cluster: &PageCluster, grid_step: f64) -> u64 {
+        self.vertices.clear();
+        self.indices.clear();
+        self.remap.fill((0, u32::MAX));
+        self.remap_more.clear();
+        self.provoking.clear();
+        let mut bad = 0;
+        for (t, tri) in cluster.indices.chunks_exact(3).enumerate() {
+            if tri.iter().any(|&i| i as usize >= cluster.positions.len()) {
+                bad += 1;
+                continue;
+            }
+            let object = cluster.objects.get(t).copied().unwrap_or(0);
+            let mut corners = [0u32; 3];
+            for (k, &i) in tri.iter().enumerate() {
+                let next = self.vertices.len() as u32;
+                let first = &mut self.remap[i as usize];
+                let v = if first.1 == u32::MAX {
+                    *first = (object, next);
+                    next
+                } else if first.0 == object {
+                    first.1
+                } else {
+                    *self.remap_more.entry((i, object)).or_insert(next)
+                };
+                if v == next {
+                    let g = cluster.positions[i as usize];
+                    let position = g.map(|c| (c as f64 * grid_step) as f32);
+                    self.vertices.push(PoolVertex { position, object, slot: 0, normal: 0 });
+                    self.provoking.push(false);
+                }
+                corners[k] = v;
+            }
+            // The provoking vertex carries the triangle's normal: a corner that provokes no
+            // other triangle, rotated into place (the winding is kept), else a copy.
+            let at = self.provoking_at;
+            match (0..3).find(|&k| !self.provoking[corners[k] as usize]) {
+                Some(k) => corners.rotate_left((k + 3 - at) % 3),
+                None => {
+                    let copy = self.vertices[corners[at] as usize];
+                    corners[at] = self.vertices.len() as u32;
+                    self.vertices.push(copy);
+                    self.provoking.push(false);
+                }
+            }
+            self.provoking[corners[at] as usize] = true;
+            let p = corners.map(|v| glam::Vec3::from(self.vertices[v as usize].position));
+            self.vertices[corners[at] as usize].normal = pack_normal((p[1] - p[0]).cross(p[2] - p[0]));
+            self.indices.extend_from_slice(&corners);
+        }
+        bad
+    }
+}
+
 /// The pool; see the module documentation.
 pub struct ClusterPool {
     budget: u64,
@@ -195,12 +296,7 @@ pub struct ClusterPool {
     pub generation: u64,
     frame: u64,
     stats: PoolStats,
-    vertices: Vec<PoolVertex>,
-    indices: Vec<u32>,
-    /// Per local vertex: (object, pooled index) of its first copy; further objects of the same
-    /// vertex (rare) go through `remap_more`.
-    remap: Vec<(u32, u32)>,
-    remap_more: HashMap<(u8, u32), u32>,
+    layout: ClusterLayout,
     bytes: Vec<u8>,
 }
 
@@ -216,7 +312,10 @@ fn slot_buffer(device: &wgpu::Device, slots: u32) -> wgpu::Buffer {
 impl ClusterPool {
     /// A pool of at most `budget` bytes of geometry (raised to [`MIN_BUDGET`] and limited to
     /// the device's `max_buffer_size`).
-    pub fn new(device: &wgpu::Device, budget: u64) -> ClusterPool {
+    ///
+    /// `provoking_last`: the backend takes flat varyings from a triangle's last vertex (wgpu's
+    /// GL backend, measured on llvmpipe) instead of the first (WGSL's rule; Vulkan).
+    pub fn new(device: &wgpu::Device, budget: u64, provoking_last: bool) -> ClusterPool {
         let budget = budget.max(MIN_BUDGET).min(device.limits().max_buffer_size) / UNIT * UNIT;
         ClusterPool {
             budget,
@@ -231,10 +330,7 @@ impl ClusterPool {
             generation: 0,
             frame: 0,
             stats: PoolStats::default(),
-            vertices: Vec::new(),
-            indices: Vec::new(),
-            remap: vec![(0, u32::MAX); 256],
-            remap_more: HashMap::new(),
+            layout: ClusterLayout::new(provoking_last),
             bytes: Vec::new(),
         }
     }
@@ -312,40 +408,12 @@ impl ClusterPool {
             return Ensure::Ready { args: r.args, slot: r.slot };
         }
         // Build the cluster's vertices (duplicated per object) and indices.
-        self.vertices.clear();
-        self.indices.clear();
-        self.remap.fill((0, u32::MAX));
-        self.remap_more.clear();
-        for (t, tri) in cluster.indices.chunks_exact(3).enumerate() {
-            if tri.iter().any(|&i| i as usize >= cluster.positions.len()) {
-                self.stats.bad_triangles += 1;
-                continue;
-            }
-            let object = cluster.objects.get(t).copied().unwrap_or(0);
-            for &i in tri {
-                let next = self.vertices.len() as u32;
-                let first = &mut self.remap[i as usize];
-                let v = if first.1 == u32::MAX {
-                    *first = (object, next);
-                    next
-                } else if first.0 == object {
-                    first.1
-                } else {
-                    *self.remap_more.entry((i, object)).or_insert(next)
-                };
-                if v == next {
-                    let g = cluster.positions[i as usize];
-                    let position = g.map(|c| (c as f64 * grid_step) as f32);
-                    self.vertices.push(PoolVertex { position, object, slot: 0 });
-                }
-                self.indices.push(v);
-            }
-        }
-        if self.indices.is_empty() {
+        self.stats.bad_triangles += self.layout.build(cluster, grid_step);
+        if self.layout.indices.is_empty() {
             return Ensure::Empty;
         }
-        let nv = self.vertices.len() as u64;
-        let index_units = (self.indices.len() as u64 * 4).div_ceil(UNIT);
+        let nv = self.layout.vertices.len() as u64;
+        let index_units = (self.layout.indices.len() as u64 * 4).div_ceil(UNIT);
         let units = nv + index_units;
         let start = loop {
             if let Some(s) = self.alloc.alloc(units) {
@@ -374,14 +442,14 @@ impl ClusterPool {
                 self.slot_count - 1
             }
         };
-        for v in &mut self.vertices {
+        for v in &mut self.layout.vertices {
             v.slot = slot;
         }
         let Some(arena) = &self.arena else { return Ensure::Full };
         // Vertices and indices are contiguous: one write.
         self.bytes.clear();
-        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.vertices));
-        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.indices));
+        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.layout.vertices));
+        self.bytes.extend_from_slice(bytemuck::cast_slice(&self.layout.indices));
         self.bytes.resize((units * UNIT) as usize, 0);
         queue.write_buffer(arena, start * UNIT, &self.bytes);
         let info = SlotInfo { page: key.0, index_in_page: key.1, level: cluster.level as u32, item: 0 };
@@ -391,7 +459,7 @@ impl ClusterPool {
             bytemuck::bytes_of(&info),
         );
         let args = DrawArgs {
-            index_count: self.indices.len() as u32,
+            index_count: self.layout.indices.len() as u32,
             instance_count: 1,
             first_index: ((start + nv) * (UNIT / 4)) as u32,
             base_vertex: start as i32,
@@ -491,7 +559,63 @@ mod tests {
 
     #[test]
     fn units_hold_whole_vertices_and_indices() {
-        assert_eq!(UNIT, 20);
+        assert_eq!(UNIT, 24);
         assert_eq!(UNIT % 4, 0);
+    }
+
+    fn unpack_normal(p: u32) -> glam::Vec3 {
+        let c = |s: u32| ((((p >> s) & 0x3ff) << 22) as i32 >> 22) as f32 / 511.0;
+        glam::Vec3::new(c(0), c(10), c(20))
+    }
+
+    /// A fan of 6 triangles around one vertex (more triangles than vertices), two objects, a
+    /// degenerate triangle and a bad index.
+    fn fan() -> PageCluster {
+        let mut positions = vec![[10u32, 10, 0]];
+        positions.extend((0..6).map(|i| {
+            let a = i as f64 * std::f64::consts::TAU / 6.0;
+            [(10.0 + 5.0 * a.cos()).round() as u32, (10.0 + 5.0 * a.sin()).round() as u32, i % 2]
+        }));
+        let mut indices = Vec::new();
+        for i in 0..6u8 {
+            indices.extend_from_slice(&[0, 1 + i, 1 + (i + 1) % 6]);
+        }
+        indices.extend_from_slice(&[1, 1, 2, 0, 1, 9]);
+        let objects = vec![3, 3, 3, 4, 4, 4, 3, 3];
+        PageCluster { positions, indices, objects, ..Default::default() }
+    }
+
+    #[test]
+    fn every_triangle_has_its_own_provoking_vertex_with_its_normal() {
+        let c = fan();
+        for provoking_last in [false, true] {
+            let mut l = ClusterLayout::new(provoking_last);
+            assert_eq!(l.build(&c, 0.5), 1, "the bad index is skipped");
+            let at = if provoking_last { 2 } else { 0 };
+            let tris: Vec<[u32; 3]> = l.indices.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
+            assert_eq!(tris.len(), 7);
+            let mut seen = std::collections::HashSet::new();
+            for (t, pooled) in tris.iter().enumerate() {
+                assert!(seen.insert(pooled[at]), "triangle {t} shares its provoking vertex");
+                // Same corners, same winding: a rotation of the store's triangle.
+                let store: Vec<[f32; 3]> = c.indices[3 * t..3 * t + 3]
+                    .iter()
+                    .map(|&i| c.positions[i as usize].map(|g| g as f32 * 0.5))
+                    .collect();
+                let got: Vec<[f32; 3]> = pooled.iter().map(|&v| l.vertices[v as usize].position).collect();
+                let rotations: Vec<Vec<[f32; 3]>> =
+                    (0..3).map(|r| (0..3).map(|k| store[(k + r) % 3]).collect()).collect();
+                assert!(rotations.contains(&got), "triangle {t}: {got:?} is not a rotation of {store:?}");
+                for &v in pooled {
+                    assert_eq!(l.vertices[v as usize].object, c.objects[t], "triangle {t}'s object");
+                }
+                let p = got.iter().map(|&q| glam::Vec3::from(q)).collect::<Vec<_>>();
+                let n = (p[1] - p[0]).cross(p[2] - p[0]).normalize_or_zero();
+                let stored = unpack_normal(l.vertices[pooled[at] as usize].normal);
+                assert!((stored - n).length() < 0.01, "triangle {t}: normal {stored} != {n}");
+            }
+            // The degenerate triangle (two equal corners) has no direction.
+            assert_eq!(l.vertices[tris[6][at] as usize].normal, 0);
+        }
     }
 }
