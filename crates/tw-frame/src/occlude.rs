@@ -10,9 +10,11 @@
 //!    - [`Occlusion::Hzb`] (GigaWalk §4.2): the depth is read back, a hierarchical Z pyramid is
 //!      built on the CPU ([`tw_runtime::Hzb`]) and each candidate's box is tested there in
 //!      parallel ([`tw_runtime::occlusion::test_clusters`]);
-//!    - [`Occlusion::Queries`] (Yoon et al. 2003 §5.3; Govindaraju's occlusion switch): one
-//!      batch of hardware occlusion queries of the candidates' boxes against the depth buffer
-//!      (sample counts on Vulkan, booleans on GL);
+//!    - [`Occlusion::Queries`] (Yoon et al. 2003 §5.3; Govindaraju's occlusion switch):
+//!      hardware occlusion queries against the depth buffer (sample counts on Vulkan, booleans
+//!      on GL), first of the skeleton nodes holding candidates, breadth-first by level in one
+//!      batch a level (thesis Alg. 3.4.1, [`tw_runtime::node_test`]; a hidden node culls its
+//!      subtree's candidates), then one batch of the remaining candidates' boxes;
 //!    - [`Occlusion::GpuHzb`] (Greene et al. 1993, two-pass as in GPU-driven renderers): the
 //!      pyramid is built and the boxes tested in compute shaders that write the second pass's
 //!      indirect draws, with no CPU round trip in between ([`crate::gpu_hzb`]);
@@ -29,8 +31,9 @@ use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use tw_gpu::{wgpu, Renderer, Target};
 use tw_runtime::frustum::grid_box;
+use tw_runtime::node_test::parents;
 use tw_runtime::occlusion::test_clusters;
-use tw_runtime::{Camera, ClusterRef, Hzb, OcclusionHistory};
+use tw_runtime::{test_hierarchy, Camera, ClusterRef, Hzb, NodeTestOptions, OcclusionHistory};
 use tw_store::{PageCluster, Store};
 
 use crate::FrameError;
@@ -109,8 +112,12 @@ pub struct OcclusionStats {
     pub culled: u64,
     /// Tested clusters covering no pixel centre (not drawn; HZB only).
     pub no_pixels: u64,
-    /// Hardware occlusion queries issued.
+    /// Hardware occlusion queries issued (node boxes and cluster boxes).
     pub queries: u64,
+    /// Skeleton node boxes tested before the clusters (queries; Alg. 3.4.1), and of those found
+    /// hidden (each culls the candidates under it).
+    pub node_tests: u64,
+    pub nodes_hidden: u64,
 }
 
 /// Frame-to-frame state of the strategies.
@@ -119,6 +126,8 @@ pub struct OcclusionState {
     pub(crate) history: OcclusionHistory,
     /// The queries' visible-pixel cut-off ([`crate::FrameSettings::visible_pixels`]).
     pub visible_pixels: u32,
+    /// The store skeleton's parent links (for the queries' node tests), made on first use.
+    pub(crate) parents: Vec<u32>,
 }
 
 impl OcclusionState {
@@ -192,19 +201,44 @@ pub fn draw_culled(
             (t.visible, o.visible, t.occluded)
         }
         Occlusion::Queries => {
-            let boxes: Vec<(Vec3, Vec3)> = split
+            // GL's queries are booleans (1 = some sample passed): no cut-off there.
+            let cutoff = if renderer.queries_count_samples() { state.visible_pixels as u64 } else { 0 };
+            // Node boxes first, breadth-first by level (Alg. 3.4.1): a hidden node culls the
+            // candidates under it without a query each.
+            if state.parents.len() != store.nodes().len() {
+                state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
+            }
+            let (nodes, groups) = (store.nodes(), store.groups());
+            let candidate_nodes: Vec<u32> = split
                 .candidates
+                .iter()
+                .map(|k| groups.get(k.group as usize).map_or(u32::MAX, |g| g.node))
+                .collect();
+            let tree =
+                test_hierarchy(&state.parents, &candidate_nodes, &NodeTestOptions::default(), |batch| {
+                    let boxes: Vec<(Vec3, Vec3)> = batch
+                        .iter()
+                        .map(|&n| grid_box(nodes[n as usize].min, nodes[n as usize].max, grid_step))
+                        .collect();
+                    let samples = renderer.query_boxes(camera, &boxes)?;
+                    Ok::<_, FrameError>(samples.iter().map(|&s| s > cutoff).collect())
+                })?;
+            stats.node_tests = tree.nodes_tested;
+            stats.nodes_hidden = tree.nodes_hidden;
+            let (survivors, by_nodes): (Vec<_>, Vec<_>) =
+                split.candidates.iter().zip(&tree.culled).partition(|(_, &culled)| !culled);
+            let survivors: Vec<ClusterRef> = survivors.into_iter().map(|(k, _)| *k).collect();
+            let mut occluded: Vec<ClusterRef> = by_nodes.into_iter().map(|(k, _)| *k).collect();
+            let boxes: Vec<(Vec3, Vec3)> = survivors
                 .iter()
                 .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
                 .collect();
             let samples = renderer.query_boxes(camera, &boxes)?;
-            stats.queries = boxes.len() as u64;
-            // GL's queries are booleans (1 = some sample passed): no cut-off there.
-            let cutoff = if renderer.queries_count_samples() { state.visible_pixels as u64 } else { 0 };
-            let (visible, occluded): (Vec<_>, Vec<_>) =
-                split.candidates.iter().zip(&samples).partition(|(_, &s)| s > cutoff);
+            stats.queries = tree.nodes_tested + boxes.len() as u64;
+            let (visible, hidden): (Vec<_>, Vec<_>) =
+                survivors.iter().zip(&samples).partition(|(_, &s)| s > cutoff);
             let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
-            let occluded: Vec<ClusterRef> = occluded.into_iter().map(|(k, _)| *k).collect();
+            occluded.extend(hidden.into_iter().map(|(k, _)| *k));
             stats.culled = occluded.len() as u64;
             (visible, split.occluders.clone(), occluded)
         }

@@ -31,7 +31,8 @@ fn walk_cameras(store: &Store) -> Vec<Camera> {
 
 /// Renders `cameras` with each strategy (the same cut: pages loaded before drawing) and checks
 /// every image against `none`. Returns the clusters each strategy culled in all.
-fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<(Occlusion, u64)>> {
+/// Also returns the skeleton nodes the queries found hidden (Alg. 3.4.1's node tests).
+fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<(Occlusion, u64, u64)>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
     let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
@@ -47,7 +48,7 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
     let mut culled = Vec::new();
     for strategy in [Occlusion::Hzb, Occlusion::Queries, Occlusion::GpuHzb] {
         w.reset();
-        let mut total = 0;
+        let (mut total, mut nodes_hidden) = (0, 0);
         for (i, c) in cameras.iter().enumerate() {
             let s =
                 FrameSettings { tau: 1.0, occlusion: strategy, wait_for_pages: true, ..Default::default() };
@@ -61,8 +62,9 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
             );
             assert!(image.covered_pixels() > 0, "{what}: frame {i} is empty");
             total += info.occlusion.culled;
+            nodes_hidden += info.occlusion.nodes_hidden;
         }
-        culled.push((strategy, total));
+        culled.push((strategy, total, nodes_hidden));
     }
     Some(culled)
 }
@@ -70,9 +72,16 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
 fn conservative_on_a_walk(backends: wgpu::Backends, what: &str) {
     let cameras = walk_cameras(&store());
     let Some(culled) = compare(backends, what, &cameras) else { return };
-    for (strategy, n) in culled {
-        eprintln!("{what}, {}: {n} clusters culled over {} frames", strategy.name(), cameras.len());
+    for (strategy, n, nodes_hidden) in culled {
+        eprintln!(
+            "{what}, {}: {n} clusters culled over {} frames ({nodes_hidden} by hidden nodes)",
+            strategy.name(),
+            cameras.len()
+        );
         assert!(n > 0, "{what}, {}: culled nothing inside the plant", strategy.name());
+        if strategy == Occlusion::Queries {
+            assert!(nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
+        }
     }
 }
 

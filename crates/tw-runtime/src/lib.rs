@@ -49,6 +49,7 @@ pub mod error;
 pub mod frustum;
 pub mod hzb;
 pub mod lod_error;
+pub mod node_test;
 pub mod occlusion;
 pub mod path;
 pub mod pathgen;
@@ -63,6 +64,7 @@ pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
+pub use node_test::{test_hierarchy, NodeTestOptions, NodeTestResult};
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
 pub use pathgen::{
