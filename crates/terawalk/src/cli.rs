@@ -53,7 +53,8 @@ pub enum Command {
     /// Preprocess inputs into a store file for walkthroughs (out of core, bounded memory).
     #[command(after_help = "Examples:\n  terawalk build plant.ply -o plant.tw\n  \
                             terawalk build part1.obj part2.glb -o site.tw --memory 1G --threads 2\n  \
-                            terawalk build scan.ply.gz -o scan.tw --up y")]
+                            terawalk build scan.ply.gz -o scan.tw --up y\n  \
+                            terawalk build plant.ply -o fine.tw --cluster-triangles 64")]
     Build(BuildArgs),
     /// Describe a store file; `--verify` checks every checksum and invariant.
     #[command(after_help = "Examples:\n  terawalk info plant.tw\n  terawalk info plant.tw --verify")]
@@ -461,6 +462,10 @@ pub struct BuildArgs {
     /// Directory for working files (default: next to the output).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
+    /// Most triangles per cluster, the unit of LOD selection and occlusion culling: smaller
+    /// clusters cull closer to the exact visible set but make more draws and a larger store.
+    #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(4..=128))]
+    pub cluster_triangles: u32,
     #[command(flatten)]
     pub import: ImportArgs,
 }

@@ -161,6 +161,22 @@ fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
     assert!(out.contains("30,000 input triangles") && out.contains("verify: OK"), "{out}");
+    assert!(out.contains("cluster_triangles=128"), "{out}");
+
+    // Smaller clusters: recorded in the store, which verifies; out of range is a usage error.
+    let o = terawalk(&["build", "p.obj", "-o", "c32.tw", "--cluster-triangles", "32"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["info", "c32.tw", "--verify"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("cluster_triangles=32") && stdout(&o).contains("verify: OK"),
+        "{}",
+        stdout(&o)
+    );
+    let o = terawalk(&["build", "p.obj", "-o", "c.tw", "--cluster-triangles", "200"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("cluster-triangles"), "{}", stderr(&o));
+    assert!(!dir.path().join("c.tw").exists());
 
     // Flip one byte in the middle of the pages: verify names the store and fails.
     let path = dir.path().join("p.tw");

@@ -55,6 +55,10 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     };
     o.units = args.units.clone();
     o.work_dir = args.work_dir.clone();
+    // A multiple of 4 (meshopt's clusterizer works in groups of 4 triangles).
+    let cluster = (args.cluster_triangles as usize / 4) * 4;
+    o.lod.max_triangles = cluster;
+    o.hlod.max_triangles = cluster;
     o
 }
 
