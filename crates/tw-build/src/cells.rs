@@ -176,16 +176,9 @@ impl CellFiles {
         if len != bf.triangles * RECORD_BYTES as u64 {
             return Err(corrupt(format!("{len} bytes, expected {} triangles", bf.triangles)));
         }
-        let mut reader = BufReader::with_capacity(1 << 20, file);
-        let n = bf.triangles as usize;
-        let mut recs = Vec::with_capacity(n);
-        let mut buf = vec![0u8; 4096 * RECORD_BYTES];
-        while recs.len() < n {
-            let k = (n - recs.len()).min(4096);
-            let bytes = &mut buf[..k * RECORD_BYTES];
-            reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
-            recs.extend(bytes.chunks_exact(RECORD_BYTES).map(Rec::decode));
-        }
+        drop(file);
+        let recs = read_records(path, RECORD_BYTES, Rec::decode)?;
+        let n = recs.len();
         // Counting sort by cell: stable, so input order within each cell.
         let cells = bf.cells.clone();
         let mut start = vec![0usize; cells.len() + 1];
@@ -364,8 +357,35 @@ impl PositionTable {
     }
 }
 
+/// Reads a file of fixed-size records (`size` bytes each) and decodes each.
+pub(crate) fn read_records<T>(
+    path: &Path,
+    size: usize,
+    decode: impl Fn(&[u8]) -> T,
+) -> Result<Vec<T>, BuildError> {
+    let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
+    let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+    if len % size as u64 != 0 {
+        return Err(BuildError::Corrupt {
+            path: path.to_path_buf(),
+            message: format!("{len} bytes is not a whole number of {size}-byte records"),
+        });
+    }
+    let mut reader = BufReader::with_capacity(1 << 20, file);
+    let n = (len / size as u64) as usize;
+    let mut out = Vec::with_capacity(n);
+    let mut buf = vec![0u8; 4096 * size];
+    while out.len() < n {
+        let k = (n - out.len()).min(4096);
+        let bytes = &mut buf[..k * size];
+        reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
+        out.extend(bytes.chunks_exact(size).map(&decode));
+    }
+    Ok(out)
+}
+
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::ingest::tests::{ingest_list, ingest_plant};
     use crate::redefine::{redefine, RedefineParams};
@@ -402,13 +422,20 @@ mod tests {
         v
     }
 
+    /// A generated plant of `triangles`, ingested, redefined and distributed to cell buckets
+    /// of `budget` bytes in `dir`.
+    pub(crate) fn plant_cells(dir: &Path, triangles: u64, budget: u64) -> (Ingested, CellFiles) {
+        let ing = ingest_plant(dir, triangles);
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        r.order_by_hierarchy();
+        let files = CellFiles::distribute(&ing, &r, dir, budget).unwrap();
+        (ing, files)
+    }
+
     #[test]
     fn every_triangle_lands_in_exactly_one_cell() {
         let dir = tempfile::tempdir().unwrap();
-        let ing = ingest_plant(dir.path(), 200_000);
-        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
-        r.order_by_hierarchy();
-        let files = CellFiles::distribute(&ing, &r, dir.path(), 4 << 20).unwrap();
+        let (ing, files) = plant_cells(dir.path(), 200_000, 4 << 20);
         assert!(files.bucket_count() > 1);
         let got = mesh_triangles(&files);
         assert_eq!(got.len(), 200_000);

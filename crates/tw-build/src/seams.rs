@@ -25,13 +25,13 @@
 //! Deterministic: partitions and seam files are sorted before use, whatever the thread count.
 
 use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
+use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use rayon::prelude::*;
 use tempfile::TempPath;
 
-use crate::cells::CellFiles;
+use crate::cells::{read_records, CellFiles};
 use crate::error::BuildError;
 
 /// Bytes of one (position, cell) record in a partition file.
@@ -234,28 +234,6 @@ fn temp_writer(dir: &Path, prefix: &str) -> Result<(TempPath, BufWriter<File>), 
     Ok((path, BufWriter::with_capacity(1 << 16, file)))
 }
 
-fn read_records<T>(path: &Path, size: usize, decode: impl Fn(&[u8]) -> T) -> Result<Vec<T>, BuildError> {
-    let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-    let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
-    if len % size as u64 != 0 {
-        return Err(BuildError::Corrupt {
-            path: path.to_path_buf(),
-            message: format!("{len} bytes is not a whole number of {size}-byte records"),
-        });
-    }
-    let mut reader = BufReader::with_capacity(1 << 20, file);
-    let n = (len / size as u64) as usize;
-    let mut out = Vec::with_capacity(n);
-    let mut buf = vec![0u8; 4096 * size];
-    while out.len() < n {
-        let k = (n - out.len()).min(4096);
-        let bytes = &mut buf[..k * size];
-        reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
-        out.extend(bytes.chunks_exact(size).map(&decode));
-    }
-    Ok(out)
-}
-
 fn put_u32s(out: &mut [u8], values: &[u32]) {
     for (k, v) in values.iter().enumerate() {
         out[4 * k..4 * k + 4].copy_from_slice(&v.to_le_bytes());
@@ -300,13 +278,8 @@ mod tests {
     /// buckets, with a budget small enough for many partitions.
     #[test]
     fn out_of_core_seams_equal_the_in_memory_ones() {
-        use crate::ingest::tests::ingest_plant;
-        use crate::redefine::{redefine, RedefineParams};
         let dir = tempfile::tempdir().unwrap();
-        let ing = ingest_plant(dir.path(), 200_000);
-        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
-        r.order_by_hierarchy();
-        let files = CellFiles::distribute(&ing, &r, dir.path(), 4 << 20).unwrap();
+        let (_, files) = crate::cells::tests::plant_cells(dir.path(), 200_000, 4 << 20);
         assert!(files.bucket_count() > 2, "{} buckets", files.bucket_count());
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
 
