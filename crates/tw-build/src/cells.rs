@@ -171,12 +171,10 @@ impl CellFiles {
         let bf = &self.buckets[b];
         let path: &Path = &bf.path;
         let corrupt = |message: String| BuildError::Corrupt { path: path.to_path_buf(), message };
-        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-        let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+        let len = std::fs::metadata(path).map_err(|e| BuildError::io(path, e))?.len();
         if len != bf.triangles * RECORD_BYTES as u64 {
             return Err(corrupt(format!("{len} bytes, expected {} triangles", bf.triangles)));
         }
-        drop(file);
         let recs = read_records(path, RECORD_BYTES, Rec::decode)?;
         let n = recs.len();
         // Counting sort by cell: stable, so input order within each cell.

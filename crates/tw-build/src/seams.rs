@@ -158,8 +158,8 @@ impl SeamFiles {
         let mut seams = 0u64;
         let mut seam_record = [0u8; SEAM_RECORD_BYTES];
         for (path, w) in parts {
-            let file = w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
-            drop(file);
+            // Flush and close the partition before reading it back.
+            w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
             let mut records = read_records(&path, OPEN_RECORD_BYTES, |b| {
                 let v = get_u32s::<4>(b);
                 ([v[0], v[1], v[2]], v[3])
