@@ -602,7 +602,7 @@ impl Renderer {
             });
         }
         let encode_start = Instant::now();
-        self.write_uniforms(camera, size, false);
+        self.write_uniforms(camera, size, !COLOR_FORMAT.is_srgb());
         let compact = self.gpu_cull_compacts();
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
         let occluders: Vec<Candidate> =

@@ -37,11 +37,23 @@ impl Readback {
         texture: &wgpu::Texture,
         bytes_per_texel: u32,
     ) {
+        self.copy_texture_aspect(device, encoder, texture, wgpu::TextureAspect::All, bytes_per_texel);
+    }
+
+    /// [`copy_texture`](Self::copy_texture) of one aspect (a depth texture's depth).
+    pub(crate) fn copy_texture_aspect(
+        &mut self,
+        device: &wgpu::Device,
+        encoder: &mut wgpu::CommandEncoder,
+        texture: &wgpu::Texture,
+        aspect: wgpu::TextureAspect,
+        bytes_per_texel: u32,
+    ) {
         let (width, height) = (texture.width(), texture.height());
         let row = padded_row(width, bytes_per_texel);
         let buffer = self.buffer(device, row as u64 * height as u64);
         encoder.copy_texture_to_buffer(
-            texture.as_image_copy(),
+            wgpu::TexelCopyTextureInfo { aspect, ..texture.as_image_copy() },
             wgpu::TexelCopyBufferInfo {
                 buffer,
                 layout: wgpu::TexelCopyBufferLayout {
@@ -65,6 +77,44 @@ impl Readback {
         row_bytes: usize,
         rows: usize,
     ) -> Result<Vec<u8>, GpuError> {
+        let mut out = Vec::with_capacity(row_bytes * rows);
+        self.finish_with(device, queue, encoder, pitch, rows, |row| {
+            out.extend_from_slice(&row[..row_bytes])
+        })?;
+        Ok(out)
+    }
+
+    /// [`finish`](Self::finish) for rows of `row_values` little-endian f32 (depth), converted
+    /// in the one pass over the mapped buffer.
+    pub(crate) fn finish_f32(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: wgpu::CommandEncoder,
+        pitch: usize,
+        row_values: usize,
+        rows: usize,
+    ) -> Result<Vec<f32>, GpuError> {
+        let mut out = Vec::with_capacity(row_values * rows);
+        self.finish_with(device, queue, encoder, pitch, rows, |row| {
+            out.extend(
+                row[..row_values * 4].chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
+            )
+        })?;
+        Ok(out)
+    }
+
+    /// Submits `encoder`, waits, and hands each of the first `rows` rows (`pitch` bytes, the
+    /// last maybe shorter) of the mapped buffer to `row`.
+    fn finish_with(
+        &mut self,
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        encoder: wgpu::CommandEncoder,
+        pitch: usize,
+        rows: usize,
+        mut row: impl FnMut(&[u8]),
+    ) -> Result<(), GpuError> {
         queue.submit([encoder.finish()]);
         let buffer = self.buffer.as_ref().ok_or_else(|| GpuError::Gpu("nothing to read back".into()))?;
         let (tx, rx) = std::sync::mpsc::channel();
@@ -77,16 +127,15 @@ impl Readback {
         rx.recv()
             .map_err(|_| GpuError::Gpu("the readback was never mapped".into()))?
             .map_err(|e| GpuError::Gpu(format!("mapping the readback buffer: {e}")))?;
-        let mut out = Vec::with_capacity(row_bytes * rows);
         {
             let view = buffer
                 .get_mapped_range(..)
                 .map_err(|e| GpuError::Gpu(format!("reading the readback buffer: {e}")))?;
             for r in view.chunks(pitch).take(rows) {
-                out.extend_from_slice(&r[..row_bytes]);
+                row(r);
             }
         }
         buffer.unmap();
-        Ok(out)
+        Ok(())
     }
 }
