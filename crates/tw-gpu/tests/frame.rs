@@ -462,6 +462,27 @@ fn external(backends: wgpu::Backends) {
     let headless: Image = r.render_clusters(&cam, 1.0, &list).unwrap();
     assert!(headless.covered_pixels() > 1000);
 
+    // The viewer's path: the own target (Rgba8Unorm, sRGB-encoded bytes) copied into an sRGB
+    // texture keeps the bytes.
+    let shown = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("shown"),
+        size: wgpu::Extent3d { width: W, height: H, depth_or_array_layers: 1 },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba8UnormSrgb,
+        usage: wgpu::TextureUsages::COPY_DST | wgpu::TextureUsages::COPY_SRC,
+        view_formats: &[],
+    });
+    let mut enc = device.create_command_encoder(&Default::default());
+    enc.copy_texture_to_texture(
+        r.color_texture().as_image_copy(),
+        shown.as_image_copy(),
+        wgpu::Extent3d { width: W, height: H, depth_or_array_layers: 1 },
+    );
+    queue.submit([enc.finish()]);
+    assert_eq!(read_texture(&device, &queue, &shown), headless.rgba);
+
     let format = wgpu::TextureFormat::Rgba8UnormSrgb;
     let tex = target(&device, format, W, H);
     r.render_to_view(&cam, 1.0, &list, &tex.create_view(&Default::default()), format, (W, H)).unwrap();

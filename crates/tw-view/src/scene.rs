@@ -63,8 +63,8 @@ struct SelectKey {
     occlusion: tw_frame::Occlusion,
 }
 
-/// Format of the scene's colour texture (the renderer's own target has the same, so it can be
-/// copied).
+/// Format of the scene's colour texture. The renderer's own target is `Rgba8Unorm` holding the
+/// same sRGB-encoded bytes; wgpu copies between formats that differ only in sRGB-ness.
 pub const SCENE_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8UnormSrgb;
 
 /// The scene's colour texture.
