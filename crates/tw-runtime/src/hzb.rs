@@ -78,6 +78,33 @@ pub enum HzbError {
     Empty,
 }
 
+/// The next pyramid level of `last`: each texel the farthest (smallest reverse-Z) of its 2×2
+/// block, sizes rounding up (an odd last row or column is its own pair). Rows in parallel for
+/// the large levels: at 1280×720 the build was ~2.5 ms of a ~50 ms `hzb` frame on 2 cores,
+/// during which the rasterizer's threads are idle (the frame waits for this pyramid).
+fn reduce(last: &HzbLevel) -> HzbLevel {
+    use rayon::prelude::*;
+    let (w, h) = (last.width.div_ceil(2), last.height.div_ceil(2));
+    let mut depth = vec![0f32; w as usize * h as usize];
+    let src_w = last.width as usize;
+    let row = |(y, out): (usize, &mut [f32])| {
+        let y0 = 2 * y;
+        let y1 = (2 * y + 1).min(last.height as usize - 1);
+        let (r0, r1) = (&last.depth[y0 * src_w..][..src_w], &last.depth[y1 * src_w..][..src_w]);
+        for (x, d) in out.iter_mut().enumerate() {
+            let x0 = 2 * x;
+            let x1 = (2 * x + 1).min(src_w - 1);
+            *d = r0[x0].min(r0[x1]).min(r1[x0]).min(r1[x1]);
+        }
+    };
+    if depth.len() >= 1 << 16 {
+        depth.par_chunks_mut(w as usize).enumerate().for_each(row);
+    } else {
+        depth.chunks_mut(w as usize).enumerate().for_each(row);
+    }
+    HzbLevel { width: w, height: h, depth }
+}
+
 impl Hzb {
     /// Builds the pyramid from a reverse-Z depth buffer (`width × height`, rows from the top).
     /// Non-finite depths are treated as far (0), so they never occlude.
@@ -94,24 +121,8 @@ impl Hzb {
             if last.width == 1 && last.height == 1 {
                 break;
             }
-            let (w, h) = (last.width.div_ceil(2), last.height.div_ceil(2));
-            let mut next = Vec::with_capacity(w as usize * h as usize);
-            for y in 0..h {
-                let y0 = (2 * y) as usize;
-                let y1 = ((2 * y + 1).min(last.height - 1)) as usize;
-                for x in 0..w {
-                    let x0 = (2 * x) as usize;
-                    let x1 = ((2 * x + 1).min(last.width - 1)) as usize;
-                    let row0 = y0 * last.width as usize;
-                    let row1 = y1 * last.width as usize;
-                    let d = last.depth[row0 + x0]
-                        .min(last.depth[row0 + x1])
-                        .min(last.depth[row1 + x0])
-                        .min(last.depth[row1 + x1]);
-                    next.push(d);
-                }
-            }
-            levels.push(HzbLevel { width: w, height: h, depth: next });
+            let next = reduce(last);
+            levels.push(next);
         }
         Ok(Hzb { levels })
     }
