@@ -14,7 +14,10 @@
 //!      hardware occlusion queries against the depth buffer (sample counts on Vulkan, booleans
 //!      on GL), first of the skeleton nodes holding candidates, breadth-first by level in one
 //!      batch a level (thesis Alg. 3.4.1, [`tw_runtime::node_test`]; a hidden node culls its
-//!      subtree's candidates), then one batch of the remaining candidates' boxes;
+//!      subtree's candidates), then one batch of the remaining candidates' boxes. Node tests
+//!      run only while they pay: a probe frame measures their time against the cluster
+//!      queries they save, and they are left out for 15 frames when they did not
+//!      ([`tw_runtime::NodeTestSwitch`]);
 //!    - [`Occlusion::GpuHzb`] (Greene et al. 1993, two-pass as in GPU-driven renderers): the
 //!      pyramid is built and the boxes tested in compute shaders that write the second pass's
 //!      indirect draws, with no CPU round trip in between ([`crate::gpu_hzb`]);
@@ -33,7 +36,10 @@ use tw_gpu::{wgpu, Renderer, Target};
 use tw_runtime::frustum::grid_box;
 use tw_runtime::node_test::parents;
 use tw_runtime::occlusion::test_clusters;
-use tw_runtime::{test_hierarchy, Camera, ClusterRef, Hzb, NodeTestOptions, OcclusionHistory};
+use tw_runtime::{
+    test_hierarchy, Camera, ClusterRef, Hzb, NodeTestOptions, NodeTestResult, NodeTestSwitch,
+    OcclusionHistory,
+};
 use tw_store::{PageCluster, Store};
 
 use crate::FrameError;
@@ -128,11 +134,14 @@ pub struct OcclusionState {
     pub visible_pixels: u32,
     /// The store skeleton's parent links (for the queries' node tests), made on first use.
     pub(crate) parents: Vec<u32>,
+    /// Whether the queries' node tests pay here (measured frame by frame).
+    pub(crate) node_switch: NodeTestSwitch,
 }
 
 impl OcclusionState {
     pub fn reset(&mut self) {
         self.history.clear();
+        self.node_switch = NodeTestSwitch::default();
     }
 }
 
@@ -209,12 +218,13 @@ pub fn draw_culled(
                 state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
             }
             let (nodes, groups) = (store.nodes(), store.groups());
-            let candidate_nodes: Vec<u32> = split
-                .candidates
-                .iter()
-                .map(|k| groups.get(k.group as usize).map_or(u32::MAX, |g| g.node))
-                .collect();
-            let tree =
+            let node_start = Instant::now();
+            let tree = if state.node_switch.test_nodes() {
+                let candidate_nodes: Vec<u32> = split
+                    .candidates
+                    .iter()
+                    .map(|k| groups.get(k.group as usize).map_or(u32::MAX, |g| g.node))
+                    .collect();
                 test_hierarchy(&state.parents, &candidate_nodes, &NodeTestOptions::default(), |batch| {
                     let boxes: Vec<(Vec3, Vec3)> = batch
                         .iter()
@@ -222,7 +232,11 @@ pub fn draw_culled(
                         .collect();
                     let samples = renderer.query_boxes(camera, &boxes)?;
                     Ok::<_, FrameError>(samples.iter().map(|&s| s > cutoff).collect())
-                })?;
+                })?
+            } else {
+                NodeTestResult { culled: vec![false; split.candidates.len()], ..Default::default() }
+            };
+            let node_time = node_start.elapsed();
             stats.node_tests = tree.nodes_tested;
             stats.nodes_hidden = tree.nodes_hidden;
             let (survivors, by_nodes): (Vec<_>, Vec<_>) =
@@ -233,7 +247,14 @@ pub fn draw_culled(
                 .iter()
                 .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
                 .collect();
+            let query_start = Instant::now();
             let samples = renderer.query_boxes(camera, &boxes)?;
+            let culled_by_nodes = split.candidates.len() as u64 - survivors.len() as u64;
+            state.node_switch.update(
+                boxes.len() as u64,
+                query_start.elapsed(),
+                state.node_switch.test_nodes().then_some((node_time, culled_by_nodes)),
+            );
             stats.queries = tree.nodes_tested + boxes.len() as u64;
             let (visible, hidden): (Vec<_>, Vec<_>) =
                 survivors.iter().zip(&samples).partition(|(_, &s)| s > cutoff);

@@ -64,7 +64,7 @@ pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use hzb::{Hzb, HzbResult};
 pub use lod_error::LodMetric;
-pub use node_test::{test_hierarchy, NodeTestOptions, NodeTestResult};
+pub use node_test::{test_hierarchy, NodeTestOptions, NodeTestResult, NodeTestSwitch};
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
 pub use pathgen::{

@@ -145,6 +145,64 @@ pub fn parents(children: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
     parent
 }
 
+/// Whether node tests pay on the current scene and view, from what they cost and saved.
+///
+/// A round of node tests costs a wait for its results (one GPU round trip); it saves one
+/// cluster query per candidate it culls. Deep in a plant (10^8 triangles, thousands of
+/// candidates behind walls) that is a large win; on a small scene or a fly-over, where few
+/// candidates are hidden, the round trips cost more than the queries saved (BENCHMARKS.md,
+/// "Node tests for `queries`"). So a frame with node tests (a probe) compares their measured
+/// time with the candidates they culled times the measured cost of one cluster query; when
+/// they did not pay, the next [`NodeTestSwitch::PROBE_EVERY`]` − 1` frames go without them.
+/// A switch between strategies from measurements, in the spirit of Govindaraju's occlusion
+/// switch (thesis ch. 3), applied to the choice of testing nodes at all.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct NodeTestSwitch {
+    /// Frames left without node tests.
+    skip: u32,
+    /// Cost of one cluster query (seconds), a running average over frames that issued at least
+    /// [`NodeTestSwitch::MIN_QUERIES_TO_MEASURE`] of them; `None` before the first.
+    query_cost: Option<f64>,
+}
+
+impl NodeTestSwitch {
+    /// A probe frame every this many frames while node tests do not pay.
+    pub const PROBE_EVERY: u32 = 16;
+    /// Cluster query batches smaller than this are dominated by their round trip: not used
+    /// to measure the cost of a query.
+    pub const MIN_QUERIES_TO_MEASURE: u64 = 256;
+    /// The cost of a cluster query assumed before one was measured (lavapipe at 1280×720
+    /// measured 5–10 µs).
+    pub const DEFAULT_QUERY_COST: f64 = 10e-6;
+
+    /// Whether this frame tests nodes.
+    pub fn test_nodes(&self) -> bool {
+        self.skip == 0
+    }
+
+    /// After the frame's cluster queries: `queries` of them took `time` (their round trip
+    /// included); `node_tests`: `Some((time, culled))` when this frame tested nodes, their
+    /// time (all rounds) and the candidates they culled.
+    pub fn update(
+        &mut self,
+        queries: u64,
+        time: std::time::Duration,
+        node_tests: Option<(std::time::Duration, u64)>,
+    ) {
+        if queries >= Self::MIN_QUERIES_TO_MEASURE {
+            let cost = time.as_secs_f64() / queries as f64;
+            self.query_cost = Some(self.query_cost.map_or(cost, |c| 0.75 * c + 0.25 * cost));
+        }
+        match node_tests {
+            Some((node_time, culled)) => {
+                let saved = culled as f64 * self.query_cost.unwrap_or(Self::DEFAULT_QUERY_COST);
+                self.skip = if saved < node_time.as_secs_f64() { Self::PROBE_EVERY - 1 } else { 0 };
+            }
+            None => self.skip = self.skip.saturating_sub(1),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,6 +259,30 @@ mod tests {
         .unwrap();
         assert_eq!(r.culled, vec![false; 4]);
         assert_eq!(r.rounds, 0);
+    }
+
+    #[test]
+    fn node_tests_are_switched_off_while_they_do_not_pay_and_probed_again() {
+        use std::time::Duration;
+        let ms = Duration::from_millis;
+        let mut s = NodeTestSwitch::default();
+        assert!(s.test_nodes(), "the first frame probes");
+        // 7,000 candidates culled at ~7 µs a query (measured: 7,000 queries in 49 ms) for 15 ms
+        // of node tests: they pay.
+        s.update(7_000, ms(49), None);
+        s.update(150, ms(3), Some((ms(15), 7_000)));
+        assert!(s.test_nodes());
+        // 116 culled (too few queries to measure: the 7 µs stand) for 6 ms: they do not.
+        s.update(30, ms(2), Some((ms(6), 116)));
+        for _ in 1..NodeTestSwitch::PROBE_EVERY {
+            assert!(!s.test_nodes());
+            s.update(146, ms(3), None);
+        }
+        assert!(s.test_nodes(), "probed again after {} frames", NodeTestSwitch::PROBE_EVERY);
+        // Without any measured query cost, the default decides.
+        let mut s = NodeTestSwitch::default();
+        s.update(10, ms(1), Some((ms(1), 1_000)));
+        assert!(s.test_nodes(), "1,000 × 10 µs = 10 ms saved for 1 ms");
     }
 
     #[test]
