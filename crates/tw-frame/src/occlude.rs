@@ -218,8 +218,9 @@ pub fn draw_culled(
                 state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
             }
             let (nodes, groups) = (store.nodes(), store.groups());
+            let test_nodes = state.node_switch.test_nodes();
             let node_start = Instant::now();
-            let tree = if state.node_switch.test_nodes() {
+            let tree = if test_nodes {
                 let candidate_nodes: Vec<u32> = split
                     .candidates
                     .iter()
@@ -249,11 +250,11 @@ pub fn draw_culled(
                 .collect();
             let query_start = Instant::now();
             let samples = renderer.query_boxes(camera, &boxes)?;
-            let culled_by_nodes = split.candidates.len() as u64 - survivors.len() as u64;
+            // `occluded` holds, so far, the candidates the node tests culled.
             state.node_switch.update(
                 boxes.len() as u64,
                 query_start.elapsed(),
-                state.node_switch.test_nodes().then_some((node_time, culled_by_nodes)),
+                test_nodes.then_some((node_time, occluded.len() as u64)),
             );
             stats.queries = tree.nodes_tested + boxes.len() as u64;
             let (visible, hidden): (Vec<_>, Vec<_>) =

@@ -36,7 +36,24 @@ impl DepthImage {
     }
 }
 
-/// The compute pipeline copying depth to a buffer.
+/// Reads `texture` (Depth32Float, COPY_SRC) back by copying its depth aspect to the buffer
+/// (every backend but GL); waits for the GPU.
+pub(crate) fn read_direct(
+    device: &wgpu::Device,
+    queue: &wgpu::Queue,
+    readback: &mut Readback,
+    texture: &wgpu::Texture,
+) -> Result<DepthImage, GpuError> {
+    let (width, height) = (texture.width(), texture.height());
+    let mut encoder =
+        device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("depth readback") });
+    readback.copy_texture_aspect(device, &mut encoder, texture, wgpu::TextureAspect::DepthOnly, 4);
+    let pitch = crate::readback::padded_row(width, 4) as usize;
+    let depth = readback.finish_f32(device, queue, encoder, pitch, width as usize, height as usize)?;
+    Ok(DepthImage { width, height, depth })
+}
+
+/// The compute pipeline copying depth to a buffer (GL).
 pub(crate) struct DepthCopy {
     layout: wgpu::BindGroupLayout,
     pipeline: wgpu::ComputePipeline,
@@ -90,26 +107,16 @@ impl DepthCopy {
         DepthCopy { layout, pipeline, storage: None }
     }
 
-    /// Reads `texture` (Depth32Float, TEXTURE_BINDING | COPY_SRC) back; waits for the GPU.
-    /// `direct`: copy the depth aspect to the buffer (not on GL), else through the compute pass.
+    /// Reads `texture` (Depth32Float, TEXTURE_BINDING) back through the compute pass (GL);
+    /// waits for the GPU.
     pub fn read(
         &mut self,
         device: &wgpu::Device,
         queue: &wgpu::Queue,
         readback: &mut Readback,
         texture: &wgpu::Texture,
-        direct: bool,
     ) -> Result<DepthImage, GpuError> {
         let (width, height) = (texture.width(), texture.height());
-        if direct {
-            let mut encoder = device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("depth readback") });
-            readback.copy_texture_aspect(device, &mut encoder, texture, wgpu::TextureAspect::DepthOnly, 4);
-            let pitch = crate::readback::padded_row(width, 4) as usize;
-            let depth =
-                readback.finish_f32(device, queue, encoder, pitch, width as usize, height as usize)?;
-            return Ok(DepthImage { width, height, depth });
-        }
         let size = width as u64 * height as u64 * 4;
         if size > device.limits().max_storage_buffer_binding_size {
             return Err(GpuError::Gpu(format!(

@@ -61,9 +61,9 @@ fn base_color(object: u32, slot: u32) -> vec3<f32> {
 // The shaded pipeline: flat shading, all of it in the vertex stage. The first (provoking)
 // vertex of every triangle carries the triangle's normal (pool.rs), so the colour computed there
 // (base colour, a headlight along the view direction, sun) is the triangle's, and coplanar
-// triangles get one colour; the fragment stage only writes it. On CPU rasterizers (llvmpipe) per-fragment lighting from screen-space derivatives was
-// ~40% of an interior frame at 1280x720 (78 -> 48 ms measured), and interior views shade each
-// pixel several times.
+// triangles get one colour; the fragment stage only writes it. On CPU rasterizers (llvmpipe)
+// per-fragment lighting from screen-space derivatives was ~40% of an interior frame at
+// 1280x720 (78 -> 48 ms measured), and interior views shade each pixel several times.
 struct ShadeOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) @interpolate(flat) color: vec3<f32>,

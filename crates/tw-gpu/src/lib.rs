@@ -365,9 +365,8 @@ impl Renderer {
     }
 
     /// The own colour target (`Rgba8Unorm` holding sRGB-encoded bytes, usage
-    /// `RENDER_ATTACHMENT | COPY_SRC`): a viewer copies it into the (`Rgba8UnormSrgb`) texture it
-    /// shows after drawing to [`Target::Own`] (no readback, no
-    /// wait).
+    /// `RENDER_ATTACHMENT | COPY_SRC`): a viewer copies it into the (`Rgba8UnormSrgb`) texture
+    /// it shows after drawing to [`Target::Own`] (no readback, no wait).
     pub fn color_texture(&self) -> &wgpu::Texture {
         &self.color
     }
@@ -485,9 +484,12 @@ impl Renderer {
             return Err(GpuError::NotOwnTarget { what: "read_depth" });
         }
         let start = Instant::now();
-        let copy = self.depth_copy.get_or_insert_with(|| depth::DepthCopy::new(&self.device));
-        let direct = self.info.backend != wgpu::Backend::Gl;
-        let d = copy.read(&self.device, &self.queue, &mut self.readback, &self.depth, direct)?;
+        let d = if self.info.backend == wgpu::Backend::Gl {
+            let copy = self.depth_copy.get_or_insert_with(|| depth::DepthCopy::new(&self.device));
+            copy.read(&self.device, &self.queue, &mut self.readback, &self.depth)?
+        } else {
+            depth::read_direct(&self.device, &self.queue, &mut self.readback, &self.depth)?
+        };
         self.stats.render += start.elapsed();
         Ok(d)
     }

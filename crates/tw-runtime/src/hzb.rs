@@ -121,8 +121,7 @@ impl Hzb {
             if last.width == 1 && last.height == 1 {
                 break;
             }
-            let next = reduce(last);
-            levels.push(next);
+            levels.push(reduce(last));
         }
         Ok(Hzb { levels })
     }
