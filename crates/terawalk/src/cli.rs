@@ -354,6 +354,10 @@ pub struct BenchArgs {
     /// Vulkan only: GL's queries are booleans.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub visible_pixels: u32,
+    /// hzb: draw the visible clusters whole, without testing their triangles against the
+    /// pyramid (as GigaWalk draws whole objects); for comparing against the default.
+    #[arg(long)]
+    pub whole_clusters: bool,
     /// GPU memory for resident cluster geometry.
     #[arg(long, default_value = "512M", value_parser = parse_bytes)]
     pub gpu_memory: u64,

@@ -51,6 +51,10 @@ pub struct FrameSettings {
     /// 0, the default, is conservative; above 0 culling is approximate (measure it with
     /// `bench --compare`). Needs sample counts: ignored on GL, whose queries are booleans.
     pub visible_pixels: u32,
+    /// `hzb` only: test each triangle of a visible cluster against the pyramid too, and draw
+    /// only those that can show a pixel ([`tw_runtime::triangle_test`]; conservative, on by
+    /// default). Off: whole clusters, as GigaWalk draws whole objects.
+    pub triangle_culling: bool,
 }
 
 impl Default for FrameSettings {
@@ -61,6 +65,7 @@ impl Default for FrameSettings {
             occlusion: Occlusion::None,
             wait_for_pages: false,
             visible_pixels: 0,
+            triangle_culling: true,
         }
     }
 }
@@ -416,6 +421,7 @@ impl Walkthrough {
             pages[i].1.bounds.get(c.index_in_page as usize).copied()
         };
         self.occlusion.visible_pixels = settings.visible_pixels;
+        self.occlusion.triangle_culling = settings.triangle_culling;
         let culled = occlude::draw_culled(
             settings.occlusion,
             &mut self.occlusion,

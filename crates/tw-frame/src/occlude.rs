@@ -27,6 +27,11 @@
 //!    the occluders too; with queries every occluder stays), so it follows visibility.
 //!
 //! Candidates are clusters, the finest unit the cut has; a cluster's box is its vertex grid box.
+//! `hzb` goes one level finer ([`crate::FrameSettings::triangle_culling`], on by default): the
+//! triangles of every cluster that passed its box test are tested against the same pyramid
+//! ([`tw_runtime::triangle_test`]), the second pass draws the visible candidates' triangles
+//! and the occluders' visible triangles their first pass left out, and the history keeps each
+//! cluster's visible triangles, which are all the next first pass draws.
 
 use std::time::{Duration, Instant};
 
@@ -37,8 +42,8 @@ use tw_runtime::frustum::grid_box;
 use tw_runtime::node_test::parents;
 use tw_runtime::occlusion::test_clusters;
 use tw_runtime::{
-    test_hierarchy, Camera, ClusterRef, Hzb, NodeTestOptions, NodeTestResult, NodeTestSwitch,
-    OcclusionHistory,
+    test_hierarchy, test_triangles, Camera, ClusterRef, Hzb, NodeTestOptions, NodeTestResult, NodeTestSwitch,
+    OcclusionHistory, TriangleMask,
 };
 use tw_store::{PageCluster, Store};
 
@@ -136,6 +141,9 @@ pub struct OcclusionState {
     pub(crate) parents: Vec<u32>,
     /// Whether the queries' node tests pay here (measured frame by frame).
     pub(crate) node_switch: NodeTestSwitch,
+    /// `hzb` only: also test the triangles of visible clusters
+    /// ([`crate::FrameSettings::triangle_culling`]).
+    pub triangle_culling: bool,
 }
 
 impl OcclusionState {
@@ -182,13 +190,17 @@ pub fn draw_culled(
     let split = state.history.split(&refs);
     let by_key: std::collections::HashMap<(u32, u32), &PageCluster> =
         clusters.iter().map(|(k, c)| ((k.page, k.index_in_page), *c)).collect();
+    // Every reference below comes from `clusters`, so `decoded` keeps them all (and per-cluster
+    // masks stay aligned with the list they were made for).
     let decoded = |list: &[ClusterRef]| -> Vec<(ClusterRef, &PageCluster)> {
         list.iter().filter_map(|k| by_key.get(&(k.page, k.index_in_page)).map(|c| (*k, *c))).collect()
     };
     let cluster_box =
         |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
 
-    renderer.draw(Target::Own, camera, grid_step, &decoded(&split.occluders), true)?;
+    // Only `hzb` keeps triangle masks in the history; the others draw their occluders whole.
+    let pass_one_masks = (strategy == Occlusion::Hzb).then_some(&split.occluder_masks[..]);
+    renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&split.occluders), pass_one_masks, true)?;
     let mut stats = OcclusionStats {
         occluders: split.occluders.len() as u64,
         tested: split.candidates.len() as u64,
@@ -196,7 +208,9 @@ pub fn draw_culled(
     };
     let (w, h) = renderer.size();
     let cull_start = Instant::now();
-    let (visible, still_visible, occluded) = match strategy {
+    // Per cluster drawn in the second pass, the triangles to draw (`u128::MAX`: all), and next
+    // frame's history (cluster, visible triangles).
+    let (visible, second_masks, history, occluded) = match strategy {
         Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
         Occlusion::Hzb => {
             let depth = renderer.read_depth()?;
@@ -207,7 +221,42 @@ pub fn draw_culled(
             let o = test_clusters(&split.occluders, &hzb, &view_proj, cluster_box);
             stats.culled = t.occluded.len() as u64;
             stats.no_pixels = t.no_pixels.len() as u64;
-            (t.visible, o.visible, t.occluded)
+            if state.triangle_culling {
+                // The visible clusters' triangles against the same pyramid: the candidates draw
+                // theirs, the occluders the ones their first pass left out.
+                let triangles = |list: &[ClusterRef]| {
+                    let clusters: Vec<&PageCluster> = decoded(list).into_iter().map(|(_, c)| c).collect();
+                    test_triangles(&clusters, grid_step, &hzb, &view_proj)
+                };
+                let (t_masks, o_masks) = (triangles(&t.visible), triangles(&o.visible));
+                let drawn_first: std::collections::HashMap<(u32, u32), TriangleMask> = split
+                    .occluders
+                    .iter()
+                    .zip(&split.occluder_masks)
+                    .map(|(k, &m)| ((k.page, k.index_in_page), m))
+                    .collect();
+                let mut visible = t.visible.clone();
+                let mut masks = t_masks.clone();
+                for (k, &m) in o.visible.iter().zip(&o_masks) {
+                    let rest = m & !drawn_first.get(&(k.page, k.index_in_page)).copied().unwrap_or(0);
+                    if rest != 0 {
+                        visible.push(*k);
+                        masks.push(rest);
+                    }
+                }
+                let history: Vec<(ClusterRef, TriangleMask)> = t
+                    .visible
+                    .iter()
+                    .copied()
+                    .zip(t_masks)
+                    .chain(o.visible.iter().copied().zip(o_masks))
+                    .collect();
+                (visible, masks, history, t.occluded)
+            } else {
+                let masks = vec![u128::MAX; t.visible.len()];
+                let history = t.visible.iter().chain(&o.visible).map(|k| (*k, u128::MAX)).collect();
+                (t.visible, masks, history, t.occluded)
+            }
         }
         Occlusion::Queries => {
             // GL's queries are booleans (1 = some sample passed): no cut-off there.
@@ -262,15 +311,20 @@ pub fn draw_culled(
             let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
             occluded.extend(hidden.into_iter().map(|(k, _)| *k));
             stats.culled = occluded.len() as u64;
-            (visible, split.occluders.clone(), occluded)
+            let masks = vec![u128::MAX; visible.len()];
+            let history = split.occluders.iter().chain(&visible).map(|k| (*k, u128::MAX)).collect();
+            (visible, masks, history, occluded)
         }
     };
     let mut cull_time = cull_start.elapsed();
-    renderer.draw(Target::Own, camera, grid_step, &decoded(&visible), false)?;
+    let second = decoded(&visible);
+    debug_assert_eq!(second.len(), second_masks.len());
+    renderer.draw_masked(Target::Own, camera, grid_step, &second, Some(&second_masks), false)?;
     let t = Instant::now();
-    state.history.update(&still_visible, &visible);
+    state.history.update_masked(history);
     cull_time += t.elapsed();
     let mut drawn = split.occluders;
-    drawn.extend_from_slice(&visible);
+    let first: std::collections::HashSet<ClusterRef> = drawn.iter().copied().collect();
+    drawn.extend(visible.into_iter().filter(|k| !first.contains(k)));
     Ok(Culled { stats, cull_time, drawn, occluded })
 }

@@ -29,10 +29,21 @@ fn walk_cameras(store: &Store) -> Vec<Camera> {
     path.frames.iter().step_by(3).map(|f| f.to_scene(store.header()).unwrap()).collect()
 }
 
-/// Renders `cameras` with each strategy (the same cut: pages loaded before drawing) and checks
-/// every image against `none`. Returns the clusters each strategy culled in all.
-/// Also returns the skeleton nodes the queries found hidden (Alg. 3.4.1's node tests).
-fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<(Occlusion, u64, u64)>> {
+/// What one strategy did over a camera list.
+struct Run {
+    strategy: Occlusion,
+    /// `hzb`: triangles of visible clusters tested too (the default).
+    triangle_culling: bool,
+    /// Clusters culled, skeleton nodes the queries found hidden (Alg. 3.4.1's node tests),
+    /// triangles drawn.
+    culled: u64,
+    nodes_hidden: u64,
+    triangles: u64,
+}
+
+/// Renders `cameras` with each strategy (the same cut: pages loaded before drawing; `hzb` with
+/// and without triangle tests) and checks every image against `none`.
+fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<Run>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
     let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
@@ -45,44 +56,69 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
         };
         baseline.push(w.frame(c, &s).unwrap().0);
     }
-    let mut culled = Vec::new();
-    for strategy in [Occlusion::Hzb, Occlusion::Queries, Occlusion::GpuHzb] {
+    let mut runs = Vec::new();
+    let strategies = [
+        (Occlusion::Hzb, true),
+        (Occlusion::Hzb, false),
+        (Occlusion::Queries, true),
+        (Occlusion::GpuHzb, true),
+    ];
+    for (strategy, triangle_culling) in strategies {
         w.reset();
-        let (mut total, mut nodes_hidden) = (0, 0);
+        let mut run = Run { strategy, triangle_culling, culled: 0, nodes_hidden: 0, triangles: 0 };
         for (i, c) in cameras.iter().enumerate() {
-            let s =
-                FrameSettings { tau: 1.0, occlusion: strategy, wait_for_pages: true, ..Default::default() };
+            let s = FrameSettings {
+                tau: 1.0,
+                occlusion: strategy,
+                wait_for_pages: true,
+                triangle_culling,
+                ..Default::default()
+            };
             let (image, info) = w.frame(c, &s).unwrap();
             let differing = image.differing_pixels(&baseline[i]).unwrap();
             assert_eq!(
                 differing,
                 0,
-                "{what}, {}: frame {i} differs from --occlusion none in {differing} pixels",
+                "{what}, {} (triangle tests {triangle_culling}): frame {i} differs from --occlusion none in \
+                 {differing} pixels",
                 strategy.name()
             );
             assert!(image.covered_pixels() > 0, "{what}: frame {i} is empty");
-            total += info.occlusion.culled;
-            nodes_hidden += info.occlusion.nodes_hidden;
+            run.culled += info.occlusion.culled;
+            run.nodes_hidden += info.occlusion.nodes_hidden;
+            run.triangles += info.triangles;
         }
-        culled.push((strategy, total, nodes_hidden));
+        runs.push(run);
     }
-    Some(culled)
+    Some(runs)
 }
 
 fn conservative_on_a_walk(backends: wgpu::Backends, what: &str) {
     let cameras = walk_cameras(&store());
-    let Some(culled) = compare(backends, what, &cameras) else { return };
-    for (strategy, n, nodes_hidden) in culled {
+    let Some(runs) = compare(backends, what, &cameras) else { return };
+    for r in &runs {
         eprintln!(
-            "{what}, {}: {n} clusters culled over {} frames ({nodes_hidden} by hidden nodes)",
-            strategy.name(),
-            cameras.len()
+            "{what}, {} (triangle tests {}): {} clusters culled over {} frames ({} by hidden nodes), {} \
+             triangles drawn",
+            r.strategy.name(),
+            r.triangle_culling,
+            r.culled,
+            cameras.len(),
+            r.nodes_hidden,
+            r.triangles
         );
-        assert!(n > 0, "{what}, {}: culled nothing inside the plant", strategy.name());
-        if strategy == Occlusion::Queries {
-            assert!(nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
+        assert!(r.culled > 0, "{what}, {}: culled nothing inside the plant", r.strategy.name());
+        if r.strategy == Occlusion::Queries {
+            assert!(r.nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
         }
     }
+    // The triangle tests must cull triangles, or the identical images above prove nothing
+    // about them.
+    let (with, without) = (runs[0].triangles, runs[1].triangles);
+    assert!(
+        with < without * 3 / 4,
+        "{what}: hzb's triangle tests drew {with} triangles, whole clusters {without}"
+    );
 }
 
 fn conservative_on_teleports(backends: wgpu::Backends, what: &str) {

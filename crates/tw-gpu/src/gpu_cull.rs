@@ -593,7 +593,7 @@ impl Renderer {
             self.pool.release_batch(&keys);
             let view = self.color_view.clone();
             let shade = Pass::Shade { view: &view, format: COLOR_FORMAT };
-            self.draw_pass(None, shade, size, camera, grid_step, candidates, false)?;
+            self.draw_pass(None, shade, size, camera, grid_step, candidates, None, false)?;
             return Ok(GpuCullResult {
                 candidates: vec![HzbResult::Visible; candidates.len()],
                 occluders: vec![HzbResult::Visible; occluder_boxes.len()],

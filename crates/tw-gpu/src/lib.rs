@@ -54,7 +54,7 @@ use std::time::{Duration, Instant};
 pub use wgpu;
 
 use glam::Vec3;
-use tw_runtime::{Camera, ClusterRef, PageCache, Selection};
+use tw_runtime::{full_mask, Camera, ClusterRef, PageCache, Selection, TriangleMask};
 use tw_store::{PageCluster, Store};
 
 pub use color::{hash_color, level_color, ColorMode, BACKGROUND, DEFAULT_COLOR};
@@ -426,24 +426,43 @@ impl Renderer {
         clusters: &[(ClusterKey, &PageCluster)],
         clear: bool,
     ) -> Result<(), GpuError> {
+        self.draw_masked(target, camera, grid_step, clusters, None, clear)
+    }
+
+    /// [`draw`](Self::draw) of only some triangles: with `masks`, cluster `i` draws the
+    /// triangles whose bits are set in `masks[i]` (bit `t` = triangle `t`; `u128::MAX` = all;
+    /// see [`tw_runtime::triangle_test`]). A partial cluster is drawn as runs of consecutive
+    /// triangles straight from its pooled index range (no copy), gaps of up to [`RUN_GAP`]
+    /// triangles bridged to save draws; the frame's triangle count counts what was drawn.
+    pub fn draw_masked(
+        &mut self,
+        target: Target<'_>,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
+        clear: bool,
+    ) -> Result<(), GpuError> {
         match target {
             Target::Own => {
                 let view = self.color_view.clone();
                 self.last_own = true;
                 let size = (self.width, self.height);
+                let pass = Pass::Shade { view: &view, format: COLOR_FORMAT };
+                self.draw_pass(None, pass, size, camera, grid_step, clusters, masks, clear)
+            }
+            Target::View { view, format, size } => {
+                self.last_own = false;
                 self.draw_pass(
                     None,
-                    Pass::Shade { view: &view, format: COLOR_FORMAT },
+                    Pass::Shade { view, format },
                     size,
                     camera,
                     grid_step,
                     clusters,
+                    masks,
                     clear,
                 )
-            }
-            Target::View { view, format, size } => {
-                self.last_own = false;
-                self.draw_pass(None, Pass::Shade { view, format }, size, camera, grid_step, clusters, clear)
             }
         }
     }
@@ -575,7 +594,16 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         self.begin_frame();
         self.last_own = false;
-        self.draw_pass(Some(encoder), Pass::Shade { view, format }, size, camera, grid_step, clusters, true)
+        self.draw_pass(
+            Some(encoder),
+            Pass::Shade { view, format },
+            size,
+            camera,
+            grid_step,
+            clusters,
+            None,
+            true,
+        )
     }
 
     /// Renders a [`Selection`] over `store` into the own target, taking the decoded pages from
@@ -621,7 +649,7 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let size = (self.width, self.height);
         self.item_base = first_number;
-        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, clear)
+        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, None, clear)
     }
 
     /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
@@ -693,6 +721,7 @@ impl Renderer {
         camera: &Camera,
         grid_step: f64,
         clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
         clear: bool,
     ) -> Result<(), GpuError> {
         let max = self.device.limits().max_texture_dimension_2d;
@@ -749,9 +778,13 @@ impl Renderer {
                         if items {
                             self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
                         }
-                        self.stats.clusters += 1;
-                        self.stats.triangles += args.index_count as u64 / 3;
-                        batch.push(args);
+                        let before = batch.len();
+                        let mask = masks.and_then(|m| m.get(i).copied()).unwrap_or(u128::MAX);
+                        let drawn = push_runs(&mut batch, args, cluster, mask);
+                        if batch.len() > before {
+                            self.stats.clusters += 1;
+                        }
+                        self.stats.triangles += drawn;
                         keys.push(pk);
                         break;
                     }
@@ -871,6 +904,55 @@ impl Renderer {
     }
 }
 
+/// At most this many draws per partially drawn cluster: beyond, the smallest gaps between its
+/// runs of visible triangles are drawn too. Each draw has a fixed cost on Mesa's CPU drivers
+/// that outweighs a few triangles' (BENCHMARKS.md, "Triangle-level HZB culling").
+pub const MAX_RUNS: usize = 4;
+
+/// Appends the draws of `mask`'s triangles of a resident cluster drawn whole by `args` and
+/// returns how many triangles they draw. A cluster with a malformed triangle (which the pool
+/// skipped, shifting the others) is drawn whole.
+fn push_runs(batch: &mut Vec<DrawArgs>, args: DrawArgs, cluster: &PageCluster, mask: TriangleMask) -> u64 {
+    let triangles = args.index_count / 3;
+    let full = full_mask(triangles as usize);
+    let well_formed = || cluster.indices.iter().all(|&v| (v as usize) < cluster.positions.len());
+    if mask & full == full || triangles > 128 || !well_formed() {
+        batch.push(args);
+        return triangles as u64;
+    }
+    let mut runs = triangle_runs(mask & full);
+    while runs.len() > MAX_RUNS {
+        let i = (1..runs.len()).min_by_key(|&i| runs[i].0 - runs[i - 1].1).expect("two runs or more");
+        runs[i - 1].1 = runs[i].1;
+        runs.remove(i);
+    }
+    let mut drawn = 0u64;
+    for (start, end) in runs {
+        batch.push(DrawArgs {
+            index_count: 3 * (end - start),
+            first_index: args.first_index + 3 * start,
+            ..args
+        });
+        drawn += (end - start) as u64;
+    }
+    drawn
+}
+
+/// The maximal runs `[start, end)` of set bits of `mask`, in order.
+fn triangle_runs(mut mask: TriangleMask) -> Vec<(u32, u32)> {
+    let mut runs = Vec::new();
+    let mut base = 0u32;
+    while mask != 0 {
+        let skip = mask.trailing_zeros();
+        mask >>= skip;
+        let len = mask.trailing_ones();
+        runs.push((base + skip, base + skip + len));
+        base += skip + len;
+        mask = if len >= 128 { 0 } else { mask >> len };
+    }
+    runs
+}
+
 /// The decoded pages of a selection's clusters, held while the frame is drawn.
 pub struct SelectionPages {
     pages: Vec<std::sync::Arc<tw_runtime::ResidentPage>>,
@@ -969,5 +1051,54 @@ mod tests {
     fn bad_sizes_are_rejected_before_touching_the_gpu() {
         assert!(matches!(Renderer::new_headless(0, 10), Err(GpuError::Size { .. })));
         assert!(matches!(Renderer::new_headless(10, MAX_SIDE + 1), Err(GpuError::Size { .. })));
+    }
+
+    fn strip(triangles: u8) -> PageCluster {
+        PageCluster {
+            positions: (0..triangles as u32 + 2).map(|i| [i, i % 2, 0]).collect(),
+            indices: (0..triangles).flat_map(|t| [t, t + 1, t + 2]).collect(),
+            objects: vec![0; triangles as usize],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn masked_clusters_draw_runs_of_their_pooled_index_range() {
+        let c = strip(10);
+        let args = DrawArgs {
+            index_count: 30,
+            instance_count: 1,
+            first_index: 300,
+            base_vertex: 40,
+            first_instance: 0,
+        };
+        let ranges = |mask: TriangleMask| {
+            let mut batch = Vec::new();
+            let drawn = push_runs(&mut batch, args, &c, mask);
+            for a in &batch {
+                assert_eq!((a.base_vertex, a.instance_count, a.first_instance), (40, 1, 0));
+            }
+            (drawn, batch.iter().map(|a| (a.first_index, a.index_count)).collect::<Vec<_>>())
+        };
+        // Everything (and bits beyond the cluster): the whole range, one draw.
+        assert_eq!(ranges(u128::MAX), (10, vec![(300, 30)]));
+        assert_eq!(ranges(0b11_1111_1111), (10, vec![(300, 30)]));
+        assert_eq!(ranges(0), (0, vec![]));
+        assert_eq!(MAX_RUNS, 4);
+        // Triangles 0-2, 5, 9: three runs, three draws.
+        assert_eq!(ranges(0b10_0010_0111), (5, vec![(300, 9), (315, 3), (327, 3)]));
+        assert_eq!(ranges(0b10_0000_0000), (1, vec![(327, 3)]));
+        // Triangles 0, 2, 4, 6, 9: five runs; the first of the smallest gaps (triangle 1) is
+        // bridged.
+        assert_eq!(ranges(0b10_0101_0101), (6, vec![(300, 9), (312, 3), (318, 3), (327, 3)]));
+        assert_eq!(triangle_runs(u128::MAX), vec![(0, 128)]);
+        assert_eq!(triangle_runs(1 << 127 | 0b110), vec![(1, 3), (127, 128)]);
+        assert_eq!(triangle_runs(0), vec![]);
+        // A malformed triangle shifts the pooled ones: the cluster is drawn whole.
+        let mut bad = c.clone();
+        bad.indices[4] = 200;
+        let mut batch = Vec::new();
+        assert_eq!(push_runs(&mut batch, args, &bad, 0b1), 10);
+        assert_eq!(batch.len(), 1);
     }
 }

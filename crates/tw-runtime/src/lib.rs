@@ -56,6 +56,7 @@ pub mod pathgen;
 pub mod prefetch;
 pub mod select;
 pub mod stream;
+pub mod triangle_test;
 
 pub use availability::{Availability, Requests};
 pub use cache::{CacheStats, Eviction, Inserted, PageCache, PageState, ResidentPage};
@@ -74,3 +75,4 @@ pub use pathgen::{
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};
+pub use triangle_test::{full_mask, test_triangles, visible_triangles, TriangleMask};

@@ -18,21 +18,26 @@
 //!    equal-depth fragments).
 //! 4. [`OcclusionHistory::update`]: next frame's occluders are the candidates drawn now plus the
 //!    occluders that the same HZB still shows (an occluder hidden behind other occluders drops
-//!    out, so the set follows visibility instead of only growing).
+//!    out, so the set follows visibility instead of only growing). With triangle tests
+//!    ([`crate::triangle_test`]) the history keeps, per cluster, the triangles found visible
+//!    ([`OcclusionHistory::update_masked`]), and the first pass draws only those.
 
-use std::collections::HashSet;
+use std::collections::HashMap;
 
 use glam::{Mat4, Vec3};
 use rayon::prelude::*;
 
 use crate::hzb::{Hzb, HzbResult};
 use crate::select::ClusterRef;
+use crate::triangle_test::TriangleMask;
 
 /// Which clusters a frame draws in its first and second pass.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct OcclusionSplit {
     /// In the cut and visible last frame: drawn first, they make the depth buffer.
     pub occluders: Vec<ClusterRef>,
+    /// Per occluder, its triangles visible last frame (`u128::MAX`: all of them).
+    pub occluder_masks: Vec<TriangleMask>,
     /// In the cut but not visible last frame: tested against the HZB.
     pub candidates: Vec<ClusterRef>,
 }
@@ -47,10 +52,11 @@ pub struct OcclusionTest {
     pub no_pixels: Vec<ClusterRef>,
 }
 
-/// The visible set carried from one frame to the next.
+/// The visible set carried from one frame to the next: clusters, each with its visible
+/// triangles (`u128::MAX` where triangles were not tested).
 #[derive(Clone, Debug, Default)]
 pub struct OcclusionHistory {
-    visible: HashSet<(u32, u32)>,
+    visible: HashMap<(u32, u32), TriangleMask>,
 }
 
 fn key(c: &ClusterRef) -> (u32, u32) {
@@ -82,8 +88,9 @@ impl OcclusionHistory {
     pub fn split(&self, cut: &[ClusterRef]) -> OcclusionSplit {
         let mut s = OcclusionSplit::default();
         for c in cut {
-            if self.visible.contains(&key(c)) {
+            if let Some(&mask) = self.visible.get(&key(c)) {
                 s.occluders.push(*c);
+                s.occluder_masks.push(mask);
             } else {
                 s.candidates.push(*c);
             }
@@ -95,7 +102,15 @@ impl OcclusionHistory {
     /// keeps (the result of testing them against this frame's HZB).
     pub fn update(&mut self, still_visible_occluders: &[ClusterRef], drawn_candidates: &[ClusterRef]) {
         self.visible.clear();
-        self.visible.extend(still_visible_occluders.iter().chain(drawn_candidates).map(key));
+        self.visible
+            .extend(still_visible_occluders.iter().chain(drawn_candidates).map(|c| (key(c), u128::MAX)));
+    }
+
+    /// [`update`](Self::update) with each cluster's visible triangles (next frame's first pass
+    /// draws only those).
+    pub fn update_masked(&mut self, visible: impl IntoIterator<Item = (ClusterRef, TriangleMask)>) {
+        self.visible.clear();
+        self.visible.extend(visible.into_iter().map(|(c, m)| (key(&c), m)));
     }
 }
 
@@ -146,7 +161,11 @@ mod tests {
         h.update(&[], &[c(2, 5), c(0, 1)]);
         let s = h.split(&cut);
         assert_eq!(s.occluders, vec![c(0, 1), c(2, 5)]);
+        assert_eq!(s.occluder_masks, vec![u128::MAX; 2]);
         assert_eq!(s.candidates, vec![c(0, 0), c(1, 0)]);
+        h.update_masked([(c(1, 0), 0b101)]);
+        let s = h.split(&cut);
+        assert_eq!((s.occluders, s.occluder_masks), (vec![c(1, 0)], vec![0b101]));
         // A cluster of the history that left the cut is simply not drawn.
         let s = h.split(&[c(0, 0)]);
         assert!(s.occluders.is_empty());

@@ -107,6 +107,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             occlusion: strategy,
             wait_for_pages: args.wait,
             visible_pixels: args.visible_pixels,
+            triangle_culling: !args.whole_clusters,
         };
         walk.reset();
         for _ in 0..args.warmup {
@@ -156,6 +157,8 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         } else {
             let cutoff = if strategy == Occlusion::Queries && args.visible_pixels > 0 {
                 format!(", visible-pixel cut-off {} samples (approximate)", args.visible_pixels)
+            } else if strategy == Occlusion::Hzb && args.whole_clusters {
+                ", visible clusters drawn whole (no triangle tests)".to_string()
             } else {
                 String::new()
             };

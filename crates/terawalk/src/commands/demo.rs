@@ -104,6 +104,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         exact: false,
         wait: false,
         visible_pixels: 0,
+        whole_clusters: false,
         gpu_memory: 512 << 20,
         warmup: 3,
         images: 4,
