@@ -27,7 +27,8 @@ pub struct Cli {
     /// More log output (-v info, -vv debug, -vvv trace); TERAWALK_LOG overrides.
     #[arg(short, long, action = clap::ArgAction::Count, global = true)]
     pub verbose: u8,
-    /// Only errors.
+    /// Log only errors, and no progress bars; a command's results (summaries, the files it
+    /// wrote) are still printed.
     #[arg(short, long, global = true)]
     pub quiet: bool,
     #[command(subcommand)]
