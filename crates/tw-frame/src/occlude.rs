@@ -198,8 +198,11 @@ pub fn draw_culled(
     let cluster_box =
         |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
 
-    // Only `hzb` keeps triangle masks in the history; the others draw their occluders whole.
-    let pass_one_masks = (strategy == Occlusion::Hzb).then_some(&split.occluder_masks[..]);
+    // Only `hzb` with triangle tests draws partial occluders (its second pass draws the rest
+    // that is visible); the others, and `hzb` after its triangle tests were turned off, draw
+    // their occluders whole whatever masks the history holds.
+    let partial_occluders = strategy == Occlusion::Hzb && state.triangle_culling;
+    let pass_one_masks = partial_occluders.then_some(&split.occluder_masks[..]);
     renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&split.occluders), pass_one_masks, true)?;
     let mut stats = OcclusionStats {
         occluders: split.occluders.len() as u64,

@@ -32,7 +32,8 @@ fn walk_cameras(store: &Store) -> Vec<Camera> {
 /// What one strategy did over a camera list.
 struct Run {
     strategy: Occlusion,
-    /// `hzb`: triangles of visible clusters tested too (the default).
+    /// `hzb`: triangles of visible clusters tested too (the default; in every other frame for
+    /// the run that switches).
     triangle_culling: bool,
     /// Clusters culled, skeleton nodes the queries found hidden (Alg. 3.4.1's node tests),
     /// triangles drawn.
@@ -42,7 +43,8 @@ struct Run {
 }
 
 /// Renders `cameras` with each strategy (the same cut: pages loaded before drawing; `hzb` with
-/// and without triangle tests) and checks every image against `none`.
+/// triangle tests, without, and switching between the two every frame) and checks every image
+/// against `none`.
 fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<Run>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
@@ -57,16 +59,25 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
         baseline.push(w.frame(c, &s).unwrap().0);
     }
     let mut runs = Vec::new();
+    // The last hzb run turns its triangle tests on and off every frame, keeping the history.
     let strategies = [
-        (Occlusion::Hzb, true),
-        (Occlusion::Hzb, false),
-        (Occlusion::Queries, true),
-        (Occlusion::GpuHzb, true),
+        (Occlusion::Hzb, Some(true)),
+        (Occlusion::Hzb, Some(false)),
+        (Occlusion::Queries, Some(true)),
+        (Occlusion::GpuHzb, Some(true)),
+        (Occlusion::Hzb, None),
     ];
-    for (strategy, triangle_culling) in strategies {
+    for (strategy, tests) in strategies {
         w.reset();
-        let mut run = Run { strategy, triangle_culling, culled: 0, nodes_hidden: 0, triangles: 0 };
+        let mut run = Run {
+            strategy,
+            triangle_culling: tests != Some(false),
+            culled: 0,
+            nodes_hidden: 0,
+            triangles: 0,
+        };
         for (i, c) in cameras.iter().enumerate() {
+            let triangle_culling = tests.unwrap_or(i % 2 == 0);
             let s = FrameSettings {
                 tau: 1.0,
                 occlusion: strategy,
