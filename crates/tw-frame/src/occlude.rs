@@ -211,9 +211,10 @@ pub fn draw_culled(
     };
     let (w, h) = renderer.size();
     let cull_start = Instant::now();
-    // Per cluster drawn in the second pass, the triangles to draw (`u128::MAX`: all), and next
-    // frame's history (cluster, visible triangles).
-    let (visible, second_masks, history, occluded) = match strategy {
+    // The visible candidates; what the second pass draws (cluster, triangles; `u128::MAX`:
+    // all): the visible candidates and, with triangle tests, the occluders' visible triangles
+    // their first pass left out; next frame's history (cluster, visible triangles).
+    let (visible, second, history, occluded) = match strategy {
         Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
         Occlusion::Hzb => {
             let depth = renderer.read_depth()?;
@@ -232,33 +233,22 @@ pub fn draw_culled(
                     test_triangles(&clusters, grid_step, &hzb, &view_proj)
                 };
                 let (t_masks, o_masks) = (triangles(&t.visible), triangles(&o.visible));
-                let drawn_first: std::collections::HashMap<(u32, u32), TriangleMask> = split
-                    .occluders
-                    .iter()
-                    .zip(&split.occluder_masks)
-                    .map(|(k, &m)| ((k.page, k.index_in_page), m))
-                    .collect();
-                let mut visible = t.visible.clone();
-                let mut masks = t_masks.clone();
-                for (k, &m) in o.visible.iter().zip(&o_masks) {
-                    let rest = m & !drawn_first.get(&(k.page, k.index_in_page)).copied().unwrap_or(0);
-                    if rest != 0 {
-                        visible.push(*k);
-                        masks.push(rest);
-                    }
-                }
-                let history: Vec<(ClusterRef, TriangleMask)> = t
-                    .visible
-                    .iter()
-                    .copied()
-                    .zip(t_masks)
-                    .chain(o.visible.iter().copied().zip(o_masks))
-                    .collect();
-                (visible, masks, history, t.occluded)
+                let candidates = t.visible.iter().copied().zip(t_masks);
+                let occluders = o.visible.iter().copied().zip(o_masks);
+                // `o.visible` keeps the order of `split.occluders`, so one walk finds what each
+                // drew in the first pass (not found: nothing, and all its visible triangles go).
+                let mut first_pass = split.occluders.iter().zip(&split.occluder_masks);
+                let rest = occluders.clone().filter_map(|(k, m)| {
+                    let drawn = first_pass.find(|(f, _)| **f == k).map_or(0, |(_, &d)| d);
+                    (m & !drawn != 0).then_some((k, m & !drawn))
+                });
+                let second: Vec<(ClusterRef, TriangleMask)> = candidates.clone().chain(rest).collect();
+                let history: Vec<(ClusterRef, TriangleMask)> = candidates.chain(occluders).collect();
+                (t.visible, second, history, t.occluded)
             } else {
-                let masks = vec![u128::MAX; t.visible.len()];
+                let second = t.visible.iter().map(|k| (*k, u128::MAX)).collect();
                 let history = t.visible.iter().chain(&o.visible).map(|k| (*k, u128::MAX)).collect();
-                (t.visible, masks, history, t.occluded)
+                (t.visible, second, history, t.occluded)
             }
         }
         Occlusion::Queries => {
@@ -314,20 +304,18 @@ pub fn draw_culled(
             let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
             occluded.extend(hidden.into_iter().map(|(k, _)| *k));
             stats.culled = occluded.len() as u64;
-            let masks = vec![u128::MAX; visible.len()];
+            let second = visible.iter().map(|k| (*k, u128::MAX)).collect();
             let history = split.occluders.iter().chain(&visible).map(|k| (*k, u128::MAX)).collect();
-            (visible, masks, history, occluded)
+            (visible, second, history, occluded)
         }
     };
     let mut cull_time = cull_start.elapsed();
-    let second = decoded(&visible);
-    debug_assert_eq!(second.len(), second_masks.len());
-    renderer.draw_masked(Target::Own, camera, grid_step, &second, Some(&second_masks), false)?;
+    let (second, second_masks): (Vec<ClusterRef>, Vec<TriangleMask>) = second.into_iter().unzip();
+    renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&second), Some(&second_masks), false)?;
     let t = Instant::now();
     state.history.update_masked(history);
     cull_time += t.elapsed();
     let mut drawn = split.occluders;
-    let first: std::collections::HashSet<ClusterRef> = drawn.iter().copied().collect();
-    drawn.extend(visible.into_iter().filter(|k| !first.contains(k)));
+    drawn.extend_from_slice(&visible);
     Ok(Culled { stats, cull_time, drawn, occluded })
 }
