@@ -126,6 +126,13 @@ impl Hzb {
         Ok(Hzb { levels })
     }
 
+    /// The occluder depth at pixel (`x`, `y`) of level 0 (the depth buffer); `x`, `y` must be
+    /// inside the image.
+    pub fn pixel_depth(&self, x: u32, y: u32) -> f32 {
+        let level = &self.levels[0];
+        level.depth[(y * level.width + x) as usize]
+    }
+
     /// Width and height of the depth buffer (level 0).
     pub fn size(&self) -> (u32, u32) {
         (self.levels[0].width, self.levels[0].height)
@@ -195,9 +202,9 @@ impl Hzb {
         Some((x_lo, y_lo, x_hi, y_hi, nearest))
     }
 
-    /// The pixels whose centres lie in the widened rectangle (inclusive bounds), `None` when
-    /// there are none. The rectangle must be finite.
-    fn pixel_rect(&self, x_lo: f32, y_lo: f32, x_hi: f32, y_hi: f32) -> Option<[u32; 4]> {
+    /// The pixels whose centres lie in the widened rectangle (inclusive bounds: x0, y0, x1,
+    /// y1), `None` when there are none. The rectangle must be finite.
+    pub fn pixel_rect(&self, x_lo: f32, y_lo: f32, x_hi: f32, y_hi: f32) -> Option<[u32; 4]> {
         let (w, h) = self.size();
         // Pixels whose centre lies in the widened rectangle: ceil(lo − ½) ..= floor(hi − ½).
         let px0 = (x_lo - RECT_SLACK_PX - 0.5).ceil().max(0.0);

@@ -7,13 +7,22 @@
 //! nearer geometry, face away behind their own object's front, or cover no pixel centre
 //! (BENCHMARKS.md, "Triangle-level HZB culling").
 //!
-//! Each triangle is tested like a box: the screen rectangle of its three projected corners and
-//! their nearest depth go through [`Hzb::test_rect`], which widens the rectangle and lowers the
-//! depth bound by the same margins as the cluster test. A triangle with a corner behind the eye,
-//! at or before the near plane, or not finite is kept. So a triangle is dropped only when every
-//! pixel centre it could cover holds nearer geometry, or when it covers none: drawing the kept
-//! triangles gives the image of drawing the whole cluster. Positions are computed exactly as the
-//! renderer's pool computes them (grid coordinates × step, rounded to f32).
+//! Each triangle's screen rectangle (of its three projected corners) is widened like a box's
+//! and reduced to the pixel centres it holds. A large triangle is then tested like a box: the
+//! rectangle and the corners' nearest depth go through [`Hzb::test_rect`], with the cluster
+//! test's depth margin. A small one (at most [`SAMPLE_TEST_MAX_PIXELS`] centres) is tested
+//! sample by sample, as the rasterizer will: only the pixel centres inside the triangle count,
+//! each against its own occluder depth (the nearest corner depth, with the same margin).
+//! Most triangles of a 1-pixel LOD cut are a pixel or two across, and a rectangle holds about
+//! twice the centres its triangle covers, so this drops the many that cover no centre at all
+//! and those whose covered centres are all hidden. "Inside" is widened by the distance the
+//! rasterizer's corners can lie from the ones computed here ([`SAMPLE_SLACK_PX`]: its sub-pixel
+//! snapping and f32 rounding, with margin), so a centre on or near an edge counts whatever the
+//! fill rule. A triangle with a corner behind the eye, at or before the near plane, or not
+//! finite is kept. So a triangle is dropped only when every pixel centre it could cover holds
+//! nearer geometry, or when it covers none: drawing the kept triangles gives the image of
+//! drawing the whole cluster. Positions are computed exactly as the renderer's pool computes
+//! them (grid coordinates × step, rounded to f32).
 //!
 //! The result is a [`TriangleMask`]: bit `t` for triangle `t` of the cluster (clusters hold at
 //! most 128 triangles, docs/FORMAT.md).
@@ -22,7 +31,24 @@ use glam::{Mat4, Vec3, Vec4};
 use rayon::prelude::*;
 use tw_store::PageCluster;
 
-use crate::hzb::{Hzb, HzbResult};
+use crate::hzb::{Hzb, HzbResult, DEPTH_MARGIN};
+
+/// Triangles whose rectangle holds at most this many pixel centres are tested centre by centre
+/// (after the rectangle test called them visible); larger ones keep the rectangle's answer.
+pub const SAMPLE_TEST_MAX_PIXELS: u32 = 64;
+
+/// How far (pixels) the rasterizer's triangle corners may lie from the ones computed here
+/// because of its sub-pixel snapping: at most 1/512 px at the 1/256 px precision of lavapipe,
+/// llvmpipe and every GPU, with a margin of 2. The f32 rounding of the two projections (the
+/// shader's and this module's) comes on top, per vertex ([`PROJECTION_ROUNDING`]).
+pub const SAMPLE_SLACK_PX: f64 = 1.0 / 256.0;
+
+/// Relative rounding allowed between two f32 evaluations of a vertex's clip coordinates (this
+/// module's and the vertex shader's, whose order of operations and fused multiply-adds may
+/// differ): 4 ulps of the sum of the magnitudes of the terms, Σ |m_ij p_j|. Scene coordinates
+/// are absolute, so near the eye and far from the scene origin a small triangle's corners can
+/// move by a good fraction of a pixel between the two.
+pub const PROJECTION_ROUNDING: f32 = 4.0 * f32::EPSILON;
 
 /// One bit per triangle of a cluster (bit `t` = triangle `t`).
 pub type TriangleMask = u128;
@@ -42,8 +68,10 @@ pub fn full_mask(triangles: usize) -> TriangleMask {
 /// no bit.
 pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_proj: &Mat4) -> TriangleMask {
     let (w, h) = hzb.size();
-    // Screen x, y and depth of each vertex; `None` where the test cannot tell.
-    let projected: Vec<Option<[f32; 3]>> = cluster
+    let abs_view_proj = Mat4::from_cols_array(&view_proj.to_cols_array().map(f32::abs));
+    // Screen x, y, depth and the bound on the screen position's rounding error (pixels) of each
+    // vertex; `None` where the test cannot tell.
+    let projected: Vec<Option<[f32; 4]>> = cluster
         .positions
         .iter()
         .map(|g| {
@@ -56,7 +84,13 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
             if depth >= 1.0 {
                 return None;
             }
-            Some([(c.x / c.w * 0.5 + 0.5) * w as f32, (0.5 - c.y / c.w * 0.5) * h as f32, depth])
+            let (x, y) = (c.x / c.w, c.y / c.w);
+            let magnitude = abs_view_proj * p.abs().extend(1.0);
+            let error = |half_size: u32, along: f32, of_axis: f32| {
+                half_size as f32 * PROJECTION_ROUNDING * (of_axis + along.abs() * magnitude.w) / c.w
+            };
+            let rounding = error(w / 2, x, magnitude.x).max(error(h / 2, y, magnitude.y));
+            Some([(x * 0.5 + 0.5) * w as f32, (0.5 - y * 0.5) * h as f32, depth, rounding])
         })
         .collect();
     let mut mask: TriangleMask = 0;
@@ -64,10 +98,23 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
         let corners = [tri[0], tri[1], tri[2]].map(|i| projected.get(i as usize).copied().flatten());
         let visible = match corners {
             [Some(a), Some(b), Some(c)] => {
-                let (x_lo, x_hi) = (a[0].min(b[0]).min(c[0]), a[0].max(b[0]).max(c[0]));
-                let (y_lo, y_hi) = (a[1].min(b[1]).min(c[1]), a[1].max(b[1]).max(c[1]));
+                // The rectangle, widened by the corners' rounding bound (the rectangle tests
+                // widen it by the snapping allowance themselves).
+                let rounding = a[3].max(b[3]).max(c[3]);
+                let (x_lo, x_hi) = (a[0].min(b[0]).min(c[0]) - rounding, a[0].max(b[0]).max(c[0]) + rounding);
+                let (y_lo, y_hi) = (a[1].min(b[1]).min(c[1]) - rounding, a[1].max(b[1]).max(c[1]) + rounding);
                 let nearest = a[2].max(b[2]).max(c[2]);
-                hzb.test_rect(x_lo, y_lo, x_hi, y_hi, nearest) == HzbResult::Visible
+                let finite = x_lo.is_finite() && x_hi.is_finite() && y_lo.is_finite() && y_hi.is_finite();
+                match hzb.pixel_rect(x_lo, y_lo, x_hi, y_hi).filter(|_| finite) {
+                    None if !finite => true,
+                    None => false,
+                    Some(_) if hzb.test_rect(x_lo, y_lo, x_hi, y_hi, nearest) != HzbResult::Visible => false,
+                    Some(rect) if pixel_count(rect) <= SAMPLE_TEST_MAX_PIXELS as u64 => {
+                        let slack = SAMPLE_SLACK_PX + rounding as f64;
+                        shows_a_sample(hzb, [a, b, c].map(|v| [v[0], v[1], v[2]]), rect, nearest, slack)
+                    }
+                    Some(_) => true,
+                }
             }
             _ => true,
         };
@@ -76,6 +123,59 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
         }
     }
     mask
+}
+
+fn pixel_count([x0, y0, x1, y1]: [u32; 4]) -> u64 {
+    (x1 - x0 + 1) as u64 * (y1 - y0 + 1) as u64
+}
+
+/// Whether a pixel centre of `rect` (inclusive pixel bounds) inside the triangle of screen
+/// corners `corners` (x, y, reverse-Z depth) holds an occluder depth the triangle's nearest
+/// depth can pass. Edge functions in f64 from the f32 corners, stepped along each row; a centre
+/// counts as inside when it would be inside for corners moved by up to `slack` pixels (a
+/// degenerate triangle thus keeps the centres on its line).
+fn shows_a_sample(
+    hzb: &Hzb,
+    corners: [[f32; 3]; 3],
+    [x0, y0, x1, y1]: [u32; 4],
+    nearest: f32,
+    slack: f64,
+) -> bool {
+    let v = corners.map(|c| [c[0] as f64, c[1] as f64]);
+    let area = (v[1][0] - v[0][0]) * (v[2][1] - v[0][1]) - (v[1][1] - v[0][1]) * (v[2][0] - v[0][0]);
+    let sign = if area < 0.0 { -1.0 } else { 1.0 };
+    let bound = nearest / (1.0 - DEPTH_MARGIN);
+    // Moving an edge's ends u, w by up to d changes its edge function at p by at most
+    // d·(|p − u| + |p − w|) + 2d². A centre the rasterizer's (moved) triangle covers lies
+    // inside it, so both distances are at most its longest edge + 3d: that bound decides
+    // at once for most centres, the exact distances for the few in between.
+    let d = slack;
+    let length2 = |p: [f64; 2], q: [f64; 2]| (p[0] - q[0]) * (p[0] - q[0]) + (p[1] - q[1]) * (p[1] - q[1]);
+    let longest = length2(v[0], v[1]).max(length2(v[1], v[2])).max(length2(v[2], v[0])).sqrt();
+    let wide = 2.0 * d * longest + 8.0 * d * d;
+    // Edge i from u to w: sign·cross(w − u, p − u) = a·p.x + b·p.y + c, ≥ 0 inside.
+    let edges = [0, 1, 2].map(|i| {
+        let (u, w) = (v[i], v[(i + 1) % 3]);
+        let (a, b) = (-sign * (w[1] - u[1]), sign * (w[0] - u[0]));
+        (a, b, -a * u[0] - b * u[1])
+    });
+    let near_edge = |i: usize, e: f64, p: [f64; 2]| {
+        let (u, w) = (v[i], v[(i + 1) % 3]);
+        e >= -(d * (length2(p, u).sqrt() + length2(p, w).sqrt()) + 2.0 * d * d)
+    };
+    let cx0 = x0 as f64 + 0.5;
+    (y0..=y1).any(|y| {
+        let py = y as f64 + 0.5;
+        let mut e = edges.map(|(a, b, c)| a * cx0 + b * py + c);
+        (x0..=x1).any(|x| {
+            let p = [x as f64 + 0.5, py];
+            let inside = (0..3).all(|i| e[i] >= 0.0 || (e[i] >= -wide && near_edge(i, e[i], p)));
+            for (ei, edge) in e.iter_mut().zip(&edges) {
+                *ei += edge.0;
+            }
+            inside && hzb.pixel_depth(x, y) <= bound
+        })
+    })
 }
 
 /// [`visible_triangles`] of many clusters, in parallel; the output keeps the input order.
@@ -143,6 +243,45 @@ mod tests {
         let m = visible_triangles(&c, 1.0 / 16.0, &hzb, &vp);
         assert_eq!(m, 0b01110, "mask {m:#b}");
         assert_eq!(test_triangles(&[&c, &c], 1.0 / 16.0, &hzb, &vp), vec![m, m]);
+    }
+
+    /// The sample test on screen-space corners against the wall scene (pixels x < 32 hold the
+    /// wall, the others the far background).
+    #[test]
+    fn only_covered_pixel_centres_count() {
+        let (hzb, _) = scene();
+        let wall = hzb.pixel_depth(0, 0);
+        assert!(wall > 0.0 && hzb.pixel_depth(40, 10) == 0.0);
+        let test = |c: [[f32; 2]; 3], depth: f32| {
+            let corners = c.map(|[x, y]| [x, y, depth]);
+            let (x_lo, x_hi) = (c[0][0].min(c[1][0]).min(c[2][0]), c[0][0].max(c[1][0]).max(c[2][0]));
+            let (y_lo, y_hi) = (c[0][1].min(c[1][1]).min(c[2][1]), c[0][1].max(c[1][1]).max(c[2][1]));
+            let rect = hzb.pixel_rect(x_lo, y_lo, x_hi, y_hi).expect("the rectangle holds pixel centres");
+            assert_eq!(
+                hzb.test_rect(x_lo, y_lo, x_hi, y_hi, depth),
+                HzbResult::Visible,
+                "rectangle test of {c:?}"
+            );
+            shows_a_sample(&hzb, corners, rect, depth, SAMPLE_SLACK_PX)
+        };
+        let near = wall * 2.0;
+        let far = wall * 0.5;
+        // A sliver along the diagonal between the centres (x + ½, y + ½): its rectangle holds
+        // 12 open centres, the sliver none.
+        assert!(!test([[40.0, 10.5], [43.0, 13.5], [43.0, 13.6]], far));
+        // A small triangle over the open centre (50.5, 20.5), in either winding.
+        assert!(test([[50.0, 20.0], [51.2, 20.0], [50.0, 21.2]], far));
+        assert!(test([[50.0, 20.0], [50.0, 21.2], [51.2, 20.0]], far));
+        // A centre exactly on a corner, and one exactly on an edge, count as covered.
+        assert!(test([[50.5, 20.5], [52.0, 20.5], [50.5, 22.0]], far));
+        assert!(test([[50.0, 20.5], [51.0, 20.5], [50.5, 19.6]], far));
+        // A degenerate triangle through an open centre keeps it.
+        assert!(test([[49.5, 19.5], [51.5, 21.5], [50.5, 20.5]], far));
+        // Straddling the wall's edge: the rectangle reaches the open centre x = 32.5, the
+        // triangle covers only wall centres: hidden behind the wall, kept in front of it.
+        let straddle = [[29.9, 5.0], [32.6, 5.0], [29.9, 7.7]];
+        assert!(!test(straddle, far));
+        assert!(test(straddle, near));
     }
 
     #[test]
