@@ -75,22 +75,7 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
         .positions
         .iter()
         .map(|g| {
-            let p = Vec3::from(g.map(|c| (c as f64 * grid_step) as f32));
-            let c: Vec4 = *view_proj * p.extend(1.0);
-            if !c.is_finite() || c.w <= 0.0 {
-                return None;
-            }
-            let depth = c.z / c.w;
-            if depth >= 1.0 {
-                return None;
-            }
-            let (x, y) = (c.x / c.w, c.y / c.w);
-            let magnitude = abs_view_proj * p.abs().extend(1.0);
-            let error = |half_size: u32, along: f32, of_axis: f32| {
-                half_size as f32 * PROJECTION_ROUNDING * (of_axis + along.abs() * magnitude.w) / c.w
-            };
-            let rounding = error(w / 2, x, magnitude.x).max(error(h / 2, y, magnitude.y));
-            Some([(x * 0.5 + 0.5) * w as f32, (0.5 - y * 0.5) * h as f32, depth, rounding])
+            project(view_proj, &abs_view_proj, Vec3::from(g.map(|c| (c as f64 * grid_step) as f32)), (w, h))
         })
         .collect();
     let mut mask: TriangleMask = 0;
@@ -123,6 +108,29 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
         }
     }
     mask
+}
+
+/// Screen x, y (pixels, y down), reverse-Z depth of `p` through `view_proj` on a `size` image,
+/// and the bound on the screen position's rounding (pixels) between this f32 evaluation and the
+/// vertex shader's ([`PROJECTION_ROUNDING`]); `None` behind the eye, at or before the near
+/// plane, or not finite. `abs_view_proj` holds the magnitudes of `view_proj`'s elements.
+fn project(view_proj: &Mat4, abs_view_proj: &Mat4, p: Vec3, (w, h): (u32, u32)) -> Option<[f32; 4]> {
+    let c: Vec4 = *view_proj * p.extend(1.0);
+    if !c.is_finite() || c.w <= 0.0 {
+        return None;
+    }
+    let depth = c.z / c.w;
+    if depth >= 1.0 {
+        return None;
+    }
+    let (x, y) = (c.x / c.w, c.y / c.w);
+    // x/w moves by (δx + |x/w|·δw)/w, with |δx| ≤ rounding × Σ |m_0j p_j|, the same for w.
+    let magnitude = *abs_view_proj * p.abs().extend(1.0);
+    let error = |size: u32, ndc: f32, of_axis: f32| {
+        0.5 * size as f32 * PROJECTION_ROUNDING * (of_axis + ndc.abs() * magnitude.w) / c.w
+    };
+    let rounding = error(w, x, magnitude.x).max(error(h, y, magnitude.y));
+    Some([(x * 0.5 + 0.5) * w as f32, (0.5 - y * 0.5) * h as f32, depth, rounding])
 }
 
 fn pixel_count([x0, y0, x1, y1]: [u32; 4]) -> u64 {
@@ -282,6 +290,38 @@ mod tests {
         let straddle = [[29.9, 5.0], [32.6, 5.0], [29.9, 7.7]];
         assert!(!test(straddle, far));
         assert!(test(straddle, near));
+    }
+
+    /// The rounding bound covers this module's own f32 error against an exact (f64)
+    /// projection twice over (the vertex shader's error is the other half), near the eye and
+    /// thousands of units from the origin, where it reaches a good part of a pixel.
+    #[test]
+    fn projection_rounding_bounds_the_f32_error() {
+        let mut rng = tw_core::rng::Rng::new(7);
+        let mut largest = 0f32;
+        for _ in 0..2000 {
+            let r = |rng: &mut tw_core::rng::Rng, s: f32| (rng.f64() as f32 * 2.0 - 1.0) * s;
+            let eye = Vec3::new(r(&mut rng, 4096.0), r(&mut rng, 4096.0), r(&mut rng, 100.0));
+            let dir = Vec3::new(r(&mut rng, 1.0), r(&mut rng, 1.0), r(&mut rng, 0.3)).normalize_or(Vec3::X);
+            let cam = Camera::new(eye, eye + dir, Vec3::Z, 60f32.to_radians(), 0.1, 1e5).unwrap();
+            let vp = cam.projection_reverse_z(1280.0 / 720.0) * cam.view();
+            let abs = Mat4::from_cols_array(&vp.to_cols_array().map(f32::abs));
+            let distance = 0.5 + rng.f64() as f32 * 50.0;
+            let p = eye
+                + dir * distance
+                + Vec3::new(r(&mut rng, 0.4), r(&mut rng, 0.4), r(&mut rng, 0.4)) * distance;
+            let Some([x, y, _, rounding]) = project(&vp, &abs, p, (1280, 720)) else { continue };
+            let exact = vp.as_dmat4() * p.as_dvec3().extend(1.0);
+            let (ex, ey) =
+                ((exact.x / exact.w * 0.5 + 0.5) * 1280.0, (0.5 - exact.y / exact.w * 0.5) * 720.0);
+            let error = ((x as f64 - ex).abs()).max((y as f64 - ey).abs()) as f32;
+            assert!(
+                error <= rounding / 2.0 + 1e-4,
+                "error {error} px, bound {rounding} px at {p} from {eye}"
+            );
+            largest = largest.max(rounding);
+        }
+        assert!(largest > 0.05, "the bound should matter here: at most {largest} px");
     }
 
     #[test]
