@@ -271,11 +271,13 @@ impl Walkthrough {
         })
     }
 
-    /// The full-detail, unculled cut (τ = 0, frustum off), pages loaded as needed.
+    /// The full-detail, unculled cut (τ = 0, frustum off), pages loaded as needed. The
+    /// occlusion history is kept: it only chooses the next frame's occluders, and any choice
+    /// gives a conservative result, so a compared frame does not make the frame after it start
+    /// from nothing.
     fn full_detail(&mut self, camera: &Camera) -> Selection {
         let (w, h) = self.renderer.size();
         let options = SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false };
-        self.occlusion.reset();
         self.streamer.select_blocking(camera, &options)
     }
 

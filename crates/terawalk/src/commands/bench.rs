@@ -136,7 +136,6 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                     if args.exact {
                         exacts.insert(i, walk.exact_visibility(camera)?);
                     }
-                    walk.reset();
                 }
                 if let Some(reference) = references.get(&i) {
                     rec.psnr_db = Some(image.psnr(reference)?.min(99.0));
