@@ -232,7 +232,15 @@ impl Hzb {
         if !(x_lo.is_finite() && y_lo.is_finite() && x_hi.is_finite() && y_hi.is_finite()) {
             return HzbResult::Visible;
         }
-        let Some(rect) = self.pixel_rect(x_lo, y_lo, x_hi, y_hi) else { return HzbResult::NoPixels };
+        match self.pixel_rect(x_lo, y_lo, x_hi, y_hi) {
+            Some(rect) => self.test_pixels(rect, nearest),
+            None => HzbResult::NoPixels,
+        }
+    }
+
+    /// [`test_rect`](Self::test_rect) of the pixels `rect` (inclusive bounds, as
+    /// [`pixel_rect`](Self::pixel_rect) gives them): `Occluded` or `Visible`.
+    pub fn test_pixels(&self, rect: [u32; 4], nearest: f32) -> HzbResult {
         let [x0, y0, x1, y1] = rect;
         let k = self.start_level(rect);
         let bound = nearest / (1.0 - DEPTH_MARGIN);

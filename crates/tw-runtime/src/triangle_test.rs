@@ -7,18 +7,18 @@
 //! nearer geometry, face away behind their own object's front, or cover no pixel centre
 //! (BENCHMARKS.md, "Triangle-level HZB culling").
 //!
-//! Each triangle's screen rectangle (of its three projected corners) is widened like a box's
-//! and reduced to the pixel centres it holds. A large triangle is then tested like a box: the
-//! rectangle and the corners' nearest depth go through [`Hzb::test_rect`], with the cluster
-//! test's depth margin. A small one (at most [`SAMPLE_TEST_MAX_PIXELS`] centres) is tested
-//! sample by sample, as the rasterizer will: only the pixel centres inside the triangle count,
-//! each against its own occluder depth (the nearest corner depth, with the same margin).
-//! Most triangles of a 1-pixel LOD cut are a pixel or two across, and a rectangle holds about
-//! twice the centres its triangle covers, so this drops the many that cover no centre at all
-//! and those whose covered centres are all hidden. "Inside" is widened by the distance the
-//! rasterizer's corners can lie from the ones computed here ([`SAMPLE_SLACK_PX`]: its sub-pixel
-//! snapping and f32 rounding, with margin), so a centre on or near an edge counts whatever the
-//! fill rule. A triangle with a corner behind the eye, at or before the near plane, or not
+//! Each triangle is first tested like a box: the screen rectangle of its three projected
+//! corners, widened by their rounding bound ([`PROJECTION_ROUNDING`]), is reduced to the pixel
+//! centres it holds, and those and the corners' nearest depth go through [`Hzb::test_pixels`],
+//! with the cluster test's depth margin. A small triangle that passes (at most
+//! [`SAMPLE_TEST_MAX_PIXELS`] centres) is then tested sample by sample, as the rasterizer will:
+//! only the pixel centres inside the triangle count, each against its own occluder depth (the
+//! nearest corner depth, with the same margin). Most triangles of a 1-pixel LOD cut are a pixel
+//! or two across, and a rectangle holds about twice the centres its triangle covers, so this
+//! drops the many that cover no centre at all and those whose covered centres are all hidden.
+//! "Inside" is widened by the distance the rasterizer's corners can lie from the ones computed
+//! here (its sub-pixel snapping, [`SAMPLE_SLACK_PX`], plus the corners' rounding bound), so a
+//! centre on or near an edge counts whatever the fill rule. A triangle with a corner behind the eye, at or before the near plane, or not
 //! finite is kept. So a triangle is dropped only when every pixel centre it could cover holds
 //! nearer geometry, or when it covers none: drawing the kept triangles gives the image of
 //! drawing the whole cluster. Positions are computed exactly as the renderer's pool computes
@@ -89,16 +89,18 @@ pub fn visible_triangles(cluster: &PageCluster, grid_step: f64, hzb: &Hzb, view_
                 let (x_lo, x_hi) = (a[0].min(b[0]).min(c[0]) - rounding, a[0].max(b[0]).max(c[0]) + rounding);
                 let (y_lo, y_hi) = (a[1].min(b[1]).min(c[1]) - rounding, a[1].max(b[1]).max(c[1]) + rounding);
                 let nearest = a[2].max(b[2]).max(c[2]);
-                let finite = x_lo.is_finite() && x_hi.is_finite() && y_lo.is_finite() && y_hi.is_finite();
-                match hzb.pixel_rect(x_lo, y_lo, x_hi, y_hi).filter(|_| finite) {
-                    None if !finite => true,
-                    None => false,
-                    Some(_) if hzb.test_rect(x_lo, y_lo, x_hi, y_hi, nearest) != HzbResult::Visible => false,
-                    Some(rect) if pixel_count(rect) <= SAMPLE_TEST_MAX_PIXELS as u64 => {
-                        let slack = SAMPLE_SLACK_PX + rounding as f64;
-                        shows_a_sample(hzb, [a, b, c].map(|v| [v[0], v[1], v[2]]), rect, nearest, slack)
+                if !(x_lo.is_finite() && x_hi.is_finite() && y_lo.is_finite() && y_hi.is_finite()) {
+                    true
+                } else {
+                    match hzb.pixel_rect(x_lo, y_lo, x_hi, y_hi) {
+                        None => false,
+                        Some(rect) if hzb.test_pixels(rect, nearest) != HzbResult::Visible => false,
+                        Some(rect) if pixel_count(rect) <= SAMPLE_TEST_MAX_PIXELS as u64 => {
+                            let slack = SAMPLE_SLACK_PX + rounding as f64;
+                            shows_a_sample(hzb, [a, b, c].map(|v| [v[0], v[1]]), rect, nearest, slack)
+                        }
+                        Some(_) => true,
                     }
-                    Some(_) => true,
                 }
             }
             _ => true,
@@ -138,13 +140,12 @@ fn pixel_count([x0, y0, x1, y1]: [u32; 4]) -> u64 {
 }
 
 /// Whether a pixel centre of `rect` (inclusive pixel bounds) inside the triangle of screen
-/// corners `corners` (x, y, reverse-Z depth) holds an occluder depth the triangle's nearest
-/// depth can pass. Edge functions in f64 from the f32 corners, stepped along each row; a centre
+/// corners `corners` (x, y) holds an occluder depth the triangle's `nearest` depth can pass. Edge functions in f64 from the f32 corners, stepped along each row; a centre
 /// counts as inside when it would be inside for corners moved by up to `slack` pixels (a
 /// degenerate triangle thus keeps the centres on its line).
 fn shows_a_sample(
     hzb: &Hzb,
-    corners: [[f32; 3]; 3],
+    corners: [[f32; 2]; 3],
     [x0, y0, x1, y1]: [u32; 4],
     nearest: f32,
     slack: f64,
@@ -261,7 +262,6 @@ mod tests {
         let wall = hzb.pixel_depth(0, 0);
         assert!(wall > 0.0 && hzb.pixel_depth(40, 10) == 0.0);
         let test = |c: [[f32; 2]; 3], depth: f32| {
-            let corners = c.map(|[x, y]| [x, y, depth]);
             let (x_lo, x_hi) = (c[0][0].min(c[1][0]).min(c[2][0]), c[0][0].max(c[1][0]).max(c[2][0]));
             let (y_lo, y_hi) = (c[0][1].min(c[1][1]).min(c[2][1]), c[0][1].max(c[1][1]).max(c[2][1]));
             let rect = hzb.pixel_rect(x_lo, y_lo, x_hi, y_hi).expect("the rectangle holds pixel centres");
@@ -270,7 +270,7 @@ mod tests {
                 HzbResult::Visible,
                 "rectangle test of {c:?}"
             );
-            shows_a_sample(&hzb, corners, rect, depth, SAMPLE_SLACK_PX)
+            shows_a_sample(&hzb, c, rect, depth, SAMPLE_SLACK_PX)
         };
         let near = wall * 2.0;
         let far = wall * 0.5;
