@@ -101,6 +101,9 @@ pub struct FrameInfo {
     pub stream: StreamStats,
     /// Triangles and clusters drawn (after occlusion culling).
     pub triangles: u64,
+    /// Of `triangles`, those that passed the triangle tests (the rest are the gaps between
+    /// runs that the draws bridge, [`tw_gpu::MAX_RUNS`]); equal to `triangles` without them.
+    pub masked_triangles: u64,
     pub clusters: u64,
     pub draw_calls: u64,
     pub occlusion: OcclusionStats,
@@ -235,6 +238,7 @@ impl Walkthrough {
             select: selection.stats,
             stream: StreamStats::default(),
             triangles: gpu.triangles,
+            masked_triangles: gpu.masked_triangles,
             clusters: gpu.clusters,
             draw_calls: gpu.draw_calls,
             occlusion: OcclusionStats::default(),
@@ -248,11 +252,33 @@ impl Walkthrough {
     /// visible objects, clusters and triangles.
     pub fn exact_visibility(&mut self, camera: &Camera) -> Result<ExactVisibility, FrameError> {
         let selection = self.full_detail(camera);
+        self.visible_in(camera, &selection)
+    }
+
+    /// Exact visibility of `camera`'s own LOD cut at pixel error `tau` (frustum culling on,
+    /// pages loaded as needed, no occlusion culling): what the occlusion culling of a frame
+    /// with this cut could at best draw. Against [`exact_visibility`](Self::exact_visibility)
+    /// it separates the culling's excess from the LOD's (a cut's triangle stands for several
+    /// full-detail ones, and may show where they do not).
+    pub fn exact_visibility_of_cut(
+        &mut self,
+        camera: &Camera,
+        tau: f32,
+    ) -> Result<ExactVisibility, FrameError> {
+        let (w, h) = self.renderer.size();
+        let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true };
+        let selection = self.streamer.select_blocking(camera, &options);
+        self.visible_in(camera, &selection)
+    }
+
+    /// The objects, clusters and triangles of `selection` left in the item buffer when all of
+    /// it is drawn (in chunks).
+    fn visible_in(&mut self, camera: &Camera, selection: &Selection) -> Result<ExactVisibility, FrameError> {
         let grid_step = self.streamer.store().header().grid_step;
         self.renderer.begin_frame();
         let mut first = true;
         let mut offset = 0u32;
-        self.for_each_chunk(&selection, |renderer, clusters| {
+        self.for_each_chunk(selection, |renderer, clusters| {
             renderer.draw_items(camera, grid_step, clusters, offset, first)?;
             first = false;
             offset += clusters.len() as u32;
@@ -447,6 +473,7 @@ impl Walkthrough {
             select: self.selection.stats,
             stream,
             triangles: gpu.triangles,
+            masked_triangles: gpu.masked_triangles,
             clusters: gpu.clusters,
             draw_calls: gpu.draw_calls,
             occlusion: culled.stats,

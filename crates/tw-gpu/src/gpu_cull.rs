@@ -716,6 +716,7 @@ impl Renderer {
             if *f == HzbResult::Visible && c.args.index_count > 0 {
                 self.stats.clusters += 1;
                 self.stats.triangles += c.args.index_count as u64 / 3;
+                self.stats.masked_triangles += c.args.index_count as u64 / 3;
             }
         }
         self.stats.draw_calls += u64::from(!list.is_empty());

@@ -90,7 +90,12 @@ const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
     pub clusters: u64,
+    /// Triangles the draws hold: with masks, the masked triangles plus the gaps between runs
+    /// that [`MAX_RUNS`] bridges.
     pub triangles: u64,
+    /// Of `triangles`, those whose mask bit is set (all of an unmasked cluster's): what the
+    /// draws would hold if every run were drawn on its own.
+    pub masked_triangles: u64,
     /// Draw calls issued (one per cluster with [`DrawMode::Direct`], one per batch indirect).
     pub draw_calls: u64,
     /// Making clusters resident: building and uploading the ones not yet on the GPU (CPU time).
@@ -780,11 +785,12 @@ impl Renderer {
                         }
                         let before = batch.len();
                         let mask = masks.and_then(|m| m.get(i).copied()).unwrap_or(u128::MAX);
-                        let drawn = push_runs(&mut batch, args, cluster, mask);
+                        let (drawn, masked) = push_runs(&mut batch, args, cluster, mask);
                         if batch.len() > before {
                             self.stats.clusters += 1;
                         }
                         self.stats.triangles += drawn;
+                        self.stats.masked_triangles += masked;
                         keys.push(pk);
                         break;
                     }
@@ -910,15 +916,20 @@ impl Renderer {
 pub const MAX_RUNS: usize = 4;
 
 /// Appends the draws of `mask`'s triangles of a resident cluster drawn whole by `args` and
-/// returns how many triangles they draw. A cluster with a malformed triangle (which the pool
-/// skipped, shifting the others) is drawn whole.
-fn push_runs(batch: &mut Vec<DrawArgs>, args: DrawArgs, cluster: &PageCluster, mask: TriangleMask) -> u64 {
+/// returns how many triangles they draw and how many of those are in the mask. A cluster with
+/// a malformed triangle (which the pool skipped, shifting the others) is drawn whole.
+fn push_runs(
+    batch: &mut Vec<DrawArgs>,
+    args: DrawArgs,
+    cluster: &PageCluster,
+    mask: TriangleMask,
+) -> (u64, u64) {
     let triangles = args.index_count / 3;
     let full = full_mask(triangles as usize);
     let well_formed = || cluster.indices.iter().all(|&v| (v as usize) < cluster.positions.len());
     if mask & full == full || triangles > 128 || !well_formed() {
         batch.push(args);
-        return triangles as u64;
+        return (triangles as u64, triangles as u64);
     }
     let mut runs = triangle_runs(mask & full);
     while runs.len() > MAX_RUNS {
@@ -935,7 +946,7 @@ fn push_runs(batch: &mut Vec<DrawArgs>, args: DrawArgs, cluster: &PageCluster, m
         });
         drawn += (end - start) as u64;
     }
-    drawn
+    (drawn, (mask & full).count_ones() as u64)
 }
 
 /// The maximal runs `[start, end)` of set bits of `mask`, in order.
@@ -1074,10 +1085,11 @@ mod tests {
         };
         let ranges = |mask: TriangleMask| {
             let mut batch = Vec::new();
-            let drawn = push_runs(&mut batch, args, &c, mask);
+            let (drawn, masked) = push_runs(&mut batch, args, &c, mask);
             for a in &batch {
                 assert_eq!((a.base_vertex, a.instance_count, a.first_instance), (40, 1, 0));
             }
+            assert_eq!(masked, (mask & 0b11_1111_1111).count_ones() as u64);
             (drawn, batch.iter().map(|a| (a.first_index, a.index_count)).collect::<Vec<_>>())
         };
         // Everything (and bits beyond the cluster): the whole range, one draw.
@@ -1098,7 +1110,7 @@ mod tests {
         let mut bad = c.clone();
         bad.indices[4] = 200;
         let mut batch = Vec::new();
-        assert_eq!(push_runs(&mut batch, args, &bad, 0b1), 10);
+        assert_eq!(push_runs(&mut batch, args, &bad, 0b1), (10, 10));
         assert_eq!(batch.len(), 1);
     }
 }

@@ -117,7 +117,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         h.push_str("<th>Min PSNR dB</th>");
     }
     if any_eff {
-        h.push_str("<th>Culling efficiency</th>");
+        h.push_str("<th>Culling efficiency</th><th>Of the cut</th>");
     }
     h.push_str("</tr>");
     for (i, r) in report.runs.iter().enumerate() {
@@ -156,6 +156,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         }
         if any_eff {
             let _ = write!(h, "<td>{}</td>", opt(s.median_culling_efficiency, 3));
+            let _ = write!(h, "<td>{}</td>", opt(s.median_cut_efficiency, 3));
         }
         h.push_str("</tr>");
     }
@@ -171,7 +172,9 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     }
     h.push_str(
         "<p class=\"note\">Percentiles interpolate linearly between ranks. Speed-up is the first run's median \
-         frame time divided by each run's, measured in the same session.</p></section>",
+         frame time divided by each run's, measured in the same session. Culling efficiency: triangles drawn ÷ \
+         triangles visible at full detail (item buffer); of the cut: ÷ triangles of the frame's own LOD cut \
+         visible in its item buffer (the culling's excess alone).</p></section>",
     );
 
     // Plots.

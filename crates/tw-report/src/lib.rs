@@ -80,6 +80,10 @@ pub struct FrameRecord {
     pub upload_ms: f64,
     pub render_ms: f64,
     pub triangles: u64,
+    /// Of `triangles`, those that passed the per-triangle occlusion tests (`hzb`): the rest
+    /// are gaps between runs of visible triangles that are drawn to save draw calls.
+    #[serde(default)]
+    pub masked_triangles: u64,
     pub clusters: u64,
     pub nodes_visited: u64,
     pub nodes_culled_frustum: u64,
@@ -113,6 +117,17 @@ pub struct FrameRecord {
     /// `--exact`: triangles drawn ÷ exact visible triangles.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub culling_efficiency: Option<f64>,
+    /// `--exact`: triangles of the frame's own LOD cut visible in its item buffer (no
+    /// occlusion culling), and triangles drawn ÷ those: the culling's own excess, without the
+    /// LOD's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cut_visible_triangles: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cut_efficiency: Option<f64>,
+    /// `--exact`: `masked_triangles` ÷ exact visible triangles (the efficiency of the tests
+    /// themselves, without the bridged gaps).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub test_efficiency: Option<f64>,
 }
 
 /// Summary statistics of one run's frames (percentiles interpolate linearly between ranks).
@@ -140,6 +155,9 @@ pub struct Summary {
     pub min_psnr_db: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_culling_efficiency: Option<f64>,
+    /// Median of the frames' `cut_efficiency` (drawn ÷ visible of the frame's own cut).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_cut_efficiency: Option<f64>,
 }
 
 impl Summary {
@@ -168,6 +186,9 @@ impl Summary {
             peak_rss_mb: peak_rss_bytes.map(|b| b as f64 / 1e6),
             min_psnr_db: psnr.iter().cloned().reduce(f64::min),
             median_culling_efficiency: stats::median(&eff),
+            median_cut_efficiency: stats::median(
+                &frames.iter().filter_map(|f| f.cut_efficiency).collect::<Vec<f64>>(),
+            ),
         }
     }
 }

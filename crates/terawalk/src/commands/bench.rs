@@ -98,7 +98,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     let mut runs = Vec::new();
     let mut reference_frames = Vec::new();
     let mut references: HashMap<usize, Image> = HashMap::new();
-    let mut exacts: HashMap<usize, ExactVisibility> = HashMap::new();
+    let mut exacts: HashMap<usize, (ExactVisibility, ExactVisibility)> = HashMap::new();
     for (ri, &strategy) in strategies.iter().enumerate() {
         let name = if args.reference { "reference".to_string() } else { strategy.name().to_string() };
         let settings = FrameSettings {
@@ -134,17 +134,21 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                         references.insert(i, reference);
                     }
                     if args.exact {
-                        exacts.insert(i, walk.exact_visibility(camera)?);
+                        let full = walk.exact_visibility(camera)?;
+                        exacts.insert(i, (full, walk.exact_visibility_of_cut(camera, args.error)?));
                     }
                 }
                 if let Some(reference) = references.get(&i) {
                     rec.psnr_db = Some(image.psnr(reference)?.min(99.0));
                     rec.differing_pixels = Some(image.differing_share(reference)?);
                 }
-                if let Some(exact) = exacts.get(&i) {
+                if let Some((exact, of_cut)) = exacts.get(&i) {
                     rec.exact_visible_triangles = Some(exact.triangles);
                     rec.exact_visible_objects = Some(exact.objects);
+                    rec.cut_visible_triangles = Some(of_cut.triangles);
+                    rec.cut_efficiency = Some(info.triangles as f64 / of_cut.triangles.max(1) as f64);
                     rec.culling_efficiency = Some(info.triangles as f64 / exact.triangles.max(1) as f64);
+                    rec.test_efficiency = Some(info.masked_triangles as f64 / exact.triangles.max(1) as f64);
                 }
             }
             records.push(rec);
@@ -225,6 +229,7 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         upload_ms: ms(info.times.upload),
         render_ms: ms(info.times.render),
         triangles: info.triangles,
+        masked_triangles: info.masked_triangles,
         clusters: info.clusters,
         nodes_visited: info.select.nodes_visited,
         nodes_culled_frustum: info.select.nodes_culled_frustum,
@@ -285,8 +290,11 @@ fn print_comparison(report: &BenchReport) {
             );
         }
         if let Some(e) = run.summary.median_culling_efficiency {
+            let of_cut = run.summary.median_cut_efficiency.map_or(String::new(), |c| {
+                format!(" (/ visible triangles of the frame's own LOD cut: median {c:.1})")
+            });
             println!(
-                "{:>10}: {}: triangles drawn / exact visible triangles: median {e:.1}",
+                "{:>10}: {}: triangles drawn / exact visible triangles: median {e:.1}{of_cut}",
                 "culling", run.name
             );
         }
