@@ -230,7 +230,7 @@ pub fn draw_culled(
                 // theirs, the occluders the ones their first pass left out.
                 let triangles = |list: &[ClusterRef]| {
                     let clusters: Vec<&PageCluster> = decoded(list).into_iter().map(|(_, c)| c).collect();
-                    test_triangles(&clusters, grid_step, &hzb, &view_proj)
+                    test_triangles(&clusters, grid_step, &hzb, &view_proj, renderer.depth_rounding() as f64)
                 };
                 let (t_masks, o_masks) = (triangles(&t.visible), triangles(&o.visible));
                 let candidates = t.visible.iter().copied().zip(t_masks);

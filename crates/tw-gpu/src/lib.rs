@@ -86,6 +86,12 @@ pub const DEFAULT_GPU_BUDGET: u64 = 512 << 20;
 /// `stage_times`: 47.5 → 35.7 ms). Copies into an `Rgba8UnormSrgb` texture keep the meaning.
 const COLOR_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba8Unorm;
 
+/// Absolute rounding of a depth written on GL: wgpu's GL backend maps clip z to GL's −1..1
+/// range in the vertex shader (z' = 2z − w) and the window transform maps it back, which leaves
+/// a few ulps of 1.0 on every depth. (The identical-image test on llvmpipe failed by 4 pixels
+/// when the triangle tests left it out.)
+pub const GL_DEPTH_ROUNDING: f32 = 4.0 * f32::EPSILON;
+
 /// What the current frame (since [`Renderer::begin_frame`]) drew and how long it took.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct FrameStats {
@@ -544,6 +550,18 @@ impl Renderer {
         )?;
         self.stats.render += start.elapsed();
         Ok(r)
+    }
+
+    /// Absolute rounding of the depths this renderer writes, beyond what the projection's
+    /// f32 arithmetic gives: [`GL_DEPTH_ROUNDING`] on GL, 0 elsewhere (Vulkan writes z/w as
+    /// the vertex stage computed it). For tests that compare a primitive's computed depth
+    /// with the depth buffer (`tw_runtime::triangle_test`).
+    pub fn depth_rounding(&self) -> f32 {
+        if self.info.backend == wgpu::Backend::Gl {
+            GL_DEPTH_ROUNDING
+        } else {
+            0.0
+        }
     }
 
     /// Whether [`query_boxes`](Self::query_boxes) returns sample counts (else 0/1: GL).

@@ -133,6 +133,13 @@ impl Hzb {
         level.depth[(y * level.width + x) as usize]
     }
 
+    /// Whether a primitive whose depth at pixel (`x`, `y`)'s centre is at most `nearest` can
+    /// show there: the occluder depth is not above it (with the relative [`DEPTH_MARGIN`], as
+    /// every test here). `x`, `y` must be inside the image.
+    pub fn pixel_shows(&self, x: u32, y: u32, nearest: f64) -> bool {
+        self.pixel_depth(x, y) as f64 * (1.0 - DEPTH_MARGIN as f64) <= nearest
+    }
+
     /// Width and height of the depth buffer (level 0).
     pub fn size(&self) -> (u32, u32) {
         (self.levels[0].width, self.levels[0].height)
@@ -241,12 +248,29 @@ impl Hzb {
     /// [`test_rect`](Self::test_rect) of the pixels `rect` (inclusive bounds, as
     /// [`pixel_rect`](Self::pixel_rect) gives them): `Occluded` or `Visible`.
     pub fn test_pixels(&self, rect: [u32; 4], nearest: f32) -> HzbResult {
+        self.test_pixels_by(rect, nearest, |_| Some(nearest))
+    }
+
+    /// [`test_pixels`](Self::test_pixels) of a primitive whose depth and footprint vary over
+    /// the rectangle: `nearest` is the nearest depth it has anywhere, and `bound(region)`, for a
+    /// sub-rectangle of `rect` (inclusive pixel bounds), the nearest depth it can have at a
+    /// pixel centre of the region that it may cover (at most `nearest`), or `None` when it can
+    /// cover none of them. Every texel on the way down the pyramid that `nearest` does not
+    /// settle is compared with its own region's bound (a region of one pixel at the bottom), so
+    /// a triangle is tested against the pixels it covers, each with the depth it has there,
+    /// rather than its whole rectangle against its nearest corner.
+    pub fn test_pixels_by(
+        &self,
+        rect: [u32; 4],
+        nearest: f32,
+        bound: impl Fn([u32; 4]) -> Option<f32>,
+    ) -> HzbResult {
         let [x0, y0, x1, y1] = rect;
         let k = self.start_level(rect);
-        let bound = nearest / (1.0 - DEPTH_MARGIN);
+        let nearest = nearest / (1.0 - DEPTH_MARGIN);
         for ty in (y0 >> k)..=(y1 >> k) {
             for tx in (x0 >> k)..=(x1 >> k) {
-                if !self.texel_occludes(k, tx, ty, rect, bound) {
+                if !self.texel_occludes(k, tx, ty, rect, nearest, &bound) {
                     return HzbResult::Visible;
                 }
             }
@@ -255,23 +279,42 @@ impl Hzb {
     }
 
     /// Whether every pixel of `rect` (inclusive pixel bounds) under texel (`tx`, `ty`) of level
-    /// `k` holds a depth above `bound`: true at once when the texel's farthest depth is; else
-    /// its children of level `k − 1` that meet the rectangle are refined, down to the pixels.
-    /// The recursion stops at the first pixel that could show the box, so a visible box costs
-    /// one path down the pyramid, and an occluded one as many texels as its outline needs.
-    fn texel_occludes(&self, k: usize, tx: u32, ty: u32, rect: [u32; 4], bound: f32) -> bool {
+    /// `k` holds a depth above the primitive's there: true at once when the texel's farthest
+    /// depth is above `nearest` (the primitive's nearest depth, margin included), or above its
+    /// bound over the pixels the texel and `rect` share (with the relative [`DEPTH_MARGIN`]),
+    /// or when the primitive covers none of those pixels; else its children of level `k − 1`
+    /// that meet the rectangle are refined, down to the pixels. The recursion stops at the
+    /// first pixel that could show the primitive, so a visible one costs one path down the
+    /// pyramid, and an occluded one as many texels as its outline needs.
+    fn texel_occludes<F: Fn([u32; 4]) -> Option<f32>>(
+        &self,
+        k: usize,
+        tx: u32,
+        ty: u32,
+        rect: [u32; 4],
+        nearest: f32,
+        bound: &F,
+    ) -> bool {
         let level = &self.levels[k];
-        if level.depth[(ty * level.width + tx) as usize] > bound {
+        let farthest = level.depth[(ty * level.width + tx) as usize];
+        if farthest > nearest {
             return true;
+        }
+        let [x0, y0, x1, y1] = rect;
+        let region =
+            [x0.max(tx << k), y0.max(ty << k), x1.min(((tx + 1) << k) - 1), y1.min(((ty + 1) << k) - 1)];
+        match bound(region) {
+            None => return true,
+            Some(b) if farthest > b / (1.0 - DEPTH_MARGIN) => return true,
+            Some(_) => {}
         }
         if k == 0 {
             return false;
         }
-        let [x0, y0, x1, y1] = rect;
         let (c, below) = (k - 1, &self.levels[k - 1]);
         for cy in (2 * ty).max(y0 >> c)..=(2 * ty + 1).min(y1 >> c).min(below.height - 1) {
             for cx in (2 * tx).max(x0 >> c)..=(2 * tx + 1).min(x1 >> c).min(below.width - 1) {
-                if !self.texel_occludes(c, cx, cy, rect, bound) {
+                if !self.texel_occludes(c, cx, cy, rect, nearest, bound) {
                     return false;
                 }
             }
@@ -363,6 +406,48 @@ mod tests {
         // A gap outside the box's rectangle does not.
         let hzb = Hzb::build(&wall(&vp, 10.0, 1..2), W, H).unwrap();
         assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Occluded);
+    }
+
+    /// `test_pixels_by`: only the pixels the primitive covers count, each with its own bound;
+    /// the walk asks for the bounds of regions inside the rectangle only.
+    #[test]
+    fn a_primitive_is_tested_by_its_own_pixels_and_depths() {
+        let c = camera();
+        let vp = view_proj(&c);
+        let (wall_depth, far) = (depth_at(&vp, 10.0), depth_at(&vp, 20.0));
+        // A one-pixel gap at column 40; the rectangle spans columns 30..=50, rows 10..=20.
+        let hzb = Hzb::build(&wall(&vp, 10.0, 40..41), W, H).unwrap();
+        let rect = [30, 10, 50, 20];
+        let inside = |r: [u32; 4]| {
+            assert!(
+                r[0] >= 30 && r[1] >= 10 && r[2] <= 50 && r[3] <= 20 && r[0] <= r[2] && r[1] <= r[3],
+                "{r:?}"
+            );
+        };
+        // Covering the gap column, behind the wall: visible through the gap.
+        let covers = |col: u32| {
+            move |r: [u32; 4]| {
+                inside(r);
+                (r[0] <= col && col <= r[2]).then_some(far)
+            }
+        };
+        assert_eq!(hzb.test_pixels_by(rect, far, covers(40)), HzbResult::Visible);
+        // Covering only column 35 (wall there): hidden, though the rectangle holds the gap.
+        assert_eq!(hzb.test_pixels_by(rect, far, covers(35)), HzbResult::Occluded);
+        assert_eq!(hzb.test_pixels(rect, far), HzbResult::Visible);
+        // Covering everything, nearer than the wall at column 35 only: visible there.
+        let nearer_at_35 = |r: [u32; 4]| {
+            inside(r);
+            Some(if r[0] <= 35 && 35 <= r[2] { wall_depth * 1.01 } else { wall_depth * 0.99 })
+        };
+        let solid = Hzb::build(&wall(&vp, 10.0, 0..0), W, H).unwrap();
+        assert_eq!(solid.test_pixels_by(rect, wall_depth * 1.01, nearer_at_35), HzbResult::Visible);
+        assert_eq!(
+            solid.test_pixels_by(rect, wall_depth * 0.99, |_| Some(wall_depth * 0.99)),
+            HzbResult::Occluded
+        );
+        // Covering nothing.
+        assert_eq!(hzb.test_pixels_by(rect, 1.0, |_| None), HzbResult::Occluded);
     }
 
     /// The refinement: a gap right beside the box's rectangle, inside the coarse texels that
