@@ -356,8 +356,7 @@ impl ScreenTriangle {
             let mut depth = pa * cx0 + pb * py + pc + error;
             (x0..=x1).any(|x| {
                 let p = [x as f64 + 0.5, py];
-                let shows = (0..3).all(|i| e[i] >= 0.0 || (e[i] >= -self.wide && self.near_edge(i, e[i], p)))
-                    && hzb.pixel_shows(x, y, depth.min(self.nearest));
+                let shows = self.inside(e, p) && hzb.pixel_shows(x, y, depth.min(self.nearest));
                 for (ei, edge) in e.iter_mut().zip(&self.edges) {
                     *ei += edge.0;
                 }
@@ -373,10 +372,12 @@ impl ScreenTriangle {
     /// inside it, so both distances are at most its longest edge + 3s: that bound (`wide`)
     /// decides at once for most centres, the exact distances for the few in between.
     fn counts_centre(&self, p: [f64; 2]) -> bool {
-        self.edges.iter().enumerate().all(|(i, &(a, b, c))| {
-            let e = a * p[0] + b * p[1] + c;
-            e >= 0.0 || (e >= -self.wide && self.near_edge(i, e, p))
-        })
+        self.inside(self.edges.map(|(a, b, c)| a * p[0] + b * p[1] + c), p)
+    }
+
+    /// [`counts_centre`](Self::counts_centre) of `p` with its edge functions `e` given.
+    fn inside(&self, e: [f64; 3], p: [f64; 2]) -> bool {
+        (0..3).all(|i| e[i] >= 0.0 || (e[i] >= -self.wide && self.near_edge(i, e[i], p)))
     }
 
     /// Whether edge `i`'s function `e` at `p`, below 0, is within what moving the edge's ends
