@@ -24,8 +24,6 @@
 //! Triangles that quantization makes degenerate are kept: every input triangle is in exactly one
 //! cell.
 
-use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
 use std::ops::Range;
 use std::path::Path;
 
@@ -36,6 +34,7 @@ use crate::error::BuildError;
 use crate::ingest::Ingested;
 use crate::redefine::Redefined;
 use crate::types::{CellMesh, GRID_STEPS};
+use crate::workio::SpillWriter;
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 44;
@@ -237,7 +236,7 @@ fn write_group(
 ) -> Result<Vec<BucketFile>, BuildError> {
     // Write buffers share a quarter of the budget, 64 KiB to 1 MiB each.
     let buf_size = (memory_budget / 4 / group.len() as u64).clamp(64 << 10, 1 << 20) as usize;
-    let mut writers = Vec::with_capacity(group.len());
+    let mut files = Vec::with_capacity(group.len());
     let mut paths = Vec::with_capacity(group.len());
     for _ in group {
         let f = tempfile::Builder::new()
@@ -246,9 +245,10 @@ fn write_group(
             .tempfile_in(work_dir)
             .map_err(|e| BuildError::io(work_dir, e))?;
         let (file, path) = f.into_parts();
-        writers.push(BufWriter::with_capacity(buf_size, file));
+        files.push(file);
         paths.push(path);
     }
+    let mut writer = SpillWriter::new(files, paths.iter().map(|p| p.to_path_buf()).collect(), buf_size);
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
     let mut recs: Vec<Option<Rec>> = Vec::new();
@@ -266,17 +266,16 @@ fn write_group(
             }
         });
         for r in recs.iter().flatten() {
-            let b = bucket_of[r.cell as usize] as usize - first;
-            writers[b].write_all(&r.encode()).map_err(|e| BuildError::io(&paths[b], e))?;
+            writer.write(bucket_of[r.cell as usize] as usize - first, &r.encode())?;
         }
         Ok(())
     })?;
-    let mut out = Vec::with_capacity(group.len());
-    for ((w, path), (cells, triangles)) in writers.into_iter().zip(paths).zip(group) {
-        w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
-        out.push(BucketFile { path, cells: cells.clone(), triangles: *triangles });
-    }
-    Ok(out)
+    drop(writer.finish()?);
+    Ok(paths
+        .into_iter()
+        .zip(group)
+        .map(|(path, (cells, triangles))| BucketFile { path, cells: cells.clone(), triangles: *triangles })
+        .collect())
 }
 
 /// One bucket in memory, its triangles grouped by cell.
@@ -356,29 +355,24 @@ impl PositionTable {
 }
 
 /// Reads a file of fixed-size records (`size` bytes each) and decodes each.
-pub(crate) fn read_records<T>(
+pub(crate) fn read_records<T: Clone + Send>(
     path: &Path,
     size: usize,
-    decode: impl Fn(&[u8]) -> T,
+    decode: impl Fn(&[u8]) -> T + Send,
 ) -> Result<Vec<T>, BuildError> {
-    let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-    let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+    let len = std::fs::metadata(path).map_err(|e| BuildError::io(path, e))?.len();
     if len % size as u64 != 0 {
         return Err(BuildError::Corrupt {
             path: path.to_path_buf(),
             message: format!("{len} bytes is not a whole number of {size}-byte records"),
         });
     }
-    let mut reader = BufReader::with_capacity(1 << 20, file);
-    let n = (len / size as u64) as usize;
-    let mut out = Vec::with_capacity(n);
-    let mut buf = vec![0u8; 4096 * size];
-    while out.len() < n {
-        let k = (n - out.len()).min(4096);
-        let bytes = &mut buf[..k * size];
-        reader.read_exact(bytes).map_err(|e| BuildError::io(path, e))?;
-        out.extend(bytes.chunks_exact(size).map(&decode));
-    }
+    let n = len / size as u64;
+    let mut out = Vec::with_capacity(n as usize);
+    crate::workio::read_ahead(path, n, size, 1 << 14, decode, |_, chunk| {
+        out.extend_from_slice(chunk);
+        Ok(())
+    })?;
     Ok(out)
 }
 

@@ -23,9 +23,7 @@
 //!
 //! Memory: O(objects) (one record per object); the triangles go to disk as they arrive.
 
-use std::fs::File;
-use std::io::{BufReader, BufWriter, Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use tempfile::TempPath;
 use tw_io::scene::SceneProgress;
@@ -33,6 +31,7 @@ use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, T
 
 use crate::error::BuildError;
 use crate::types::{Grid, GridBox, ObjectRecord};
+use crate::workio::SpillWriter;
 
 /// Bytes per triangle in the working file: 9 × f32 + u32 object id.
 pub const RECORD_BYTES: usize = 40;
@@ -102,33 +101,8 @@ impl WorkFile {
 
     /// Reads every record in order, handing out chunks of up to [`SCAN_CHUNK`] triangles with the
     /// index of the chunk's first triangle. Memory: one chunk.
-    pub fn scan(
-        &self,
-        mut f: impl FnMut(u64, &[WorkTri]) -> Result<(), BuildError>,
-    ) -> Result<(), BuildError> {
-        let path: &Path = &self.path;
-        let file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-        let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
-        if len != self.triangles * RECORD_BYTES as u64 {
-            return Err(BuildError::Corrupt {
-                path: path.to_path_buf(),
-                message: format!("{len} bytes, expected {} triangles", self.triangles),
-            });
-        }
-        let mut reader = BufReader::with_capacity(1 << 20, file);
-        let mut bytes = vec![0u8; SCAN_CHUNK * RECORD_BYTES];
-        let mut tris = Vec::with_capacity(SCAN_CHUNK);
-        let mut done = 0u64;
-        while done < self.triangles {
-            let n = (self.triangles - done).min(SCAN_CHUNK as u64) as usize;
-            let buf = &mut bytes[..n * RECORD_BYTES];
-            reader.read_exact(buf).map_err(|e| BuildError::io(path, e))?;
-            tris.clear();
-            tris.extend(buf.chunks_exact(RECORD_BYTES).map(WorkTri::decode));
-            f(done, &tris)?;
-            done += n as u64;
-        }
-        Ok(())
+    pub fn scan(&self, f: impl FnMut(u64, &[WorkTri]) -> Result<(), BuildError>) -> Result<(), BuildError> {
+        crate::workio::read_ahead(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, WorkTri::decode, f)
     }
 }
 
@@ -163,8 +137,7 @@ pub fn ingest(
         .map_err(|e| BuildError::io(work_dir, e))?;
     let (file, path) = file.into_parts();
     let mut sink = IngestSink {
-        out: BufWriter::with_capacity(1 << 20, file),
-        path: path.to_path_buf(),
+        out: SpillWriter::new(vec![file], vec![path.to_path_buf()], 1 << 20),
         origin: None,
         objects: Vec::new(),
         triangles: 0,
@@ -178,8 +151,7 @@ pub fn ingest(
         return Err(e);
     }
     let summary = streamed?;
-    sink.out.flush().map_err(|e| BuildError::io(&sink.path, e))?;
-    drop(sink.out);
+    drop(sink.out.finish()?);
     let Some(origin) = sink.origin else { return Err(BuildError::Empty) };
     let work = WorkFile { path, origin, triangles: sink.triangles };
     let (min, max) = (work.position(sink.min), work.position(sink.max));
@@ -210,8 +182,7 @@ struct ObjectAcc {
 }
 
 struct IngestSink {
-    out: BufWriter<File>,
-    path: PathBuf,
+    out: SpillWriter,
     origin: Option<[f64; 3]>,
     objects: Vec<ObjectAcc>,
     triangles: u64,
@@ -260,8 +231,7 @@ impl IngestSink {
         }
         let mut rec = [0u8; RECORD_BYTES];
         WorkTri { p, object }.encode(&mut rec);
-        if let Err(e) = self.out.write_all(&rec) {
-            let e = BuildError::io(&self.path, e);
+        if let Err(e) = self.out.write(0, &rec) {
             return Err(self.fail(e));
         }
         self.triangles += 1;

@@ -20,6 +20,7 @@ pub mod pipeline;
 pub mod redefine;
 pub mod seams;
 pub mod types;
+pub mod workio;
 
 pub use error::BuildError;
 pub use pipeline::{build, BuildOptions, BuildProgress, BuildReport, NoProgress};

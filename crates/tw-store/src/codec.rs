@@ -220,9 +220,12 @@ fn encode_cluster(c: &PageCluster, out: &mut Vec<u8>, force: Option<PositionMode
     let delta_size = 3 + packed_len(v.saturating_sub(1), delta_w.iter().sum());
     let rel: Vec<[u32; 3]> =
         c.positions.iter().map(|p| [p[0] - min[0], p[1] - min[1], p[2] - min[2]]).collect();
+    // Compression level 0 of the vertex codec: on the 10^7-triangle plant it cut the build's CPU
+    // time by ~10% (20.9 -> 18.7 user-seconds) for a store 1.3% larger than level 2 (115.2 vs
+    // 113.8 MB); the decoder reads every level.
     let meshopt_bytes = match force {
         None | Some(PositionMode::Meshopt) if v > 0 => Some(
-            meshopt::encode_vertex_buffer_level(&rel, 2, Some(1)).map_err(|e| format!("meshopt: {e:?}"))?,
+            meshopt::encode_vertex_buffer_level(&rel, 0, Some(1)).map_err(|e| format!("meshopt: {e:?}"))?,
         ),
         _ => None,
     };
