@@ -213,6 +213,38 @@ fn boundary_and_area(store: &Store, sel: &Selection) -> (usize, f64, HashSet<u8>
     (edges.values().filter(|&&n| n == 1).count(), area, levels)
 }
 
+/// Panics if a selected cluster was simplified (through any number of steps) from the geometry
+/// of a group that also has selected clusters: the DAG form of "no overlap", checked directly
+/// rather than through the area (which folds of coarse simplification can also change).
+fn assert_no_ancestor_selected(store: &Store, sel: &Selection, what: &str) {
+    let (groups, links) = (store.groups(), store.group_links());
+    let selected: HashSet<u32> = sel.clusters.iter().map(|c| c.group).collect();
+    let mut pages: HashMap<u32, Vec<tw_store::PageCluster>> = HashMap::new();
+    for c in &sel.clusters {
+        let page = pages.entry(c.page).or_insert_with(|| store.page(c.page).unwrap());
+        let cl = &page[c.index_in_page as usize];
+        if cl.self_error <= 0.0 {
+            continue; // an input cluster: made from nothing
+        }
+        let source = links.sources(c.group).iter().copied().find(|&s| {
+            let g = &groups[s as usize];
+            g.error == cl.self_error && g.sphere == cl.self_sphere
+        });
+        let source = source.unwrap_or_else(|| panic!("{what}: a cluster of group {} has no source", c.group));
+        let (mut stack, mut seen) = (vec![source], HashSet::new());
+        while let Some(g) = stack.pop() {
+            if seen.insert(g) {
+                assert!(
+                    !selected.contains(&g),
+                    "{what}: group {g} is drawn and so is a cluster of group {} made from it",
+                    c.group
+                );
+                stack.extend_from_slice(links.sources(g));
+            }
+        }
+    }
+}
+
 /// Checks the cut of `eye` looking at the scene centre at each τ: no boundary edge (the input
 /// is closed), area within [0.95, 1.001] of the input's (no overlap, no hole). Returns how many
 /// cuts mixed LOD levels and how many included HLOD groups (groups of inner nodes).
@@ -228,6 +260,7 @@ fn check_cuts(store: &Store, eyes: &[[f32; 3]], taus: &[f32], min_area: f64) -> 
         for &tau in taus {
             let sel = select(store, &cache, &cam, opts(tau, false));
             let (open_edges, area, levels) = boundary_and_area(store, &sel);
+            assert_no_ancestor_selected(store, &sel, &format!("eye {eye:?} tau {tau}"));
             assert_eq!(open_edges, 0, "eye {eye:?} tau {tau}: cracks ({} clusters)", sel.clusters.len());
             assert!(
                 area <= input_area * 1.001 && area >= input_area * min_area,
