@@ -826,13 +826,16 @@ impl Renderer {
                         // Bound the staging memory of one batch (see `UPLOADS_PER_BATCH`).
                         let uploaded = self.pool.stats().uploaded_bytes - batch_uploads_from;
                         if external.is_none() && uploaded >= self.pool.budget() / UPLOADS_PER_BATCH {
-                            self.flush(None, &color_view, format, &depth_view, &batch, clear && first)?;
+                            let clear = clear && first;
+                            batch_uploads_from = self.flush_part(
+                                &color_view,
+                                format,
+                                &depth_view,
+                                &mut batch,
+                                &mut keys,
+                                clear,
+                            )?;
                             first = false;
-                            self.wait_idle()?;
-                            self.pool.release_batch(&keys);
-                            batch.clear();
-                            keys.clear();
-                            batch_uploads_from = self.pool.stats().uploaded_bytes;
                         }
                         break;
                     }
@@ -841,15 +844,10 @@ impl Renderer {
                         return Err(GpuError::OverBudget { budget: self.pool.budget() });
                     }
                     Ensure::Full if !retried && !batch.is_empty() => {
-                        self.flush(None, &color_view, format, &depth_view, &batch, clear && first)?;
+                        let clear = clear && first;
+                        batch_uploads_from =
+                            self.flush_part(&color_view, format, &depth_view, &mut batch, &mut keys, clear)?;
                         first = false;
-                        // Let the batch finish before uploading the next, on every backend
-                        // (staging, see `UPLOADS_PER_BATCH`; on GL also the hazard above).
-                        self.wait_idle()?;
-                        self.pool.release_batch(&keys);
-                        batch.clear();
-                        keys.clear();
-                        batch_uploads_from = self.pool.stats().uploaded_bytes;
                         retried = true;
                     }
                     Ensure::Full => {
@@ -867,6 +865,27 @@ impl Renderer {
         self.pool.release_batch(&keys);
         self.stats.upload += upload;
         Ok(())
+    }
+
+    /// Submits a part of a frame drawn in several batches and waits for it before the next is
+    /// prepared, on every backend (staging, see [`UPLOADS_PER_BATCH`]; on GL also the hazard
+    /// noted in `draw`); its clusters may then be evicted. Returns the pool's uploaded bytes, from
+    /// which the next batch's uploads are counted.
+    fn flush_part(
+        &mut self,
+        color_view: &wgpu::TextureView,
+        format: Option<wgpu::TextureFormat>,
+        depth_view: &wgpu::TextureView,
+        batch: &mut Vec<DrawArgs>,
+        keys: &mut Vec<PoolKey>,
+        clear: bool,
+    ) -> Result<u64, GpuError> {
+        self.flush(None, color_view, format, depth_view, batch, clear)?;
+        self.wait_idle()?;
+        self.pool.release_batch(keys);
+        batch.clear();
+        keys.clear();
+        Ok(self.pool.stats().uploaded_bytes)
     }
 
     fn wait_idle(&self) -> Result<(), GpuError> {
