@@ -12,6 +12,7 @@ use clap::Parser;
 fn main() {
     let cli = cli::Cli::parse();
     init_logging(cli.verbose, cli.quiet);
+    on_interrupt_remove_temporaries();
     let result = match cli.command {
         cli::Command::Stats(a) => commands::stats::run(a),
         cli::Command::Generate(a) => commands::generate::run(a),
@@ -27,6 +28,19 @@ fn main() {
     if let Err(e) = result {
         eprintln!("error: {e:#}");
         std::process::exit(1);
+    }
+}
+
+/// Ctrl-C, SIGTERM or SIGHUP: remove the temporary store file and working directory of a build
+/// in progress (`tw_store::cleanup`), then exit with 130 as a shell does for an interrupt.
+fn on_interrupt_remove_temporaries() {
+    let installed = ctrlc::set_handler(|| {
+        let removed = tw_store::cleanup::remove_registered();
+        eprintln!("\ninterrupted: {removed} temporary path(s) removed");
+        std::process::exit(130);
+    });
+    if let Err(e) = installed {
+        tracing::warn!("no interrupt handler ({e}): an interrupted build may leave temporary files");
     }
 }
 

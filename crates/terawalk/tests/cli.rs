@@ -237,3 +237,44 @@ fn render_writes_a_png_of_a_store() {
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("camera") && !stderr(&o).contains("panicked"), "{}", stderr(&o));
 }
+
+/// Ctrl-C (SIGINT) and `kill` (SIGTERM) during a build: exit 130, and neither the store nor its
+/// temporary file nor the working directory is left behind.
+#[cfg(unix)]
+#[test]
+fn an_interrupted_build_leaves_nothing_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "300k", "-o", "in.ply"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    for signal in ["-INT", "-TERM"] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_terawalk"))
+            .args(["-q", "build", "in.ply", "-o", "out.tw"])
+            .current_dir(dir.path())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Wait until the build has made its working directory and temporary store file.
+        let names = || -> Vec<String> {
+            std::fs::read_dir(dir.path())
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .filter(|n| n != "in.ply")
+                .collect()
+        };
+        let start = std::time::Instant::now();
+        while names().len() < 2 && child.try_wait().unwrap().is_none() {
+            assert!(start.elapsed().as_secs() < 120, "the build made no temporary files");
+            std::thread::sleep(std::time::Duration::from_millis(5));
+        }
+        assert!(child.try_wait().unwrap().is_none(), "the build ended before the signal; use a bigger input");
+        let made = names();
+        assert!(made.iter().any(|n| n.starts_with(".terawalk-build-")), "{made:?}");
+        assert!(made.iter().any(|n| n.starts_with(".out.tw.tmp")), "{made:?}");
+        let kill = Command::new("kill").args([signal, &child.id().to_string()]).status().unwrap();
+        assert!(kill.success());
+        let out = child.wait_with_output().unwrap();
+        assert_eq!(out.status.code(), Some(130), "{signal}: {}", stderr(&out));
+        assert!(stderr(&out).contains("interrupted"), "{}", stderr(&out));
+        assert_eq!(names(), Vec::<String>::new(), "{signal}: left behind");
+    }
+}

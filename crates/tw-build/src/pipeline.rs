@@ -204,6 +204,7 @@ fn build_with_pool(
         .prefix(".terawalk-build-")
         .tempdir_in(&work_root)
         .map_err(|e| BuildError::io(&work_root, e))?;
+    let _cleanup = tw_store::cleanup::register(work.path());
     let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
     let mut t = Timer { report: &mut report, start: Instant::now() };
 

@@ -65,6 +65,7 @@
 
 #![deny(unsafe_code)]
 
+pub mod cleanup;
 pub mod codec;
 pub mod error;
 pub mod format;

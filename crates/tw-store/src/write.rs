@@ -64,6 +64,8 @@ pub struct StoreWriter {
     pos: u64,
     pages: Vec<PageEntry>,
     scratch: Vec<u8>,
+    /// Removes the temporary file if the process is interrupted ([`crate::cleanup`]).
+    _cleanup: crate::cleanup::TempGuard,
 }
 
 impl StoreWriter {
@@ -96,9 +98,17 @@ impl StoreWriter {
             builder.permissions(std::fs::Permissions::from_mode(0o666));
         }
         let tmp = builder.tempfile_in(&dir).map_err(io)?;
+        let cleanup = crate::cleanup::register(tmp.path());
         let mut out = BufWriter::with_capacity(1 << 20, tmp);
         out.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
-        Ok(StoreWriter { path, out, pos: HEADER_LEN as u64, pages: Vec::new(), scratch: Vec::new() })
+        Ok(StoreWriter {
+            path,
+            out,
+            pos: HEADER_LEN as u64,
+            pages: Vec::new(),
+            scratch: Vec::new(),
+            _cleanup: cleanup,
+        })
     }
 
     fn io(&self, source: std::io::Error) -> StoreError {
