@@ -960,10 +960,10 @@ impl Renderer {
         }
         if let Some(e) = own {
             // At most two batches in flight: a CPU driver runs a submission long after it is
-            // made, and each holds the staging copies of its uploads (a cluster-pool's worth
-            // when a full-detail frame is drawn in chunks), so without this wait they piled up
-            // to several times the GPU budget. Waiting for the previous batch, not this one,
-            // keeps the CPU preparing the next batch while the GPU draws.
+            // made, and each holds the staging copies of its uploads (up to a quarter of the
+            // GPU budget, `UPLOADS_PER_BATCH`), so without this wait they piled up over
+            // frames. Waiting for the previous batch, not this one, keeps the CPU preparing
+            // the next batch while the GPU draws.
             let index = self.queue.submit([e.finish()]);
             if let Some(previous) = self.in_flight.replace(index) {
                 self.device

@@ -8,10 +8,11 @@
 //! gigabytes of working files behind.
 
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Mutex;
 
 static PATHS: Mutex<Vec<(u64, PathBuf)>> = Mutex::new(Vec::new());
-static NEXT: Mutex<u64> = Mutex::new(0);
+static NEXT_ID: AtomicU64 = AtomicU64::new(0);
 
 /// Keeps `path` registered until dropped.
 #[derive(Debug)]
@@ -21,11 +22,7 @@ pub struct TempGuard {
 
 /// Registers `path` (a file or a directory) for [`remove_registered`].
 pub fn register(path: &Path) -> TempGuard {
-    let id = {
-        let mut next = NEXT.lock().unwrap_or_else(|e| e.into_inner());
-        *next += 1;
-        *next
-    };
+    let id = NEXT_ID.fetch_add(1, Ordering::Relaxed);
     PATHS.lock().unwrap_or_else(|e| e.into_inner()).push((id, path.to_path_buf()));
     TempGuard { id }
 }
