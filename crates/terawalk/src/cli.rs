@@ -215,6 +215,10 @@ pub struct RenderArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub size: (u32, u32),
+    /// Samples per pixel: 1, or 4 for 4× multisample anti-aliasing (occlusion culling stays
+    /// conservative for every sample).
+    #[arg(long, default_value_t = 1, value_parser = parse_samples)]
+    pub samples: u32,
     /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
     /// whole scene from an oblique direction.
     #[arg(long)]
@@ -325,6 +329,10 @@ pub struct BenchArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub size: (u32, u32),
+    /// Samples per pixel: 1, or 4 for 4× multisample anti-aliasing (occlusion culling stays
+    /// conservative for every sample).
+    #[arg(long, default_value_t = 1, value_parser = parse_samples)]
+    pub samples: u32,
     /// Pixel error threshold τ of the LOD cut.
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
@@ -416,7 +424,14 @@ pub struct DemoArgs {
     pub frames: usize,
 }
 
-pub fn parse_size(s: &str) -> Result<(u32, u32), String> {
+pub fn parse_samples(s: &str) -> Result<u32, String> {
+    match s.parse::<u32>() {
+        Ok(n) if tw_gpu::SUPPORTED_SAMPLES.contains(&n) => Ok(n),
+        _ => Err(format!("expected one of {:?} samples per pixel, got {s:?}", tw_gpu::SUPPORTED_SAMPLES)),
+    }
+}
+
+fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size must be WIDTHxHEIGHT, got {s:?}"))?;
     let w: u32 = w.trim().parse().map_err(|_| format!("bad width in {s:?}"))?;
     let h: u32 = h.trim().parse().map_err(|_| format!("bad height in {s:?}"))?;

@@ -218,8 +218,11 @@ pub fn draw_culled(
         Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
         Occlusion::Hzb => {
             let depth = renderer.read_depth()?;
+            // With multisampling the depth is each pixel's farthest sample, and a pixel is
+            // its samples to the tests (tw_gpu::msaa).
             let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
-                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?;
+                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?
+                .with_samples(renderer.sample_positions());
             let view_proj = camera.projection_reverse_z(w as f32 / h as f32) * camera.view();
             let t = test_clusters(&split.candidates, &hzb, &view_proj, cluster_box);
             let o = test_clusters(&split.occluders, &hzb, &view_proj, cluster_box);

@@ -2,7 +2,9 @@
 //! gives the image of `--occlusion none`, pixel for pixel, on a walk through a generated plant's
 //! interior (smooth camera motion) and on camera teleports (the two-pass scheme draws the newly
 //! visible clusters in the same frame). Each strategy must also cull something on the walk, so
-//! the comparison is not trivially true. On GL (llvmpipe) and Vulkan (lavapipe); without an
+//! the comparison is not trivially true. The same with 4× multisampling (tw_gpu::msaa: the
+//! tests then treat a pixel as its four samples; Vulkan only, GL refuses it). On GL (llvmpipe)
+//! and Vulkan (lavapipe); without an
 //! adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.
 
 use std::sync::{Arc, OnceLock};
@@ -44,11 +46,12 @@ struct Run {
 
 /// Renders `cameras` with each strategy (the same cut: pages loaded before drawing; `hzb` with
 /// triangle tests, without, and switching between the two every frame) and checks every image
-/// against `none`.
-fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<Vec<Run>> {
+/// against `none`, at `samples` per pixel.
+fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera], samples: u32) -> Option<Vec<Run>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
     let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
+    w.renderer_mut().set_samples(samples).unwrap();
     for c in cameras {
         let s = FrameSettings {
             tau: 1.0,
@@ -104,9 +107,9 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera]) -> Option<V
     Some(runs)
 }
 
-fn conservative_on_a_walk(backends: wgpu::Backends, what: &str) {
+fn conservative_on_a_walk(backends: wgpu::Backends, what: &str, samples: u32) {
     let cameras = walk_cameras(&store());
-    let Some(runs) = compare(backends, what, &cameras) else { return };
+    let Some(runs) = compare(backends, what, &cameras, samples) else { return };
     for r in &runs {
         eprintln!(
             "{what}, {} (triangle tests {}): {} clusters culled over {} frames ({} by hidden nodes), {} \
@@ -132,31 +135,41 @@ fn conservative_on_a_walk(backends: wgpu::Backends, what: &str) {
     );
 }
 
-fn conservative_on_teleports(backends: wgpu::Backends, what: &str) {
+fn conservative_on_teleports(backends: wgpu::Backends, what: &str, samples: u32) {
     // Jumps between far-apart walk cameras: last frame's visible set is useless as occluders.
     let walk = walk_cameras(&store());
     let cameras: Vec<Camera> = (0..8).map(|i| walk[(i * 7) % walk.len()]).collect();
-    compare(backends, what, &cameras);
+    compare(backends, what, &cameras, samples);
 }
 
 #[test]
 fn occlusion_is_conservative_on_a_walk_vulkan() {
-    conservative_on_a_walk(wgpu::Backends::VULKAN, "vulkan");
+    conservative_on_a_walk(wgpu::Backends::VULKAN, "vulkan", 1);
 }
 
 #[test]
 fn occlusion_is_conservative_on_a_walk_gl() {
-    conservative_on_a_walk(wgpu::Backends::GL, "gl");
+    conservative_on_a_walk(wgpu::Backends::GL, "gl", 1);
 }
 
 #[test]
 fn occlusion_is_conservative_on_teleports_vulkan() {
-    conservative_on_teleports(wgpu::Backends::VULKAN, "vulkan");
+    conservative_on_teleports(wgpu::Backends::VULKAN, "vulkan", 1);
 }
 
 #[test]
 fn occlusion_is_conservative_on_teleports_gl() {
-    conservative_on_teleports(wgpu::Backends::GL, "gl");
+    conservative_on_teleports(wgpu::Backends::GL, "gl", 1);
+}
+
+#[test]
+fn occlusion_is_conservative_with_msaa_on_a_walk_vulkan() {
+    conservative_on_a_walk(wgpu::Backends::VULKAN, "vulkan, 4 samples", 4);
+}
+
+#[test]
+fn occlusion_is_conservative_with_msaa_on_teleports_vulkan() {
+    conservative_on_teleports(wgpu::Backends::VULKAN, "vulkan, 4 samples", 4);
 }
 
 /// The queries' visible-pixel cut-off: with sample counts (Vulkan) a cut-off culls at least

@@ -38,7 +38,7 @@ pub(crate) struct Pipelines {
     pub bind_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
     shade: wgpu::ShaderModule,
-    shaded: Vec<(wgpu::TextureFormat, wgpu::RenderPipeline)>,
+    shaded: Vec<((wgpu::TextureFormat, u32), wgpu::RenderPipeline)>,
     item: Option<wgpu::RenderPipeline>,
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
     pub primitive_index: bool,
@@ -98,13 +98,18 @@ impl Pipelines {
         }
     }
 
-    /// The shaded pipeline drawing into `format`, created on first use.
-    pub fn shaded(&mut self, device: &wgpu::Device, format: wgpu::TextureFormat) -> &wgpu::RenderPipeline {
-        let i = match self.shaded.iter().position(|(f, _)| *f == format) {
+    /// The shaded pipeline drawing into `format` with `samples` per pixel, created on first use.
+    pub fn shaded(
+        &mut self,
+        device: &wgpu::Device,
+        format: wgpu::TextureFormat,
+        samples: u32,
+    ) -> &wgpu::RenderPipeline {
+        let i = match self.shaded.iter().position(|(k, _)| *k == (format, samples)) {
             Some(i) => i,
             None => {
-                let p = pipeline(device, &self.layout, &self.shade, "vs_shade", "fs_main", format);
-                self.shaded.push((format, p));
+                let p = pipeline(device, &self.layout, &self.shade, "vs_shade", "fs_main", format, samples);
+                self.shaded.push(((format, samples), p));
                 self.shaded.len() - 1
             }
         };
@@ -127,7 +132,7 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item = Some(pipeline(device, &self.layout, &module, "vs_main", "fs_items", ITEM_FORMAT));
+            self.item = Some(pipeline(device, &self.layout, &module, "vs_main", "fs_items", ITEM_FORMAT, 1));
         }
         self.item.as_ref().expect("just created")
     }
@@ -140,6 +145,7 @@ fn pipeline(
     vertex: &str,
     fragment: &str,
     format: wgpu::TextureFormat,
+    samples: u32,
 ) -> wgpu::RenderPipeline {
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(fragment),
@@ -166,7 +172,7 @@ fn pipeline(
             stencil: Default::default(),
             bias: Default::default(),
         }),
-        multisample: Default::default(),
+        multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
         fragment: Some(wgpu::FragmentState {
             module,
             entry_point: Some(fragment),

@@ -249,6 +249,9 @@ pub(crate) struct GpuCull {
     /// 0: the candidates, 1: the occluders.
     sets: [CullSet; 2],
     timestamps: Option<(wgpu::QuerySet, wgpu::Buffer)>,
+    /// How far a pixel's samples reach from its centre ([`tw_runtime::hzb::sample_spread`]):
+    /// the rectangles are widened by it, as the CPU test does with multisampling.
+    pub spread: f32,
 }
 
 fn layout_entry(binding: u32, ty: wgpu::BindingType) -> wgpu::BindGroupLayoutEntry {
@@ -350,6 +353,7 @@ impl GpuCull {
             pyramid: None,
             sets: Default::default(),
             timestamps,
+            spread: 0.0,
         }
     }
 
@@ -446,7 +450,7 @@ impl GpuCull {
         CullUniform {
             view_proj: view_proj.to_cols_array_2d(),
             size: [p.size.0, p.size.1, p.levels.len() as u32, n as u32],
-            params: [RECT_SLACK_PX + GPU_RECT_GUARD_PX, DEPTH_MARGIN, GPU_DEPTH_GUARD, 0.0],
+            params: [RECT_SLACK_PX + GPU_RECT_GUARD_PX + self.spread, DEPTH_MARGIN, GPU_DEPTH_GUARD, 0.0],
             mode: [compact as u32, write_args as u32, 0, 0],
             levels: p.level_table(),
         }
@@ -593,6 +597,7 @@ impl Renderer {
             self.pool.release_batch(&keys);
             let view = self.color_view.clone();
             let shade = Pass::Shade { view: &view, format: COLOR_FORMAT };
+            self.depth_stale = self.samples > 1;
             self.draw_pass(None, shade, size, camera, grid_step, candidates, None, false)?;
             return Ok(GpuCullResult {
                 candidates: vec![HzbResult::Visible; candidates.len()],
@@ -608,6 +613,8 @@ impl Renderer {
         let occluders: Vec<Candidate> =
             occluder_boxes.iter().map(|&b| Candidate::new(b, DrawArgs::zeroed())).collect();
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(&self.device));
+        cull.spread =
+            tw_runtime::hzb::sample_spread(tw_runtime::hzb::sample_positions(self.samples).unwrap_or(&[]));
         cull.pyramid(&self.device, &self.queue, &self.depth)?;
         let u0 = cull.uniform(&view_proj, list.len(), compact, true);
         cull.sets[0].prepare(&self.device, &self.queue, &list, &u0);
@@ -620,6 +627,8 @@ impl Renderer {
         // 2–3. Pyramid from the occluders' depth, cull (and compaction). Timestamps: a pair
         // per compute pass encoded.
         let mut passes = 0u32;
+        self.encode_depth_resolve(&mut encoder);
+        let cull = self.gpu_cull.as_ref().expect("made above");
         if !list.is_empty() {
             cull.encode(&self.device, &mut encoder, true, 0, list.len(), compact, 0);
             passes += 1;
@@ -635,20 +644,25 @@ impl Renderer {
             );
             self.bind_generation = self.pool.generation;
         }
-        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT).clone();
+        let color_view = self.color_view.clone();
+        let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT };
+        let att = self.attachments(&shade, size, self.depth_view.clone());
+        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples).clone();
         let cull = self.gpu_cull.as_ref().expect("made above");
         let set0 = cull.sets[0].buffers.as_ref().expect("prepared above");
+        // Handles, so that the depth resolve below may borrow the renderer.
+        let (args0, state0) = (set0.args.clone(), set0.state.clone());
         if let (Some(arena), false) = (self.pool.arena(), list.is_empty()) {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("gpu hzb draw"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &self.color_view,
+                    view: &att.color,
                     depth_slice: None,
-                    resolve_target: None,
+                    resolve_target: att.resolve.as_ref(),
                     ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &self.depth_view,
+                    view: &att.depth,
                     depth_ops: Some(wgpu::Operations {
                         load: wgpu::LoadOp::Load,
                         store: wgpu::StoreOp::Store,
@@ -664,13 +678,16 @@ impl Renderer {
             pass.set_vertex_buffer(0, arena.slice(..));
             pass.set_index_buffer(arena.slice(..), wgpu::IndexFormat::Uint32);
             if compact {
-                pass.multi_draw_indexed_indirect_count(&set0.args, 0, &set0.state, 0, list.len() as u32);
+                pass.multi_draw_indexed_indirect_count(&args0, 0, &state0, 0, list.len() as u32);
             } else {
-                pass.multi_draw_indexed_indirect(&set0.args, 0, list.len() as u32);
+                pass.multi_draw_indexed_indirect(&args0, 0, list.len() as u32);
             }
         }
         // 5. Rebuild from the final depth, test the occluders.
+        self.depth_stale = self.samples > 1;
         if !occluders.is_empty() {
+            self.encode_depth_resolve(&mut encoder);
+            let cull = self.gpu_cull.as_ref().expect("made above");
             cull.encode(&self.device, &mut encoder, true, 1, occluders.len(), false, 2 * passes);
             passes += 1;
         }
@@ -678,6 +695,7 @@ impl Renderer {
         let bytes0 = 4 + 4 * list.len() as u64;
         let bytes1 = if occluders.is_empty() { 0 } else { 4 + 4 * occluders.len() as u64 };
         let ts_at = (bytes0 + bytes1).next_multiple_of(8);
+        let cull = self.gpu_cull.as_ref().expect("made above");
         let timestamps = cull.timestamps.as_ref().filter(|_| passes > 0);
         let ts_bytes = if timestamps.is_some() { 2 * passes as u64 * wgpu::QUERY_SIZE as u64 } else { 0 };
         let total = ts_at + ts_bytes;
@@ -685,7 +703,7 @@ impl Renderer {
             encoder.resolve_query_set(q, 0..2 * passes, resolve, 0);
         }
         let target = self.readback.buffer(&self.device, total);
-        encoder.copy_buffer_to_buffer(&set0.state, 0, target, 0, bytes0);
+        encoder.copy_buffer_to_buffer(&state0, 0, target, 0, bytes0);
         if bytes1 > 0 {
             let set1 = cull.sets[1].buffers.as_ref().expect("prepared above");
             encoder.copy_buffer_to_buffer(&set1.state, 0, target, bytes0, bytes1);
@@ -744,8 +762,11 @@ impl Renderer {
             return Err(GpuError::NotOwnTarget { what: "test_boxes_gpu" });
         }
         let view_proj = camera.projection_reverse_z(self.width as f32 / self.height as f32) * camera.view();
+        self.resolve_depth();
         let (device, queue) = (&self.device, &self.queue);
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(device));
+        cull.spread =
+            tw_runtime::hzb::sample_spread(tw_runtime::hzb::sample_positions(self.samples).unwrap_or(&[]));
         cull.pyramid(device, queue, &self.depth)?;
         test_boxes(cull, device, queue, &mut self.readback, true, &view_proj, boxes)
     }
@@ -758,6 +779,7 @@ impl Renderer {
         if !self.last_own {
             return Err(GpuError::NotOwnTarget { what: "read_gpu_hzb" });
         }
+        self.resolve_depth();
         let (device, queue) = (&self.device, &self.queue);
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(device));
         cull.pyramid(device, queue, &self.depth)?;
@@ -814,7 +836,7 @@ fn read_pyramid(
             depth: values[o as usize..(o + w * h) as usize].to_vec(),
         })
         .collect();
-    Ok(Hzb { levels })
+    Ok(Hzb::from_levels(levels))
 }
 
 #[cfg(test)]

@@ -32,12 +32,18 @@ impl Image {
         self.rgba.chunks_exact(4).filter(|p| p[3] != 0).count()
     }
 
-    /// The image with [`BACKGROUND`] where nothing was drawn, opaque.
+    /// The image composited over [`BACKGROUND`], opaque. The renderer clears to transparent
+    /// black, so a pixel is premultiplied by its coverage: 255 where geometry covers it, 0
+    /// where nothing was drawn, in between on the edges of a multisampled frame ([`crate::msaa`]).
     pub fn opaque(&self) -> Vec<u8> {
         let mut out = self.rgba.clone();
         for p in out.chunks_exact_mut(4) {
-            if p[3] == 0 {
-                p[..3].copy_from_slice(&BACKGROUND);
+            let rest = 255 - p[3] as u32;
+            if rest > 0 {
+                for c in 0..3 {
+                    let v = p[c] as u32 + (rest * BACKGROUND[c] as u32 + 127) / 255;
+                    p[c] = v.min(255) as u8;
+                }
             }
             p[3] = 255;
         }

@@ -45,6 +45,7 @@ pub mod error;
 pub mod gpu_cull;
 pub mod ids;
 pub mod image;
+pub mod msaa;
 pub mod pool;
 pub mod query;
 mod readback;
@@ -64,6 +65,7 @@ pub use error::GpuError;
 pub use gpu_cull::GpuCullResult;
 pub use ids::{ClusterVisibility, Item, ItemBuffer, VisibleSet};
 pub use image::Image;
+pub use msaa::SUPPORTED_SAMPLES;
 pub use pool::{PoolStats, MIN_BUDGET};
 
 use draw::{IndirectArgs, Pipelines, Uniforms, DEPTH_FORMAT, ITEM_FORMAT};
@@ -127,6 +129,16 @@ enum Pass<'a> {
     Items,
 }
 
+/// The views one pass draws into: `color` (multisampled when `resolve` is set: resolved into
+/// it at the end of each render pass) and `depth`, at `samples` per pixel.
+#[derive(Clone)]
+struct Attachments {
+    color: wgpu::TextureView,
+    resolve: Option<wgpu::TextureView>,
+    depth: wgpu::TextureView,
+    samples: u32,
+}
+
 /// The wgpu renderer; see the crate documentation.
 pub struct Renderer {
     device: wgpu::Device,
@@ -166,6 +178,15 @@ pub struct Renderer {
     /// The last batch submitted by [`Renderer::flush`], not yet known to be finished: the next
     /// flush waits for it (see there).
     in_flight: Option<wgpu::SubmissionIndex>,
+    /// Samples per pixel of the shaded passes ([`msaa`]).
+    samples: u32,
+    /// Multisampled targets: the own target's, and one for a caller view's size and format.
+    msaa_own: Option<msaa::MsaaTarget>,
+    msaa_view: Option<msaa::MsaaTarget>,
+    depth_resolve: Option<msaa::DepthResolve>,
+    /// Whether the own single-sample depth lags behind the multisampled one (a shaded pass
+    /// drew since the last resolve).
+    depth_stale: bool,
 }
 
 /// A batch is submitted (and waited for before the next is prepared) once it has uploaded a
@@ -322,6 +343,11 @@ impl Renderer {
             stats: FrameStats::default(),
             last_own: false,
             in_flight: None,
+            samples: 1,
+            msaa_own: None,
+            msaa_view: None,
+            depth_resolve: None,
+            depth_stale: false,
             device,
             queue,
             info,
@@ -359,6 +385,61 @@ impl Renderer {
     /// Whether the item buffer has triangle ids (`Features::PRIMITIVE_INDEX`).
     pub fn has_triangle_ids(&self) -> bool {
         self.pipelines.primitive_index
+    }
+
+    /// Sets the samples per pixel of the shaded passes: 1, or 4 for 4× multisampling
+    /// ([`msaa`]; its targets take [`Renderer::target_bytes`] more GPU memory). The item buffer
+    /// stays single-sample. Call between frames. Not on GL: wgpu's GL backend on llvmpipe
+    /// resolved multisampled frames to nothing or to one sample (tests/frame.rs `msaa_gl`).
+    pub fn set_samples(&mut self, samples: u32) -> Result<(), GpuError> {
+        if !SUPPORTED_SAMPLES.contains(&samples) {
+            return Err(GpuError::Gpu(format!(
+                "{samples} samples per pixel are not supported (use one of {SUPPORTED_SAMPLES:?})"
+            )));
+        }
+        if samples > 1 && !self.multisampling_supported() {
+            return Err(GpuError::Gpu(format!(
+                "multisampling is not supported on the {:?} backend (use Vulkan: WGPU_BACKEND=vulkan)",
+                self.info.backend
+            )));
+        }
+        if samples != self.samples {
+            self.samples = samples;
+            self.msaa_own = None;
+            self.msaa_view = None;
+            self.depth_resolve = None;
+            self.box_queries = None;
+            self.depth_stale = false;
+        }
+        Ok(())
+    }
+
+    /// Whether [`Renderer::set_samples`] accepts more than one sample (every backend but GL).
+    pub fn multisampling_supported(&self) -> bool {
+        self.info.backend != wgpu::Backend::Gl
+    }
+
+    /// Samples per pixel of the shaded passes ([`Renderer::set_samples`]).
+    pub fn samples(&self) -> u32 {
+        self.samples
+    }
+
+    /// Where those samples lie in a pixel (x, y from its top-left corner): what the CPU
+    /// occlusion tests take ([`tw_runtime::hzb::Hzb::with_samples`]) to stay conservative.
+    pub fn sample_positions(&self) -> &'static [[f32; 2]] {
+        tw_runtime::hzb::sample_positions(self.samples).expect("set_samples accepts only these")
+    }
+
+    /// GPU memory of the own render targets (colour, depth, and the multisampled ones) in
+    /// bytes; the item buffer, made by the first [`Renderer::item_buffer`], adds 16 B a pixel.
+    pub fn target_bytes(&self) -> u64 {
+        let pixels = self.width as u64 * self.height as u64;
+        let msaa = if self.samples > 1 {
+            msaa::MsaaTarget::bytes((self.width, self.height), self.samples)
+        } else {
+            0
+        };
+        pixels * 8 + msaa
     }
 
     /// Sets the GPU-memory budget for resident cluster geometry (bytes; at least
@@ -472,6 +553,7 @@ impl Renderer {
                 self.last_own = true;
                 let size = (self.width, self.height);
                 let pass = Pass::Shade { view: &view, format: COLOR_FORMAT };
+                self.depth_stale = self.samples > 1;
                 self.draw_pass(None, pass, size, camera, grid_step, clusters, masks, clear)
             }
             Target::View { view, format, size } => {
@@ -526,6 +608,7 @@ impl Renderer {
             return Err(GpuError::NotOwnTarget { what: "read_depth" });
         }
         let start = Instant::now();
+        self.resolve_depth();
         let d = if self.info.backend == wgpu::Backend::Gl {
             let copy = self.depth_copy.get_or_insert_with(|| depth::DepthCopy::new(&self.device));
             copy.read(&self.device, &self.queue, &mut self.readback, &self.depth)?
@@ -547,19 +630,31 @@ impl Renderer {
         let start = Instant::now();
         let aspect = self.width as f32 / self.height as f32;
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
+        // With multisampling the boxes are rasterized at the same samples against the
+        // multisampled depth itself (no resolve); counts are given back in pixels (rounded up).
+        let samples = self.samples;
+        let depth_view = match &self.msaa_own {
+            Some(t) if samples > 1 => t.depth.clone(),
+            _ => self.depth_view.clone(),
+        };
         let q = self
             .box_queries
-            .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT));
-        let r = q.run(
+            .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT, samples));
+        let mut r = q.run(
             &self.device,
             &self.queue,
             &mut self.readback,
-            &self.depth_view,
+            &depth_view,
             view_proj,
             camera.eye,
             camera.near,
             boxes,
         )?;
+        if samples > 1 && self.queries_count_samples() {
+            for c in r.iter_mut().filter(|c| **c != query::EYE_INSIDE) {
+                *c = c.div_ceil(samples as u64);
+            }
+        }
         self.stats.render += start.elapsed();
         Ok(r)
     }
@@ -576,7 +671,7 @@ impl Renderer {
         }
     }
 
-    /// Whether [`query_boxes`](Self::query_boxes) returns sample counts (else 0/1: GL).
+    /// Whether [`query_boxes`](Self::query_boxes) returns pixel counts (else 0/1: GL).
     pub fn queries_count_samples(&self) -> bool {
         self.info.backend != wgpu::Backend::Gl
     }
@@ -684,6 +779,7 @@ impl Renderer {
     ) -> Result<(), GpuError> {
         let size = (self.width, self.height);
         self.item_base = first_number;
+        self.depth_stale = false;
         self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, None, clear)
     }
 
@@ -730,6 +826,67 @@ impl Renderer {
             headlight: (camera.eye - camera.target).normalize_or(Vec3::Z).extend(0.0).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// The attachments of `pass` into a target of `size` whose single-sample depth is
+    /// `depth_view`: with multisampling, a shaded pass draws into the multisampled targets of
+    /// that size and format (made on first use) and resolves into the pass's view.
+    fn attachments(
+        &mut self,
+        pass: &Pass<'_>,
+        size: (u32, u32),
+        depth_view: wgpu::TextureView,
+    ) -> Attachments {
+        match *pass {
+            Pass::Items => Attachments {
+                color: self.items.as_ref().expect("made before").1.clone(),
+                resolve: None,
+                depth: depth_view,
+                samples: 1,
+            },
+            Pass::Shade { view, .. } if self.samples == 1 => {
+                Attachments { color: view.clone(), resolve: None, depth: depth_view, samples: 1 }
+            }
+            Pass::Shade { view, format } => {
+                let own = size == (self.width, self.height) && format == COLOR_FORMAT;
+                let (device, samples) = (&self.device, self.samples);
+                let slot = if own { &mut self.msaa_own } else { &mut self.msaa_view };
+                if slot.as_ref().is_none_or(|t| t.size != size || t.format != format) {
+                    *slot = Some(msaa::MsaaTarget::new(device, size, format, samples));
+                }
+                let t = slot.as_ref().expect("made above");
+                Attachments {
+                    color: t.color.clone(),
+                    resolve: Some(view.clone()),
+                    depth: t.depth.clone(),
+                    samples,
+                }
+            }
+        }
+    }
+
+    /// Brings the own single-sample depth up to date with the multisampled one (the farthest
+    /// sample of each pixel, [`msaa`]) when a shaded pass drew since; submits without waiting.
+    fn resolve_depth(&mut self) {
+        if !self.depth_stale {
+            return;
+        }
+        let mut encoder = self
+            .device
+            .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("depth resolve") });
+        self.encode_depth_resolve(&mut encoder);
+        self.queue.submit([encoder.finish()]);
+    }
+
+    /// Records [`resolve_depth`](Self::resolve_depth)'s pass into `encoder` (when needed).
+    fn encode_depth_resolve(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        let Some(target) = self.msaa_own.as_ref().filter(|_| self.depth_stale) else { return };
+        if self.depth_resolve.as_ref().is_none_or(|r| r.samples() != self.samples) {
+            self.depth_resolve = Some(msaa::DepthResolve::new(&self.device, self.samples));
+        }
+        let resolve = self.depth_resolve.as_ref().expect("made above");
+        resolve.encode(&self.device, encoder, &target.depth_only, &self.depth_view);
+        self.depth_stale = false;
     }
 
     /// The depth view for a target of `size`.
@@ -781,10 +938,7 @@ impl Renderer {
             let v = t.create_view(&Default::default());
             self.items = Some((t, v));
         }
-        let color_view = match &pass {
-            Pass::Shade { view, .. } => (*view).clone(),
-            Pass::Items => self.items.as_ref().expect("created above").1.clone(),
-        };
+        let att = self.attachments(&pass, size, depth_view);
         let format = match pass {
             Pass::Shade { format, .. } => Some(format),
             Pass::Items => None,
@@ -827,14 +981,8 @@ impl Renderer {
                         let uploaded = self.pool.stats().uploaded_bytes - batch_uploads_from;
                         if external.is_none() && uploaded >= self.pool.budget() / UPLOADS_PER_BATCH {
                             let clear = clear && first;
-                            batch_uploads_from = self.flush_part(
-                                &color_view,
-                                format,
-                                &depth_view,
-                                &mut batch,
-                                &mut keys,
-                                clear,
-                            )?;
+                            batch_uploads_from =
+                                self.flush_part(&att, format, &mut batch, &mut keys, clear)?;
                             first = false;
                         }
                         break;
@@ -845,8 +993,7 @@ impl Renderer {
                     }
                     Ensure::Full if !retried && !batch.is_empty() => {
                         let clear = clear && first;
-                        batch_uploads_from =
-                            self.flush_part(&color_view, format, &depth_view, &mut batch, &mut keys, clear)?;
+                        batch_uploads_from = self.flush_part(&att, format, &mut batch, &mut keys, clear)?;
                         first = false;
                         retried = true;
                     }
@@ -859,7 +1006,7 @@ impl Renderer {
                 }
             }
         }
-        self.flush(external.take(), &color_view, format, &depth_view, &batch, clear && first)?;
+        self.flush(external.take(), &att, format, &batch, clear && first)?;
         // Submitted: a later draw of the same frame (the second pass of occlusion culling, the
         // next chunk of a reference frame) may evict these if it needs the room.
         self.pool.release_batch(&keys);
@@ -873,14 +1020,13 @@ impl Renderer {
     /// which the next batch's uploads are counted.
     fn flush_part(
         &mut self,
-        color_view: &wgpu::TextureView,
+        att: &Attachments,
         format: Option<wgpu::TextureFormat>,
-        depth_view: &wgpu::TextureView,
         batch: &mut Vec<DrawArgs>,
         keys: &mut Vec<PoolKey>,
         clear: bool,
     ) -> Result<u64, GpuError> {
-        self.flush(None, color_view, format, depth_view, batch, clear)?;
+        self.flush(None, att, format, batch, clear)?;
         self.wait_idle()?;
         self.pool.release_batch(keys);
         batch.clear();
@@ -899,9 +1045,8 @@ impl Renderer {
     fn flush(
         &mut self,
         external: Option<&mut wgpu::CommandEncoder>,
-        color_view: &wgpu::TextureView,
+        att: &Attachments,
         format: Option<wgpu::TextureFormat>,
-        depth_view: &wgpu::TextureView,
         batch: &[DrawArgs],
         clear: bool,
     ) -> Result<(), GpuError> {
@@ -918,7 +1063,7 @@ impl Renderer {
             _ => None,
         };
         let pipeline = match format {
-            Some(f) => self.pipelines.shaded(&self.device, f).clone(),
+            Some(f) => self.pipelines.shaded(&self.device, f, att.samples).clone(),
             None => self.pipelines.item(&self.device).clone(),
         };
         let mut own = None;
@@ -935,13 +1080,13 @@ impl Renderer {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("clusters"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: color_view,
+                    view: &att.color,
                     depth_slice: None,
-                    resolve_target: None,
+                    resolve_target: att.resolve.as_ref(),
                     ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
                 })],
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: depth_view,
+                    view: &att.depth,
                     depth_ops: Some(wgpu::Operations {
                         load: if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load },
                         store: wgpu::StoreOp::Store,

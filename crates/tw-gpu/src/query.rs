@@ -48,7 +48,13 @@ const BOX_INDICES: [u32; 36] = [
 ];
 
 impl BoxQueries {
-    pub fn new(device: &wgpu::Device, queue: &wgpu::Queue, depth_format: wgpu::TextureFormat) -> BoxQueries {
+    /// Box queries against a depth target of `depth_format` with `samples` per pixel.
+    pub fn new(
+        device: &wgpu::Device,
+        queue: &wgpu::Queue,
+        depth_format: wgpu::TextureFormat,
+        samples: u32,
+    ) -> BoxQueries {
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("box queries"),
             entries: &[wgpu::BindGroupLayoutEntry {
@@ -92,7 +98,7 @@ impl BoxQueries {
                 stencil: Default::default(),
                 bias: Default::default(),
             }),
-            multisample: Default::default(),
+            multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
             fragment: None,
             multiview_mask: None,
             cache: None,

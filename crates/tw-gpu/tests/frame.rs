@@ -761,3 +761,66 @@ fn gpu_hzb_cull_gl() {
 fn gpu_hzb_cull_vulkan() {
     gpu_cull(wgpu::Backends::VULKAN);
 }
+
+/// 4× multisampling: the resolved frame equals the single-sample one inside the quads, blends
+/// with the background only on their edges (premultiplied by coverage: alpha strictly between 0
+/// and 255 there), and its depth resolve is the farthest sample of each pixel.
+fn msaa(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    let back = quad(0, 0, 100, 100, 10, 5);
+    let front = quad(40, 40, 61, 61, 50, 7);
+    let list = [(key(1), &back), (key(2), &front)];
+    let one = r.render_clusters(&top_camera(), 1.0, &list).unwrap();
+    let depth_one = r.read_depth().unwrap();
+    if !r.multisampling_supported() {
+        let e = r.set_samples(4).unwrap_err().to_string();
+        assert!(e.contains("not supported"), "{e}");
+        assert_eq!(r.samples(), 1);
+        return;
+    }
+    r.set_samples(4).unwrap();
+    assert_eq!(r.samples(), 4);
+    let four = r.render_clusters(&top_camera(), 1.0, &list).unwrap();
+    let depth_four = r.read_depth().unwrap();
+    let alpha = |img: &tw_gpu::Image, x: u32, y: u32| img.rgba[((y * W + x) * 4 + 3) as usize];
+    let mut partial = 0;
+    let mut inner_differ = 0;
+    for y in 0..H {
+        for x in 0..W {
+            let a = alpha(&four, x, y);
+            if a != 0 && a != 255 {
+                partial += 1;
+            }
+            let d1 = depth_one.get(x, y).unwrap();
+            let d4 = depth_four.get(x, y).unwrap();
+            // The farthest sample is never nearer than the centre's depth.
+            assert!(d4 <= d1 + 1e-6, "{backends:?}: pixel ({x}, {y}) resolved depth {d4} nearer than {d1}");
+            let i = ((y * W + x) * 4) as usize;
+            let fully = a == 255 && d4 == d1;
+            if fully && x > 0 && y > 0 && one.rgba[i..i + 4] != four.rgba[i..i + 4] {
+                inner_differ += 1;
+            }
+        }
+    }
+    let covered = one.covered_pixels();
+    eprintln!("{backends:?}: {covered} covered pixels, {partial} partially covered with 4 samples");
+    assert!(covered > 1000, "{backends:?}: the single-sample frame is nearly empty");
+    assert!(four.covered_pixels() >= covered, "{backends:?}: multisampling lost pixels");
+    assert!(partial > 100 && partial < covered / 4, "{backends:?}: {partial} edge pixels");
+    assert!(inner_differ < covered / 100, "{backends:?}: {inner_differ} inner pixels differ");
+    assert!(r.set_samples(3).is_err());
+    r.set_samples(1).unwrap();
+    let again = r.render_clusters(&top_camera(), 1.0, &list).unwrap();
+    assert_eq!(again.rgba, one.rgba, "{backends:?}: back to one sample");
+}
+
+#[test]
+fn msaa_gl() {
+    msaa(wgpu::Backends::GL);
+}
+
+#[test]
+fn msaa_vulkan() {
+    msaa(wgpu::Backends::VULKAN);
+}

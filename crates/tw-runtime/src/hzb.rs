@@ -27,7 +27,10 @@
 //!
 //! The test is therefore conservative: it never reports a box occluded if any point inside it
 //! would pass the depth test at a pixel centre, for the same camera and resolution as the depth
-//! buffer. (Conservative *relative to the occluders drawn*: GigaWalk's argument that the result
+//! buffer. With multisampling a pixel is its samples ([`Hzb::with_samples`], e.g. [`SAMPLES_4X`])
+//! and the depth buffer holds each pixel's farthest sample: "centre" above then reads "any sample
+//! position", a rectangle is widened by the samples' spread around the centre, and the test is
+//! conservative for every sample. (Conservative *relative to the occluders drawn*: GigaWalk's argument that the result
 //! equals no culling needs the occluders to be drawn at the same LOD cut as the frame, which is
 //! the caller's job.)
 
@@ -37,6 +40,29 @@ use glam::{Mat4, Vec3, Vec4};
 /// centres: covers f32 rounding of the projection and the rasterizer's sub-pixel snapping
 /// (≥ 1/256 px on every GPU and on lavapipe/llvmpipe).
 pub const RECT_SLACK_PX: f32 = 1.0 / 32.0;
+
+/// The one sample of a pixel without multisampling: its centre (x, y from the pixel's top-left
+/// corner).
+pub const PIXEL_CENTRE: [[f32; 2]; 1] = [[0.5, 0.5]];
+
+/// WebGPU's standard 4× multisample positions (x, y from the pixel's top-left corner), which
+/// Vulkan's standard sample locations, lavapipe and llvmpipe share.
+pub const SAMPLES_4X: [[f32; 2]; 4] = [[0.375, 0.125], [0.875, 0.375], [0.125, 0.625], [0.625, 0.875]];
+
+/// The sample positions of a pixel rendered with `count` samples (1 or 4), `None` for other
+/// counts.
+pub fn sample_positions(count: u32) -> Option<&'static [[f32; 2]]> {
+    match count {
+        1 => Some(&PIXEL_CENTRE),
+        4 => Some(&SAMPLES_4X),
+        _ => None,
+    }
+}
+
+/// How far `samples` reach from the pixel centre along either axis (pixels).
+pub fn sample_spread(samples: &[[f32; 2]]) -> f32 {
+    samples.iter().flat_map(|p| p.map(|c| (c - 0.5).abs())).fold(0.0, f32::max)
+}
 
 /// Relative depth margin in the box's favour: a box is occluded only when its nearest depth is
 /// below `occluder_depth × (1 − DEPTH_MARGIN)`.
@@ -67,6 +93,10 @@ pub struct HzbLevel {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Hzb {
     pub levels: Vec<HzbLevel>,
+    /// The sample positions of a pixel ([`PIXEL_CENTRE`] unless [`Hzb::with_samples`]).
+    samples: Vec<[f32; 2]>,
+    /// How far the samples reach from the pixel centre along either axis (0 for the centre).
+    spread: f32,
 }
 
 /// Errors of [`Hzb::build`].
@@ -123,7 +153,33 @@ impl Hzb {
             }
             levels.push(reduce(last));
         }
-        Ok(Hzb { levels })
+        Ok(Hzb::from_levels(levels))
+    }
+
+    /// A pyramid of given levels (level 0 the depth buffer, each next one as [`Hzb::build`]
+    /// reduces it), sampled at pixel centres.
+    pub fn from_levels(levels: Vec<HzbLevel>) -> Hzb {
+        Hzb { levels, samples: PIXEL_CENTRE.to_vec(), spread: 0.0 }
+    }
+
+    /// The pyramid of a multisampled frame: the depth buffer holds each pixel's farthest
+    /// sample, and primitives cover a pixel where they cover one of the `samples` positions
+    /// (x, y in 0..1 from its top-left corner; e.g. [`SAMPLES_4X`]). An empty list means the
+    /// centre.
+    pub fn with_samples(mut self, samples: &[[f32; 2]]) -> Hzb {
+        self.samples = if samples.is_empty() { PIXEL_CENTRE.to_vec() } else { samples.to_vec() };
+        self.spread = sample_spread(&self.samples);
+        self
+    }
+
+    /// The sample positions within a pixel (see [`Hzb::with_samples`]).
+    pub fn samples(&self) -> &[[f32; 2]] {
+        &self.samples
+    }
+
+    /// How far a pixel's samples reach from its centre along either axis (pixels).
+    pub fn sample_spread(&self) -> f32 {
+        self.spread
     }
 
     /// The occluder depth at pixel (`x`, `y`) of level 0 (the depth buffer); `x`, `y` must be
@@ -210,14 +266,17 @@ impl Hzb {
     }
 
     /// The pixels whose centres lie in the widened rectangle (inclusive bounds: x0, y0, x1,
-    /// y1), `None` when there are none. The rectangle must be finite.
+    /// y1), `None` when there are none. The rectangle must be finite. With multisampling the
+    /// rectangle is widened by the samples' spread as well: the pixels a sample of which may
+    /// lie in it.
     pub fn pixel_rect(&self, x_lo: f32, y_lo: f32, x_hi: f32, y_hi: f32) -> Option<[u32; 4]> {
         let (w, h) = self.size();
         // Pixels whose centre lies in the widened rectangle: ceil(lo − ½) ..= floor(hi − ½).
-        let px0 = (x_lo - RECT_SLACK_PX - 0.5).ceil().max(0.0);
-        let py0 = (y_lo - RECT_SLACK_PX - 0.5).ceil().max(0.0);
-        let px1 = (x_hi + RECT_SLACK_PX - 0.5).floor().min(w as f32 - 1.0);
-        let py1 = (y_hi + RECT_SLACK_PX - 0.5).floor().min(h as f32 - 1.0);
+        let slack = RECT_SLACK_PX + self.spread;
+        let px0 = (x_lo - slack - 0.5).ceil().max(0.0);
+        let py0 = (y_lo - slack - 0.5).ceil().max(0.0);
+        let px1 = (x_hi + slack - 0.5).floor().min(w as f32 - 1.0);
+        let py1 = (y_hi + slack - 0.5).floor().min(h as f32 - 1.0);
         if px0 > px1 || py0 > py1 {
             return None;
         }

@@ -210,7 +210,8 @@ fn projected_shows(hzb: &Hzb, [a, b, c]: [Projected; 3], depth_rounding: f64) ->
     if hzb.test_pixels(rect, nearest) != HzbResult::Visible {
         return false;
     }
-    let triangle = ScreenTriangle::new([a, b, c], SAMPLE_SLACK_PX + rounding as f64, depth_rounding);
+    let triangle =
+        ScreenTriangle::new([a, b, c], SAMPLE_SLACK_PX + rounding as f64, depth_rounding, hzb.samples());
     let [x0, y0, x1, y1] = rect;
     if pixel_count(rect) <= SAMPLE_TEST_MAX_PIXELS as u64 {
         return triangle.shows_at_a_centre(hzb, rect);
@@ -277,11 +278,15 @@ struct ScreenTriangle {
     plane: Option<(f64, f64, f64, f64)>,
     /// Twice the area (square pixels).
     area: f64,
+    /// A pixel's sample positions from its top-left corner ([`Hzb::samples`]) and their
+    /// bounding box (x, y lowest; x, y highest).
+    samples: Vec<[f64; 2]>,
+    sample_box: [f64; 4],
 }
 
 impl ScreenTriangle {
     /// `depth_rounding`: the corners' largest, with the depth buffer's absolute rounding.
-    fn new(corners: [Projected; 3], slack: f64, depth_rounding: f64) -> ScreenTriangle {
+    fn new(corners: [Projected; 3], slack: f64, depth_rounding: f64, samples: &[[f32; 2]]) -> ScreenTriangle {
         let v = corners.map(|c| [c.x as f64, c.y as f64]);
         let d = corners.map(|c| c.depth as f64);
         let (e1, e2) = ([v[1][0] - v[0][0], v[1][1] - v[0][1]], [v[2][0] - v[0][0], v[2][1] - v[0][1]]);
@@ -312,24 +317,48 @@ impl ScreenTriangle {
             nearest: d[0].max(d[1]).max(d[2]) + depth_rounding,
             plane: plane.filter(|p| p.0.is_finite() && p.1.is_finite() && p.2.is_finite()),
             area: area.abs(),
+            sample_box: samples.iter().fold(
+                [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY],
+                |b, p| {
+                    [
+                        b[0].min(p[0] as f64),
+                        b[1].min(p[1] as f64),
+                        b[2].max(p[0] as f64),
+                        b[3].max(p[1] as f64),
+                    ]
+                },
+            ),
+            samples: samples.iter().map(|p| [p[0] as f64, p[1] as f64]).collect(),
         }
     }
 
-    /// The nearest depth the triangle can have at a pixel centre of `region` (inclusive pixel
-    /// bounds) that it may cover, or `None` when it can cover none of them. For one pixel the
-    /// centre is tested exactly; for more, each edge's function at the region's corners.
+    /// The nearest depth the triangle can have at a pixel centre (a sample position, with
+    /// multisampling) of `region` (inclusive pixel bounds) that it may cover, or `None` when it
+    /// can cover none of them. For one pixel its samples are tested exactly; for more, each
+    /// edge's function at the corners of the region's samples.
     fn bound(&self, region: [u32; 4]) -> Option<f32> {
         self.bound_f64(region).map(round_up)
     }
 
     /// [`bound`](Self::bound) in f64.
     fn bound_f64(&self, [x0, y0, x1, y1]: [u32; 4]) -> Option<f64> {
-        let (cx0, cy0, cx1, cy1) = (x0 as f64 + 0.5, y0 as f64 + 0.5, x1 as f64 + 0.5, y1 as f64 + 0.5);
         if x0 == x1 && y0 == y1 {
-            if !self.counts_centre([cx0, cy0]) {
-                return None;
-            }
-        } else if self
+            // Each sample the triangle may cover, at the depth it has there.
+            let (x, y) = (x0 as f64, y0 as f64);
+            return self
+                .samples
+                .iter()
+                .map(|s| [x + s[0], y + s[1]])
+                .filter(|&p| self.counts_centre(p))
+                .map(|p| match self.plane {
+                    Some((a, b, c, error)) => (c + a * p[0] + b * p[1] + error).min(self.nearest),
+                    None => self.nearest,
+                })
+                .reduce(f64::max);
+        }
+        let [sx0, sy0, sx1, sy1] = self.sample_box;
+        let (cx0, cy0, cx1, cy1) = (x0 as f64 + sx0, y0 as f64 + sy0, x1 as f64 + sx1, y1 as f64 + sy1);
+        if self
             .edges
             .iter()
             .any(|&(a, b, c)| c + (a * cx0).max(a * cx1) + (b * cy0).max(b * cy1) < -self.wide)
@@ -344,25 +373,41 @@ impl ScreenTriangle {
         })
     }
 
-    /// Whether a pixel centre of `rect` (inclusive pixel bounds) inside the triangle holds an
-    /// occluder depth the triangle's depth there can pass: [`bound`](Self::bound) of each pixel,
-    /// with the edge functions and the depth plane stepped along each row.
+    /// Whether a pixel centre (a sample position, with multisampling) of `rect` (inclusive
+    /// pixel bounds) inside the triangle holds an occluder depth the triangle's depth there can
+    /// pass: [`bound`](Self::bound) of each pixel, with the edge functions and the depth plane
+    /// stepped along each row, for each sample position.
     fn shows_at_a_centre(&self, hzb: &Hzb, [x0, y0, x1, y1]: [u32; 4]) -> bool {
-        let cx0 = x0 as f64 + 0.5;
         let (pa, pb, pc, error) = self.plane.unwrap_or((0.0, 0.0, f64::INFINITY, 0.0));
         (y0..=y1).any(|y| {
-            let py = y as f64 + 0.5;
-            let mut e = self.edges.map(|(a, b, c)| a * cx0 + b * py + c);
-            let mut depth = pa * cx0 + pb * py + pc + error;
-            (x0..=x1).any(|x| {
-                let p = [x as f64 + 0.5, py];
-                let shows = self.inside(e, p) && hzb.pixel_shows(x, y, depth.min(self.nearest));
-                for (ei, edge) in e.iter_mut().zip(&self.edges) {
-                    *ei += edge.0;
-                }
-                depth += pa;
-                shows
-            })
+            self.samples
+                .iter()
+                .any(|&[sx, sy]| self.shows_in_row(hzb, [x0, x1], y, [sx, sy], (pa, pb, pc, error)))
+        })
+    }
+
+    /// [`shows_at_a_centre`](Self::shows_at_a_centre) of the samples at (`sx`, `sy`) of the
+    /// pixels `x0..=x1` of row `y`.
+    fn shows_in_row(
+        &self,
+        hzb: &Hzb,
+        [x0, x1]: [u32; 2],
+        y: u32,
+        [sx, sy]: [f64; 2],
+        (pa, pb, pc, error): (f64, f64, f64, f64),
+    ) -> bool {
+        let cx0 = x0 as f64 + sx;
+        let py = y as f64 + sy;
+        let mut e = self.edges.map(|(a, b, c)| a * cx0 + b * py + c);
+        let mut depth = pa * cx0 + pb * py + pc + error;
+        (x0..=x1).any(|x| {
+            let p = [x as f64 + sx, py];
+            let shows = self.inside(e, p) && hzb.pixel_shows(x, y, depth.min(self.nearest));
+            for (ei, edge) in e.iter_mut().zip(&self.edges) {
+                *ei += edge.0;
+            }
+            depth += pa;
+            shows
         })
     }
 
@@ -421,6 +466,39 @@ mod tests {
     use crate::camera::Camera;
 
     /// 64×48 view down +X from the origin; a wall at x = 10 covers the left half of the image.
+    #[test]
+    fn multisampled_pixels_count_their_samples() {
+        use crate::hzb::SAMPLES_4X;
+        let (one, _) = scene();
+        let four = one.clone().with_samples(&SAMPLES_4X);
+        let shows = |hzb: &Hzb, c: [[f32; 2]; 3], depth: f32| {
+            projected_shows(
+                hzb,
+                c.map(|[x, y]| Projected { x, y, depth, rounding: 0.0, depth_rounding: 0.0 }),
+                0.0,
+            )
+        };
+        let far = one.pixel_depth(0, 0) * 0.5;
+        // Around the sample (50.375, 20.125) of the open pixel (50, 20), away from its centre.
+        let at_sample = [[50.3, 20.05], [50.45, 20.05], [50.3, 20.2]];
+        assert!(!shows(&one, at_sample, far), "covers no pixel centre");
+        assert!(shows(&four, at_sample, far), "covers a sample");
+        // Between the samples of pixel (50, 20): none with 4 samples either.
+        let between = [[50.05, 20.3], [50.2, 20.3], [50.05, 20.45]];
+        assert!(!shows(&four, between, far));
+        // A large triangle over open pixels, its samples only: the walk (step 3) keeps it.
+        let big = [[36.0, 2.0], [60.0, 2.0], [36.0, 40.0]];
+        assert!(shows(&four, big, far));
+        // Behind the wall it is hidden at every sample.
+        let hidden = [[2.0, 2.0], [28.0, 2.0], [2.0, 40.0]];
+        assert!(!shows(&four, hidden, far));
+        // The rectangle of pixels a sample of which may lie in a thin rectangle: with 4
+        // samples it reaches the pixels whose outer samples it touches.
+        assert_eq!(one.pixel_rect(40.6, 10.6, 40.9, 10.9), None);
+        assert_eq!(four.pixel_rect(40.6, 10.6, 40.9, 10.9), Some([40, 10, 40, 10]));
+        assert_eq!(four.test_rect(40.6, 10.6, 40.9, 10.9, far), HzbResult::Visible);
+    }
+
     fn scene() -> (Hzb, Mat4) {
         let (w, h) = (64u32, 48u32);
         let cam = Camera::new(Vec3::ZERO, Vec3::X, Vec3::Z, 60f32.to_radians(), 0.1, 1000.0).unwrap();

@@ -74,6 +74,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
 
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
     renderer.set_gpu_budget(args.gpu_memory);
+    renderer.set_samples(args.samples)?;
     if renderer.gpu_budget() + (64 << 10) < args.gpu_memory {
         println!(
             "note: GPU budget {} MiB, the most one buffer can hold on this device (asked for {} MiB)",
