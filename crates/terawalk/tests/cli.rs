@@ -236,6 +236,20 @@ fn render_writes_a_png_of_a_store() {
     let o = terawalk(&["render", "p.tw", "-o", "x.png", "--camera", "1,2,3;1,2,3;0,0,1;60"], dir.path());
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("camera") && !stderr(&o).contains("panicked"), "{}", stderr(&o));
+
+    // Multisampling: 4 samples give a frame on Vulkan, a clear refusal on GL; 3 are a usage error.
+    let o = terawalk(&["render", "p.tw", "-o", "x.png", "--size", "320x200", "--samples", "3"], dir.path());
+    assert_eq!(o.status.code(), Some(2));
+    assert!(stderr(&o).contains("samples per pixel"), "{}", stderr(&o));
+    let o =
+        terawalk(&["render", "p.tw", "-o", "msaa.png", "--size", "320x200", "--samples", "4"], dir.path());
+    if stdout(&o).contains("(Gl,") {
+        assert_eq!(o.status.code(), Some(1));
+        assert!(stderr(&o).contains("multisampling is not supported"), "{}", stderr(&o));
+    } else {
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(dir.path().join("msaa.png").exists());
+    }
 }
 
 /// Ctrl-C (SIGINT) and `kill` (SIGTERM) during a build: exit 130, and neither the store nor its

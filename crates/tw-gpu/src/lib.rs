@@ -15,6 +15,8 @@
 //! - [`query`]: hardware occlusion queries of boxes against the frame's depth.
 //! - [`gpu_cull`]: the GPU hierarchical Z-buffer built in compute shaders, the cull of
 //!   candidate boxes against it feeding indirect draws in the same frame (`gpu-hzb`).
+//! - [`msaa`]: 4× multisampling of the shaded passes, with the farthest-sample depth resolve
+//!   the occlusion strategies read.
 //! - [`image`]: RGBA images, PNG, PSNR and pixel differences.
 //! - `readback`, [`color`], [`error`].
 //!
@@ -36,6 +38,7 @@
 //! | depth readback | compute copy | compute copy |
 //! | occlusion queries | sample counts | 0/1 |
 //! | GPU HZB cull ([`gpu_cull`]) | compacted, `multi_draw_indexed_indirect_count` | in place (culled draws get 0 instances); needs GL 4.3 compute, known after [`Renderer::set_downlevel`] |
+//! | 4× multisampling ([`Renderer::set_samples`]) | yes | refused (llvmpipe resolved to nothing) |
 //! | reuse of evicted pool ranges | ordered by wgpu | the renderer waits for earlier GPU work first (see `draw_pass`) |
 
 pub mod color;

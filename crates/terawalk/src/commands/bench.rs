@@ -74,7 +74,6 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
 
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
     renderer.set_gpu_budget(args.gpu_memory);
-    renderer.set_samples(args.samples)?;
     if renderer.gpu_budget() + (64 << 10) < args.gpu_memory {
         println!(
             "note: GPU budget {} MiB, the most one buffer can hold on this device (asked for {} MiB)",
@@ -84,6 +83,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     }
     let adapter = renderer.adapter_summary();
     println!("adapter: {adapter}");
+    renderer.set_samples(args.samples)?;
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
     let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
     walk.set_color_mode(color_mode(args.color));
@@ -198,7 +198,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         date: tw_report::utc_now(),
         machine: machine(),
         path: args.path.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "generated".into()),
-        extra: vec![("frames".into(), cameras.len().to_string()), ("warmup".into(), args.warmup.to_string())],
+        extra: vec![
+            ("frames".into(), cameras.len().to_string()),
+            ("warmup".into(), args.warmup.to_string()),
+            ("samples per pixel".into(), args.samples.to_string()),
+        ],
     };
     let report = BenchReport::new(meta, runs);
     print_comparison(&report);

@@ -33,8 +33,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
         None => default_camera(header, args.size)?,
     };
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
-    renderer.set_samples(args.samples)?;
     println!("adapter: {}", renderer.adapter_summary());
+    renderer.set_samples(args.samples)?;
     renderer.set_store_colors(&store);
     renderer.set_color_mode(match args.color {
         RenderColoring::Material => ColorMode::Material,
