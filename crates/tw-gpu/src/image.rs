@@ -109,6 +109,32 @@ impl Image {
         Ok(out)
     }
 
+    /// An image decoded from an 8-bit RGBA PNG such as [`png_bytes`](Self::png_bytes) writes
+    /// (opaque); other PNG layouts are an error.
+    pub fn from_png_bytes(bytes: &[u8]) -> Result<Image, GpuError> {
+        let bad = |e: png::DecodingError| GpuError::Gpu(format!("decoding a PNG image: {e}"));
+        // Frames up to the renderer's largest side (the default limit is 64 MiB).
+        let limits = png::Limits { bytes: 1 << 30 };
+        let decoder = png::Decoder::new_with_limits(std::io::Cursor::new(bytes), limits);
+        let mut reader = decoder.read_info().map_err(bad)?;
+        let info = reader.info();
+        let (width, height) = (info.width, info.height);
+        if (info.color_type, info.bit_depth) != (png::ColorType::Rgba, png::BitDepth::Eight) {
+            return Err(GpuError::Gpu(format!(
+                "expected an 8-bit RGBA PNG, got {:?} at {:?}",
+                info.color_type, info.bit_depth
+            )));
+        }
+        let mut rgba = vec![0u8; width as usize * height as usize * 4];
+        reader.next_frame(&mut rgba).map_err(bad)?;
+        Ok(Image { width, height, rgba })
+    }
+
+    /// The image as [`opaque`](Self::opaque) gives it, as an image.
+    pub fn to_opaque(&self) -> Image {
+        Image { width: self.width, height: self.height, rgba: self.opaque() }
+    }
+
     /// Writes the image as [`png_bytes`](Self::png_bytes), atomically (a temporary file beside
     /// `path`, synced, renamed).
     pub fn save_png(&self, path: &Path) -> Result<(), GpuError> {
