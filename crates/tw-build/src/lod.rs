@@ -392,7 +392,18 @@ pub(crate) fn boundary_kinds(n: usize, indices: &[u32]) -> (Vec<bool>, Vec<bool>
     drop(fill);
     for lo in 0..n {
         let list = &mut entries[start[lo] as usize..start[lo + 1] as usize];
-        list.sort_unstable();
+        // A vertex has a handful of edges (insertion sort), rarely many (a fan's centre).
+        if list.len() > 16 {
+            list.sort_unstable();
+        } else {
+            for k in 1..list.len() {
+                let mut m = k;
+                while m > 0 && list[m - 1] > list[m] {
+                    list.swap(m - 1, m);
+                    m -= 1;
+                }
+            }
+        }
         let mut i = 0;
         while i < list.len() {
             let hi = list[i] >> 1;
@@ -466,9 +477,19 @@ impl OriginalTriangles {
     }
 }
 
-fn sorted3(mut t: [u32; 3]) -> [u32; 3] {
-    t.sort_unstable();
-    t
+fn sorted3(t: [u32; 3]) -> [u32; 3] {
+    // A three-element sorting network (the slice sort's call overhead showed in profiles).
+    let [mut a, mut b, mut c] = t;
+    if a > b {
+        std::mem::swap(&mut a, &mut b);
+    }
+    if b > c {
+        std::mem::swap(&mut b, &mut c);
+    }
+    if a > b {
+        std::mem::swap(&mut a, &mut b);
+    }
+    [a, b, c]
 }
 
 #[cfg(test)]
