@@ -10,11 +10,12 @@
 //!    with a cell outside the node's cell range, where a neighbouring subtree may be drawn finer
 //!    ([`crate::hlod::build_hlod`]); each bucket reads its own seams, and a subtree passes up
 //!    only those at its roots' vertices;
-//! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
-//!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
-//!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
-//!    gets its HLOD groups at once — so only the roots of the subtrees on the current path are
-//!    held in memory;
+//! 5. one pass over all cells: LOD of the cells on the pool ([`crate::lod::build_cell_lod`])
+//!    while, on the calling thread, in leaf order as they become ready, the cells' groups go to
+//!    pages ([`crate::pages`]) and their roots up the tree, where each node whose children are
+//!    complete gets its HLOD groups at once — so only the roots of the subtrees on the current
+//!    path are held in memory; a loader thread reads the next bucket (and its seams) while the
+//!    current one is built (`BucketQueue`: two buckets held, each a sixth of the budget);
 //! 6. write: group (with each group's sources, the groups its clusters were simplified from),
 //!    node and object tables, atomically ([`tw_store::StoreWriter`]).
 //!
