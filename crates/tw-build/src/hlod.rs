@@ -180,13 +180,16 @@ pub fn build_hlod(
     let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
 
     // 1. Merge: positions deduplicated by grid point.
-    let mut positions: Vec<[u32; 3]> = children
+    // Packed into u128 keys, which sort like the [u32; 3] points and compare faster.
+    let key = |p: &[u32; 3]| (p[0] as u128) << 64 | (p[1] as u128) << 32 | p[2] as u128;
+    let mut keys: Vec<u128> = children
         .iter()
-        .flat_map(|r| r.dag.clusters.iter().flat_map(|c| c.positions.iter().copied()))
+        .flat_map(|r| r.dag.clusters.iter().flat_map(|c| c.positions.iter().map(key)))
         .collect();
-    positions.sort_unstable();
-    positions.dedup();
-    let index_of = |p: &[u32; 3]| positions.binary_search(p).map(|i| i as u32).unwrap_or(0);
+    keys.sort_unstable();
+    keys.dedup();
+    let positions: Vec<[u32; 3]> = keys.iter().map(|&k| unpack_triangle(k)).collect();
+    let index_of = |p: &[u32; 3]| keys.binary_search(&key(p)).map(|i| i as u32).unwrap_or(0);
     let mut indices: Vec<u32> = Vec::new();
     let mut objects: Vec<u32> = Vec::new();
     let mut child_error = 0.0f32;
@@ -238,8 +241,8 @@ pub fn build_hlod(
     // If the regular simplifier breaks some, the neighbourhood of those edges is locked too and
     // it runs again (a few rounds); the last resort is the merged mesh itself (a lossless step:
     // the parent tries again with more room).
-    let border = free_border_vertices(positions.len(), &indices, &locks);
-    let broken = |out: &[u32]| broken_edges(&indices, out, &locks, &border);
+    let check = EdgeCheck::new(positions.len(), &indices, &locks);
+    let broken = |out: &[u32]| check.broken(out);
     let mut simplified = indices.clone();
     let mut sim_locks = locks.clone();
     let mut outcome = HlodOutcome::Unchanged;
@@ -475,13 +478,14 @@ fn prune_components(
 }
 
 /// Triangles with their vertices rotated so the smallest comes first (winding kept), sorted and
-/// deduplicated: the triangle set that crack checks see (`crate::cut::boundary_edges`).
-fn unique_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
-    let mut tris: Vec<[u32; 3]> = indices
+/// deduplicated: the triangle set that crack checks see (`crate::cut::boundary_edges`). Each is
+/// packed into a `u128` (`a << 64 | b << 32 | c`, which sorts like `[a, b, c]`).
+fn unique_triangles(indices: &[u32]) -> Vec<u128> {
+    let mut tris: Vec<u128> = indices
         .chunks_exact(3)
         .map(|t| {
             let k = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
-            [t[k], t[(k + 1) % 3], t[(k + 2) % 3]]
+            (t[k] as u128) << 64 | (t[(k + 1) % 3] as u128) << 32 | t[(k + 2) % 3] as u128
         })
         .collect();
     tris.sort_unstable();
@@ -489,19 +493,30 @@ fn unique_triangles(indices: &[u32]) -> Vec<[u32; 3]> {
     tris
 }
 
-/// The undirected edges (smaller index first) of `tris` for which `keep` holds, each with the
-/// number of triangles using it; sorted.
-fn edge_uses(
-    tris: impl Iterator<Item = [u32; 3]>,
-    keep: impl Fn(u32, u32) -> bool,
-) -> Vec<((u32, u32), usize)> {
-    let mut edges: Vec<(u32, u32)> = tris
+/// The vertices of a triangle packed by [`unique_triangles`].
+fn unpack_triangle(t: u128) -> [u32; 3] {
+    [(t >> 64) as u32, (t >> 32) as u32, t as u32]
+}
+
+/// An undirected edge packed into a `u64`, smaller index in the high half (sorts like the pair).
+fn edge_key(a: u32, b: u32) -> u64 {
+    (a.min(b) as u64) << 32 | a.max(b) as u64
+}
+
+fn edge_pair(e: u64) -> (u32, u32) {
+    ((e >> 32) as u32, e as u32)
+}
+
+/// The undirected edges ([`edge_key`]) of `tris` for which `keep` holds, each with the number of
+/// triangles using it; sorted.
+fn edge_uses(tris: impl Iterator<Item = [u32; 3]>, keep: impl Fn(u32, u32) -> bool) -> Vec<(u64, u32)> {
+    let mut edges: Vec<u64> = tris
         .flat_map(|t| [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])])
         .filter(|&(a, b)| keep(a, b))
-        .map(|(a, b)| (a.min(b), a.max(b)))
+        .map(|(a, b)| edge_key(a, b))
         .collect();
     edges.sort_unstable();
-    let mut out: Vec<((u32, u32), usize)> = Vec::new();
+    let mut out: Vec<(u64, u32)> = Vec::with_capacity(edges.len() / 2 + 1);
     for e in edges {
         match out.last_mut() {
             Some((last, n)) if *last == e => *n += 1,
@@ -512,8 +527,12 @@ fn edge_uses(
 }
 
 /// How many triangles use edge `e` in `uses` (from [`edge_uses`]).
-fn uses_of(uses: &[((u32, u32), usize)], e: (u32, u32)) -> usize {
+fn uses_of(uses: &[(u64, u32)], e: u64) -> u32 {
     uses.binary_search_by_key(&e, |&(e, _)| e).map_or(0, |i| uses[i].1)
+}
+
+fn index_triangles(idx: &[u32]) -> impl Iterator<Item = [u32; 3]> + '_ {
+    idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]])
 }
 
 /// The vertices of the merged mesh on its free border: on a boundary edge (used by one triangle)
@@ -521,55 +540,87 @@ fn uses_of(uses: &[((u32, u32), usize)], e: (u32, u32)) -> usize {
 /// (meshopt moves border vertices along the border); vertices that are only on seams, or only
 /// on non-manifold edges (left by earlier simplification: a vertex inside the input's surface),
 /// are not.
+#[cfg(test)]
 fn free_border_vertices(n: usize, indices: &[u32], locks: &[bool]) -> Vec<bool> {
-    let locked = |v: u32| locks.get(v as usize) == Some(&true);
-    let mut free = vec![false; n];
-    for ((a, b), uses) in edge_uses(unique_triangles(indices).into_iter(), |_, _| true) {
-        if uses == 1 && !(locked(a) && locked(b)) {
-            for v in [a, b] {
-                if let Some(f) = free.get_mut(v as usize) {
-                    *f = true;
+    EdgeCheck::new(n, indices, locks).free_border
+}
+
+/// [`EdgeCheck::broken`] for one pair (tests).
+#[cfg(test)]
+fn broken_edges(before: &[u32], after: &[u32], locks: &[bool], free_border: &[bool]) -> Vec<(u32, u32)> {
+    let mut check = EdgeCheck::new(free_border.len(), before, locks);
+    check.free_border = free_border.to_vec();
+    check.broken(after)
+}
+
+/// What [`EdgeCheck::broken`] needs of the merged mesh (`before`), computed once per node: every
+/// simplification round of the node is checked against the same mesh and locks.
+struct EdgeCheck<'a> {
+    locks: &'a [bool],
+    /// See [`free_border_vertices`].
+    free_border: Vec<bool>,
+    /// The seam edges of `before` (both ends locked) used by exactly one triangle, sorted.
+    seams_before: Vec<u64>,
+    /// Every edge of `before`'s unique triangles with its uses.
+    old: Vec<(u64, u32)>,
+}
+
+impl<'a> EdgeCheck<'a> {
+    fn new(n: usize, before: &[u32], locks: &'a [bool]) -> EdgeCheck<'a> {
+        let locked = |v: u32| locks.get(v as usize) == Some(&true);
+        let old = edge_uses(unique_triangles(before).into_iter().map(unpack_triangle), |_, _| true);
+        let mut free_border = vec![false; n];
+        for &(e, uses) in &old {
+            let (a, b) = edge_pair(e);
+            if uses == 1 && !(locked(a) && locked(b)) {
+                for v in [a, b] {
+                    if let Some(f) = free_border.get_mut(v as usize) {
+                        *f = true;
+                    }
                 }
             }
         }
-    }
-    free
-}
-
-/// The edges that `after` (a simplification of `before`) breaks, sorted:
-///
-/// * seams: an edge of `before` used by one triangle, between two locked vertices (a seam with a
-///   cell outside the node), must still be used by exactly one triangle. Lost, the finer
-///   neighbour's border is open; folded into two triangles (a double-sided pair, which meshopt
-///   makes of thin parts), it is no longer open in the parent's merged mesh, so its vertices are
-///   not locked there and the seam is lost one level up;
-/// * holes: every boundary edge of `after` (used by one of its unique triangles, as crack checks
-///   count) must be one of `before` or join two free border vertices of `before` (a simplified
-///   object border). Anything else is a hole inside the surface, a crack in every cut that uses
-///   these clusters (meshopt's topology rules are per directed half-edge, so the double-sided and
-///   non-manifold parts that earlier levels leave can lose triangles next to an edge it takes for
-///   interior; the sloppy simplifier ignores topology altogether).
-fn broken_edges(before: &[u32], after: &[u32], locks: &[bool], free_border: &[bool]) -> Vec<(u32, u32)> {
-    let locked = |v: u32| locks.get(v as usize) == Some(&true);
-    let free = |v: u32| free_border.get(v as usize) == Some(&true);
-    let triangles = |idx: &[u32]| idx.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect::<Vec<_>>();
-    let seam = |a: u32, b: u32| locked(a) && locked(b);
-    let seams_after = edge_uses(triangles(after).into_iter(), seam);
-    let mut bad: Vec<(u32, u32)> = edge_uses(triangles(before).into_iter(), seam)
-        .into_iter()
-        .filter(|&(e, n)| n == 1 && uses_of(&seams_after, e) != 1)
-        .map(|(e, _)| e)
-        .collect();
-    let old = edge_uses(unique_triangles(before).into_iter(), |_, _| true);
-    bad.extend(
-        edge_uses(unique_triangles(after).into_iter(), |_, _| true)
+        let seams_before = edge_uses(index_triangles(before), |a, b| locked(a) && locked(b))
             .into_iter()
-            .filter(|&((a, b), n)| n == 1 && !(free(a) && free(b)) && uses_of(&old, (a, b)) != 1)
-            .map(|(e, _)| e),
-    );
-    bad.sort_unstable();
-    bad.dedup();
-    bad
+            .filter(|&(_, n)| n == 1)
+            .map(|(e, _)| e)
+            .collect();
+        EdgeCheck { locks, free_border, seams_before, old }
+    }
+
+    /// The edges that `after` (a simplification of `before`) breaks, sorted:
+    ///
+    /// * seams: an edge of `before` used by one triangle, between two locked vertices (a seam
+    ///   with a cell outside the node), must still be used by exactly one triangle. Lost, the
+    ///   finer neighbour's border is open; folded into two triangles (a double-sided pair, which
+    ///   meshopt makes of thin parts), it is no longer open in the parent's merged mesh, so its
+    ///   vertices are not locked there and the seam is lost one level up;
+    /// * holes: every boundary edge of `after` (used by one of its unique triangles, as crack
+    ///   checks count) must be one of `before` or join two free border vertices of `before` (a
+    ///   simplified object border). Anything else is a hole inside the surface, a crack in every
+    ///   cut that uses these clusters (meshopt's topology rules are per directed half-edge, so
+    ///   the double-sided and non-manifold parts that earlier levels leave can lose triangles
+    ///   next to an edge it takes for interior; the sloppy simplifier ignores topology
+    ///   altogether).
+    fn broken(&self, after: &[u32]) -> Vec<(u32, u32)> {
+        let locked = |v: u32| self.locks.get(v as usize) == Some(&true);
+        let free = |v: u32| self.free_border.get(v as usize) == Some(&true);
+        let seams_after = edge_uses(index_triangles(after), |a, b| locked(a) && locked(b));
+        let mut bad: Vec<u64> =
+            self.seams_before.iter().copied().filter(|&e| uses_of(&seams_after, e) != 1).collect();
+        bad.extend(
+            edge_uses(unique_triangles(after).into_iter().map(unpack_triangle), |_, _| true)
+                .into_iter()
+                .filter(|&(e, n)| {
+                    let (a, b) = edge_pair(e);
+                    n == 1 && !(free(a) && free(b)) && uses_of(&self.old, e) != 1
+                })
+                .map(|(e, _)| e),
+        );
+        bad.sort_unstable();
+        bad.dedup();
+        bad.into_iter().map(edge_pair).collect()
+    }
 }
 
 /// The positions on open (or non-manifold) edges of at least two of the given cells, sorted:

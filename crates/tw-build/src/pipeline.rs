@@ -10,11 +10,12 @@
 //!    with a cell outside the node's cell range, where a neighbouring subtree may be drawn finer
 //!    ([`crate::hlod::build_hlod`]); each bucket reads its own seams, and a subtree passes up
 //!    only those at its roots' vertices;
-//! 5. for each bucket: LOD of its cells on the pool ([`crate::lod::build_cell_lod`]) while, on
-//!    the calling thread, in leaf order as they become ready, the cells' groups go to pages
-//!    ([`crate::pages`]) and their roots up the tree, where each node whose children are complete
-//!    gets its HLOD groups at once — so only the roots of the subtrees on the current path are
-//!    held in memory;
+//! 5. one pass over all cells: LOD of the cells on the pool ([`crate::lod::build_cell_lod`])
+//!    while, on the calling thread, in leaf order as they become ready, the cells' groups go to
+//!    pages ([`crate::pages`]) and their roots up the tree, where each node whose children are
+//!    complete gets its HLOD groups at once — so only the roots of the subtrees on the current
+//!    path are held in memory; a loader thread reads the next bucket (and its seams) while the
+//!    current one is built (`BucketQueue`: two buckets held, each a sixth of the budget);
 //! 6. write: group (with each group's sources, the groups its clusters were simplified from),
 //!    node and object tables, atomically ([`tw_store::StoreWriter`]).
 //!
@@ -223,11 +224,13 @@ fn build_with_pool(
     progress.end_phase();
     t.lap("redefine+hierarchy");
 
-    // 3. Distribute triangles to cells. A quarter of the budget for one bucket: the LOD of a
-    // bucket's cells, built in parallel, holds about as much again.
+    // 3. Distribute triangles to cells. A sixth of the budget for one bucket: the LOD phase
+    // holds two (the one being built and the next, read ahead), and the LOD of the cells in
+    // flight holds about as much again as one.
     progress.phase("distribute", 0, "");
     let budget = (options.memory / 4).max(16 << 20);
-    let cells = pool.install(|| CellFiles::distribute(&ing, &red, work.path(), budget))?;
+    let bucket_budget = (options.memory / 6).max(16 << 20);
+    let cells = pool.install(|| CellFiles::distribute(&ing, &red, work.path(), bucket_budget))?;
     drop(std::fs::remove_file(ing.work.path()));
     progress.end_phase();
     t.lap("distribute");
@@ -249,28 +252,57 @@ fn build_with_pool(
     let mut state = LodState::new(&hierarchy, options);
     let grid = ing.grid;
     let mut done_triangles = 0u64;
-    for b in 0..cells.bucket_count() {
-        let bucket = cells.read_bucket(b)?;
-        let bucket_seams = seams.read_bucket(b)?;
-        let external = |p: [u32; 3]| bucket_seams.contains(p);
-        let ids: Vec<u32> = bucket.cells().collect();
-        // The pool builds the cells' DAGs, taking cells in order; this thread consumes them in
-        // cell order (pages, HLOD) as they come, so the sequential part overlaps the parallel one.
-        for_each_in_order(
+    // One pass over every cell (cells are numbered in bucket order): the pool builds the cells'
+    // DAGs, taking cells in order; this thread consumes them in cell order (pages, HLOD) as they
+    // come, so the sequential part overlaps the parallel one. A loader thread reads the next
+    // bucket and its seams while the current one is built, so the pool neither waits for the
+    // read nor drains at a bucket's end (at most two buckets are held).
+    let queue = BucketQueue::new(cells.bucket_count());
+    std::thread::scope(|scope| -> Result<(), BuildError> {
+        let loader = scope.spawn(|| {
+            queue.load_all(|b| {
+                Ok(LoadedBucket { bucket: cells.read_bucket(b)?, seams: seams.read_bucket(b)? })
+            })
+        });
+        let result = for_each_in_order(
             pool,
-            ids.len(),
-            |i| build_cell_lod_with_seams(&bucket.mesh(ids[i]), &grid, &options.lod, &external),
+            cells.cell_count(),
+            |i| {
+                let b = cells.bucket_of_cell(i as u32);
+                let loaded = queue.get(b)?;
+                let external = |p: [u32; 3]| loaded.seams.contains(p);
+                Some(build_cell_lod_with_seams(&loaded.bucket.mesh(i as u32), &grid, &options.lod, &external))
+            },
             |i, dag| {
-                let cell = ids[i];
+                let cell = i as u32;
+                let b = cells.bucket_of_cell(cell);
+                let (Some(dag), Some(loaded)) = (dag, queue.get(b)) else {
+                    queue.stop();
+                    return Err(queue.take_error());
+                };
                 let leaf = state.leaf_of_cell[cell as usize];
-                state.add_cell(&mut writer, leaf, dag, &bucket_seams)?;
-                state.complete_upwards(&mut writer, leaf, &grid, &options.hlod)?;
+                let r = state
+                    .add_cell(&mut writer, leaf, dag, &loaded.seams)
+                    .and_then(|()| state.complete_upwards(&mut writer, leaf, &grid, &options.hlod));
+                if r.is_err() {
+                    // Workers waiting for a bucket the loader will not read must wake up.
+                    queue.stop();
+                    return r;
+                }
                 done_triangles += red.cells[cell as usize].triangles;
                 progress.advance(done_triangles);
+                if cell + 1 == cells.bucket_cells(b).end {
+                    drop(loaded);
+                    queue.release(b);
+                }
                 Ok(())
             },
-        )?;
-    }
+        );
+        queue.stop();
+        let loaded = loader.join().map_err(|_| BuildError::Param("bucket loader panicked".into()))?;
+        result?;
+        loaded
+    })?;
     progress.end_phase();
     t.lap("lod+hlod+pages");
     let (cell_count, cell_triangles, cell_root_triangles) = state.cell_counts;
@@ -338,6 +370,113 @@ fn build_with_pool(
     report.peak_rss = tw_core::mem::peak_rss_bytes();
     report.hlod = hlod;
     Ok(report)
+}
+
+/// A bucket of cells and its seams, read ahead of the cells that need them.
+struct LoadedBucket {
+    bucket: crate::cells::Bucket,
+    seams: SeamTable,
+}
+
+/// Buckets read in order by one loader thread, at most [`BUCKETS_AHEAD`] + 1 held at a time:
+/// the consumer's current bucket and the next ones.
+struct BucketQueue {
+    state: std::sync::Mutex<QueueState>,
+    cond: std::sync::Condvar,
+}
+
+/// Buckets the loader may read beyond the one the consumer is in.
+const BUCKETS_AHEAD: usize = 1;
+
+struct QueueState {
+    slots: Vec<Option<std::sync::Arc<LoadedBucket>>>,
+    /// Buckets `0..loaded` have been read (or failed: `error`).
+    loaded: usize,
+    /// Buckets `0..released` are done with.
+    released: usize,
+    error: Option<BuildError>,
+    stop: bool,
+}
+
+impl BucketQueue {
+    fn new(buckets: usize) -> BucketQueue {
+        BucketQueue {
+            state: std::sync::Mutex::new(QueueState {
+                slots: vec![None; buckets],
+                loaded: 0,
+                released: 0,
+                error: None,
+                stop: false,
+            }),
+            cond: std::sync::Condvar::new(),
+        }
+    }
+
+    fn lock(&self) -> std::sync::MutexGuard<'_, QueueState> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// The loader: reads every bucket in order, waiting while [`BUCKETS_AHEAD`] are ahead of the
+    /// consumer; stops at the first error (kept for the consumer) or at [`BucketQueue::stop`].
+    fn load_all(&self, load: impl Fn(usize) -> Result<LoadedBucket, BuildError>) -> Result<(), BuildError> {
+        let n = self.lock().slots.len();
+        for b in 0..n {
+            {
+                let mut st = self.lock();
+                while !st.stop && b > st.released + BUCKETS_AHEAD {
+                    st = self.cond.wait(st).unwrap_or_else(|e| e.into_inner());
+                }
+                if st.stop {
+                    return Ok(());
+                }
+            }
+            let r = load(b);
+            let mut st = self.lock();
+            st.loaded = b + 1;
+            match r {
+                Ok(l) => st.slots[b] = Some(std::sync::Arc::new(l)),
+                Err(e) => {
+                    st.error = Some(e);
+                    st.loaded = n;
+                    drop(st);
+                    self.cond.notify_all();
+                    return Ok(());
+                }
+            }
+            drop(st);
+            self.cond.notify_all();
+        }
+        Ok(())
+    }
+
+    /// Bucket `b` once it is read; None if it could not be (see [`BucketQueue::take_error`]) or
+    /// the queue stopped.
+    fn get(&self, b: usize) -> Option<std::sync::Arc<LoadedBucket>> {
+        let mut st = self.lock();
+        while st.loaded <= b && !st.stop {
+            st = self.cond.wait(st).unwrap_or_else(|e| e.into_inner());
+        }
+        st.slots.get(b).cloned().flatten()
+    }
+
+    /// The consumer is done with bucket `b` (and every one before it).
+    fn release(&self, b: usize) {
+        let mut st = self.lock();
+        st.slots[b] = None;
+        st.released = b + 1;
+        drop(st);
+        self.cond.notify_all();
+    }
+
+    /// Why a bucket could not be had.
+    fn take_error(&self) -> BuildError {
+        self.lock().error.take().unwrap_or_else(|| BuildError::Param("bucket loading stopped".into()))
+    }
+
+    fn stop(&self) {
+        self.lock().stop = true;
+        self.cond.notify_all();
+    }
 }
 
 /// Results [`for_each_in_order`] may hold ahead of the consumer.

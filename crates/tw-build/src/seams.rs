@@ -133,22 +133,37 @@ impl SeamFiles {
         let mut open_positions = 0u64;
         let mut done = 0u64;
         let mut record = [0u8; OPEN_RECORD_BYTES];
-        for b in 0..cells.bucket_count() {
-            let bucket = cells.read_bucket(b)?;
-            let ids: Vec<u32> = bucket.cells().collect();
-            let per_cell: Vec<Vec<[u32; 3]>> = pool
-                .install(|| ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect());
-            for (open, &cell) in per_cell.iter().zip(&ids) {
-                for &p in open {
-                    put_u32s(&mut record, &[p[0], p[1], p[2], cell]);
-                    let (path, w) = &mut parts[partition_of(p, partitions)];
-                    w.write_all(&record).map_err(|e| BuildError::io(&**path, e))?;
+        // The next bucket is read on a helper thread while the pool works on this one (two
+        // buckets held; the LOD phase holds as many).
+        std::thread::scope(|scope| -> Result<(), BuildError> {
+            let n = cells.bucket_count();
+            let mut next = (n > 0).then(|| scope.spawn(|| cells.read_bucket(0)));
+            for b in 0..n {
+                let bucket = match next.take().map(|h| h.join()) {
+                    Some(Ok(r)) => r?,
+                    _ => return Err(BuildError::Param("bucket reader panicked".into())),
+                };
+                if b + 1 < n {
+                    next = Some(scope.spawn(move || cells.read_bucket(b + 1)));
                 }
-                open_positions += open.len() as u64;
+                let ids: Vec<u32> = bucket.cells().collect();
+                let per_cell: Vec<Vec<[u32; 3]>> = pool.install(|| {
+                    ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect()
+                });
+                drop(bucket);
+                for (open, &cell) in per_cell.iter().zip(&ids) {
+                    for &p in open {
+                        put_u32s(&mut record, &[p[0], p[1], p[2], cell]);
+                        let (path, w) = &mut parts[partition_of(p, partitions)];
+                        w.write_all(&record).map_err(|e| BuildError::io(&**path, e))?;
+                    }
+                    open_positions += open.len() as u64;
+                }
+                done += ids.len() as u64;
+                advance(done);
             }
-            done += ids.len() as u64;
-            advance(done);
-        }
+            Ok(())
+        })?;
 
         // 2. Seams of each partition, to the seam files of their cells' buckets.
         let mut outs: Vec<(TempPath, BufWriter<File>)> = (0..cells.bucket_count())

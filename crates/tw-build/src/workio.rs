@@ -1,5 +1,5 @@
 //! Working-file I/O off the calling thread: the build's early phases stream gigabytes through
-//! the page cache (the working file is 40 bytes per triangle, the buckets 44), and the kernel's
+//! the page cache (the working file is 40 bytes per triangle, the buckets 35), and the kernel's
 //! copies in `write` and `read` were ~40 % of their time at 10^8 triangles, all on the one
 //! thread that also parses and decodes. [`SpillWriter`] hands full buffers to a writer thread;
 //! [`read_ahead`] reads and decodes the next chunks of a record file on a reader thread. Both

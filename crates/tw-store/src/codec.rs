@@ -116,7 +116,15 @@ impl PageCluster {
         }
         let mut indices: Vec<u8> = self.indices.iter().map(|&i| remap[i as usize]).collect();
         rotate_triangles(&mut indices);
-        PageCluster { positions, indices, ..self.clone() }
+        PageCluster {
+            positions,
+            indices,
+            objects: self.objects.clone(),
+            self_error: self.self_error,
+            self_sphere: self.self_sphere,
+            group: self.group,
+            level: self.level,
+        }
     }
 }
 
