@@ -982,7 +982,11 @@ impl Renderer {
                         keys.push(pk);
                         // Bound the staging memory of one batch (see `UPLOADS_PER_BATCH`).
                         let uploaded = self.pool.stats().uploaded_bytes - batch_uploads_from;
-                        if external.is_none() && uploaded >= self.pool.budget() / UPLOADS_PER_BATCH {
+                        // Multisampled, a batch is `samples` times smaller: lavapipe's binned
+                        // scene of a batch grows with the samples (a 10^7 reference frame at 64
+                        // MiB peaked 63 MB higher at 4 samples with the single-sample cap).
+                        let cap = self.pool.budget() / (UPLOADS_PER_BATCH * self.samples as u64);
+                        if external.is_none() && uploaded >= cap {
                             let clear = clear && first;
                             batch_uploads_from =
                                 self.flush_part(&att, format, &mut batch, &mut keys, clear)?;
