@@ -612,9 +612,9 @@ impl Renderer {
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
         let occluders: Vec<Candidate> =
             occluder_boxes.iter().map(|&b| Candidate::new(b, DrawArgs::zeroed())).collect();
+        let spread = tw_runtime::hzb::sample_spread(self.sample_positions());
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(&self.device));
-        cull.spread =
-            tw_runtime::hzb::sample_spread(tw_runtime::hzb::sample_positions(self.samples).unwrap_or(&[]));
+        cull.spread = spread;
         cull.pyramid(&self.device, &self.queue, &self.depth)?;
         let u0 = cull.uniform(&view_proj, list.len(), compact, true);
         cull.sets[0].prepare(&self.device, &self.queue, &list, &u0);
@@ -763,10 +763,10 @@ impl Renderer {
         }
         let view_proj = camera.projection_reverse_z(self.width as f32 / self.height as f32) * camera.view();
         self.resolve_depth();
+        let spread = tw_runtime::hzb::sample_spread(self.sample_positions());
         let (device, queue) = (&self.device, &self.queue);
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(device));
-        cull.spread =
-            tw_runtime::hzb::sample_spread(tw_runtime::hzb::sample_positions(self.samples).unwrap_or(&[]));
+        cull.spread = spread;
         cull.pyramid(device, queue, &self.depth)?;
         test_boxes(cull, device, queue, &mut self.readback, true, &view_proj, boxes)
     }

@@ -391,7 +391,7 @@ impl Renderer {
     }
 
     /// Sets the samples per pixel of the shaded passes: 1, or 4 for 4× multisampling
-    /// ([`msaa`]; its targets take [`Renderer::target_bytes`] more GPU memory). The item buffer
+    /// ([`msaa`]; its targets take 8 bytes × samples a pixel more GPU memory). The item buffer
     /// stays single-sample. Call between frames. Not on GL: wgpu's GL backend on llvmpipe
     /// resolved multisampled frames to nothing or to one sample (tests/frame.rs `msaa_gl`).
     pub fn set_samples(&mut self, samples: u32) -> Result<(), GpuError> {
@@ -431,18 +431,6 @@ impl Renderer {
     /// occlusion tests take ([`tw_runtime::hzb::Hzb::with_samples`]) to stay conservative.
     pub fn sample_positions(&self) -> &'static [[f32; 2]] {
         tw_runtime::hzb::sample_positions(self.samples).expect("set_samples accepts only these")
-    }
-
-    /// GPU memory of the own render targets (colour, depth, and the multisampled ones) in
-    /// bytes; the item buffer, made by the first [`Renderer::item_buffer`], adds 16 B a pixel.
-    pub fn target_bytes(&self) -> u64 {
-        let pixels = self.width as u64 * self.height as u64;
-        let msaa = if self.samples > 1 {
-            msaa::MsaaTarget::bytes((self.width, self.height), self.samples)
-        } else {
-            0
-        };
-        pixels * 8 + msaa
     }
 
     /// Sets the GPU-memory budget for resident cluster geometry (bytes; at least

@@ -63,11 +63,6 @@ impl MsaaTarget {
         });
         MsaaTarget { size, format, color, depth, depth_only }
     }
-
-    /// Bytes of GPU memory the two targets take.
-    pub fn bytes(size: (u32, u32), samples: u32) -> u64 {
-        size.0 as u64 * size.1 as u64 * samples as u64 * (4 + 4)
-    }
 }
 
 /// The pass writing the farthest sample of a multisampled depth into a single-sample depth.

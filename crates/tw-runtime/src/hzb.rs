@@ -177,11 +177,6 @@ impl Hzb {
         &self.samples
     }
 
-    /// How far a pixel's samples reach from its centre along either axis (pixels).
-    pub fn sample_spread(&self) -> f32 {
-        self.spread
-    }
-
     /// The occluder depth at pixel (`x`, `y`) of level 0 (the depth buffer); `x`, `y` must be
     /// inside the image.
     pub fn pixel_depth(&self, x: u32, y: u32) -> f32 {
