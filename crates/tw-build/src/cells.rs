@@ -242,7 +242,6 @@ fn write_group(
 ) -> Result<Vec<BucketFile>, BuildError> {
     // Write buffers share a quarter of the budget, 64 KiB to 1 MiB each.
     let buf_size = (memory_budget / 4 / group.len() as u64).clamp(64 << 10, 1 << 20) as usize;
-    let mut files = Vec::with_capacity(group.len());
     let mut paths = Vec::with_capacity(group.len());
     for _ in group {
         let f = tempfile::Builder::new()
@@ -250,11 +249,9 @@ fn write_group(
             .suffix(".work")
             .tempfile_in(work_dir)
             .map_err(|e| BuildError::io(work_dir, e))?;
-        let (file, path) = f.into_parts();
-        files.push(file);
-        paths.push(path);
+        paths.push(f.into_temp_path());
     }
-    let mut writer = SpillWriter::new(files, paths.iter().map(|p| p.to_path_buf()).collect(), buf_size);
+    let mut writer = SpillWriter::direct(paths.iter().map(|p| p.to_path_buf()).collect(), buf_size)?;
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
     let mut recs: Vec<Option<Rec>> = Vec::new();

@@ -136,8 +136,9 @@ pub fn ingest(
         .tempfile_in(work_dir)
         .map_err(|e| BuildError::io(work_dir, e))?;
     let (file, path) = file.into_parts();
+    drop(file); // reopened for direct writes
     let mut sink = IngestSink {
-        out: SpillWriter::new(vec![file], vec![path.to_path_buf()], 1 << 20),
+        out: SpillWriter::direct(vec![path.to_path_buf()], 1 << 20)?,
         origin: None,
         objects: Vec::new(),
         triangles: 0,

@@ -24,8 +24,6 @@
 //!
 //! Deterministic: partitions and seam files are sorted before use, whatever the thread count.
 
-use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::Path;
 
 use rayon::prelude::*;
@@ -33,6 +31,7 @@ use tempfile::TempPath;
 
 use crate::cells::{read_records, CellFiles};
 use crate::error::BuildError;
+use crate::workio::SpillWriter;
 
 /// Bytes of one (position, cell) record in a partition file.
 const OPEN_RECORD_BYTES: usize = 16;
@@ -126,8 +125,10 @@ impl SeamFiles {
         let triangles: u64 = (0..cells.bucket_count()).map(|b| cells.bucket_triangles(b)).sum();
         let worst = triangles * 3 * OPEN_RECORD_BYTES as u64;
         let partitions = worst.div_ceil(budget.max(1 << 20)).clamp(1, 512) as usize;
-        let mut parts: Vec<(TempPath, BufWriter<File>)> =
-            (0..partitions).map(|_| temp_writer(work_dir, "tw-open-")).collect::<Result<_, _>>()?;
+        let part_paths: Vec<TempPath> =
+            (0..partitions).map(|_| temp_path(work_dir, "tw-open-")).collect::<Result<_, _>>()?;
+        let mut parts =
+            SpillWriter::direct(part_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?;
 
         // 1. Open positions of every cell, by partition.
         let mut open_positions = 0u64;
@@ -154,8 +155,7 @@ impl SeamFiles {
                 for (open, &cell) in per_cell.iter().zip(&ids) {
                     for &p in open {
                         put_u32s(&mut record, &[p[0], p[1], p[2], cell]);
-                        let (path, w) = &mut parts[partition_of(p, partitions)];
-                        w.write_all(&record).map_err(|e| BuildError::io(&**path, e))?;
+                        parts.write(partition_of(p, partitions), &record)?;
                     }
                     open_positions += open.len() as u64;
                 }
@@ -166,15 +166,15 @@ impl SeamFiles {
         })?;
 
         // 2. Seams of each partition, to the seam files of their cells' buckets.
-        let mut outs: Vec<(TempPath, BufWriter<File>)> = (0..cells.bucket_count())
-            .map(|_| temp_writer(work_dir, "tw-seams-"))
-            .collect::<Result<_, _>>()?;
-        let mut counts = vec![0u64; outs.len()];
+        drop(parts.finish()?);
+        let out_paths: Vec<TempPath> =
+            (0..cells.bucket_count()).map(|_| temp_path(work_dir, "tw-seams-")).collect::<Result<_, _>>()?;
+        let mut outs =
+            SpillWriter::direct(out_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?;
+        let mut counts = vec![0u64; out_paths.len()];
         let mut seams = 0u64;
         let mut seam_record = [0u8; SEAM_RECORD_BYTES];
-        for (path, w) in parts {
-            // Flush and close the partition before reading it back.
-            w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
+        for path in part_paths {
             let mut records = read_records(&path, OPEN_RECORD_BYTES, |b| {
                 let v = get_u32s::<4>(b);
                 ([v[0], v[1], v[2]], v[3])
@@ -196,8 +196,7 @@ impl SeamFiles {
                     for &(_, cell) in &records[i..j] {
                         let b = cells.bucket_of_cell(cell);
                         if b != last_bucket {
-                            let (path, w) = &mut outs[b];
-                            w.write_all(&seam_record).map_err(|e| BuildError::io(&**path, e))?;
+                            outs.write(b, &seam_record)?;
                             counts[b] += 1;
                             last_bucket = b;
                         }
@@ -206,11 +205,8 @@ impl SeamFiles {
                 i = j;
             }
         }
-        let mut buckets = Vec::with_capacity(outs.len());
-        for ((path, w), n) in outs.into_iter().zip(counts) {
-            w.into_inner().map_err(|e| BuildError::io(&path, e.into_error()))?;
-            buckets.push((path, n));
-        }
+        drop(outs.finish()?);
+        let buckets = out_paths.into_iter().zip(counts).collect();
         Ok(SeamFiles { buckets, open_positions, seams, partitions })
     }
 
@@ -239,14 +235,16 @@ fn partition_of(p: [u32; 3], partitions: usize) -> usize {
     ((h >> 32) % partitions as u64) as usize
 }
 
-fn temp_writer(dir: &Path, prefix: &str) -> Result<(TempPath, BufWriter<File>), BuildError> {
+/// Write buffer per partition or seam file.
+const WRITE_BUFFER: usize = 1 << 16;
+
+fn temp_path(dir: &Path, prefix: &str) -> Result<TempPath, BuildError> {
     let f = tempfile::Builder::new()
         .prefix(prefix)
         .suffix(".work")
         .tempfile_in(dir)
         .map_err(|e| BuildError::io(dir, e))?;
-    let (file, path) = f.into_parts();
-    Ok((path, BufWriter::with_capacity(1 << 16, file)))
+    Ok(f.into_temp_path())
 }
 
 fn put_u32s(out: &mut [u8], values: &[u32]) {

@@ -1,60 +1,86 @@
 //! Working-file I/O off the calling thread: the build's early phases stream gigabytes through
-//! the page cache (the working file is 40 bytes per triangle, the buckets 35), and the kernel's
-//! copies in `write` and `read` were ~40 % of their time at 10^8 triangles, all on the one
-//! thread that also parses and decodes. [`SpillWriter`] hands full buffers to a writer thread;
-//! [`read_ahead`] reads and decodes the next chunks of a record file on a reader thread. Both
-//! keep the bytes and their order exactly as a plain buffered writer or reader would, so builds
-//! stay byte-identical; memory is a fixed number of buffers.
+//! their working files (40 bytes per triangle, the buckets 35). [`SpillWriter`] hands full
+//! buffers to a writer thread; [`read_ahead`] reads and decodes the next chunks of a record file
+//! on a reader thread. Both bypass the page cache where the file system allows
+//! ([`tw_core::direct_io`]: on this project's VMs, page-cache pages of new files cost ~7 s of
+//! system time per GB). Both keep the bytes and their order exactly as a plain buffered writer
+//! or reader would, so builds stay byte-identical; memory is a fixed number of buffers.
 
 use std::fs::File;
-use std::io::{Read, Write};
+use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
+
+use tw_core::direct_io::{AlignedBuf, DirectReader, DirectWriter};
 
 use crate::error::BuildError;
 
 /// Full buffers queued for the writer thread beyond the ones being filled.
 pub const WRITES_IN_FLIGHT: usize = 4;
 
+/// Buffer of [`read_ahead`]'s direct reads.
+const READ_BUFFER: usize = 1 << 20;
+
 /// What the writer thread gives back: the files, or the index of the file that failed and why.
 type WriterResult = Result<Vec<File>, (usize, std::io::Error)>;
 
-/// Buffered appends to several files, written on a background thread in the order given.
+/// A buffer for the writer thread: the file, the bytes, and whether they end the file.
+type Job = (usize, AlignedBuf, bool);
+
+/// Buffered appends to several files, written on a background thread in the order given,
+/// bypassing the page cache where the file system allows ([`SpillWriter::direct`]; see
+/// [`tw_core::direct_io`] for why).
 ///
 /// Memory: one buffer per file being filled plus at most [`WRITES_IN_FLIGHT`] full ones queued
-/// or being written, `buffer` bytes each.
+/// or being written, `buffer` bytes each (rounded up to 4 KiB).
 pub struct SpillWriter {
     paths: Vec<PathBuf>,
-    filling: Vec<Vec<u8>>,
+    filling: Vec<AlignedBuf>,
     buffer: usize,
-    to_writer: Option<SyncSender<(usize, Vec<u8>)>>,
-    recycled: Receiver<Vec<u8>>,
+    to_writer: Option<SyncSender<Job>>,
+    recycled: Receiver<AlignedBuf>,
     thread: Option<JoinHandle<WriterResult>>,
 }
 
 impl SpillWriter {
-    /// A writer over `files` (named by `paths`, for errors) with buffers of `buffer` bytes.
+    /// A writer over open `files` (named by `paths`, for errors), written from their start
+    /// through the page cache, with buffers of `buffer` bytes.
     pub fn new(files: Vec<File>, paths: Vec<PathBuf>, buffer: usize) -> SpillWriter {
         assert_eq!(files.len(), paths.len());
-        let buffer = buffer.max(4096);
-        let (to_writer, queued) = sync_channel::<(usize, Vec<u8>)>(WRITES_IN_FLIGHT);
-        let (give_back, recycled) = sync_channel::<Vec<u8>>(WRITES_IN_FLIGHT + 1);
+        SpillWriter::spawn(files.into_iter().map(DirectWriter::buffered).collect(), paths, buffer)
+    }
+
+    /// A writer over the existing files `paths` (truncated), written with direct I/O where the
+    /// file system allows, with buffers of `buffer` bytes.
+    pub fn direct(paths: Vec<PathBuf>, buffer: usize) -> Result<SpillWriter, BuildError> {
+        let writers = paths
+            .iter()
+            .map(|p| DirectWriter::open(p).map_err(|e| BuildError::io(p, e)))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(SpillWriter::spawn(writers, paths, buffer))
+    }
+
+    fn spawn(writers: Vec<DirectWriter>, paths: Vec<PathBuf>, buffer: usize) -> SpillWriter {
+        let buffer = AlignedBuf::new(buffer.max(4096)).capacity();
+        let (to_writer, queued) = sync_channel::<Job>(WRITES_IN_FLIGHT);
+        let (give_back, recycled) = sync_channel::<AlignedBuf>(WRITES_IN_FLIGHT + 1);
         let thread = std::thread::Builder::new()
             .name("tw-spill-writer".into())
             .spawn(move || {
-                let mut files = files;
-                for (i, mut bytes) in queued.iter() {
-                    files[i].write_all(&bytes).map_err(|e| (i, e))?;
+                let mut writers = writers;
+                for (i, mut bytes, last) in queued.iter() {
+                    let w = &mut writers[i];
+                    if last { w.write_last(&mut bytes) } else { w.write(&bytes) }.map_err(|e| (i, e))?;
                     bytes.clear();
                     // A full return queue only means the producer has buffers enough.
                     let _ = give_back.try_send(bytes);
                 }
-                Ok(files)
+                Ok(writers.into_iter().map(DirectWriter::into_file).collect())
             })
             .expect("spawning the spill writer thread");
         SpillWriter {
-            filling: (0..paths.len()).map(|_| Vec::new()).collect(),
+            filling: (0..paths.len()).map(|_| AlignedBuf::empty()).collect(),
             paths,
             buffer,
             to_writer: Some(to_writer),
@@ -67,24 +93,40 @@ impl SpillWriter {
     #[inline]
     pub fn write(&mut self, file: usize, bytes: &[u8]) -> Result<(), BuildError> {
         let buf = &mut self.filling[file];
-        if buf.len() + bytes.len() > self.buffer {
-            self.send(file)?;
+        if bytes.len() <= buf.room() {
+            buf.extend_from_slice(bytes);
+            return Ok(());
         }
-        let buf = &mut self.filling[file];
-        if buf.capacity() == 0 {
-            buf.reserve_exact(self.buffer);
-        }
-        buf.extend_from_slice(bytes);
-        Ok(())
+        self.write_slow(file, bytes)
     }
 
-    fn send(&mut self, file: usize) -> Result<(), BuildError> {
+    /// [`SpillWriter::write`] when the buffer is missing or full: only whole buffers (a multiple
+    /// of 4 KiB) go to the writer before the last, as direct transfers need.
+    #[cold]
+    fn write_slow(&mut self, file: usize, mut bytes: &[u8]) -> Result<(), BuildError> {
+        loop {
+            if self.filling[file].capacity() == 0 {
+                self.filling[file] =
+                    self.recycled.try_recv().unwrap_or_else(|_| AlignedBuf::new(self.buffer));
+            }
+            let buf = &mut self.filling[file];
+            let room = buf.room();
+            if bytes.len() <= room {
+                buf.extend_from_slice(bytes);
+                return Ok(());
+            }
+            buf.extend_from_slice(&bytes[..room]);
+            bytes = &bytes[room..];
+            self.send(file, false)?;
+        }
+    }
+
+    fn send(&mut self, file: usize, last: bool) -> Result<(), BuildError> {
         if self.filling[file].is_empty() {
             return Ok(());
         }
-        let fresh = self.recycled.try_recv().unwrap_or_default();
-        let full = std::mem::replace(&mut self.filling[file], fresh);
-        let sent = self.to_writer.as_ref().map(|tx| tx.send((file, full)).is_ok()).unwrap_or(false);
+        let full = std::mem::replace(&mut self.filling[file], AlignedBuf::empty());
+        let sent = self.to_writer.as_ref().map(|tx| tx.send((file, full, last)).is_ok()).unwrap_or(false);
         if !sent {
             // The writer stopped on an error: report it.
             return Err(self.join().err().unwrap_or_else(|| {
@@ -109,7 +151,7 @@ impl SpillWriter {
     /// Writes what is buffered and waits for the writer: the files, in the order given.
     pub fn finish(mut self) -> Result<Vec<File>, BuildError> {
         for f in 0..self.filling.len() {
-            self.send(f)?;
+            self.send(f, true)?;
         }
         self.join()
     }
@@ -126,7 +168,8 @@ impl Drop for SpillWriter {
 
 /// Reads `path`, `records` records of `size` bytes, in chunks of up to `chunk` records decoded
 /// with `decode` on a reader thread, and calls `f(first record index, records)` for each chunk
-/// in order on the calling thread. Memory: three chunks, raw and decoded.
+/// in order on the calling thread, with direct reads where the file system allows. Memory: three
+/// chunks, raw and decoded, and a 1 MiB read buffer.
 pub fn read_ahead<T, D, F>(
     path: &Path,
     records: u64,
@@ -140,8 +183,8 @@ where
     D: Fn(&[u8]) -> T + Send,
     F: FnMut(u64, &[T]) -> Result<(), BuildError>,
 {
-    let mut file = File::open(path).map_err(|e| BuildError::io(path, e))?;
-    let len = file.metadata().map_err(|e| BuildError::io(path, e))?.len();
+    let mut file = DirectReader::open(path, READ_BUFFER).map_err(|e| BuildError::io(path, e))?;
+    let len = file.file_len();
     if len != records * size as u64 {
         return Err(BuildError::Corrupt {
             path: path.to_path_buf(),

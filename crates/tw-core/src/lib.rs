@@ -18,6 +18,7 @@
 
 pub mod bounds;
 pub mod color;
+pub mod direct_io;
 pub mod mem;
 pub mod rng;
 

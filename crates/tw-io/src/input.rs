@@ -7,6 +7,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
+use tw_core::direct_io::DirectReader;
+
 use crate::error::{ImportError, Position};
 
 /// Size of the read buffer in front of every parser.
@@ -36,8 +38,9 @@ impl Input {
         let mut magic = [0u8; 2];
         let got = read_up_to(&mut file, &mut magic).map_err(io_err)?;
         let gzip = got == 2 && magic == [0x1f, 0x8b];
-        use std::io::Seek;
-        file.seek(io::SeekFrom::Start(0)).map_err(io_err)?;
+        drop(file);
+        // Read once, front to back: bypass the page cache (see tw_core::direct_io).
+        let file = DirectReader::open(path, READ_BUFFER).map_err(io_err)?;
         let disk_bytes = Arc::new(AtomicU64::new(0));
         let counted = CountingReader { inner: file, count: disk_bytes.clone() };
         let inner: Box<dyn Read + Send> = if gzip {
