@@ -16,7 +16,7 @@
 //! except one `fcntl` call.
 
 use std::fs::{File, OpenOptions};
-use std::io::{self, Read};
+use std::io::{self, Read, Write};
 use std::path::Path;
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
@@ -403,6 +403,51 @@ impl DirectWriter {
     }
 }
 
+/// A [`Write`] over a [`DirectWriter`] through one aligned buffer: appends of any size, direct
+/// where the file system allows. [`AlignedWriter::finish`] writes the rest and returns the file.
+/// Memory: one buffer.
+pub struct AlignedWriter {
+    out: DirectWriter,
+    buf: AlignedBuf,
+}
+
+impl AlignedWriter {
+    /// Writes the existing file `path` from its start (truncating it) with a buffer of `buffer`
+    /// bytes (rounded up to 4 KiB).
+    pub fn open(path: &Path, buffer: usize) -> io::Result<AlignedWriter> {
+        Ok(AlignedWriter { out: DirectWriter::open(path)?, buf: AlignedBuf::new(buffer) })
+    }
+
+    /// Bytes written so far, buffered ones included.
+    pub fn position(&self) -> u64 {
+        self.out.len() + self.buf.len() as u64
+    }
+
+    /// Writes the buffered bytes and returns the file, its length exactly what was written.
+    pub fn finish(mut self) -> io::Result<File> {
+        self.out.write_last(&mut self.buf)?;
+        Ok(self.out.into_file())
+    }
+}
+
+impl Write for AlignedWriter {
+    fn write(&mut self, bytes: &[u8]) -> io::Result<usize> {
+        if self.buf.room() == 0 {
+            self.out.write(&self.buf)?;
+            self.buf.clear();
+        }
+        let n = bytes.len().min(self.buf.room());
+        self.buf.extend_from_slice(&bytes[..n]);
+        Ok(n)
+    }
+
+    /// Does nothing: a direct file can only take whole blocks before its end, so the buffer is
+    /// written when full and by [`AlignedWriter::finish`].
+    fn flush(&mut self) -> io::Result<()> {
+        Ok(())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -481,6 +526,28 @@ mod tests {
             drop(r); // joins the thread: must not hang
         }
         assert!(DirectReader::open(&dir.join("missing"), 4096).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_aligned_writer_takes_appends_of_any_size() {
+        let dir = tempfile_dir();
+        let path = dir.join("f");
+        std::fs::write(&path, b"stale").unwrap();
+        let data = pattern(100_003);
+        let mut w = AlignedWriter::open(&path, 4096).unwrap();
+        let mut at = 0;
+        for k in 0.. {
+            if at == data.len() {
+                break;
+            }
+            let n = (k * 37 % 9000).min(data.len() - at);
+            w.write_all(&data[at..at + n]).unwrap();
+            at += n;
+            assert_eq!(w.position(), at as u64);
+        }
+        drop(w.finish().unwrap());
+        assert_eq!(std::fs::read(&path).unwrap(), data);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -8,7 +8,9 @@
 //! input (no timestamps, no hash-map order).
 
 use std::fs::File;
-use std::io::{BufWriter, Seek, SeekFrom, Write};
+use std::io::{Seek, SeekFrom, Write};
+
+use tw_core::direct_io::AlignedWriter;
 use std::path::{Path, PathBuf};
 
 use crate::codec::{self, PageCluster};
@@ -60,7 +62,10 @@ pub struct WriteSummary {
 /// Writes one store file; see the module documentation.
 pub struct StoreWriter {
     path: PathBuf,
-    out: BufWriter<tempfile::NamedTempFile>,
+    /// Pages and tables, written past the page cache where the file system allows (the runtime
+    /// reads pages on demand; see `tw_core::direct_io`); the header goes through `tmp` last.
+    out: AlignedWriter,
+    tmp: tempfile::NamedTempFile,
     pos: u64,
     pages: Vec<PageEntry>,
     scratch: Vec<u8>,
@@ -99,11 +104,12 @@ impl StoreWriter {
         }
         let tmp = builder.tempfile_in(&dir).map_err(io)?;
         let cleanup = crate::cleanup::register(tmp.path());
-        let mut out = BufWriter::with_capacity(1 << 20, tmp);
+        let mut out = AlignedWriter::open(tmp.path(), 1 << 20).map_err(io)?;
         out.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
         Ok(StoreWriter {
             path,
             out,
+            tmp,
             pos: HEADER_LEN as u64,
             pages: Vec::new(),
             scratch: Vec::new(),
@@ -247,7 +253,8 @@ impl StoreWriter {
         let page_bytes = header.section(SectionKind::Pages).length;
         let path = self.path.clone();
         let io = |source| StoreError::Io { path: path.clone(), source };
-        let mut tmp = self.out.into_inner().map_err(|e| io(e.into_error()))?;
+        drop(self.out.finish().map_err(io)?);
+        let mut tmp = self.tmp;
         let f: &mut File = tmp.as_file_mut();
         f.seek(SeekFrom::Start(0)).map_err(io)?;
         f.write_all(&header_bytes).map_err(io)?;
