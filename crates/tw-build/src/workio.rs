@@ -20,7 +20,7 @@ use crate::error::BuildError;
 pub const WRITES_IN_FLIGHT: usize = 4;
 
 /// Buffer of [`read_ahead`]'s direct reads.
-const READ_BUFFER: usize = 1 << 20;
+const READ_BUFFER: usize = 4 << 20;
 
 /// What the writer thread gives back: the files, or the index of the file that failed and why.
 type WriterResult = Result<Vec<File>, (usize, std::io::Error)>;
@@ -169,7 +169,7 @@ impl Drop for SpillWriter {
 /// Reads `path`, `records` records of `size` bytes, in chunks of up to `chunk` records decoded
 /// with `decode` on a reader thread, and calls `f(first record index, records)` for each chunk
 /// in order on the calling thread, with direct reads where the file system allows. Memory: three
-/// chunks, raw and decoded, and a 1 MiB read buffer.
+/// chunks, raw and decoded, and three read buffers of up to 4 MiB.
 pub fn read_ahead<T, D, F>(
     path: &Path,
     records: u64,
@@ -183,7 +183,9 @@ where
     D: Fn(&[u8]) -> T + Send,
     F: FnMut(u64, &[T]) -> Result<(), BuildError>,
 {
-    let mut file = DirectReader::open(path, READ_BUFFER).map_err(|e| BuildError::io(path, e))?;
+    // Small files (a bucket's seams) get a buffer their size.
+    let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
+    let mut file = DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
     let len = file.file_len();
     if len != records * size as u64 {
         return Err(BuildError::Corrupt {
