@@ -10,8 +10,8 @@
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
 
-use tw_core::direct_io::AlignedWriter;
 use std::path::{Path, PathBuf};
+use tw_core::direct_io::AlignedWriter;
 
 use crate::codec::{self, PageCluster};
 use crate::error::StoreError;
