@@ -37,7 +37,7 @@ use crate::error::BuildError;
 use crate::ingest::Ingested;
 use crate::redefine::Redefined;
 use crate::types::{CellMesh, GRID_STEPS};
-use crate::workio::SpillWriter;
+use crate::workio::{temp_path, SpillWriter};
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 35;
@@ -242,15 +242,8 @@ fn write_group(
 ) -> Result<Vec<BucketFile>, BuildError> {
     // Write buffers share a quarter of the budget, 64 KiB to 1 MiB each.
     let buf_size = (memory_budget / 4 / group.len() as u64).clamp(64 << 10, 1 << 20) as usize;
-    let mut paths = Vec::with_capacity(group.len());
-    for _ in group {
-        let f = tempfile::Builder::new()
-            .prefix("tw-bucket-")
-            .suffix(".work")
-            .tempfile_in(work_dir)
-            .map_err(|e| BuildError::io(work_dir, e))?;
-        paths.push(f.into_temp_path());
-    }
+    let paths: Vec<TempPath> =
+        group.iter().map(|_| temp_path(work_dir, "tw-bucket-")).collect::<Result<_, _>>()?;
     let mut writer = SpillWriter::direct(paths.iter().map(|p| p.to_path_buf()).collect(), buf_size)?;
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);

@@ -130,13 +130,7 @@ pub fn ingest(
     work_dir: &Path,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
-    let file = tempfile::Builder::new()
-        .prefix("tw-triangles-")
-        .suffix(".work")
-        .tempfile_in(work_dir)
-        .map_err(|e| BuildError::io(work_dir, e))?;
-    let (file, path) = file.into_parts();
-    drop(file); // reopened for direct writes
+    let path = crate::workio::temp_path(work_dir, "tw-triangles-")?;
     let mut sink = IngestSink {
         out: SpillWriter::direct(vec![path.to_path_buf()], 1 << 20)?,
         origin: None,

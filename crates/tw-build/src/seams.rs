@@ -31,7 +31,7 @@ use tempfile::TempPath;
 
 use crate::cells::{read_records, CellFiles};
 use crate::error::BuildError;
-use crate::workio::SpillWriter;
+use crate::workio::{temp_path, SpillWriter};
 
 /// Bytes of one (position, cell) record in a partition file.
 const OPEN_RECORD_BYTES: usize = 16;
@@ -237,15 +237,6 @@ fn partition_of(p: [u32; 3], partitions: usize) -> usize {
 
 /// Write buffer per partition or seam file.
 const WRITE_BUFFER: usize = 1 << 16;
-
-fn temp_path(dir: &Path, prefix: &str) -> Result<TempPath, BuildError> {
-    let f = tempfile::Builder::new()
-        .prefix(prefix)
-        .suffix(".work")
-        .tempfile_in(dir)
-        .map_err(|e| BuildError::io(dir, e))?;
-    Ok(f.into_temp_path())
-}
 
 fn put_u32s(out: &mut [u8], values: &[u32]) {
     for (k, v) in values.iter().enumerate() {

@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::JoinHandle;
 
+use tempfile::TempPath;
 use tw_core::direct_io::{AlignedBuf, DirectReader, DirectWriter};
 
 use crate::error::BuildError;
@@ -164,6 +165,16 @@ impl Drop for SpillWriter {
             let _ = t.join();
         }
     }
+}
+
+/// A new empty working file `PREFIX….work` in `dir`, deleted when the path is dropped.
+pub fn temp_path(dir: &Path, prefix: &str) -> Result<TempPath, BuildError> {
+    let f = tempfile::Builder::new()
+        .prefix(prefix)
+        .suffix(".work")
+        .tempfile_in(dir)
+        .map_err(|e| BuildError::io(dir, e))?;
+    Ok(f.into_temp_path())
 }
 
 /// Reads `path`, `records` records of `size` bytes, in chunks of up to `chunk` records decoded

@@ -9,8 +9,8 @@
 
 use std::fs::File;
 use std::io::{Seek, SeekFrom, Write};
-
 use std::path::{Path, PathBuf};
+
 use tw_core::direct_io::AlignedWriter;
 
 use crate::codec::{self, PageCluster};
