@@ -215,10 +215,11 @@ pub struct RenderArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel: 1, or 4 for 4× multisample anti-aliasing (occlusion culling stays
-    /// conservative for every sample).
-    #[arg(long, default_value_t = 1, value_parser = parse_samples)]
-    pub samples: u32,
+    /// Samples per pixel: 1, 4 for 4× multisample anti-aliasing (occlusion culling stays
+    /// conservative for every sample), or auto: 4 on a real GPU with Vulkan (or Metal, DX12),
+    /// 1 on CPU drivers and GL.
+    #[arg(long, default_value = "auto", value_parser = parse_samples)]
+    pub samples: SamplesChoice,
     /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
     /// whole scene from an oblique direction.
     #[arg(long)]
@@ -329,10 +330,11 @@ pub struct BenchArgs {
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub size: (u32, u32),
-    /// Samples per pixel: 1, or 4 for 4× multisample anti-aliasing (occlusion culling stays
-    /// conservative for every sample).
-    #[arg(long, default_value_t = 1, value_parser = parse_samples)]
-    pub samples: u32,
+    /// Samples per pixel: 1, 4 for 4× multisample anti-aliasing (occlusion culling stays
+    /// conservative for every sample), or auto: 4 on a real GPU with Vulkan (or Metal, DX12),
+    /// 1 on CPU drivers and GL.
+    #[arg(long, default_value = "auto", value_parser = parse_samples)]
+    pub samples: SamplesChoice,
     /// Pixel error threshold τ of the LOD cut.
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
@@ -424,10 +426,32 @@ pub struct DemoArgs {
     pub frames: usize,
 }
 
-pub fn parse_samples(s: &str) -> Result<u32, String> {
-    match s.parse::<u32>() {
-        Ok(n) if tw_gpu::SUPPORTED_SAMPLES.contains(&n) => Ok(n),
-        _ => Err(format!("expected one of {:?} samples per pixel, got {s:?}", tw_gpu::SUPPORTED_SAMPLES)),
+/// A `--samples` value: a count, or `auto` ([`tw_gpu::Renderer::default_samples`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SamplesChoice {
+    Auto,
+    Is(u32),
+}
+
+impl SamplesChoice {
+    pub fn resolve(self, renderer: &tw_gpu::Renderer) -> u32 {
+        match self {
+            SamplesChoice::Auto => renderer.default_samples(),
+            SamplesChoice::Is(n) => n,
+        }
+    }
+}
+
+pub fn parse_samples(s: &str) -> Result<SamplesChoice, String> {
+    if s.trim() == "auto" {
+        return Ok(SamplesChoice::Auto);
+    }
+    match s.trim().parse::<u32>() {
+        Ok(n) if tw_gpu::SUPPORTED_SAMPLES.contains(&n) => Ok(SamplesChoice::Is(n)),
+        _ => Err(format!(
+            "expected auto or one of {:?} samples per pixel, got {s:?}",
+            tw_gpu::SUPPORTED_SAMPLES
+        )),
     }
 }
 
@@ -449,6 +473,16 @@ mod tests {
     #[test]
     fn cli_is_well_formed() {
         Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn samples() {
+        assert_eq!(parse_samples("auto"), Ok(SamplesChoice::Auto));
+        assert_eq!(parse_samples("1"), Ok(SamplesChoice::Is(1)));
+        assert_eq!(parse_samples("4"), Ok(SamplesChoice::Is(4)));
+        for bad in ["3", "0", "", "four", "-4"] {
+            assert!(parse_samples(bad).unwrap_err().contains("samples per pixel"), "{bad:?}");
+        }
     }
 
     #[test]

@@ -250,6 +250,11 @@ fn render_writes_a_png_of_a_store() {
         assert!(o.status.success(), "{}", stderr(&o));
         assert!(dir.path().join("msaa.png").exists());
     }
+    // auto (the default) is 1 sample on CPU drivers and GL, so it renders everywhere.
+    let o =
+        terawalk(&["render", "p.tw", "-o", "auto.png", "--size", "320x200", "--samples", "auto"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(dir.path().join("auto.png").exists());
 }
 
 /// Ctrl-C (SIGINT) and `kill` (SIGTERM) during a build: exit 130, and neither the store nor its

@@ -26,11 +26,12 @@ pub mod occlude;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use tw_gpu::{ColorMode, GpuError, Image, PoolStats, Renderer, Target};
 use tw_runtime::{
-    Camera, ClusterRef, ResidentPage, RuntimeError, SelectOptions, SelectStats, Selection, StreamOptions,
-    StreamStats, Streamer,
+    Camera, ClusterRef, PageCache, ResidentPage, RuntimeError, SelectOptions, SelectStats, Selection,
+    StreamOptions, StreamStats, Streamer,
 };
 use tw_store::{PageCluster, Store};
 
@@ -317,15 +318,26 @@ impl Walkthrough {
         let limit = (self.streamer.options().budget_bytes / 4).max(1);
         let store = self.streamer.store().clone();
         let cache = self.streamer.cache().clone();
-        let mut rest = &selection.clusters[..];
+        let all = &selection.clusters[..];
+        // Pages are read and decoded ahead on every core, a window at a time, into the cache;
+        // the loop below then finds them there. One page at a time on this thread, a reference
+        // frame of the 10^8 plant (whose decoded full detail is larger than the cache) took
+        // over 20 s on a 16-core host (BENCHMARKS.md, "On a real GPU").
+        let window = 4 * rayon::current_num_threads();
+        let mut warm_end = 0;
+        let mut rest = all;
         while !rest.is_empty() {
             let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
             let mut bytes = 0u64;
             let mut n = 0;
+            let done = all.len() - rest.len();
             for c in rest {
                 if pages.last().map(|(p, _)| *p) != Some(c.page) {
                     if bytes >= limit {
                         break;
+                    }
+                    if done + n >= warm_end {
+                        warm_end = warm_pages(&cache, &store, all, done + n, window);
                     }
                     match cache.get(&store, c.page) {
                         Ok(p) => {
@@ -345,6 +357,27 @@ impl Walkthrough {
         }
         Ok(())
     }
+}
+
+/// Loads the pages of `clusters[from..]` into `cache` in parallel, up to `pages` distinct ones
+/// (errors are left for the caller's own [`PageCache::get`], which reports them); returns the
+/// end of the clusters whose pages were loaded.
+fn warm_pages(cache: &PageCache, store: &Store, clusters: &[ClusterRef], from: usize, pages: usize) -> usize {
+    let mut ids: Vec<u32> = Vec::with_capacity(pages);
+    let mut end = from;
+    while let Some(c) = clusters.get(end) {
+        if ids.last() != Some(&c.page) {
+            if ids.len() == pages {
+                break;
+            }
+            ids.push(c.page);
+        }
+        end += 1;
+    }
+    ids.par_iter().for_each(|&page| {
+        let _ = cache.get(store, page);
+    });
+    end
 }
 
 /// The resident pages of `clusters` (loaded through the cache where needed), sorted by page.

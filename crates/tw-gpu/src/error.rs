@@ -10,6 +10,11 @@ pub enum GpuError {
          WGPU_BACKEND=gl"
     )]
     NoAdapter { backends: String, reason: String },
+    #[error(
+        "{adapter} cannot run terawalk's shaders: it lacks {missing}; use another backend \
+         (WGPU_BACKEND=vulkan)"
+    )]
+    Unusable { adapter: String, missing: String },
     #[error("cannot create a device on {adapter}: {source}")]
     Device {
         adapter: String,

@@ -200,6 +200,10 @@ pub struct Renderer {
 /// the cache, pool, skeleton and fixed parts. Ordinary frames upload far less and are not split.
 const UPLOADS_PER_BATCH: u64 = 4;
 
+/// Storage buffers the draw shaders' vertex stage binds (common.wgsl: the slot table and the
+/// object colours).
+const VERTEX_STORAGE_BUFFERS: u32 = 2;
+
 impl Renderer {
     /// A renderer of `width` × `height` pixels on the first adapter of the backends in
     /// `WGPU_BACKEND` (e.g. `vulkan`, `gl`; default all).
@@ -228,6 +232,7 @@ impl Renderer {
         }))
         .map_err(|e| GpuError::NoAdapter { backends: format!("{backends:?}"), reason: e.to_string() })?;
         let info = adapter.get_info();
+        Renderer::check_adapter(&adapter)?;
         let limits = Renderer::device_limits(&adapter);
         if width > limits.max_texture_dimension_2d || height > limits.max_texture_dimension_2d {
             return Err(GpuError::Size { width, height, max: limits.max_texture_dimension_2d });
@@ -245,6 +250,34 @@ impl Renderer {
         let mut r = Renderer::from_device(device, queue, info, width, height)?;
         r.set_downlevel(&adapter.get_downlevel_capabilities());
         Ok(r)
+    }
+
+    /// Refuses an adapter that cannot run the draw shaders: their vertex stage reads the slot
+    /// table and the object colours from storage buffers (common.wgsl). wgpu's GL backend on
+    /// NVIDIA's EGL driver offered a GLSL version without them (BENCHMARKS.md, "On a real
+    /// GPU"), and its shader translation then panicked at the first pipeline; this turns that
+    /// into a clear error before a device is opened.
+    pub fn check_adapter(adapter: &wgpu::Adapter) -> Result<(), GpuError> {
+        let info = adapter.get_info();
+        let caps = adapter.get_downlevel_capabilities();
+        let limits = adapter.limits();
+        let missing = if !caps.flags.contains(wgpu::DownlevelFlags::VERTEX_STORAGE) {
+            Some(
+                "storage buffers in vertex shaders (GL 4.3 / GLES 3.1 with vertex storage blocks)"
+                    .to_string(),
+            )
+        } else if limits.max_storage_buffers_per_shader_stage < VERTEX_STORAGE_BUFFERS {
+            Some(format!(
+                "{VERTEX_STORAGE_BUFFERS} storage buffers per shader stage (it has {})",
+                limits.max_storage_buffers_per_shader_stage
+            ))
+        } else {
+            None
+        };
+        match missing {
+            Some(missing) => Err(GpuError::Unusable { adapter: adapter_summary(&info), missing }),
+            None => Ok(()),
+        }
     }
 
     /// The limits to open a device with (also for [`Renderer::from_device`]): wgpu's downlevel
@@ -420,6 +453,17 @@ impl Renderer {
     /// Whether [`Renderer::set_samples`] accepts more than one sample (every backend but GL).
     pub fn multisampling_supported(&self) -> bool {
         self.info.backend != wgpu::Backend::Gl
+    }
+
+    /// The samples per pixel `--samples auto` picks: 4 on a real GPU that can multisample (the
+    /// fidelity goal's setting; it cost 17–26 % of the frame on an NVIDIA H200 against 2–3× on
+    /// lavapipe, BENCHMARKS.md "On a real GPU"), 1 on CPU drivers and on GL.
+    pub fn default_samples(&self) -> u32 {
+        if self.multisampling_supported() && self.info.device_type != wgpu::DeviceType::Cpu {
+            4
+        } else {
+            1
+        }
     }
 
     /// Samples per pixel of the shaded passes ([`Renderer::set_samples`]).

@@ -45,6 +45,7 @@ impl Gfx {
         .map_err(|e| ViewError::Adapter(e.to_string()))?;
         let info = adapter.get_info();
         tracing::info!("window adapter: {} ({:?}, {:?})", info.name, info.backend, info.device_type);
+        tw_gpu::Renderer::check_adapter(&adapter).map_err(|e| ViewError::Gpu(e.to_string()))?;
         let limits = tw_gpu::Renderer::device_limits(&adapter);
         let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("terawalk view"),

@@ -83,7 +83,8 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     }
     let adapter = renderer.adapter_summary();
     println!("adapter: {adapter}");
-    renderer.set_samples(args.samples)?;
+    let samples = args.samples.resolve(&renderer);
+    renderer.set_samples(samples)?;
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
     let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
     walk.set_color_mode(color_mode(args.color));
@@ -210,7 +211,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         extra: vec![
             ("frames".into(), cameras.len().to_string()),
             ("warmup".into(), args.warmup.to_string()),
-            ("samples per pixel".into(), args.samples.to_string()),
+            ("samples per pixel".into(), samples.to_string()),
         ],
     };
     let report = BenchReport::new(meta, runs);

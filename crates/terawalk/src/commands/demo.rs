@@ -96,7 +96,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         frames: None,
         out: out.clone(),
         size: (1280, 720),
-        samples: 1,
+        samples: crate::cli::SamplesChoice::Auto,
         error: 1.0,
         memory: 1 << 30,
         occlusion: tw_frame::Occlusion::ALL.iter().map(|&o| crate::cli::OcclusionChoice::Is(o)).collect(),

@@ -34,7 +34,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     };
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
     println!("adapter: {}", renderer.adapter_summary());
-    renderer.set_samples(args.samples)?;
+    renderer.set_samples(args.samples.resolve(&renderer))?;
     renderer.set_store_colors(&store);
     renderer.set_color_mode(match args.color {
         RenderColoring::Material => ColorMode::Material,
