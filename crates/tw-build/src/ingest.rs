@@ -25,9 +25,13 @@
 
 use std::path::Path;
 
+use rayon::prelude::*;
 use tempfile::TempPath;
 use tw_io::scene::SceneProgress;
-use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleSink};
+use tw_io::{
+    ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleBatch, TriangleSink,
+    BATCH_STEP,
+};
 
 use crate::error::BuildError;
 use crate::types::{Grid, GridBox, ObjectRecord};
@@ -38,6 +42,9 @@ pub const RECORD_BYTES: usize = 40;
 
 /// Triangles decoded per chunk by [`WorkFile::scan`] (2.5 MiB of records).
 pub const SCAN_CHUNK: usize = 1 << 16;
+
+/// Triangles of a [`TriangleBatch`] that one task of the pool converts to records.
+const PIECE: usize = 4096;
 
 /// One triangle of the working file: positions relative to [`WorkFile::origin`] (input units).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -124,14 +131,27 @@ pub struct Ingested {
 }
 
 /// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
-/// called now and then with how far the reading has got.
+/// called now and then with how far the reading has got. Batches of triangles
+/// ([`TriangleSink::batch`]) are converted on rayon's global pool.
 pub fn ingest(
     scene: Scene,
     work_dir: &Path,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
+    ingest_in(scene, work_dir, None, progress)
+}
+
+/// [`ingest`], converting batches on `pool` (the global pool when `None`). The working file is
+/// the same whatever the pool.
+pub fn ingest_in(
+    scene: Scene,
+    work_dir: &Path,
+    pool: Option<&rayon::ThreadPool>,
+    progress: &mut dyn FnMut(SceneProgress),
+) -> Result<Ingested, BuildError> {
     let path = crate::workio::temp_path(work_dir, "tw-triangles-")?;
     let mut sink = IngestSink {
+        pool,
         out: SpillWriter::direct(vec![path.to_path_buf()], 1 << 20)?,
         origin: None,
         objects: Vec::new(),
@@ -140,6 +160,7 @@ pub fn ingest(
         max: [f32::NEG_INFINITY; 3],
         failure: None,
         scratch: Vec::new(),
+        pieces: Vec::new(),
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
     if let Some(e) = sink.failure.take() {
@@ -176,7 +197,8 @@ struct ObjectAcc {
     max: [f32; 3],
 }
 
-struct IngestSink {
+struct IngestSink<'p> {
+    pool: Option<&'p rayon::ThreadPool>,
     out: SpillWriter,
     origin: Option<[f64; 3]>,
     objects: Vec<ObjectAcc>,
@@ -186,9 +208,94 @@ struct IngestSink {
     /// The real error behind an [`ImportError::Sink`] we returned (an I/O error on our file).
     failure: Option<BuildError>,
     scratch: Vec<[f32; 3]>,
+    /// Reused pieces of [`TriangleSink::batch`].
+    pieces: Vec<Piece>,
 }
 
-impl IngestSink {
+/// The stored offset of `p` from the origin `o`, or why it cannot be stored.
+#[inline]
+fn offset_from(o: [f64; 3], p: [f64; 3]) -> Result<[f32; 3], BuildError> {
+    let off = [(p[0] - o[0]) as f32, (p[1] - o[1]) as f32, (p[2] - o[2]) as f32];
+    if off.iter().any(|v| !v.is_finite()) {
+        let msg = format!(
+            "vertex {p:?} is too far from the scene's first vertex {o:?} for the working format (f32)"
+        );
+        return Err(BuildError::Limit(msg));
+    }
+    Ok(off)
+}
+
+/// Why a piece stopped: the source's error, or ours.
+enum PieceError {
+    Import(ImportError),
+    Build(BuildError),
+}
+
+/// A run of triangles of a batch converted on one thread: their records, in order, and per
+/// run of consecutive triangles of one object its count and bounds; merged in batch order, so
+/// the working file and every figure are those of the one-by-one path, whatever the threads.
+#[derive(Default)]
+struct Piece {
+    range: std::ops::Range<usize>,
+    bytes: Vec<u8>,
+    /// (object, triangles, min, max) per run of one object.
+    runs: Vec<(ObjectId, u64, [f32; 3], [f32; 3])>,
+    error: Option<PieceError>,
+}
+
+impl Piece {
+    /// Converts the piece's triangles of `batch` with the scene origin `origin`; `objects` are
+    /// the objects announced.
+    fn fill(&mut self, batch: &dyn TriangleBatch, origin: [f64; 3], objects: usize) {
+        self.bytes.clear();
+        self.runs.clear();
+        self.error = None;
+        let mut tris = Vec::with_capacity(BATCH_STEP);
+        for start in self.range.clone().step_by(BATCH_STEP) {
+            tris.clear();
+            if let Err(e) = batch.triangles(start..(start + BATCH_STEP).min(self.range.end), &mut tris) {
+                self.error = Some(PieceError::Import(e));
+                return;
+            }
+            if let Err(e) = self.push(&tris, origin, objects) {
+                self.error = Some(e);
+                return;
+            }
+        }
+    }
+
+    /// Converts and appends `tris`.
+    #[inline]
+    fn push(&mut self, tris: &[Triangle], origin: [f64; 3], objects: usize) -> Result<(), PieceError> {
+        for t in tris {
+            if t.object as usize >= objects {
+                let msg = format!("triangle of unannounced object {}", t.object);
+                return Err(PieceError::Import(ImportError::Sink(msg)));
+            }
+            let mut p = [[0f32; 3]; 3];
+            for (q, &v) in p.iter_mut().zip(&t.positions) {
+                *q = offset_from(origin, v).map_err(PieceError::Build)?;
+            }
+            match self.runs.last_mut() {
+                Some(run) if run.0 == t.object => run.1 += 1,
+                _ => self.runs.push((t.object, 1, [f32::INFINITY; 3], [f32::NEG_INFINITY; 3])),
+            }
+            let run = self.runs.last_mut().expect("pushed above");
+            for v in &p {
+                for (i, &x) in v.iter().enumerate() {
+                    run.2[i] = run.2[i].min(x);
+                    run.3[i] = run.3[i].max(x);
+                }
+            }
+            let mut rec = [0u8; RECORD_BYTES];
+            WorkTri { p, object: t.object }.encode(&mut rec);
+            self.bytes.extend_from_slice(&rec);
+        }
+        Ok(())
+    }
+}
+
+impl IngestSink<'_> {
     fn fail(&mut self, e: BuildError) -> ImportError {
         let msg = e.to_string();
         self.failure = Some(e);
@@ -198,14 +305,7 @@ impl IngestSink {
     #[inline]
     fn offset(&mut self, p: [f64; 3]) -> Result<[f32; 3], ImportError> {
         let o = *self.origin.get_or_insert(p);
-        let off = [(p[0] - o[0]) as f32, (p[1] - o[1]) as f32, (p[2] - o[2]) as f32];
-        if off.iter().any(|v| !v.is_finite()) {
-            let msg = format!(
-                "vertex {p:?} is too far from the scene's first vertex {o:?} for the working format (f32)"
-            );
-            return Err(self.fail(BuildError::Limit(msg)));
-        }
-        Ok(off)
+        offset_from(o, p).map_err(|e| self.fail(e))
     }
 
     #[inline]
@@ -234,7 +334,7 @@ impl IngestSink {
     }
 }
 
-impl TriangleSink for IngestSink {
+impl TriangleSink for IngestSink<'_> {
     fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
         if id as usize != self.objects.len() {
             return Err(ImportError::Sink(format!(
@@ -255,6 +355,66 @@ impl TriangleSink for IngestSink {
     fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
         let p = [self.offset(t.positions[0])?, self.offset(t.positions[1])?, self.offset(t.positions[2])?];
         self.push(p, t.object)
+    }
+
+    /// Converts the batch's triangles on the pool's threads, [`PIECE`] at a time, and appends
+    /// the pieces in order: the same records and figures as [`IngestSink::triangle`] one by one.
+    fn batch(&mut self, batch: &dyn TriangleBatch) -> Result<(), ImportError> {
+        for o in batch.new_objects() {
+            self.object(o.id, &o.info)?;
+        }
+        // The scene's first vertex is the origin of all the others.
+        let n = batch.len();
+        let mut first = 0;
+        while self.origin.is_none() && first < n {
+            let mut t = Vec::with_capacity(1);
+            batch.triangles(first..first + 1, &mut t)?;
+            if let Some(t) = t.first() {
+                self.triangle(t)?;
+            }
+            first += 1;
+        }
+        let Some(origin) = self.origin else { return Ok(()) };
+        let mut pieces = std::mem::take(&mut self.pieces);
+        let count = (n - first).div_ceil(PIECE);
+        pieces.resize_with(count.max(pieces.len()), Piece::default);
+        for (k, p) in pieces[..count].iter_mut().enumerate() {
+            p.range = first + k * PIECE..(first + (k + 1) * PIECE).min(n);
+        }
+        let objects = self.objects.len();
+        let work = &mut pieces[..count];
+        let mut fill = || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects));
+        match self.pool {
+            Some(pool) => pool.install(fill),
+            None => fill(),
+        }
+        let mut result = Ok(());
+        for p in &mut pieces[..count] {
+            if let Some(e) = p.error.take() {
+                result = Err(match e {
+                    PieceError::Import(e) => e,
+                    PieceError::Build(e) => self.fail(e),
+                });
+                break;
+            }
+            for &(object, triangles, min, max) in &p.runs {
+                let acc = &mut self.objects[object as usize];
+                acc.triangles += triangles;
+                for i in 0..3 {
+                    acc.min[i] = acc.min[i].min(min[i]);
+                    acc.max[i] = acc.max[i].max(max[i]);
+                    self.min[i] = self.min[i].min(acc.min[i]);
+                    self.max[i] = self.max[i].max(acc.max[i]);
+                }
+                self.triangles += triangles;
+            }
+            if let Err(e) = self.out.write(0, &p.bytes) {
+                result = Err(self.fail(e));
+                break;
+            }
+        }
+        self.pieces = pieces;
+        result
     }
 
     fn mesh(&mut self, chunk: &MeshChunk<'_>) -> Result<(), ImportError> {

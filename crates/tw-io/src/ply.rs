@@ -50,8 +50,10 @@ use tw_core::Rgba8;
 use crate::error::{ImportError, Position};
 use crate::format::ImportOptions;
 use crate::input::{DiskCounter, Input};
-use crate::vertex_store::VertexStore;
-use crate::{ObjectId, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
+use crate::vertex_store::{VertexStore, BLOCK_SHIFT};
+use crate::{
+    NewObject, ObjectId, ObjectInfo, SourceSummary, Triangle, TriangleBatch, TriangleSink, TriangleSource,
+};
 
 /// Most items a list in a vertex or face record may hold (so a face has at most this many
 /// vertices); a longer list is an error, not an allocation.
@@ -982,6 +984,47 @@ impl Vertices {
         })
     }
 
+    /// Makes block `b` of every store resident (see [`VertexStore::touch`]).
+    fn touch(&mut self, b: usize) -> io::Result<()> {
+        match &mut self.pos {
+            Positions::F32(s) => s.touch(b)?,
+            Positions::F64(s) => s.touch(b)?,
+        }
+        if let Some(n) = &mut self.normals {
+            n.touch(b)?;
+        }
+        if let Some(c) = &mut self.colors {
+            c.touch(b)?;
+        }
+        Ok(())
+    }
+
+    /// How many blocks may be touched and stay resident together: one fewer than the smallest
+    /// store keeps (at least 1).
+    fn touchable_blocks(&self) -> usize {
+        let pos = match &self.pos {
+            Positions::F32(s) => s.max_resident_blocks(),
+            Positions::F64(s) => s.max_resident_blocks(),
+        };
+        let normals = self.normals.as_ref().map_or(usize::MAX, VertexStore::max_resident_blocks);
+        let colors = self.colors.as_ref().map_or(usize::MAX, VertexStore::max_resident_blocks);
+        pos.min(normals).min(colors) - 1
+    }
+
+    /// The corner of vertex `i < len()`, whose block was touched since the last push; from a
+    /// shared reference, so that several threads can resolve faces at once.
+    #[inline]
+    fn corner_resident(&self, i: u64) -> Corner {
+        Corner {
+            pos: match &self.pos {
+                Positions::F32(s) => s.get_resident(i).map(|c| c as f64),
+                Positions::F64(s) => s.get_resident(i),
+            },
+            normal: self.normals.as_ref().map(|s| s.get_resident(i)),
+            color: self.colors.as_ref().map(|s| s.get_resident(i)),
+        }
+    }
+
     fn len(&self) -> u64 {
         match &self.pos {
             Positions::F32(s) => s.len(),
@@ -1083,18 +1126,37 @@ impl Objects {
     #[cold]
     #[inline(never)]
     fn lookup(&mut self, raw: i64, sink: &mut dyn TriangleSink) -> Result<ObjectId, RecordError> {
-        let id = match self.ids.get(&raw) {
-            Some(&id) => id,
+        let (id, new) = self.resolve_new(raw)?;
+        if let Some(info) = new {
+            sink.object(id, &info)?;
+        }
+        Ok(id)
+    }
+
+    /// The dense id of file id `raw`, and the object's description when it is new (for the
+    /// caller to announce before the object's first triangle).
+    #[inline(always)]
+    fn resolve(&mut self, raw: i64) -> Result<(ObjectId, Option<ObjectInfo>), RecordError> {
+        match self.last {
+            Some((r, id)) if r == raw => Ok((id, None)),
+            _ => self.resolve_new(raw),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn resolve_new(&mut self, raw: i64) -> Result<(ObjectId, Option<ObjectInfo>), RecordError> {
+        let (id, new) = match self.ids.get(&raw) {
+            Some(&id) => (id, None),
             None => {
                 let id = u32::try_from(self.ids.len())
                     .map_err(|_| RecordError::Bad("more than 2^32 objects".into()))?;
-                sink.object(id, &ObjectInfo { name: format!("{}/{raw}", self.stem), color: None })?;
                 self.ids.insert(raw, id);
-                id
+                (id, Some(ObjectInfo { name: format!("{}/{raw}", self.stem), color: None }))
             }
         };
         self.last = Some((raw, id));
-        Ok(id)
+        Ok((id, new))
     }
 }
 
@@ -1108,6 +1170,102 @@ fn fixed_layout(props: &[Property], offsets: &mut [usize]) -> Option<usize> {
         at += t.size();
     }
     Some(at)
+}
+
+/// The layout of a binary face record that holds one triangle: every property a scalar except
+/// the index list, whose count is 3. Such records all have the same size, so a run of them can
+/// be delimited without reading them one by one (see [`Body::binary_triangles`]).
+#[derive(Clone, Copy, Debug)]
+struct TriangleRecord {
+    size: usize,
+    /// Offset of the index list's count; the three indices follow it.
+    count_at: usize,
+    /// Offset and type of the object id, when the faces have one.
+    object: Option<(usize, Scalar)>,
+}
+
+impl TriangleRecord {
+    /// The layout, when the face element has no list besides the indices.
+    fn of(el: &Element, layout: &FaceLayout) -> Option<TriangleRecord> {
+        let (mut at, mut count_at, mut object) = (0, None, None);
+        for (pi, p) in el.props.iter().enumerate() {
+            match p.kind {
+                PropKind::Scalar(t) => {
+                    if layout.object.is_some_and(|(op, _)| op == pi) {
+                        object = Some((at, t));
+                    }
+                    at += t.size();
+                }
+                PropKind::List { count, item } if pi == layout.prop => {
+                    count_at = Some(at);
+                    at += count.size() + 3 * item.size();
+                }
+                PropKind::List { .. } => return None,
+            }
+        }
+        Some(TriangleRecord { size: at, count_at: count_at?, object })
+    }
+}
+
+/// A run of triangle records being handed to the sink as one [`TriangleBatch`]: the faces'
+/// vertex indices (checked) and objects, and the objects they announce. Reused across runs.
+#[derive(Default)]
+struct TriangleRun {
+    corners: Vec<[u64; 3]>,
+    /// Dense object ids, one per face; empty when the file is one object (id 0).
+    objects: Vec<ObjectId>,
+    new_objects: Vec<NewObject>,
+    /// Vertex blocks touched by the run: `stamp[b] == run` for those.
+    stamp: Vec<u32>,
+    run: u32,
+    touched: usize,
+}
+
+/// Why [`Body::scan_run`] stopped.
+enum RunEnd {
+    /// At the end of the buffered records (or of the element).
+    Window,
+    /// The next record would touch more vertex blocks than stay resident together.
+    Full,
+    /// The next record is not a triangle (its count is not 3).
+    NotTriangle,
+    /// The next record is broken.
+    Bad(RecordError),
+}
+
+/// The batch of a [`TriangleRun`]: triangles resolved from the touched vertex blocks, through
+/// shared references, on whichever threads the sink uses.
+struct RunBatch<'a> {
+    run: &'a TriangleRun,
+    vertices: &'a Vertices,
+}
+
+impl TriangleBatch for RunBatch<'_> {
+    fn len(&self) -> usize {
+        self.run.corners.len()
+    }
+
+    fn triangles(&self, range: Range<usize>, out: &mut Vec<Triangle>) -> Result<(), ImportError> {
+        let objects = self.run.objects.get(range.clone());
+        for (k, corners) in self.run.corners[range].iter().enumerate() {
+            let [a, b, c] = corners.map(|v| self.vertices.corner_resident(v));
+            let normals = match (a.normal, b.normal, c.normal) {
+                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+                _ => None,
+            };
+            let colors = match (a.color, b.color, c.color) {
+                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+                _ => None,
+            };
+            let object = objects.map_or(0, |o| o[k]);
+            out.push(Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object });
+        }
+        Ok(())
+    }
+
+    fn new_objects(&self) -> &[NewObject] {
+        &self.run.new_objects
+    }
 }
 
 /// Walks the binary record at the start of `bytes`: fills `offsets` with each property's offset
@@ -1326,6 +1484,9 @@ impl Body<'_> {
         v: &mut Vertices,
         sink: &mut dyn TriangleSink,
     ) -> Result<(), ImportError> {
+        if let Some(rec) = TriangleRecord::of(el, layout) {
+            return self.binary_triangles(rd, el, layout, rec, v, sink);
+        }
         let big = self.big;
         let mut objects = self.objects.take();
         // Two instances of the record loop, so that files without objects pay nothing for them.
@@ -1376,6 +1537,109 @@ impl Body<'_> {
             faces.emit(v, object, sink)
         });
         self.faces = faces;
+        result
+    }
+
+    /// Reads binary faces whose records are triangles of one size ([`TriangleRecord`]): runs of
+    /// them are checked here, in order, and handed to the sink as [`TriangleBatch`]es, which
+    /// it may resolve on several threads; any other record (a polygon, a short face, one that
+    /// needs more vertex blocks than stay resident together) is read the general way. The
+    /// triangles, their order, the objects and the errors are those of the general path.
+    fn binary_triangles(
+        &mut self,
+        rd: &mut ByteReader,
+        el: &Element,
+        layout: &FaceLayout,
+        rec: TriangleRecord,
+        v: &mut Vertices,
+        sink: &mut dyn TriangleSink,
+    ) -> Result<(), ImportError> {
+        let (path, big) = (self.path, self.big);
+        let mut faces = std::mem::replace(&mut self.faces, Faces { indices: Vec::new(), short: 0 });
+        let mut objects = self.objects.take();
+        let mut run =
+            TriangleRun { stamp: vec![0; v.len().div_ceil(1 << BLOCK_SHIFT) as usize], ..Default::default() };
+        let mut offsets = vec![0usize; el.props.len()];
+        let mut index = 0u64;
+        let result = (|| -> Result<(), ImportError> {
+            while index < el.count {
+                let start = rd.position();
+                let records = ((rd.available().len() / rec.size) as u64).min(el.count - index) as usize;
+                let end = scan_run(
+                    &rd.available()[..records * rec.size],
+                    rec,
+                    layout,
+                    big,
+                    &mut run,
+                    v,
+                    &mut objects,
+                );
+                let n = run.corners.len();
+                if n > 0 {
+                    sink.batch(&RunBatch { run: &run, vertices: v })?;
+                    rd.consume(n * rec.size);
+                    index += n as u64;
+                }
+                match end {
+                    RunEnd::Window if index < el.count => {
+                        let got = rd
+                            .fill_more()
+                            .map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?;
+                        if got == 0 {
+                            return Err(truncated(path, rd, el, index));
+                        }
+                    }
+                    RunEnd::Window => {}
+                    RunEnd::Full if n > 0 => {}
+                    RunEnd::Full | RunEnd::NotTriangle => {
+                        // One record the general way.
+                        let at = rd.position();
+                        let len = loop {
+                            match measure(&el.props, rd.available(), big, MAX_LIST, &mut offsets) {
+                                Ok(Some(len)) => break len,
+                                Ok(None) => {
+                                    let got = rd.fill_more().map_err(|e| {
+                                        ImportError::io(path, Position::Byte(rd.position()), e)
+                                    })?;
+                                    if got == 0 {
+                                        return Err(truncated(path, rd, el, index));
+                                    }
+                                }
+                                Err(msg) => {
+                                    return Err(RecordError::Bad(msg).at(
+                                        path,
+                                        Position::Byte(at),
+                                        &el.name,
+                                        index,
+                                    ))
+                                }
+                            }
+                        };
+                        let record = &rd.available()[..len];
+                        let r = face_record(record, &offsets, layout, big, &mut faces, v, &mut objects, sink);
+                        if let Err(e) = r {
+                            return Err(e.at(path, Position::Byte(at), &el.name, index));
+                        }
+                        rd.consume(len);
+                        index += 1;
+                    }
+                    RunEnd::Bad(e) => {
+                        return Err(e.at(
+                            path,
+                            Position::Byte(start + (n * rec.size) as u64),
+                            &el.name,
+                            index,
+                        ))
+                    }
+                }
+                if rd.take_refilled() {
+                    sink.progress(self.counter.get());
+                }
+            }
+            Ok(())
+        })();
+        self.faces = faces;
+        self.objects = objects;
         result
     }
 
@@ -1536,6 +1800,116 @@ impl Body<'_> {
             Ok(())
         })
     }
+}
+
+/// Collects into `run` the triangle records at the start of `bytes` (whole records) that can go
+/// to the sink as one batch: checks their counts and indices, touches the vertex blocks they
+/// use, resolves their objects. Stops at the first record that cannot join the run, and says why.
+#[allow(clippy::too_many_arguments)]
+fn scan_run(
+    bytes: &[u8],
+    rec: TriangleRecord,
+    layout: &FaceLayout,
+    big: bool,
+    run: &mut TriangleRun,
+    v: &mut Vertices,
+    objects: &mut Option<Objects>,
+) -> RunEnd {
+    run.corners.clear();
+    run.objects.clear();
+    run.new_objects.clear();
+    run.run = run.run.wrapping_add(1);
+    if run.run == 0 {
+        run.stamp.fill(0);
+        run.run = 1;
+    }
+    run.touched = 0;
+    let touchable = v.touchable_blocks();
+    let n_vertices = v.len();
+    let (count, item) = (layout.count, layout.item);
+    let items_at = rec.count_at + count.size();
+    let isz = item.size();
+    for r in bytes.chunks_exact(rec.size) {
+        if count.i64(&r[rec.count_at..], big) != 3 {
+            return RunEnd::NotTriangle;
+        }
+        let mut corner = [0u64; 3];
+        for (k, c) in corner.iter_mut().enumerate() {
+            let i = item.i64(&r[items_at + k * isz..], big);
+            if i < 0 || i as u64 >= n_vertices {
+                return RunEnd::Bad(RecordError::Bad(format!(
+                    "vertex index {i} out of range (the file has {n_vertices} vertices)"
+                )));
+            }
+            *c = i as u64;
+        }
+        // The blocks this face adds to the run, all of them or none.
+        let blocks = corner.map(|c| (c >> BLOCK_SHIFT) as usize);
+        let mut new = 0;
+        for (k, &b) in blocks.iter().enumerate() {
+            if run.stamp[b] != run.run && !blocks[..k].contains(&b) {
+                new += 1;
+            }
+        }
+        if new > 0 {
+            if run.touched + new > touchable {
+                return RunEnd::Full;
+            }
+            for b in blocks {
+                if run.stamp[b] != run.run {
+                    if let Err(e) = v.touch(b) {
+                        return RunEnd::Bad(RecordError::Io(e));
+                    }
+                    run.stamp[b] = run.run;
+                    run.touched += 1;
+                }
+            }
+        }
+        if let (Some(objects), Some((at, ty))) = (objects.as_mut(), rec.object) {
+            match objects.resolve(ty.i64(&r[at..], big)) {
+                Ok((id, new)) => {
+                    if let Some(info) = new {
+                        run.new_objects.push(NewObject { first: run.corners.len(), id, info });
+                    }
+                    run.objects.push(id);
+                }
+                Err(e) => return RunEnd::Bad(e),
+            }
+        }
+        run.corners.push(corner);
+    }
+    RunEnd::Window
+}
+
+/// Reads one binary face record the general way (any list length) and streams its triangles.
+#[allow(clippy::too_many_arguments)]
+fn face_record(
+    rec: &[u8],
+    offsets: &[usize],
+    layout: &FaceLayout,
+    big: bool,
+    faces: &mut Faces,
+    v: &mut Vertices,
+    objects: &mut Option<Objects>,
+    sink: &mut dyn TriangleSink,
+) -> Result<(), RecordError> {
+    let at = offsets[layout.prop];
+    // `measure` checked the count and that the items are in `rec`.
+    let n = layout.count.i64(&rec[at..], big) as usize;
+    let (csize, isize_) = (layout.count.size(), layout.item.size());
+    let items = &rec[at + csize..at + csize + n * isize_];
+    faces.indices.clear();
+    let n_vertices = v.len();
+    for item in items.chunks_exact(isize_) {
+        faces.add(layout.item.i64(item, big), n_vertices)?;
+    }
+    let object = match (objects.as_mut(), layout.object) {
+        (Some(objects), Some((p, ty))) if faces.indices.len() >= 3 => {
+            objects.id(ty.i64(&rec[offsets[p]..], big), sink)?
+        }
+        _ => 0,
+    };
+    faces.emit(v, object, sink)
 }
 
 fn truncated(path: &Path, rd: &ByteReader, el: &Element, index: u64) -> ImportError {

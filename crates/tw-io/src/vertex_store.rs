@@ -58,7 +58,7 @@ impl Record for Rgba8 {
 }
 
 /// Records per block: 4096 (96 KiB of f64 positions).
-const BLOCK_SHIFT: u32 = 12;
+pub const BLOCK_SHIFT: u32 = 12;
 const BLOCK_LEN: usize = 1 << BLOCK_SHIFT;
 
 struct Block<T> {
@@ -153,6 +153,36 @@ impl<T: Record> VertexStore<T> {
         let block = &mut self.blocks[b];
         block.last_use = self.tick;
         Ok(block.data.as_ref().expect("loaded above")[slot])
+    }
+
+    /// Most blocks the store keeps in memory at once (at least two).
+    pub fn max_resident_blocks(&self) -> usize {
+        self.max_resident
+    }
+
+    /// Makes block `b` (the records `b << BLOCK_SHIFT ..`) resident and most recently used,
+    /// reading it back from the spill file if needed, so that [`VertexStore::get_resident`] can
+    /// read it from shared references. Blocks touched since the last push stay resident for as
+    /// long as fewer than [`VertexStore::max_resident_blocks`] of them have been touched: each
+    /// load evicts the least recently used block.
+    pub fn touch(&mut self, b: usize) -> io::Result<()> {
+        assert!(b < self.blocks.len(), "block {b} out of range {}", self.blocks.len());
+        self.tick += 1;
+        if self.blocks[b].data.is_none() {
+            self.load(b)?;
+        }
+        self.blocks[b].last_use = self.tick;
+        Ok(())
+    }
+
+    /// The record at `index`, whose block must be resident ([`VertexStore::touch`]); panics
+    /// otherwise, or when `index >= len()`. Does not update the LRU order.
+    #[inline]
+    pub fn get_resident(&self, index: u64) -> T {
+        assert!(index < self.len, "vertex {index} out of range {}", self.len);
+        let b = (index >> BLOCK_SHIFT) as usize;
+        let slot = (index & (BLOCK_LEN as u64 - 1)) as usize;
+        self.blocks[b].data.as_ref().expect("the block was touched")[slot]
     }
 
     fn note_peak(&mut self) {
@@ -274,5 +304,26 @@ mod tests {
                 assert_eq!(s.get(i as u64).unwrap(), Rgba8(i.to_le_bytes()));
             }
         }
+    }
+
+    #[test]
+    fn touched_blocks_stay_resident_for_shared_reads() {
+        // Budget of two blocks, six blocks of data: touching one block at a time (fewer than
+        // the two the store keeps) makes each readable through a shared reference.
+        let n = 6 * BLOCK_LEN as u64 - 5;
+        let mut s = VertexStore::<[f32; 3]>::new(0, None);
+        for i in 0..n {
+            s.push([i as f32, 1.0, 2.0]).unwrap();
+        }
+        assert_eq!(s.max_resident_blocks(), 2);
+        for b in [0, 5, 2, 2, 4, 1, 3, 0] {
+            s.touch(b).unwrap();
+            let first = (b << BLOCK_SHIFT) as u64;
+            let last = (first + BLOCK_LEN as u64 - 1).min(n - 1);
+            let shared = &s;
+            assert_eq!(shared.get_resident(first), [first as f32, 1.0, 2.0]);
+            assert_eq!(shared.get_resident(last), [last as f32, 1.0, 2.0]);
+        }
+        assert!(s.stats().blocks_loaded >= 5);
     }
 }
