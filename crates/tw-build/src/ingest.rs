@@ -617,4 +617,59 @@ pub(crate) mod tests {
         let r = ing.work.scan(|_, _| Ok(()));
         assert!(matches!(r, Err(BuildError::Corrupt { .. })), "{r:?}");
     }
+
+    /// Streams a source's triangles one by one (the sink's `batch` is never called).
+    struct OneByOne(Box<dyn TriangleSource>);
+
+    struct Forward<'a>(&'a mut dyn TriangleSink);
+
+    impl TriangleSink for Forward<'_> {
+        fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
+            self.0.object(id, info)
+        }
+        fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+            self.0.triangle(t)
+        }
+    }
+
+    impl TriangleSource for OneByOne {
+        fn name(&self) -> String {
+            self.0.name()
+        }
+        fn progress_total(&self) -> Option<u64> {
+            None
+        }
+        fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
+            self.0.stream(&mut Forward(sink))
+        }
+    }
+
+    #[test]
+    fn batches_give_the_working_file_of_one_by_one_whatever_the_threads() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("plant.ply");
+        let mut w = tw_io::write::create_writer(&ply).unwrap();
+        let plant =
+            tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: 150_000, seed: 3 })
+                .unwrap();
+        Box::new(plant).stream(&mut *w).unwrap();
+        w.finish().unwrap();
+        let options = tw_io::format::ImportOptions { vertex_memory: 1 << 18, spill_dir: None };
+        let open = || tw_io::open_source(&ply, &options).unwrap();
+        let one_by_one =
+            ingest(Scene::from_sources(vec![Box::new(OneByOne(open()))]), dir.path(), &mut |_| {}).unwrap();
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let got =
+                ingest_in(Scene::from_sources(vec![open()]), dir.path(), Some(&pool), &mut |_| {}).unwrap();
+            assert_eq!(got.triangles, one_by_one.triangles);
+            assert_eq!(got.work.origin, one_by_one.work.origin);
+            assert_eq!((got.min, got.max), (one_by_one.min, one_by_one.max));
+            assert_eq!(got.objects, one_by_one.objects);
+            assert_eq!(got.summary, one_by_one.summary);
+            let bytes = |i: &Ingested| std::fs::read(i.work.path()).unwrap();
+            assert!(bytes(&got) == bytes(&one_by_one), "{threads} threads");
+        }
+        assert!(one_by_one.objects.len() > 10);
+    }
 }

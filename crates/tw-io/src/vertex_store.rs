@@ -67,6 +67,8 @@ struct Block<T> {
     /// True once written to the spill file (blocks are immutable once full, so once is enough).
     on_disk: bool,
     last_use: u64,
+    /// Index in [`VertexStore::resident`] while resident.
+    slot: usize,
 }
 
 /// Statistics of a store, for logs and tests.
@@ -83,7 +85,8 @@ pub struct VertexStore<T: Record> {
     blocks: Vec<Block<T>>,
     len: u64,
     max_resident: usize,
-    resident: usize,
+    /// The resident blocks, in no order (eviction looks at these only, not at every block).
+    resident: Vec<usize>,
     tick: u64,
     spill_dir: Option<PathBuf>,
     spill: Option<File>,
@@ -100,7 +103,7 @@ impl<T: Record> VertexStore<T> {
             blocks: Vec::new(),
             len: 0,
             max_resident: (budget_bytes / block_bytes).max(2),
-            resident: 0,
+            resident: Vec::new(),
             tick: 0,
             spill_dir,
             spill: None,
@@ -131,8 +134,9 @@ impl<T: Record> VertexStore<T> {
                 data: Some(vec![T::default(); BLOCK_LEN].into_boxed_slice()),
                 on_disk: false,
                 last_use: self.tick,
+                slot: self.resident.len(),
             });
-            self.resident += 1;
+            self.resident.push(self.blocks.len() - 1);
             self.note_peak();
         }
         let block = self.blocks.last_mut().expect("a block was just ensured");
@@ -186,24 +190,23 @@ impl<T: Record> VertexStore<T> {
     }
 
     fn note_peak(&mut self) {
-        let bytes = (self.resident * BLOCK_LEN * std::mem::size_of::<T>()) as u64;
+        let bytes = (self.resident.len() * BLOCK_LEN * std::mem::size_of::<T>()) as u64;
         self.stats.peak_resident_bytes = self.stats.peak_resident_bytes.max(bytes);
     }
 
     /// Evicts least recently used blocks until one more fits.
     fn make_room(&mut self) -> io::Result<()> {
-        while self.resident >= self.max_resident {
+        while self.resident.len() >= self.max_resident {
             // The last block may still be filling (a spilled copy would go stale): keep it
             // unless it is full.
             let last = self.blocks.len().saturating_sub(1);
             let last_full = self.len.is_multiple_of(BLOCK_LEN as u64);
             let victim = self
-                .blocks
+                .resident
                 .iter()
-                .enumerate()
-                .filter(|(i, b)| b.data.is_some() && (*i != last || last_full))
-                .min_by_key(|(_, b)| b.last_use)
-                .map(|(i, _)| i);
+                .filter(|&&i| i != last || last_full)
+                .min_by_key(|&&i| self.blocks[i].last_use)
+                .copied();
             let Some(v) = victim else { break };
             self.evict(v)?;
         }
@@ -236,7 +239,11 @@ impl<T: Record> VertexStore<T> {
             self.blocks[b].on_disk = true;
             self.stats.blocks_spilled += 1;
         }
-        self.resident -= 1;
+        let slot = self.blocks[b].slot;
+        self.resident.swap_remove(slot);
+        if let Some(&moved) = self.resident.get(slot) {
+            self.blocks[moved].slot = slot;
+        }
         Ok(())
     }
 
@@ -255,7 +262,8 @@ impl<T: Record> VertexStore<T> {
         let data: Box<[T]> =
             (0..BLOCK_LEN).map(|i| T::read_from(&self.scratch[i * T::SIZE..(i + 1) * T::SIZE])).collect();
         self.blocks[b].data = Some(data);
-        self.resident += 1;
+        self.blocks[b].slot = self.resident.len();
+        self.resident.push(b);
         self.stats.blocks_loaded += 1;
         self.note_peak();
         Ok(())
