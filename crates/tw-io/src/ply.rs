@@ -112,7 +112,12 @@ pub(crate) fn object_name(path: &Path) -> String {
 
 /// Bytes at the start of the remaining stream: the largest buffer a [`ByteReader`] may grow to.
 const MAX_BUFFER: usize = 64 << 20;
-const CHUNK: usize = 1 << 20;
+/// The first size of a [`ByteReader`]'s buffer: larger than [`crate::input::READ_BUFFER`], so
+/// that reads go straight from the file's reader into it rather than through the `BufReader`.
+const CHUNK: usize = 4 * crate::input::READ_BUFFER;
+/// Most faces in one [`TriangleRun`] (its memory, and the sink's for the batch, are bounded
+/// by it whatever the buffer holds).
+const MAX_RUN: usize = 1 << 17;
 
 /// A read buffer under the parsers (shared by the PLY and STL importers): records and lines are
 /// parsed in place from [`ByteReader::available`]; [`ByteReader::fill_more`] moves the unread
@@ -1467,6 +1472,21 @@ impl Body<'_> {
         sink: &mut dyn TriangleSink,
     ) -> Result<(), ImportError> {
         let big = self.big;
+        // The usual layout, `float x y z` (little endian) and nothing else read: without the
+        // dispatch on roles and types.
+        if let ([(px, Role::X, Scalar::F32), (py, Role::Y, Scalar::F32), (pz, Role::Z, Scalar::F32)], false) =
+            (layout.fields.as_slice(), big)
+        {
+            let (px, py, pz) = (*px, *py, *pz);
+            let f = |b: &[u8]| f32::from_le_bytes([b[0], b[1], b[2], b[3]]) as f64;
+            return self.binary_records(rd, el, MAX_LIST, sink, |rec, offsets, _, _| {
+                let pos = [f(&rec[offsets[px]..]), f(&rec[offsets[py]..]), f(&rec[offsets[pz]..])];
+                let mut v = VertexValues { pos, ..VertexValues::NEW };
+                v.check()?;
+                out.push(&v)?;
+                Ok(())
+            });
+        }
         self.binary_records(rd, el, MAX_LIST, sink, |rec, offsets, _, _| {
             let mut v = VertexValues::NEW;
             for &(p, role, ty) in &layout.fields {
@@ -1566,7 +1586,8 @@ impl Body<'_> {
         let result = (|| -> Result<(), ImportError> {
             while index < el.count {
                 let start = rd.position();
-                let records = ((rd.available().len() / rec.size) as u64).min(el.count - index) as usize;
+                let records =
+                    ((rd.available().len() / rec.size).min(MAX_RUN) as u64).min(el.count - index) as usize;
                 let end = scan_run(
                     &rd.available()[..records * rec.size],
                     rec,
