@@ -161,11 +161,16 @@ pub fn ingest_in(
         failure: None,
         scratch: Vec::new(),
         pieces: Vec::new(),
+        pending: Vec::new(),
+        pending_count: 0,
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
+    // The last batch's triangles; their errors come before any the stream stopped at later.
+    let appended = sink.flush();
     if let Some(e) = sink.failure.take() {
         return Err(e);
     }
+    appended?;
     let summary = streamed?;
     drop(sink.out.finish()?);
     let Some(origin) = sink.origin else { return Err(BuildError::Empty) };
@@ -208,8 +213,11 @@ struct IngestSink<'p> {
     /// The real error behind an [`ImportError::Sink`] we returned (an I/O error on our file).
     failure: Option<BuildError>,
     scratch: Vec<[f32; 3]>,
-    /// Reused pieces of [`TriangleSink::batch`].
+    /// Reused pieces of [`TriangleSink::batch`]: those being converted, and the previous
+    /// batch's, converted but not yet appended (the first `pending_count`).
     pieces: Vec<Piece>,
+    pending: Vec<Piece>,
+    pending_count: usize,
 }
 
 /// The stored offset of `p` from the origin `o`, or why it cannot be stored.
@@ -223,6 +231,37 @@ fn offset_from(o: [f64; 3], p: [f64; 3]) -> Result<[f32; 3], BuildError> {
         return Err(BuildError::Limit(msg));
     }
     Ok(off)
+}
+
+/// Appends converted pieces in order: their records to `out`, their counts and bounds to the
+/// objects' and the scene's (in the order the one-by-one path folds them). Stops at the first
+/// piece that failed.
+fn append(
+    pieces: &mut [Piece],
+    out: &mut SpillWriter,
+    objects: &mut [ObjectAcc],
+    triangles: &mut u64,
+    scene_min: &mut [f32; 3],
+    scene_max: &mut [f32; 3],
+) -> Result<(), PieceError> {
+    for p in pieces {
+        if let Some(e) = p.error.take() {
+            return Err(e);
+        }
+        for &(object, n, min, max) in &p.runs {
+            let acc = &mut objects[object as usize];
+            acc.triangles += n;
+            for i in 0..3 {
+                acc.min[i] = acc.min[i].min(min[i]);
+                acc.max[i] = acc.max[i].max(max[i]);
+                scene_min[i] = scene_min[i].min(acc.min[i]);
+                scene_max[i] = scene_max[i].max(acc.max[i]);
+            }
+            *triangles += n;
+        }
+        out.write(0, &p.bytes).map_err(PieceError::Build)?;
+    }
+    Ok(())
 }
 
 /// Why a piece stopped: the source's error, or ours.
@@ -296,6 +335,23 @@ impl Piece {
 }
 
 impl IngestSink<'_> {
+    fn piece_failed(&mut self, e: PieceError) -> ImportError {
+        match e {
+            PieceError::Import(e) => e,
+            PieceError::Build(e) => self.fail(e),
+        }
+    }
+
+    /// Appends the last batch's pieces, before anything else is written.
+    fn flush(&mut self) -> Result<(), ImportError> {
+        let n = std::mem::take(&mut self.pending_count);
+        if n == 0 {
+            return Ok(());
+        }
+        let IngestSink { out, objects, triangles, min, max, pending, .. } = self;
+        append(&mut pending[..n], out, objects, triangles, min, max).map_err(|e| self.piece_failed(e))
+    }
+
     fn fail(&mut self, e: BuildError) -> ImportError {
         let msg = e.to_string();
         self.failure = Some(e);
@@ -353,6 +409,7 @@ impl TriangleSink for IngestSink<'_> {
     }
 
     fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+        self.flush()?;
         let p = [self.offset(t.positions[0])?, self.offset(t.positions[1])?, self.offset(t.positions[2])?];
         self.push(p, t.object)
     }
@@ -375,49 +432,34 @@ impl TriangleSink for IngestSink<'_> {
             first += 1;
         }
         let Some(origin) = self.origin else { return Ok(()) };
-        let mut pieces = std::mem::take(&mut self.pieces);
         let count = (n - first).div_ceil(PIECE);
-        pieces.resize_with(count.max(pieces.len()), Piece::default);
-        for (k, p) in pieces[..count].iter_mut().enumerate() {
+        self.pieces.resize_with(count.max(self.pieces.len()), Piece::default);
+        for (k, p) in self.pieces[..count].iter_mut().enumerate() {
             p.range = first + k * PIECE..(first + (k + 1) * PIECE).min(n);
         }
+        // Convert this batch while a thread of the pool appends the previous one.
         let objects = self.objects.len();
-        let work = &mut pieces[..count];
-        let mut fill = || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects));
-        match self.pool {
-            Some(pool) => pool.install(fill),
-            None => fill(),
-        }
-        let mut result = Ok(());
-        for p in &mut pieces[..count] {
-            if let Some(e) = p.error.take() {
-                result = Err(match e {
-                    PieceError::Import(e) => e,
-                    PieceError::Build(e) => self.fail(e),
-                });
-                break;
-            }
-            for &(object, triangles, min, max) in &p.runs {
-                let acc = &mut self.objects[object as usize];
-                acc.triangles += triangles;
-                for i in 0..3 {
-                    acc.min[i] = acc.min[i].min(min[i]);
-                    acc.max[i] = acc.max[i].max(max[i]);
-                    self.min[i] = self.min[i].min(acc.min[i]);
-                    self.max[i] = self.max[i].max(acc.max[i]);
-                }
-                self.triangles += triangles;
-            }
-            if let Err(e) = self.out.write(0, &p.bytes) {
-                result = Err(self.fail(e));
-                break;
-            }
-        }
-        self.pieces = pieces;
-        result
+        let pending = std::mem::take(&mut self.pending_count);
+        let IngestSink { pool, out, objects: accs, triangles, min, max, pieces, pending: done, .. } = self;
+        let (work, done) = (&mut pieces[..count], &mut done[..pending]);
+        let mut both = || {
+            rayon::join(
+                || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects)),
+                || append(done, out, accs, triangles, min, max),
+            )
+            .1
+        };
+        let appended = match pool {
+            Some(pool) => pool.install(both),
+            None => both(),
+        };
+        std::mem::swap(&mut self.pieces, &mut self.pending);
+        self.pending_count = count;
+        appended.map_err(|e| self.piece_failed(e))
     }
 
     fn mesh(&mut self, chunk: &MeshChunk<'_>) -> Result<(), ImportError> {
+        self.flush()?;
         // Convert each shared vertex once.
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
@@ -671,5 +713,31 @@ pub(crate) mod tests {
             assert!(bytes(&got) == bytes(&one_by_one), "{threads} threads");
         }
         assert!(one_by_one.objects.len() > 10);
+    }
+
+    #[test]
+    fn a_coordinate_too_far_in_a_batch_is_a_limit_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("far.ply");
+        let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty double x\n\
+            property double y\nproperty double z\nelement face 2\nproperty list uchar int vertex_indices\n\
+            end_header\n"
+            .to_vec();
+        for v in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1e300, 0.0, 0.0]] {
+            for c in v {
+                bytes.extend_from_slice(&f64::to_le_bytes(c));
+            }
+        }
+        for f in [[0i32, 1, 2], [3, 1, 2]] {
+            bytes.push(3);
+            for i in f {
+                bytes.extend_from_slice(&i.to_le_bytes());
+            }
+        }
+        std::fs::write(&ply, bytes).unwrap();
+        let scene = Scene::open(&[&ply], Default::default()).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let r = ingest_in(scene, dir.path(), Some(&pool), &mut |_| {});
+        assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");
     }
 }
