@@ -21,7 +21,15 @@
 //! [`GridBox`] contains every quantized vertex of its triangles exactly (quantization is
 //! monotone).
 //!
-//! Memory: O(objects) (one record per object); the triangles go to disk as they arrive.
+//! # Threads
+//!
+//! Sources that hand over [`TriangleBatch`]es (binary PLY) have them converted to records on the
+//! pool, `PIECE` triangles per task, while a pool thread appends the previous batch's pieces
+//! in order (`append`): the working file, the bounds and the object records are those of the
+//! one-by-one path, whatever the thread count.
+//!
+//! Memory: O(objects) (one record per object) and two batches' records; the triangles go to
+//! disk as they arrive.
 
 use std::path::Path;
 
@@ -414,8 +422,9 @@ impl TriangleSink for IngestSink<'_> {
         self.push(p, t.object)
     }
 
-    /// Converts the batch's triangles on the pool's threads, [`PIECE`] at a time, and appends
-    /// the pieces in order: the same records and figures as [`IngestSink::triangle`] one by one.
+    /// Converts the batch's triangles on the pool's threads, [`PIECE`] at a time, while the
+    /// previous batch's pieces are appended in order; this batch's are appended by the next
+    /// call or by `flush`. The same records and figures as [`IngestSink::triangle`] one by one.
     fn batch(&mut self, batch: &dyn TriangleBatch) -> Result<(), ImportError> {
         for o in batch.new_objects() {
             self.object(o.id, &o.info)?;

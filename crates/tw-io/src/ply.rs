@@ -29,6 +29,13 @@
 //!    when the file's coordinate types convert to `f32` exactly (the usual `float x y z`), which
 //!    halves memory and spilling, and as `f64` otherwise. Face records are resolved
 //!    through the stores and streamed as triangles; other elements are skipped.
+//! 3. Binary faces whose records are triangles of one size (every property a scalar but the
+//!    index list, its count 3: what terawalk writes and most large scans are) go in runs
+//!    (`Body::binary_triangles`): `scan_run` checks a run's counts and indices in order,
+//!    makes the vertex blocks it uses resident and resolves its objects, and the run goes to
+//!    the sink as one [`TriangleBatch`], which the sink may resolve on several threads (the
+//!    build does). Any other record (a polygon, a short face) is read the general way in
+//!    between; triangles, order, objects and errors are the same either way.
 //!
 //! Binary records are decoded straight out of the read buffer (`ByteReader`): a record of a
 //! fixed layout is a constant set of offsets, a record with lists is measured once and decoded in
