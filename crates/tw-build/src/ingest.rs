@@ -21,13 +21,25 @@
 //! [`GridBox`] contains every quantized vertex of its triangles exactly (quantization is
 //! monotone).
 //!
-//! Memory: O(objects) (one record per object); the triangles go to disk as they arrive.
+//! # Threads
+//!
+//! Sources that hand over [`TriangleBatch`]es (binary PLY) have them converted to records on the
+//! pool, `PIECE` triangles per task, while a pool thread appends the previous batch's pieces
+//! in order (`append`): the working file, the bounds and the object records are those of the
+//! one-by-one path, whatever the thread count.
+//!
+//! Memory: O(objects) (one record per object) and two batches' records; the triangles go to
+//! disk as they arrive.
 
 use std::path::Path;
 
+use rayon::prelude::*;
 use tempfile::TempPath;
 use tw_io::scene::SceneProgress;
-use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleSink};
+use tw_io::{
+    ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleBatch, TriangleSink,
+    BATCH_STEP,
+};
 
 use crate::error::BuildError;
 use crate::types::{Grid, GridBox, ObjectRecord};
@@ -38,6 +50,9 @@ pub const RECORD_BYTES: usize = 40;
 
 /// Triangles decoded per chunk by [`WorkFile::scan`] (2.5 MiB of records).
 pub const SCAN_CHUNK: usize = 1 << 16;
+
+/// Triangles of a [`TriangleBatch`] that one task of the pool converts to records.
+const PIECE: usize = 4096;
 
 /// One triangle of the working file: positions relative to [`WorkFile::origin`] (input units).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -124,14 +139,27 @@ pub struct Ingested {
 }
 
 /// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
-/// called now and then with how far the reading has got.
+/// called now and then with how far the reading has got. Batches of triangles
+/// ([`TriangleSink::batch`]) are converted on rayon's global pool.
 pub fn ingest(
     scene: Scene,
     work_dir: &Path,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
+    ingest_in(scene, work_dir, None, progress)
+}
+
+/// [`ingest`], converting batches on `pool` (the global pool when `None`). The working file is
+/// the same whatever the pool.
+pub fn ingest_in(
+    scene: Scene,
+    work_dir: &Path,
+    pool: Option<&rayon::ThreadPool>,
+    progress: &mut dyn FnMut(SceneProgress),
+) -> Result<Ingested, BuildError> {
     let path = crate::workio::temp_path(work_dir, "tw-triangles-")?;
     let mut sink = IngestSink {
+        pool,
         out: SpillWriter::direct(vec![path.to_path_buf()], 1 << 20)?,
         origin: None,
         objects: Vec::new(),
@@ -140,11 +168,17 @@ pub fn ingest(
         max: [f32::NEG_INFINITY; 3],
         failure: None,
         scratch: Vec::new(),
+        pieces: Vec::new(),
+        pending: Vec::new(),
+        pending_count: 0,
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
+    // The last batch's triangles; their errors come before any the stream stopped at later.
+    let appended = sink.flush();
     if let Some(e) = sink.failure.take() {
         return Err(e);
     }
+    appended?;
     let summary = streamed?;
     drop(sink.out.finish()?);
     let Some(origin) = sink.origin else { return Err(BuildError::Empty) };
@@ -176,7 +210,8 @@ struct ObjectAcc {
     max: [f32; 3],
 }
 
-struct IngestSink {
+struct IngestSink<'p> {
+    pool: Option<&'p rayon::ThreadPool>,
     out: SpillWriter,
     origin: Option<[f64; 3]>,
     objects: Vec<ObjectAcc>,
@@ -186,9 +221,145 @@ struct IngestSink {
     /// The real error behind an [`ImportError::Sink`] we returned (an I/O error on our file).
     failure: Option<BuildError>,
     scratch: Vec<[f32; 3]>,
+    /// Reused pieces of [`TriangleSink::batch`]: those being converted, and the previous
+    /// batch's, converted but not yet appended (the first `pending_count`).
+    pieces: Vec<Piece>,
+    pending: Vec<Piece>,
+    pending_count: usize,
 }
 
-impl IngestSink {
+/// The stored offset of `p` from the origin `o`, or why it cannot be stored.
+#[inline]
+fn offset_from(o: [f64; 3], p: [f64; 3]) -> Result<[f32; 3], BuildError> {
+    let off = [(p[0] - o[0]) as f32, (p[1] - o[1]) as f32, (p[2] - o[2]) as f32];
+    if off.iter().any(|v| !v.is_finite()) {
+        let msg = format!(
+            "vertex {p:?} is too far from the scene's first vertex {o:?} for the working format (f32)"
+        );
+        return Err(BuildError::Limit(msg));
+    }
+    Ok(off)
+}
+
+/// Appends converted pieces in order: their records to `out`, their counts and bounds to the
+/// objects' and the scene's (in the order the one-by-one path folds them). Stops at the first
+/// piece that failed.
+fn append(
+    pieces: &mut [Piece],
+    out: &mut SpillWriter,
+    objects: &mut [ObjectAcc],
+    triangles: &mut u64,
+    scene_min: &mut [f32; 3],
+    scene_max: &mut [f32; 3],
+) -> Result<(), PieceError> {
+    for p in pieces {
+        if let Some(e) = p.error.take() {
+            return Err(e);
+        }
+        for &(object, n, min, max) in &p.runs {
+            let acc = &mut objects[object as usize];
+            acc.triangles += n;
+            for i in 0..3 {
+                acc.min[i] = acc.min[i].min(min[i]);
+                acc.max[i] = acc.max[i].max(max[i]);
+                scene_min[i] = scene_min[i].min(acc.min[i]);
+                scene_max[i] = scene_max[i].max(acc.max[i]);
+            }
+            *triangles += n;
+        }
+        out.write(0, &p.bytes).map_err(PieceError::Build)?;
+    }
+    Ok(())
+}
+
+/// Why a piece stopped: the source's error, or ours.
+enum PieceError {
+    Import(ImportError),
+    Build(BuildError),
+}
+
+/// A run of triangles of a batch converted on one thread: their records, in order, and per
+/// run of consecutive triangles of one object its count and bounds; merged in batch order, so
+/// the working file and every figure are those of the one-by-one path, whatever the threads.
+#[derive(Default)]
+struct Piece {
+    range: std::ops::Range<usize>,
+    bytes: Vec<u8>,
+    /// (object, triangles, min, max) per run of one object.
+    runs: Vec<(ObjectId, u64, [f32; 3], [f32; 3])>,
+    error: Option<PieceError>,
+}
+
+impl Piece {
+    /// Converts the piece's triangles of `batch` with the scene origin `origin`; `objects` are
+    /// the objects announced.
+    fn fill(&mut self, batch: &dyn TriangleBatch, origin: [f64; 3], objects: usize) {
+        self.bytes.clear();
+        self.runs.clear();
+        self.error = None;
+        let mut tris = Vec::with_capacity(BATCH_STEP);
+        for start in self.range.clone().step_by(BATCH_STEP) {
+            tris.clear();
+            if let Err(e) = batch.triangles(start..(start + BATCH_STEP).min(self.range.end), &mut tris) {
+                self.error = Some(PieceError::Import(e));
+                return;
+            }
+            if let Err(e) = self.push(&tris, origin, objects) {
+                self.error = Some(e);
+                return;
+            }
+        }
+    }
+
+    /// Converts and appends `tris`.
+    #[inline]
+    fn push(&mut self, tris: &[Triangle], origin: [f64; 3], objects: usize) -> Result<(), PieceError> {
+        for t in tris {
+            if t.object as usize >= objects {
+                let msg = format!("triangle of unannounced object {}", t.object);
+                return Err(PieceError::Import(ImportError::Sink(msg)));
+            }
+            let mut p = [[0f32; 3]; 3];
+            for (q, &v) in p.iter_mut().zip(&t.positions) {
+                *q = offset_from(origin, v).map_err(PieceError::Build)?;
+            }
+            match self.runs.last_mut() {
+                Some(run) if run.0 == t.object => run.1 += 1,
+                _ => self.runs.push((t.object, 1, [f32::INFINITY; 3], [f32::NEG_INFINITY; 3])),
+            }
+            let run = self.runs.last_mut().expect("pushed above");
+            for v in &p {
+                for (i, &x) in v.iter().enumerate() {
+                    run.2[i] = run.2[i].min(x);
+                    run.3[i] = run.3[i].max(x);
+                }
+            }
+            let mut rec = [0u8; RECORD_BYTES];
+            WorkTri { p, object: t.object }.encode(&mut rec);
+            self.bytes.extend_from_slice(&rec);
+        }
+        Ok(())
+    }
+}
+
+impl IngestSink<'_> {
+    fn piece_failed(&mut self, e: PieceError) -> ImportError {
+        match e {
+            PieceError::Import(e) => e,
+            PieceError::Build(e) => self.fail(e),
+        }
+    }
+
+    /// Appends the last batch's pieces, before anything else is written.
+    fn flush(&mut self) -> Result<(), ImportError> {
+        let n = std::mem::take(&mut self.pending_count);
+        if n == 0 {
+            return Ok(());
+        }
+        let IngestSink { out, objects, triangles, min, max, pending, .. } = self;
+        append(&mut pending[..n], out, objects, triangles, min, max).map_err(|e| self.piece_failed(e))
+    }
+
     fn fail(&mut self, e: BuildError) -> ImportError {
         let msg = e.to_string();
         self.failure = Some(e);
@@ -198,14 +369,7 @@ impl IngestSink {
     #[inline]
     fn offset(&mut self, p: [f64; 3]) -> Result<[f32; 3], ImportError> {
         let o = *self.origin.get_or_insert(p);
-        let off = [(p[0] - o[0]) as f32, (p[1] - o[1]) as f32, (p[2] - o[2]) as f32];
-        if off.iter().any(|v| !v.is_finite()) {
-            let msg = format!(
-                "vertex {p:?} is too far from the scene's first vertex {o:?} for the working format (f32)"
-            );
-            return Err(self.fail(BuildError::Limit(msg)));
-        }
-        Ok(off)
+        offset_from(o, p).map_err(|e| self.fail(e))
     }
 
     #[inline]
@@ -234,7 +398,7 @@ impl IngestSink {
     }
 }
 
-impl TriangleSink for IngestSink {
+impl TriangleSink for IngestSink<'_> {
     fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
         if id as usize != self.objects.len() {
             return Err(ImportError::Sink(format!(
@@ -253,11 +417,58 @@ impl TriangleSink for IngestSink {
     }
 
     fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+        self.flush()?;
         let p = [self.offset(t.positions[0])?, self.offset(t.positions[1])?, self.offset(t.positions[2])?];
         self.push(p, t.object)
     }
 
+    /// Converts the batch's triangles on the pool's threads, [`PIECE`] at a time, while the
+    /// previous batch's pieces are appended in order; this batch's are appended by the next
+    /// call or by `flush`. The same records and figures as [`IngestSink::triangle`] one by one.
+    fn batch(&mut self, batch: &dyn TriangleBatch) -> Result<(), ImportError> {
+        for o in batch.new_objects() {
+            self.object(o.id, &o.info)?;
+        }
+        // The scene's first vertex is the origin of all the others.
+        let n = batch.len();
+        let mut first = 0;
+        while self.origin.is_none() && first < n {
+            let mut t = Vec::with_capacity(1);
+            batch.triangles(first..first + 1, &mut t)?;
+            if let Some(t) = t.first() {
+                self.triangle(t)?;
+            }
+            first += 1;
+        }
+        let Some(origin) = self.origin else { return Ok(()) };
+        let count = (n - first).div_ceil(PIECE);
+        self.pieces.resize_with(count.max(self.pieces.len()), Piece::default);
+        for (k, p) in self.pieces[..count].iter_mut().enumerate() {
+            p.range = first + k * PIECE..(first + (k + 1) * PIECE).min(n);
+        }
+        // Convert this batch while a thread of the pool appends the previous one.
+        let objects = self.objects.len();
+        let pending = std::mem::take(&mut self.pending_count);
+        let IngestSink { pool, out, objects: accs, triangles, min, max, pieces, pending: done, .. } = self;
+        let (work, done) = (&mut pieces[..count], &mut done[..pending]);
+        let mut both = || {
+            rayon::join(
+                || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects)),
+                || append(done, out, accs, triangles, min, max),
+            )
+            .1
+        };
+        let appended = match pool {
+            Some(pool) => pool.install(both),
+            None => both(),
+        };
+        std::mem::swap(&mut self.pieces, &mut self.pending);
+        self.pending_count = count;
+        appended.map_err(|e| self.piece_failed(e))
+    }
+
     fn mesh(&mut self, chunk: &MeshChunk<'_>) -> Result<(), ImportError> {
+        self.flush()?;
         // Convert each shared vertex once.
         let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
@@ -456,5 +667,86 @@ pub(crate) mod tests {
         f.set_len(100).unwrap();
         let r = ing.work.scan(|_, _| Ok(()));
         assert!(matches!(r, Err(BuildError::Corrupt { .. })), "{r:?}");
+    }
+
+    /// Streams a source's triangles one by one (the sink's `batch` is never called).
+    struct OneByOne(Box<dyn TriangleSource>);
+
+    struct Forward<'a>(&'a mut dyn TriangleSink);
+
+    impl TriangleSink for Forward<'_> {
+        fn object(&mut self, id: ObjectId, info: &ObjectInfo) -> Result<(), ImportError> {
+            self.0.object(id, info)
+        }
+        fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+            self.0.triangle(t)
+        }
+    }
+
+    impl TriangleSource for OneByOne {
+        fn name(&self) -> String {
+            self.0.name()
+        }
+        fn progress_total(&self) -> Option<u64> {
+            None
+        }
+        fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
+            self.0.stream(&mut Forward(sink))
+        }
+    }
+
+    #[test]
+    fn batches_give_the_working_file_of_one_by_one_whatever_the_threads() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("plant.ply");
+        let mut w = tw_io::write::create_writer(&ply).unwrap();
+        let plant =
+            tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: 150_000, seed: 3 })
+                .unwrap();
+        Box::new(plant).stream(&mut *w).unwrap();
+        w.finish().unwrap();
+        let options = tw_io::format::ImportOptions { vertex_memory: 1 << 18, spill_dir: None };
+        let open = || tw_io::open_source(&ply, &options).unwrap();
+        let one_by_one =
+            ingest(Scene::from_sources(vec![Box::new(OneByOne(open()))]), dir.path(), &mut |_| {}).unwrap();
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let got =
+                ingest_in(Scene::from_sources(vec![open()]), dir.path(), Some(&pool), &mut |_| {}).unwrap();
+            assert_eq!(got.triangles, one_by_one.triangles);
+            assert_eq!(got.work.origin, one_by_one.work.origin);
+            assert_eq!((got.min, got.max), (one_by_one.min, one_by_one.max));
+            assert_eq!(got.objects, one_by_one.objects);
+            assert_eq!(got.summary, one_by_one.summary);
+            let bytes = |i: &Ingested| std::fs::read(i.work.path()).unwrap();
+            assert!(bytes(&got) == bytes(&one_by_one), "{threads} threads");
+        }
+        assert!(one_by_one.objects.len() > 10);
+    }
+
+    #[test]
+    fn a_coordinate_too_far_in_a_batch_is_a_limit_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("far.ply");
+        let mut bytes = b"ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty double x\n\
+            property double y\nproperty double z\nelement face 2\nproperty list uchar int vertex_indices\n\
+            end_header\n"
+            .to_vec();
+        for v in [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1e300, 0.0, 0.0]] {
+            for c in v {
+                bytes.extend_from_slice(&f64::to_le_bytes(c));
+            }
+        }
+        for f in [[0i32, 1, 2], [3, 1, 2]] {
+            bytes.push(3);
+            for i in f {
+                bytes.extend_from_slice(&i.to_le_bytes());
+            }
+        }
+        std::fs::write(&ply, bytes).unwrap();
+        let scene = Scene::open(&[&ply], Default::default()).unwrap();
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        let r = ingest_in(scene, dir.path(), Some(&pool), &mut |_| {});
+        assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");
     }
 }

@@ -211,7 +211,7 @@ fn build_with_pool(
 
     // 1. Ingest.
     progress.phase("ingest", 0, "bytes");
-    let ing = crate::ingest::ingest(scene, work.path(), &mut |p: SceneProgress| {
+    let ing = crate::ingest::ingest_in(scene, work.path(), Some(pool), &mut |p: SceneProgress| {
         progress.advance(p.done);
     })?;
     progress.end_phase();

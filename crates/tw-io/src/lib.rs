@@ -40,6 +40,8 @@ pub use error::{ImportError, Position};
 pub use format::{open_source, Format};
 pub use scene::{Scene, SceneOptions, SceneStats, SceneSummary};
 
+use std::ops::Range;
+
 use tw_core::Rgba8;
 
 /// Index of an object. Sources number their objects densely from 0 in the order they announce
@@ -67,17 +69,25 @@ impl Triangle {
 
     /// Twice the area (the length of the cross product of two edges).
     pub fn double_area(&self) -> f64 {
+        self.double_area_squared().sqrt()
+    }
+
+    /// The square of [`Triangle::double_area`].
+    #[inline]
+    fn double_area_squared(&self) -> f64 {
         let [a, b, c] = self.positions;
         let u = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
         let v = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
         let n = [u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]];
-        (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        n[0] * n[0] + n[1] * n[1] + n[2] * n[2]
     }
 
     /// A triangle with two equal vertices or zero area carries nothing visible.
     pub fn is_degenerate(&self) -> bool {
         let [a, b, c] = self.positions;
-        a == b || b == c || a == c || self.double_area() == 0.0
+        // `double_area() == 0.0` without the square root: the sum of squares is 0 exactly when
+        // its root is (and NaN, from overflowing coordinates, compares unequal either way).
+        a == b || b == c || a == c || self.double_area_squared() == 0.0
     }
 }
 
@@ -119,9 +129,69 @@ pub trait TriangleSink {
         Ok(())
     }
 
+    /// A run of triangles the sink may resolve in any order and on several threads (the binary
+    /// PLY reader hands its faces over this way). The default announces each of
+    /// [`TriangleBatch::new_objects`] just before its first triangle and passes the triangles to
+    /// [`TriangleSink::triangle`] in order, exactly as if the source had streamed them one by
+    /// one. A sink that overrides it must give the same result, fetch every triangle of the
+    /// batch exactly once (unless it stops at an error) and treat the batch's objects as
+    /// announced before its first triangle.
+    fn batch(&mut self, batch: &dyn TriangleBatch) -> Result<(), ImportError> {
+        let mut tris = Vec::new();
+        let mut done = 0;
+        for o in batch.new_objects() {
+            for start in (done..o.first.min(batch.len())).step_by(BATCH_STEP) {
+                tris.clear();
+                batch.triangles(start..(start + BATCH_STEP).min(o.first), &mut tris)?;
+                tris.iter().try_for_each(|t| self.triangle(t))?;
+            }
+            done = done.max(o.first.min(batch.len()));
+            self.object(o.id, &o.info)?;
+        }
+        for start in (done..batch.len()).step_by(BATCH_STEP) {
+            tris.clear();
+            batch.triangles(start..(start + BATCH_STEP).min(batch.len()), &mut tris)?;
+            tris.iter().try_for_each(|t| self.triangle(t))?;
+        }
+        Ok(())
+    }
+
     /// How far the source has got: bytes of the input file consumed (compressed bytes for a .gz),
     /// or for a generator the triangles produced. Called now and then, for progress bars.
     fn progress(&mut self, _done: u64) {}
+}
+
+/// Triangles fetched from a [`TriangleBatch`] at a time by the default [`TriangleSink::batch`]
+/// (a few KiB: they are written and read back while in the cache).
+pub const BATCH_STEP: usize = 64;
+
+/// Triangles in input order that can be fetched by index ranges from any thread: what
+/// [`TriangleSink::batch`] receives. Fetching is pure: the same range gives the same answer.
+pub trait TriangleBatch: Sync {
+    /// Triangles in the batch, before any are dropped (see [`TriangleBatch::triangles`]).
+    fn len(&self) -> usize;
+
+    /// True when the batch holds no triangles.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Appends to `out` the triangles of `range` (within `0..len()`), in order. A source yields
+    /// every one; a [`Scene`] drops the degenerate ones on the way. Ranges of about
+    /// [`BATCH_STEP`] keep the triangles in the cache between this and their use.
+    fn triangles(&self, range: Range<usize>, out: &mut Vec<Triangle>) -> Result<(), ImportError>;
+
+    /// Objects announced in this batch, in id order, each with the index of its first triangle.
+    fn new_objects(&self) -> &[NewObject];
+}
+
+/// An object first met inside a [`TriangleBatch`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct NewObject {
+    /// Index in the batch of the object's first triangle (`len()` when it has none there).
+    pub first: usize,
+    pub id: ObjectId,
+    pub info: ObjectInfo,
 }
 
 /// A stream of triangles from one file or generator.

@@ -5,13 +5,19 @@
 //! counted here, once for every format; a non-finite coordinate that slipped past a parser is an
 //! error naming the file and the triangle.
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 use tw_core::Aabb;
 
 use crate::error::{ImportError, Position};
 use crate::format::{open_source, ImportOptions};
-use crate::{MeshChunk, ObjectId, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use crate::{
+    MeshChunk, NewObject, ObjectId, ObjectInfo, SourceSummary, Triangle, TriangleBatch, TriangleSink,
+    TriangleSource,
+};
 
 #[derive(Clone, Debug, Default)]
 pub struct SceneOptions {
@@ -209,8 +215,98 @@ impl TriangleSink for SceneFilter<'_> {
         self.sink.mesh(&MeshChunk { object: chunk.object + self.base, ..*chunk })
     }
 
+    fn batch(&mut self, batch: &dyn TriangleBatch) -> Result<(), ImportError> {
+        let mut new_objects = Vec::with_capacity(batch.new_objects().len());
+        for o in batch.new_objects() {
+            if o.id != self.objects {
+                return Err(ImportError::Sink(format!(
+                    "{}: importer announced object {} out of order (expected {})",
+                    self.path.display(),
+                    o.id,
+                    self.objects
+                )));
+            }
+            self.objects += 1;
+            new_objects.push(NewObject { id: o.id + self.base, ..o.clone() });
+        }
+        let filtered = FilteredBatch {
+            inner: batch,
+            new_objects,
+            path: self.path,
+            base: self.base,
+            objects: self.objects,
+            seen: self.seen,
+            degenerate: AtomicU64::new(0),
+        };
+        self.sink.batch(&filtered)?;
+        let degenerate = filtered.degenerate.into_inner();
+        self.seen += batch.len() as u64;
+        self.degenerate += degenerate;
+        self.passed += batch.len() as u64 - degenerate;
+        Ok(())
+    }
+
     fn progress(&mut self, done: u64) {
         (self.progress)(SceneProgress { file: self.file, files: self.files, done, total: self.total });
+    }
+}
+
+/// A source's batch as [`SceneFilter`] passes it on: ids offset, degenerate triangles dropped
+/// (and counted: the sink fetches every triangle once), non-finite ones rejected; the same
+/// checks as [`SceneFilter::triangle`], per triangle, on whichever thread fetches it.
+struct FilteredBatch<'a> {
+    inner: &'a dyn TriangleBatch,
+    new_objects: Vec<NewObject>,
+    path: &'a Path,
+    base: ObjectId,
+    /// Objects of this source announced up to the end of the batch.
+    objects: u32,
+    /// Triangles of this source before the batch.
+    seen: u64,
+    degenerate: AtomicU64,
+}
+
+impl TriangleBatch for FilteredBatch<'_> {
+    fn len(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn triangles(&self, range: Range<usize>, out: &mut Vec<Triangle>) -> Result<(), ImportError> {
+        let first = out.len();
+        self.inner.triangles(range.clone(), out)?;
+        // Sources drop nothing: the k-th triangle appended is triangle `range.start + k`.
+        let mut kept = first;
+        for k in first..out.len() {
+            let mut t = out[k];
+            let seen = self.seen + (range.start + k - first) as u64 + 1;
+            if t.object >= self.objects {
+                return Err(ImportError::Sink(format!(
+                    "{}: triangle {seen} belongs to object {} that was never announced",
+                    self.path.display(),
+                    t.object
+                )));
+            }
+            if t.positions.iter().flatten().any(|v| !v.is_finite()) {
+                return Err(ImportError::parse(
+                    self.path,
+                    Position::File,
+                    format!("triangle {seen} has a non-finite coordinate"),
+                ));
+            }
+            if t.is_degenerate() {
+                continue;
+            }
+            t.object += self.base;
+            out[kept] = t;
+            kept += 1;
+        }
+        self.degenerate.fetch_add((out.len() - kept) as u64, Ordering::Relaxed);
+        out.truncate(kept);
+        Ok(())
+    }
+
+    fn new_objects(&self) -> &[NewObject] {
+        &self.new_objects
     }
 }
 

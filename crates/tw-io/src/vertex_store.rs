@@ -58,7 +58,7 @@ impl Record for Rgba8 {
 }
 
 /// Records per block: 4096 (96 KiB of f64 positions).
-const BLOCK_SHIFT: u32 = 12;
+pub const BLOCK_SHIFT: u32 = 12;
 const BLOCK_LEN: usize = 1 << BLOCK_SHIFT;
 
 struct Block<T> {
@@ -67,6 +67,8 @@ struct Block<T> {
     /// True once written to the spill file (blocks are immutable once full, so once is enough).
     on_disk: bool,
     last_use: u64,
+    /// Index in [`VertexStore::resident`] while resident.
+    slot: usize,
 }
 
 /// Statistics of a store, for logs and tests.
@@ -83,7 +85,8 @@ pub struct VertexStore<T: Record> {
     blocks: Vec<Block<T>>,
     len: u64,
     max_resident: usize,
-    resident: usize,
+    /// The resident blocks, in no order (eviction looks at these only, not at every block).
+    resident: Vec<usize>,
     tick: u64,
     spill_dir: Option<PathBuf>,
     spill: Option<File>,
@@ -100,7 +103,7 @@ impl<T: Record> VertexStore<T> {
             blocks: Vec::new(),
             len: 0,
             max_resident: (budget_bytes / block_bytes).max(2),
-            resident: 0,
+            resident: Vec::new(),
             tick: 0,
             spill_dir,
             spill: None,
@@ -131,8 +134,9 @@ impl<T: Record> VertexStore<T> {
                 data: Some(vec![T::default(); BLOCK_LEN].into_boxed_slice()),
                 on_disk: false,
                 last_use: self.tick,
+                slot: self.resident.len(),
             });
-            self.resident += 1;
+            self.resident.push(self.blocks.len() - 1);
             self.note_peak();
         }
         let block = self.blocks.last_mut().expect("a block was just ensured");
@@ -155,25 +159,54 @@ impl<T: Record> VertexStore<T> {
         Ok(block.data.as_ref().expect("loaded above")[slot])
     }
 
+    /// Most blocks the store keeps in memory at once (at least two).
+    pub fn max_resident_blocks(&self) -> usize {
+        self.max_resident
+    }
+
+    /// Makes block `b` (the records `b << BLOCK_SHIFT ..`) resident and most recently used,
+    /// reading it back from the spill file if needed, so that [`VertexStore::get_resident`] can
+    /// read it from shared references. Blocks touched since the last push stay resident for as
+    /// long as fewer than [`VertexStore::max_resident_blocks`] of them have been touched: each
+    /// load evicts the least recently used block.
+    pub fn touch(&mut self, b: usize) -> io::Result<()> {
+        assert!(b < self.blocks.len(), "block {b} out of range {}", self.blocks.len());
+        self.tick += 1;
+        if self.blocks[b].data.is_none() {
+            self.load(b)?;
+        }
+        self.blocks[b].last_use = self.tick;
+        Ok(())
+    }
+
+    /// The record at `index`, whose block must be resident ([`VertexStore::touch`]); panics
+    /// otherwise, or when `index >= len()`. Does not update the LRU order.
+    #[inline]
+    pub fn get_resident(&self, index: u64) -> T {
+        assert!(index < self.len, "vertex {index} out of range {}", self.len);
+        let b = (index >> BLOCK_SHIFT) as usize;
+        let slot = (index & (BLOCK_LEN as u64 - 1)) as usize;
+        self.blocks[b].data.as_ref().expect("the block was touched")[slot]
+    }
+
     fn note_peak(&mut self) {
-        let bytes = (self.resident * BLOCK_LEN * std::mem::size_of::<T>()) as u64;
+        let bytes = (self.resident.len() * BLOCK_LEN * std::mem::size_of::<T>()) as u64;
         self.stats.peak_resident_bytes = self.stats.peak_resident_bytes.max(bytes);
     }
 
     /// Evicts least recently used blocks until one more fits.
     fn make_room(&mut self) -> io::Result<()> {
-        while self.resident >= self.max_resident {
+        while self.resident.len() >= self.max_resident {
             // The last block may still be filling (a spilled copy would go stale): keep it
             // unless it is full.
             let last = self.blocks.len().saturating_sub(1);
             let last_full = self.len.is_multiple_of(BLOCK_LEN as u64);
             let victim = self
-                .blocks
+                .resident
                 .iter()
-                .enumerate()
-                .filter(|(i, b)| b.data.is_some() && (*i != last || last_full))
-                .min_by_key(|(_, b)| b.last_use)
-                .map(|(i, _)| i);
+                .filter(|&&i| i != last || last_full)
+                .min_by_key(|&&i| self.blocks[i].last_use)
+                .copied();
             let Some(v) = victim else { break };
             self.evict(v)?;
         }
@@ -206,7 +239,11 @@ impl<T: Record> VertexStore<T> {
             self.blocks[b].on_disk = true;
             self.stats.blocks_spilled += 1;
         }
-        self.resident -= 1;
+        let slot = self.blocks[b].slot;
+        self.resident.swap_remove(slot);
+        if let Some(&moved) = self.resident.get(slot) {
+            self.blocks[moved].slot = slot;
+        }
         Ok(())
     }
 
@@ -225,7 +262,8 @@ impl<T: Record> VertexStore<T> {
         let data: Box<[T]> =
             (0..BLOCK_LEN).map(|i| T::read_from(&self.scratch[i * T::SIZE..(i + 1) * T::SIZE])).collect();
         self.blocks[b].data = Some(data);
-        self.resident += 1;
+        self.blocks[b].slot = self.resident.len();
+        self.resident.push(b);
         self.stats.blocks_loaded += 1;
         self.note_peak();
         Ok(())
@@ -274,5 +312,26 @@ mod tests {
                 assert_eq!(s.get(i as u64).unwrap(), Rgba8(i.to_le_bytes()));
             }
         }
+    }
+
+    #[test]
+    fn touched_blocks_stay_resident_for_shared_reads() {
+        // Budget of two blocks, six blocks of data: touching one block at a time (fewer than
+        // the two the store keeps) makes each readable through a shared reference.
+        let n = 6 * BLOCK_LEN as u64 - 5;
+        let mut s = VertexStore::<[f32; 3]>::new(0, None);
+        for i in 0..n {
+            s.push([i as f32, 1.0, 2.0]).unwrap();
+        }
+        assert_eq!(s.max_resident_blocks(), 2);
+        for b in [0, 5, 2, 2, 4, 1, 3, 0] {
+            s.touch(b).unwrap();
+            let first = (b << BLOCK_SHIFT) as u64;
+            let last = (first + BLOCK_LEN as u64 - 1).min(n - 1);
+            let shared = &s;
+            assert_eq!(shared.get_resident(first), [first as f32, 1.0, 2.0]);
+            assert_eq!(shared.get_resident(last), [last as f32, 1.0, 2.0]);
+        }
+        assert!(s.stats().blocks_loaded >= 5);
     }
 }
