@@ -66,7 +66,9 @@ fn main() {
         streamer.load_queued(loads);
     }
     if let Some(out) = args.get(5) {
-        let mut text = String::from("frame\tsegment\ttotal_ms\tcut_ms\tprefetch_ms\tclusters\tnodes\tgroups\treq\tpref\thash\n");
+        let mut text = String::from(
+            "frame\tsegment\ttotal_ms\tcut_ms\tprefetch_ms\tclusters\tnodes\tgroups\treq\tpref\thash\n",
+        );
         for r in &rows {
             text += &format!(
                 "{}\t{}\t{:.3}\t{:.3}\t{:.3}\t{}\t{}\t{}\t{}\t{}\t{:016x}\n",
