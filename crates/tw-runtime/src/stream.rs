@@ -246,8 +246,9 @@ pub struct Streamer {
     last_cache: CacheStats,
     last_prefetch: (u64, u64),
     scratch: Selection,
-    /// The last prefetch views' requests and the frame they were selected in.
-    prefetch_list: (Requests, u64),
+    /// The last prefetch views' requests and the frame they were selected in (`None`: not
+    /// since the last reset).
+    prefetch_list: (Requests, Option<u64>),
 }
 
 impl std::fmt::Debug for Streamer {
@@ -358,7 +359,11 @@ impl Streamer {
         let cut = start.elapsed();
         let mut prefetch = Requests::default();
         let every = self.options.prefetch.every.max(1) as u64;
-        let fresh = self.prefetch_list.0 .0.is_empty() || self.frame >= self.prefetch_list.1 + every;
+        // Selected every `every` frames, whether or not the last selection found pages to
+        // request (an empty list used to count as stale, so with every page of the views
+        // resident — the common case once the cache is warm — the views were selected every
+        // frame).
+        let fresh = self.prefetch_list.1.is_none_or(|f| self.frame >= f + every);
         let wanted = self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below;
         if wanted && !fresh {
             // Between prefetch selections: the last list, less what arrived meanwhile.
@@ -380,7 +385,7 @@ impl Streamer {
             }
             prefetch.0.retain(|p, _| !demand.0.contains_key(p));
             self.availability.set_peek_only(false);
-            self.prefetch_list = (prefetch.clone(), self.frame);
+            self.prefetch_list = (prefetch.clone(), Some(self.frame));
         }
         let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);
