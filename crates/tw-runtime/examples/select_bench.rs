@@ -3,11 +3,13 @@
 //! checked for identical output.
 //!
 //! ```text
-//! cargo run --release -p tw-runtime --example select_bench -- STORE PATH.json [MEMORY_MIB] [LOADS_PER_FRAME] [OUT.tsv]
+//! cargo run --release -p tw-runtime --example select_bench -- STORE PATH.json [MEMORY_MIB] [LOADS_PER_FRAME] [OUT.tsv] [LOADER_THREADS]
 //! ```
 //!
 //! Pages are loaded on the caller's thread between frames (`LOADS_PER_FRAME`, default 64;
-//! untimed), so the residency, and thus every cut, is the same from run to run.
+//! untimed), so the residency, and thus every cut, is the same from run to run. With
+//! `LOADER_THREADS` > 0 they are loaded in the background as in a walkthrough instead (the
+//! frames are then `LOADS_PER_FRAME` ms apart, and not reproducible).
 
 use std::hash::{Hash, Hasher};
 use std::sync::Arc;
@@ -33,7 +35,8 @@ fn main() {
     let path = CameraPath::load(std::path::Path::new(&args[2])).expect("path");
     let mib: u64 = args.get(3).map_or(512, |s| s.parse().expect("MEMORY_MIB"));
     let loads: usize = args.get(4).map_or(64, |s| s.parse().expect("LOADS_PER_FRAME"));
-    let options = StreamOptions { budget_bytes: mib << 20, loader_threads: 0, ..Default::default() };
+    let threads: usize = args.get(6).map_or(0, |s| s.parse().expect("LOADER_THREADS"));
+    let options = StreamOptions { budget_bytes: mib << 20, loader_threads: threads, ..Default::default() };
     let mut streamer = Streamer::new(store.clone(), options).expect("streamer");
     let select = SelectOptions::default();
     let mut rows = Vec::new();
@@ -63,9 +66,13 @@ fn main() {
             fp,
         ));
         drop(frame);
-        streamer.load_queued(loads);
+        if threads == 0 {
+            streamer.load_queued(loads);
+        } else {
+            std::thread::sleep(std::time::Duration::from_millis(loads as u64));
+        }
     }
-    if let Some(out) = args.get(5) {
+    if let Some(out) = args.get(5).filter(|o| *o != "-") {
         let mut text = String::from(
             "frame\tsegment\ttotal_ms\tcut_ms\tprefetch_ms\tclusters\tnodes\tgroups\treq\tpref\thash\n",
         );

@@ -414,6 +414,14 @@ impl PageCache {
         !matches!(self.lock().slots.get(page as usize), Some(Slot::Empty))
     }
 
+    /// Keeps the items of `items` whose page (`page_of`) is not settled
+    /// ([`is_settled`](Self::is_settled)), in order, under one lock (the frame's request
+    /// lists, without a lock per page that the loaders would contend for).
+    pub fn retain_unsettled<T>(&self, items: &mut Vec<T>, page_of: impl Fn(&T) -> u32) {
+        let inner = self.lock();
+        items.retain(|t| matches!(inner.slots.get(page_of(t) as usize), Some(Slot::Empty)));
+    }
+
     /// Evicts least recently used unpinned pages, except `keep`, until within the budget.
     fn evict(&self, inner: &mut Inner, keep: u32) {
         while inner.stats.resident_bytes > self.budget {
