@@ -35,8 +35,8 @@
 //! **Frame-to-frame state.** Once a group's page has been seen, the [`Selector`] keeps the
 //! group's steps (in order of first appearance; pages never change). In later frames a group
 //! whose every step is skipped (too coarse, and, when streaming, its finer sources available)
-//! is selected without reading its page at all ([`Selector::all_skip`]) — about 60% of the
-//! selected groups on the 10^8-triangle plant, the DAG's interior above the cut. The steps are
+//! is selected without reading its page at all ([`Selector::all_skip`]) — 63% of the selected
+//! groups on a path through the 10^8-triangle plant, the DAG's interior above the cut. The steps are
 //! evaluated in the order the cluster loop would meet them and the evaluation stops at the first
 //! step that is not skipped, so the residency snapshot is asked the same questions in the same
 //! order: the cut, the statistics, the requests and even the page cache's LRU order are those
@@ -44,7 +44,7 @@
 //! ones over random camera sequences and compares all of them).
 //!
 //! Why not an incremental front (Hoppe, Yoon 2003 §5: refine and coarsen last frame's front)?
-//! The skeleton is small (23,555 nodes for 10^8 triangles) and the node tests were ~1% of the
+//! The skeleton is small (23,555 nodes for 10^8 triangles) and the node tests were 1–3% of the
 //! traversal's time in a profile of the 10^8 walk and fly-over; the work is in the groups and
 //! clusters at the cut, which an incremental front must test every frame as well. The state
 //! kept here is what coherence buys: per-group data read once instead of every frame.
@@ -162,8 +162,11 @@ pub struct Selector {
     /// frame decides that none of a group's clusters is drawn without reading its page
     /// ([`Selector::all_skip`]); the page's content never changes (checksummed), so once is
     /// enough.
-    group_steps: Vec<OnceLock<Box<[(f32, [f32; 4])]>>>,
+    group_steps: Vec<OnceLock<Box<[Step]>>>,
 }
+
+/// A step: the `(self_error, self_sphere)` its clusters share.
+type Step = (f32, [f32; 4]);
 
 /// Where a selection gets its pages (see the module documentation).
 enum Mode<'a> {
