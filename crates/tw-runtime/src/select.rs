@@ -67,6 +67,7 @@
 //! resident both modes give the same cut. The LOD skip of step 2 stays valid: availability only
 //! replaces more groups.
 
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use glam::Vec3;
@@ -163,6 +164,9 @@ pub struct Selector {
     /// ([`Selector::all_skip`]); the page's content never changes (checksummed), so once is
     /// enough.
     group_steps: Vec<OnceLock<Box<[Step]>>>,
+    /// Groups selected from their kept steps, since the selector was made
+    /// ([`Selector::groups_from_steps`]).
+    from_steps: Arc<AtomicU64>,
 }
 
 /// A step: the `(self_error, self_sphere)` its clusters share.
@@ -278,7 +282,22 @@ impl Selector {
         }
         let group_lod = groups.iter().map(|g| (g.error, g.sphere)).collect();
         let group_steps = (0..groups.len()).map(|_| OnceLock::new()).collect();
-        Selector { grid_step: step, node_boxes, lod_boxes, subtree_error, group_lod, group_steps }
+        Selector {
+            grid_step: step,
+            node_boxes,
+            lod_boxes,
+            subtree_error,
+            group_lod,
+            group_steps,
+            from_steps: Arc::default(),
+        }
+    }
+
+    /// Groups selected from their kept steps without reading their page, over every selection
+    /// this selector (and its clones) made. A diagnostic: the selections themselves do not
+    /// depend on it.
+    pub fn groups_from_steps(&self) -> u64 {
+        self.from_steps.load(Ordering::Relaxed)
     }
 
     /// Whether no cluster of group `g` is drawn this frame, from its recorded steps alone:
@@ -367,6 +386,7 @@ impl Selector {
         let stats = &mut out.stats;
         let mut pages: Vec<u32> = Vec::new();
         let mut verdicts: Vec<(u32, Verdict)> = Vec::new();
+        let mut from_steps = 0u64;
         // (node, inside): `inside` = an ancestor's box is entirely inside the frustum.
         let mut stack: Vec<(u32, bool)> = vec![(0, !options.frustum_culling)];
         if nodes.is_empty() {
@@ -416,6 +436,7 @@ impl Selector {
                         && self.all_skip(store, mode, &metric, tau, gi as u32) == Some(true)
                     {
                         stats.groups_selected += 1;
+                        from_steps += 1;
                         pages.push(g.page);
                         continue;
                     }
@@ -549,6 +570,7 @@ impl Selector {
                 stack.extend(children.rev().map(|c| (c, inside)));
             }
         }
+        self.from_steps.fetch_add(from_steps, Ordering::Relaxed);
         stats.clusters_selected = out.clusters.len() as u64;
         pages.sort_unstable();
         pages.dedup();

@@ -215,6 +215,16 @@ fn check_sequence(store: &Store, budget: u64, frames: usize, seed: u64) {
     assert!(teleports > 5, "{teleports} teleports");
     assert!(evictions > 0, "the budget never forced an eviction");
     assert!(drawn > 0);
+    eprintln!(
+        "{frames} frames: {teleports} teleports, {evictions} evictions, {drawn} clusters drawn, {} groups \
+         selected from their kept steps",
+        warm.groups_from_steps()
+    );
+    assert!(
+        warm.groups_from_steps() > frames as u64,
+        "{} groups selected from their kept steps: the shortcut was hardly exercised",
+        warm.groups_from_steps()
+    );
 }
 
 fn total_page_bytes(store: &Store) -> u64 {
