@@ -148,6 +148,11 @@ impl Availability {
         }
     }
 
+    /// Whether `page` is resident in this frame's snapshot (without cloning its `Arc`).
+    pub fn is_resident(&mut self, cache: &PageCache, page: u32) -> bool {
+        self.page_resident(cache, page)
+    }
+
     /// Whether `page` failed (or does not exist), in this frame's snapshot.
     pub fn page_failed(&mut self, cache: &PageCache, page: u32) -> bool {
         matches!(self.snap(cache, page), Snap::Failed)

@@ -32,13 +32,33 @@ use tw_store::{PageCluster, Store, StoreError};
 
 use crate::error::RuntimeError;
 
-/// One decoded page: its clusters, and each cluster's grid bounding box (for culling).
+/// One decoded page: its clusters, each cluster's grid bounding box (for culling), and the
+/// compact per-cluster data the selection reads ([`ClusterInfo`], [`ResidentPage::steps`]),
+/// computed once when the page is decoded (on a loader thread), so that a frame's selection
+/// never touches the clusters' vertex data and evaluates the LOD test once per step instead of
+/// once per cluster.
 #[derive(Debug)]
 pub struct ResidentPage {
     pub clusters: Vec<PageCluster>,
     /// Inclusive grid box `(min, max)` of each cluster's vertices.
     pub bounds: Vec<([u32; 3], [u32; 3])>,
+    /// Per cluster (same order as `clusters`).
+    info: Vec<ClusterInfo>,
+    /// The page's distinct `(self_error, self_sphere)` pairs (bit for bit), in order of first
+    /// appearance: clusters made by the same simplification step share one.
+    steps: Vec<(f32, [f32; 4])>,
     bytes: usize,
+}
+
+/// What the selection needs of one cluster (12 bytes; [`ResidentPage::info`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ClusterInfo {
+    /// `PageCluster::group`.
+    pub group: u32,
+    /// Index of the cluster's `(self_error, self_sphere)` in [`ResidentPage::steps`].
+    pub step: u32,
+    /// `PageCluster::triangle_count`.
+    pub triangles: u32,
 }
 
 impl ResidentPage {
@@ -61,14 +81,41 @@ impl ResidentPage {
                 (lo, hi)
             })
             .collect::<Vec<_>>();
+        // Distinct steps by their bits, so that evaluating a step gives the same bits as
+        // evaluating any of its clusters.
+        let mut steps: Vec<(f32, [f32; 4])> = Vec::new();
+        let mut index: HashMap<(u32, [u32; 4]), u32> = HashMap::new();
+        let info = clusters
+            .iter()
+            .map(|c| {
+                let key = (c.self_error.to_bits(), c.self_sphere.map(f32::to_bits));
+                let step = *index.entry(key).or_insert_with(|| {
+                    steps.push((c.self_error, c.self_sphere));
+                    steps.len() as u32 - 1
+                });
+                ClusterInfo { group: c.group, step, triangles: c.triangle_count() as u32 }
+            })
+            .collect::<Vec<_>>();
         let bytes = std::mem::size_of::<ResidentPage>()
             + clusters.capacity() * std::mem::size_of::<PageCluster>()
             + bounds.capacity() * std::mem::size_of::<([u32; 3], [u32; 3])>()
+            + info.capacity() * std::mem::size_of::<ClusterInfo>()
+            + steps.capacity() * std::mem::size_of::<(f32, [f32; 4])>()
             + clusters
                 .iter()
                 .map(|c| c.positions.capacity() * 12 + c.indices.capacity() + c.objects.capacity() * 4)
                 .sum::<usize>();
-        ResidentPage { clusters, bounds, bytes }
+        ResidentPage { clusters, bounds, info, steps, bytes }
+    }
+
+    /// Per cluster: its group, step and triangle count (same order as `clusters`).
+    pub fn info(&self) -> &[ClusterInfo] {
+        &self.info
+    }
+
+    /// The distinct `(self_error, self_sphere)` pairs of the page's clusters.
+    pub fn steps(&self) -> &[(f32, [f32; 4])] {
+        &self.steps
     }
 
     /// Heap bytes this page holds (what the cache budget counts).
@@ -365,6 +412,14 @@ impl PageCache {
     /// Whether `page` is resident or has failed (nothing left to load), or does not exist.
     pub fn is_settled(&self, page: u32) -> bool {
         !matches!(self.lock().slots.get(page as usize), Some(Slot::Empty))
+    }
+
+    /// Keeps the items of `items` whose page (`page_of`) is not settled
+    /// ([`is_settled`](Self::is_settled)), in order, under one lock (the frame's request
+    /// lists, without a lock per page that the loaders would contend for).
+    pub fn retain_unsettled<T>(&self, items: &mut Vec<T>, page_of: impl Fn(&T) -> u32) {
+        let inner = self.lock();
+        items.retain(|t| matches!(inner.slots.get(page_of(t) as usize), Some(Slot::Empty)));
     }
 
     /// Evicts least recently used unpinned pages, except `keep`, until within the budget.

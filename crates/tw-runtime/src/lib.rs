@@ -59,7 +59,7 @@ pub mod stream;
 pub mod triangle_test;
 
 pub use availability::{Availability, Requests};
-pub use cache::{CacheStats, Eviction, Inserted, PageCache, PageState, ResidentPage};
+pub use cache::{CacheStats, ClusterInfo, Eviction, Inserted, PageCache, PageState, ResidentPage};
 pub use camera::{Camera, InputCamera};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};

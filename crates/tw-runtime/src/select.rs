@@ -25,6 +25,30 @@
 //! 4. **Clusters** of such a group are drawn when `proj(self_sphere, self_error) ≤ τ` (the
 //!    cluster is fine enough) and their vertex box is not outside the frustum.
 //!
+//! **Per step, not per cluster.** A cluster's LOD decision depends only on its *step* — its
+//! `(self_error, self_sphere)`, shared by the clusters one simplification made — and, when
+//! streaming, on the availability of that step's sources. So the decision is evaluated once per
+//! step a group holds (in cluster order, memoized for the group), from the compact per-cluster
+//! data the loader computed when it decoded the page ([`ResidentPage::info`],
+//! [`ResidentPage::steps`]): the selection never reads a cluster's vertex data.
+//!
+//! **Frame-to-frame state.** Once a group's page has been seen, the [`Selector`] keeps the
+//! group's steps (in order of first appearance; pages never change). In later frames a group
+//! whose every step is skipped (too coarse, and, when streaming, its finer sources available)
+//! is selected without reading its page at all ([`Selector::all_skip`]) — 63% of the selected
+//! groups on a path through the 10^8-triangle plant, the DAG's interior above the cut. The steps are
+//! evaluated in the order the cluster loop would meet them and the evaluation stops at the first
+//! step that is not skipped, so the residency snapshot is asked the same questions in the same
+//! order: the cut, the statistics, the requests and even the page cache's LRU order are those
+//! of the traversal without the shortcut (tests/coherence.rs drives a warm selector and fresh
+//! ones over random camera sequences and compares all of them).
+//!
+//! Why not an incremental front (Hoppe, Yoon 2003 §5: refine and coarsen last frame's front)?
+//! The skeleton is small (23,555 nodes for 10^8 triangles) and the node tests were 1–3% of the
+//! traversal's time in a profile of the 10^8 walk and fly-over; the work is in the groups and
+//! clusters at the cut, which an incremental front must test every frame as well. The state
+//! kept here is what coherence buys: per-group data read once instead of every frame.
+//!
 //! Because each decision is a function of (error, sphere) evaluated the same way everywhere
 //! ([`LodMetric`]), a group's "replaced" and its replacement's "fine enough" agree exactly, and
 //! the drawn set is a crack-free cut of the DAG; the frustum only removes clusters whose
@@ -43,7 +67,8 @@
 //! resident both modes give the same cut. The LOD skip of step 2 stays valid: availability only
 //! replaces more groups.
 
-use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, OnceLock};
 
 use glam::Vec3;
 use tw_store::Store;
@@ -130,7 +155,22 @@ pub struct Selector {
     lod_boxes: Vec<(Vec3, Vec3)>,
     /// Largest group error in each node's subtree.
     subtree_error: Vec<f32>,
+    /// `(error, sphere)` of each group: the render rule's test reads 20 bytes a group here
+    /// instead of the store's whole group record.
+    group_lod: Vec<(f32, [f32; 4])>,
+    /// Per group, once its page has been seen: the distinct `(self_error, self_sphere)` of its
+    /// clusters (its steps), in order of first appearance among the clusters. With them a
+    /// frame decides that none of a group's clusters is drawn without reading its page
+    /// ([`Selector::all_skip`]); the page's content never changes (checksummed), so once is
+    /// enough.
+    group_steps: Vec<OnceLock<Box<[Step]>>>,
+    /// Groups selected from their kept steps, since the selector was made
+    /// ([`Selector::groups_from_steps`]).
+    from_steps: Arc<AtomicU64>,
 }
+
+/// A step: the `(self_error, self_sphere)` its clusters share.
+type Step = (f32, [f32; 4]);
 
 /// Where a selection gets its pages (see the module documentation).
 enum Mode<'a> {
@@ -140,22 +180,71 @@ enum Mode<'a> {
     Stream { cache: &'a PageCache, availability: &'a mut Availability, requests: &'a mut Requests },
 }
 
-/// The sources of cluster `c`'s step: the sources of its group `g` whose error and sphere
-/// equal its self error and self sphere (docs/FORMAT.md, "Links").
+/// The sources of the step of a cluster of group `g` whose self error and self sphere are
+/// `error` and `sphere`: the sources of `g` with that error and sphere (docs/FORMAT.md,
+/// "Links").
 fn step_sources<'s>(
     store: &'s Store,
+    group_lod: &'s [(f32, [f32; 4])],
     g: u32,
-    c: &'s tw_store::PageCluster,
+    error: f32,
+    sphere: [f32; 4],
 ) -> impl Iterator<Item = u32> + 's {
-    let groups = store.groups();
-    store.group_sources(g).iter().copied().filter(move |&s| {
-        groups.get(s as usize).is_some_and(|sg| sg.error == c.self_error && sg.sphere == c.self_sphere)
-    })
+    store
+        .group_sources(g)
+        .iter()
+        .copied()
+        .filter(move |&s| group_lod.get(s as usize).is_some_and(|&(e, sp)| e == error && sp == sphere))
+}
+
+/// What a cluster's step says about the cluster (a function of its group, its self error and
+/// self sphere, and the frame's availability; [`step_verdict`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Verdict {
+    /// Fine enough: drawn (if in the frustum).
+    Draw,
+    /// Too coarse: finer clusters are drawn instead.
+    Skip,
+    /// Too coarse, but its step's sources are not available: drawn in their place.
+    Fallback,
 }
 
 /// Widens `v` by a relative 2⁻²⁰ (outwards in direction `sign`) before rounding to f32.
 fn widen(v: f64, sign: f64) -> f32 {
     (v + sign * v.abs() * 2f64.powi(-20)) as f32
+}
+
+/// The [`Verdict`] of a cluster of group `g` with self error `error` and self sphere `sphere`:
+/// `Draw` when `proj(sphere, error) ≤ τ`; otherwise, when streaming, `Fallback` if the sources
+/// of its step are not all available (and it has a recorded step), else `Skip`.
+#[allow(clippy::too_many_arguments)]
+fn step_verdict(
+    store: &Store,
+    group_lod: &[(f32, [f32; 4])],
+    mode: &mut Mode<'_>,
+    metric: &LodMetric,
+    tau: f64,
+    g: u32,
+    error: f32,
+    sphere: [f32; 4],
+) -> Verdict {
+    if metric.sphere(error, sphere) <= tau {
+        return Verdict::Draw;
+    }
+    // Too coarse: finer clusters of another group are drawn — unless, when streaming, those
+    // (the sources of its step) are not available.
+    let Mode::Stream { cache, availability, .. } = mode else { return Verdict::Skip };
+    if error <= 0.0 {
+        return Verdict::Skip;
+    }
+    let mut step = step_sources(store, group_lod, g, error, sphere).peekable();
+    if step.peek().is_none() {
+        return Verdict::Skip; // no step recorded (a store that breaks invariant 12)
+    }
+    if step.all(|s| availability.available(store, cache, s)) {
+        return Verdict::Skip;
+    }
+    Verdict::Fallback
 }
 
 impl Selector {
@@ -191,7 +280,43 @@ impl Selector {
             lod_boxes[i] = (lo, hi);
             subtree_error[i] = err;
         }
-        Selector { grid_step: step, node_boxes, lod_boxes, subtree_error }
+        let group_lod = groups.iter().map(|g| (g.error, g.sphere)).collect();
+        let group_steps = (0..groups.len()).map(|_| OnceLock::new()).collect();
+        Selector {
+            grid_step: step,
+            node_boxes,
+            lod_boxes,
+            subtree_error,
+            group_lod,
+            group_steps,
+            from_steps: Arc::default(),
+        }
+    }
+
+    /// Groups selected from their kept steps without reading their page, over every selection
+    /// this selector (and its clones) made. A diagnostic: the selections themselves do not
+    /// depend on it.
+    pub fn groups_from_steps(&self) -> u64 {
+        self.from_steps.load(Ordering::Relaxed)
+    }
+
+    /// Whether no cluster of group `g` is drawn this frame, from its recorded steps alone:
+    /// every step's verdict is [`Verdict::Skip`]. `None` when the steps are not known yet.
+    /// The steps are evaluated in their recorded order and the evaluation stops at the first
+    /// other verdict, so the availability snapshot sees the same questions in the same order
+    /// as the cluster loop would ask them (which keeps the page cache's LRU order identical).
+    fn all_skip(
+        &self,
+        store: &Store,
+        mode: &mut Mode<'_>,
+        metric: &LodMetric,
+        tau: f64,
+        g: u32,
+    ) -> Option<bool> {
+        let steps = self.group_steps.get(g as usize)?.get()?;
+        Some(steps.iter().all(|&(error, sphere)| {
+            step_verdict(store, &self.group_lod, mode, metric, tau, g, error, sphere) == Verdict::Skip
+        }))
     }
 
     /// Selects the clusters to draw for `camera` (see the module documentation). Pages come
@@ -260,6 +385,8 @@ impl Selector {
         let groups = store.groups();
         let stats = &mut out.stats;
         let mut pages: Vec<u32> = Vec::new();
+        let mut verdicts: Vec<(u32, Verdict)> = Vec::new();
+        let mut from_steps = 0u64;
         // (node, inside): `inside` = an ancestor's box is entirely inside the frustum.
         let mut stack: Vec<(u32, bool)> = vec![(0, !options.frustum_culling)];
         if nodes.is_empty() {
@@ -288,17 +415,31 @@ impl Selector {
             }
             let first = node.first_group as usize;
             for gi in first..first + node.group_count as usize {
-                let Some(g) = groups.get(gi) else { break };
+                let Some(&(gerror, gsphere)) = self.group_lod.get(gi) else { break };
                 stats.groups_tested += 1;
-                if metric.sphere(g.error, g.sphere) <= tau {
+                if metric.sphere(gerror, gsphere) <= tau {
                     continue; // replaced by coarser clusters
                 }
                 if !inside
-                    && frustum.test_sphere(Vec3::new(g.sphere[0], g.sphere[1], g.sphere[2]), g.sphere[3])
+                    && frustum.test_sphere(Vec3::new(gsphere[0], gsphere[1], gsphere[2]), gsphere[3])
                         == Containment::Outside
                 {
                     stats.groups_culled_frustum += 1;
                     continue;
+                }
+                let Some(g) = groups.get(gi) else { break };
+                // Streaming: a group whose steps are known and all skipped is selected without
+                // reading its page (asked in the order the full path below would ask).
+                if let Mode::Stream { cache, availability, .. } = mode {
+                    if availability.available(store, cache, gi as u32)
+                        && availability.is_resident(cache, g.page)
+                        && self.all_skip(store, mode, &metric, tau, gi as u32) == Some(true)
+                    {
+                        stats.groups_selected += 1;
+                        from_steps += 1;
+                        pages.push(g.page);
+                        continue;
+                    }
                 }
                 let page = match mode {
                     Mode::Wait(cache) => match cache.get(store, g.page) {
@@ -335,8 +476,7 @@ impl Selector {
                 };
                 let page: Arc<ResidentPage> = page;
                 let range = g.first_cluster as usize..g.first_cluster as usize + g.cluster_count as usize;
-                let (Some(clusters), Some(bounds)) =
-                    (page.clusters.get(range.clone()), page.bounds.get(range))
+                let (Some(infos), Some(bounds)) = (page.info().get(range.clone()), page.bounds.get(range))
                 else {
                     tracing::error!(
                         "group {gi} skipped: clusters {}..+{} beyond the {} clusters of page {}",
@@ -348,7 +488,7 @@ impl Selector {
                     stats.groups_failed += 1;
                     continue;
                 };
-                if let Some(c) = clusters.iter().find(|c| c.group as usize != gi) {
+                if let Some(c) = infos.iter().find(|c| c.group as usize != gi) {
                     tracing::error!(
                         "group {gi} skipped: page {} lists a member of group {}",
                         g.page,
@@ -359,24 +499,48 @@ impl Selector {
                 }
                 stats.groups_selected += 1;
                 pages.push(g.page);
-                for (k, (c, &(cmin, cmax))) in clusters.iter().zip(bounds).enumerate() {
-                    let mut fallback = false;
-                    if metric.sphere(c.self_error, c.self_sphere) > tau {
-                        // Too coarse: finer clusters of another group are drawn — unless, when
-                        // streaming, those (the sources of its step) are not available.
-                        let Mode::Stream { cache, availability, .. } = mode else { continue };
-                        if c.self_error <= 0.0 {
-                            continue;
+                self.group_steps[gi].get_or_init(|| {
+                    let mut seen: Vec<u32> = Vec::new();
+                    for info in infos {
+                        if !seen.contains(&info.step) {
+                            seen.push(info.step);
                         }
-                        let mut step = step_sources(store, gi as u32, c).peekable();
-                        if step.peek().is_none() {
-                            continue; // no step recorded (a store that breaks invariant 12)
-                        }
-                        if step.all(|s| availability.available(store, cache, s)) {
-                            continue;
-                        }
-                        fallback = true;
                     }
+                    seen.iter().map(|&k| page.steps()[k as usize]).collect()
+                });
+                if matches!(mode, Mode::Wait(_))
+                    && self.all_skip(store, mode, &metric, tau, gi as u32) == Some(true)
+                {
+                    continue;
+                }
+                // The LOD test of a cluster depends only on its step (self error and sphere):
+                // evaluated once per step met in this group, in cluster order, so that the
+                // availability snapshot is consulted in the same order as cluster by cluster.
+                verdicts.clear();
+                for (k, (info, &(cmin, cmax))) in infos.iter().zip(bounds).enumerate() {
+                    let verdict = match verdicts.iter().find(|(s, _)| *s == info.step) {
+                        Some(&(_, v)) => v,
+                        None => {
+                            let (error, sphere) = page.steps()[info.step as usize];
+                            let v = step_verdict(
+                                store,
+                                &self.group_lod,
+                                mode,
+                                &metric,
+                                tau,
+                                gi as u32,
+                                error,
+                                sphere,
+                            );
+                            verdicts.push((info.step, v));
+                            v
+                        }
+                    };
+                    let fallback = match verdict {
+                        Verdict::Skip => continue,
+                        Verdict::Draw => false,
+                        Verdict::Fallback => true,
+                    };
                     if !inside {
                         let (clo, chi) = grid_box(cmin, cmax, self.grid_step);
                         if frustum.test_aabb(clo, chi) == Containment::Outside {
@@ -387,7 +551,8 @@ impl Selector {
                     if fallback {
                         stats.clusters_fallback += 1;
                         if let Mode::Stream { cache, availability, requests } = mode {
-                            for s in step_sources(store, gi as u32, c) {
+                            let (error, sphere) = page.steps()[info.step as usize];
+                            for s in step_sources(store, &self.group_lod, gi as u32, error, sphere) {
                                 availability.request_for(store, cache, &metric, s, requests);
                             }
                         }
@@ -397,7 +562,7 @@ impl Selector {
                         index_in_page: g.first_cluster + k as u32,
                         group: gi as u32,
                     });
-                    out.triangles += c.triangle_count() as u64;
+                    out.triangles += info.triangles as u64;
                 }
             }
             let children = node.first_child..node.first_child.saturating_add(node.child_count);
@@ -405,6 +570,7 @@ impl Selector {
                 stack.extend(children.rev().map(|c| (c, inside)));
             }
         }
+        self.from_steps.fetch_add(from_steps, Ordering::Relaxed);
         stats.clusters_selected = out.clusters.len() as u64;
         pages.sort_unstable();
         pages.dedup();

@@ -9,8 +9,11 @@
 //! 2. the cut by the availability rule ([`Selector::select_available`]): it draws the best
 //!    available ancestors where pages are missing and collects the missing pages with their
 //!    priority (the pixel error they would remove);
-//! 3. when the frame asks for few pages (the loaders are idle enough), the prefetch views are
-//!    selected over the same snapshot and their missing pages collected, minus the frame's own;
+//! 3. when the frame asks for few pages (the loaders are idle enough), the prefetch views'
+//!    missing pages are added, minus the frame's own. The views are selected every
+//!    [`PrefetchOptions::every`] frames; with loader threads on a thread of their own (over
+//!    their own peek-only residency snapshot; the frame submits the last list that thread
+//!    finished, less what arrived), else on the frame thread over the frame's snapshot;
 //! 4. both lists *replace* the loaders' queues ([`Streamer::submit`]): stale requests of
 //!    earlier frames are dropped; pages resident, failed or being loaded are left out, so a
 //!    page is never loaded twice at once;
@@ -235,7 +238,7 @@ fn loader_loop(store: Arc<Store>, cache: Arc<PageCache>, shared: Arc<Shared>) {
 pub struct Streamer {
     store: Arc<Store>,
     cache: Arc<PageCache>,
-    selector: Selector,
+    selector: Arc<Selector>,
     options: StreamOptions,
     shared: Arc<Shared>,
     threads: Vec<JoinHandle<()>>,
@@ -246,8 +249,61 @@ pub struct Streamer {
     last_cache: CacheStats,
     last_prefetch: (u64, u64),
     scratch: Selection,
-    /// The last prefetch views' requests and the frame they were selected in.
-    prefetch_list: (Requests, u64),
+    /// The last prefetch views' requests and the frame they were selected in (`None`: not
+    /// since the last reset). With a [`PrefetchWorker`], the frame the last job was sent in.
+    prefetch_list: (Requests, Option<u64>),
+    /// Selects the prefetch views off the frame thread (with loader threads only).
+    prefetch_worker: Option<PrefetchWorker>,
+    /// Incremented by [`Streamer::reset_history`]: results of older prefetch jobs are dropped.
+    generation: u64,
+}
+
+/// The prefetch views' selection on a thread of its own (module documentation, step 3): the
+/// frame thread sends the views every `every` frames when the worker is idle, and submits the
+/// last list the worker finished. The worker has its own residency snapshot, looked up without
+/// marking pages used (like the synchronous prefetch views), and releases it after each job.
+struct PrefetchWorker {
+    jobs: Option<std::sync::mpsc::Sender<PrefetchJob>>,
+    results: std::sync::mpsc::Receiver<(u64, Requests)>,
+    busy: bool,
+    thread: Option<JoinHandle<()>>,
+}
+
+struct PrefetchJob {
+    generation: u64,
+    views: Vec<(Camera, SelectOptions)>,
+}
+
+fn prefetch_loop(
+    store: Arc<Store>,
+    cache: Arc<PageCache>,
+    selector: Arc<Selector>,
+    jobs: std::sync::mpsc::Receiver<PrefetchJob>,
+    results: std::sync::mpsc::Sender<(u64, Requests)>,
+) {
+    let mut availability = Availability::default();
+    let mut scratch = Selection::default();
+    while let Ok(job) = jobs.recv() {
+        availability.begin(&store);
+        availability.set_peek_only(true);
+        let mut requests = Requests::default();
+        for (camera, options) in &job.views {
+            selector.select_available(
+                &store,
+                &cache,
+                &mut availability,
+                &mut requests,
+                camera,
+                options,
+                &mut scratch,
+            );
+        }
+        // Release the snapshot's pages now rather than at the next job.
+        availability.begin(&store);
+        if results.send((job.generation, requests)).is_err() {
+            return;
+        }
+    }
 }
 
 impl std::fmt::Debug for Streamer {
@@ -282,7 +338,26 @@ impl Streamer {
                 }
             }
         }
-        Ok(Streamer::assemble(store, cache, shared, threads, options))
+        let mut streamer = Streamer::assemble(store, cache, shared, threads, options);
+        if options.loader_threads > 0 {
+            let (jobs, job_rx) = std::sync::mpsc::channel();
+            let (result_tx, results) = std::sync::mpsc::channel();
+            let (s, c, sel) = (streamer.store.clone(), streamer.cache.clone(), streamer.selector.clone());
+            let spawned = std::thread::Builder::new()
+                .name("tw-prefetch".into())
+                .spawn(move || prefetch_loop(s, c, sel, job_rx, result_tx));
+            match spawned {
+                Ok(h) => {
+                    streamer.prefetch_worker =
+                        Some(PrefetchWorker { jobs: Some(jobs), results, busy: false, thread: Some(h) })
+                }
+                // Not fatal: the views are selected on the frame thread instead.
+                Err(e) => {
+                    tracing::warn!("cannot start the prefetch thread ({e}); prefetching on the frame thread")
+                }
+            }
+        }
+        Ok(streamer)
     }
 
     fn assemble(
@@ -294,7 +369,7 @@ impl Streamer {
     ) -> Streamer {
         let last_cache = cache.stats();
         Streamer {
-            selector: Selector::new(&store),
+            selector: Arc::new(Selector::new(&store)),
             store,
             cache,
             options,
@@ -307,6 +382,8 @@ impl Streamer {
             last_prefetch: (0, 0),
             scratch: Selection::default(),
             prefetch_list: Default::default(),
+            prefetch_worker: None,
+            generation: 0,
         }
     }
 
@@ -336,6 +413,7 @@ impl Streamer {
     pub fn reset_history(&mut self) {
         self.history.clear();
         self.prefetch_list = Default::default();
+        self.generation += 1;
     }
 
     /// One frame: select without waiting, request, prefetch, statistics (module documentation).
@@ -358,12 +436,51 @@ impl Streamer {
         let cut = start.elapsed();
         let mut prefetch = Requests::default();
         let every = self.options.prefetch.every.max(1) as u64;
-        let fresh = self.prefetch_list.0 .0.is_empty() || self.frame >= self.prefetch_list.1 + every;
+        // Selected every `every` frames, whether or not the last selection found pages to
+        // request (an empty list used to count as stale, so with every page of the views
+        // resident — the common case once the cache is warm — the views were selected every
+        // frame).
+        let fresh = self.prefetch_list.1.is_none_or(|f| self.frame >= f + every);
         let wanted = self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below;
-        if wanted && !fresh {
+        if let Some(worker) = &mut self.prefetch_worker {
+            while let Ok((generation, list)) = worker.results.try_recv() {
+                worker.busy = false;
+                if generation == self.generation {
+                    self.prefetch_list.0 = list;
+                }
+            }
+            if wanted && fresh && !worker.busy {
+                let views = prefetch_views(camera, &self.history, options, &self.options.prefetch);
+                let job = PrefetchJob { generation: self.generation, views };
+                if worker.jobs.as_ref().is_some_and(|j| j.send(job).is_ok()) {
+                    worker.busy = true;
+                    self.prefetch_list.1 = Some(self.frame);
+                }
+            }
+            if wanted {
+                let mut list: Vec<(u32, f32)> = self
+                    .prefetch_list
+                    .0
+                     .0
+                    .iter()
+                    .map(|(&p, &q)| (p, q))
+                    .filter(|(p, _)| !demand.0.contains_key(p))
+                    .collect();
+                cache.retain_unsettled(&mut list, |&(p, _)| p);
+                prefetch.0.extend(list);
+            }
+        } else if wanted && !fresh {
             // Between prefetch selections: the last list, less what arrived meanwhile.
-            prefetch = self.prefetch_list.0.clone();
-            prefetch.0.retain(|&p, _| !demand.0.contains_key(&p) && !cache.is_settled(p));
+            let mut list: Vec<(u32, f32)> = self
+                .prefetch_list
+                .0
+                 .0
+                .iter()
+                .map(|(&p, &q)| (p, q))
+                .filter(|(p, _)| !demand.0.contains_key(p))
+                .collect();
+            cache.retain_unsettled(&mut list, |&(p, _)| p);
+            prefetch.0.extend(list);
         } else if wanted {
             // Prefetch views do not refresh pages in the LRU order.
             self.availability.set_peek_only(true);
@@ -380,7 +497,7 @@ impl Streamer {
             }
             prefetch.0.retain(|p, _| !demand.0.contains_key(p));
             self.availability.set_peek_only(false);
-            self.prefetch_list = (prefetch.clone(), self.frame);
+            self.prefetch_list = (prefetch.clone(), Some(self.frame));
         }
         let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);
@@ -438,8 +555,8 @@ impl Streamer {
     /// resident, failed and in-flight pages are left out. Returns (queued, in flight).
     pub fn submit(&self, demand: &Requests, prefetch: &Requests) -> (usize, usize) {
         let filter = |r: &Requests| -> Vec<(u32, f32)> {
-            let mut v: Vec<(u32, f32)> =
-                r.sorted().into_iter().filter(|&(p, _)| !self.cache.is_settled(p)).collect();
+            let mut v = r.sorted();
+            self.cache.retain_unsettled(&mut v, |&(p, _)| p);
             v.reverse(); // ascending: the next page is the last
             v
         };
@@ -502,6 +619,14 @@ impl Streamer {
     }
 
     fn stop(&mut self) {
+        if let Some(worker) = &mut self.prefetch_worker {
+            worker.jobs = None; // the worker's loop ends
+            if let Some(t) = worker.thread.take() {
+                if t.join().is_err() {
+                    tracing::error!("the prefetch thread panicked");
+                }
+            }
+        }
         self.shared.lock().shutdown = true;
         self.shared.work.notify_all();
         for t in self.threads.drain(..) {
