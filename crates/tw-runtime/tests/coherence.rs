@@ -6,84 +6,14 @@
 //! requests as a fresh selector traversing from the root, in both residency modes, and leaves
 //! the page cache in the same state (same pages resident, so the same LRU order of use).
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+mod common;
+use common::{small_pages_plant_path, spheres_path};
 
 use glam::Vec3;
-use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 use tw_runtime::{
     Availability, Camera, PageCache, Requests, ResidentPage, SelectOptions, Selection, Selector,
 };
 use tw_store::Store;
-
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
-fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(name);
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
-}
-
-/// The plant with small pages (1024 triangles) and only the top two levels in root pages.
-fn small_pages_plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            let mut options =
-                tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
-            options.pages.page_triangles = 1024;
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant-small-pages.tw", options)
-        })
-        .path
-}
-
-/// Whole icospheres (closed, manifold), one object each.
-struct Spheres(Vec<([f64; 3], f64, u32)>);
-
-impl TriangleSource for Spheres {
-    fn name(&self) -> String {
-        "spheres".into()
-    }
-    fn progress_total(&self) -> Option<u64> {
-        None
-    }
-    fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
-        for (o, &(c, r, level)) in self.0.iter().enumerate() {
-            sink.object(o as u32, &ObjectInfo::default())?;
-            let (v, f) = tw_io::generate::icosphere(c, r, level);
-            for t in f {
-                sink.triangle(&Triangle::new(t.map(|i| v[i as usize]), o as u32))?;
-            }
-        }
-        Ok(SourceSummary { objects: self.0.len() as u32, ..Default::default() })
-    }
-}
-
-/// The same closed scene as tests/select.rs: a big sphere over several cells beside a row of
-/// small ones that HLOD merges.
-fn spheres_path() -> &'static Path {
-    static SPHERES: OnceLock<Built> = OnceLock::new();
-    &SPHERES
-        .get_or_init(|| {
-            let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
-            for i in 0..6 {
-                list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
-            }
-            let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            options.redefine.max_cell_triangles = 8192;
-            build(tw_io::Scene::from_sources(vec![Box::new(Spheres(list))]), "spheres.tw", options)
-        })
-        .path
-}
 
 fn scene_sphere(store: &Store) -> (Vec3, f32) {
     let h = store.header();

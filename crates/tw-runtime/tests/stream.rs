@@ -2,102 +2,19 @@
 //! complete and crack-free cuts while pages are missing (the availability rule of
 //! docs/FORMAT.md), convergence to the blocking cut, corrupt pages, prefetch, shutdown.
 
+mod common;
+use common::{plant_path, small_pages_plant_path, spheres_path};
+
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, OnceLock};
+use std::path::Path;
+use std::sync::Arc;
 use std::time::Duration;
 
 use glam::Vec3;
-use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 use tw_runtime::{
     Camera, PrefetchOptions, ResidentPage, SelectOptions, Selection, StreamOptions, StreamStats, Streamer,
 };
 use tw_store::Store;
-
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
-fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(name);
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
-}
-
-fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant.tw", options)
-        })
-        .path
-}
-
-/// The plant with small pages (1024 triangles) and only the top two levels in root pages:
-/// many pages, so that a walk keeps needing new ones.
-fn small_pages_plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            let mut options =
-                tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
-            options.pages.page_triangles = 1024;
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant-small-pages.tw", options)
-        })
-        .path
-}
-
-/// Whole icospheres (closed, manifold), one object each.
-struct Spheres(Vec<([f64; 3], f64, u32)>);
-
-impl TriangleSource for Spheres {
-    fn name(&self) -> String {
-        "spheres".into()
-    }
-    fn progress_total(&self) -> Option<u64> {
-        None
-    }
-    fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
-        for (o, &(c, r, level)) in self.0.iter().enumerate() {
-            sink.object(o as u32, &ObjectInfo::default())?;
-            let (v, f) = tw_io::generate::icosphere(c, r, level);
-            for t in f {
-                sink.triangle(&Triangle::new(t.map(|i| v[i as usize]), o as u32))?;
-            }
-        }
-        Ok(SourceSummary { objects: self.0.len() as u32, ..Default::default() })
-    }
-}
-
-/// The same closed scene as tests/select.rs: a big sphere over several cells beside a row of
-/// small ones that HLOD merges.
-fn spheres_path() -> &'static Path {
-    static SPHERES: OnceLock<Built> = OnceLock::new();
-    &SPHERES
-        .get_or_init(|| {
-            let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
-            for i in 0..6 {
-                list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
-            }
-            let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            options.redefine.max_cell_triangles = 8192;
-            build(tw_io::Scene::from_sources(vec![Box::new(Spheres(list))]), "spheres.tw", options)
-        })
-        .path
-}
 
 fn open(path: &Path) -> Arc<Store> {
     Arc::new(Store::open(path).unwrap())

@@ -1,0 +1,94 @@
+//! Stores shared by the streaming and coherence tests, built once per test binary with
+//! tw-build: a 50 k-triangle plant (default pages and small ones) and a closed scene of
+//! icospheres.
+#![allow(dead_code)] // each test binary uses some of them
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
+
+pub struct Built {
+    _dir: tempfile::TempDir,
+    pub path: PathBuf,
+}
+
+pub fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -> Built {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join(name);
+    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
+    Built { _dir: dir, path }
+}
+
+pub fn plant_path() -> &'static Path {
+    static PLANT: OnceLock<Built> = OnceLock::new();
+    &PLANT
+        .get_or_init(|| {
+            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
+                triangles: 50_000,
+                seed: 1,
+            })
+            .unwrap();
+            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant.tw", options)
+        })
+        .path
+}
+
+/// The plant with small pages (1024 triangles) and only the top two levels in root pages:
+/// many pages, so that a walk keeps needing new ones.
+pub fn small_pages_plant_path() -> &'static Path {
+    static PLANT: OnceLock<Built> = OnceLock::new();
+    &PLANT
+        .get_or_init(|| {
+            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
+                triangles: 50_000,
+                seed: 1,
+            })
+            .unwrap();
+            let mut options =
+                tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
+            options.pages.page_triangles = 1024;
+            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant-small-pages.tw", options)
+        })
+        .path
+}
+
+/// Whole icospheres (closed, manifold), one object each.
+pub struct Spheres(pub Vec<([f64; 3], f64, u32)>);
+
+impl TriangleSource for Spheres {
+    fn name(&self) -> String {
+        "spheres".into()
+    }
+    fn progress_total(&self) -> Option<u64> {
+        None
+    }
+    fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
+        for (o, &(c, r, level)) in self.0.iter().enumerate() {
+            sink.object(o as u32, &ObjectInfo::default())?;
+            let (v, f) = tw_io::generate::icosphere(c, r, level);
+            for t in f {
+                sink.triangle(&Triangle::new(t.map(|i| v[i as usize]), o as u32))?;
+            }
+        }
+        Ok(SourceSummary { objects: self.0.len() as u32, ..Default::default() })
+    }
+}
+
+/// The same closed scene as tests/select.rs: a big sphere over several cells beside a row of
+/// small ones that HLOD merges.
+pub fn spheres_path() -> &'static Path {
+    static SPHERES: OnceLock<Built> = OnceLock::new();
+    &SPHERES
+        .get_or_init(|| {
+            let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
+            for i in 0..6 {
+                list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
+            }
+            let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+            options.redefine.max_cell_triangles = 8192;
+            build(tw_io::Scene::from_sources(vec![Box::new(Spheres(list))]), "spheres.tw", options)
+        })
+        .path
+}
