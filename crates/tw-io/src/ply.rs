@@ -937,6 +937,21 @@ struct Corner {
     color: Option<Rgba8>,
 }
 
+impl Corner {
+    /// The triangle of three corners: normals and colours only where all three have them.
+    fn triangle([a, b, c]: [&Corner; 3], object: ObjectId) -> Triangle {
+        let normals = match (a.normal, b.normal, c.normal) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            _ => None,
+        };
+        let colors = match (a.color, b.color, c.color) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            _ => None,
+        };
+        Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object }
+    }
+}
+
 impl Vertices {
     /// Stores sharing [`ImportOptions::vertex_memory`] in proportion to their record sizes.
     fn new(layout: Option<&VertexLayout>, options: &ImportOptions) -> Vertices {
@@ -1092,15 +1107,7 @@ impl Faces {
         let mut b = v.corner(*second)?;
         for &i in rest {
             let c = v.corner(i)?;
-            let normals = match (a.normal, b.normal, c.normal) {
-                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
-                _ => None,
-            };
-            let colors = match (a.color, b.color, c.color) {
-                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
-                _ => None,
-            };
-            sink.triangle(&Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object })?;
+            sink.triangle(&Corner::triangle([&a, &b, &c], object))?;
             b = c;
         }
         Ok(())
@@ -1263,16 +1270,7 @@ impl TriangleBatch for RunBatch<'_> {
         let objects = self.run.objects.get(range.clone());
         for (k, corners) in self.run.corners[range].iter().enumerate() {
             let [a, b, c] = corners.map(|v| self.vertices.corner_resident(v));
-            let normals = match (a.normal, b.normal, c.normal) {
-                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
-                _ => None,
-            };
-            let colors = match (a.color, b.color, c.color) {
-                (Some(x), Some(y), Some(z)) => Some([x, y, z]),
-                _ => None,
-            };
-            let object = objects.map_or(0, |o| o[k]);
-            out.push(Triangle { positions: [a.pos, b.pos, c.pos], normals, colors, object });
+            out.push(Corner::triangle([&a, &b, &c], objects.map_or(0, |o| o[k])));
         }
         Ok(())
     }

@@ -274,6 +274,15 @@ struct PrefetchJob {
     views: Vec<(Camera, SelectOptions)>,
 }
 
+/// The requests of `list` that the frame's `demand` does not hold and whose pages are neither
+/// resident nor failed in `cache`: what is left of an earlier prefetch list.
+fn unsettled_requests(list: &Requests, demand: &Requests, cache: &PageCache) -> Vec<(u32, f32)> {
+    let mut left: Vec<(u32, f32)> =
+        list.0.iter().map(|(&p, &q)| (p, q)).filter(|(p, _)| !demand.0.contains_key(p)).collect();
+    cache.retain_unsettled(&mut left, |&(p, _)| p);
+    left
+}
+
 fn prefetch_loop(
     store: Arc<Store>,
     cache: Arc<PageCache>,
@@ -458,29 +467,11 @@ impl Streamer {
                 }
             }
             if wanted {
-                let mut list: Vec<(u32, f32)> = self
-                    .prefetch_list
-                    .0
-                     .0
-                    .iter()
-                    .map(|(&p, &q)| (p, q))
-                    .filter(|(p, _)| !demand.0.contains_key(p))
-                    .collect();
-                cache.retain_unsettled(&mut list, |&(p, _)| p);
-                prefetch.0.extend(list);
+                prefetch.0.extend(unsettled_requests(&self.prefetch_list.0, &demand, cache));
             }
         } else if wanted && !fresh {
             // Between prefetch selections: the last list, less what arrived meanwhile.
-            let mut list: Vec<(u32, f32)> = self
-                .prefetch_list
-                .0
-                 .0
-                .iter()
-                .map(|(&p, &q)| (p, q))
-                .filter(|(p, _)| !demand.0.contains_key(p))
-                .collect();
-            cache.retain_unsettled(&mut list, |&(p, _)| p);
-            prefetch.0.extend(list);
+            prefetch.0.extend(unsettled_requests(&self.prefetch_list.0, &demand, cache));
         } else if wanted {
             // Prefetch views do not refresh pages in the LRU order.
             self.availability.set_peek_only(true);

@@ -20,18 +20,17 @@ pub fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -
     Built { _dir: dir, path }
 }
 
+/// The 50 k-triangle plant (seed 1) built with `options`.
+fn plant(name: &str, options: tw_build::BuildOptions) -> Built {
+    let params = tw_io::generate::PlantParams { triangles: 50_000, seed: 1 };
+    let src = tw_io::generate::PlantSource::new(params).unwrap();
+    build(tw_io::Scene::from_sources(vec![Box::new(src)]), name, options)
+}
+
 pub fn plant_path() -> &'static Path {
     static PLANT: OnceLock<Built> = OnceLock::new();
     &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant.tw", options)
-        })
+        .get_or_init(|| plant("plant.tw", tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }))
         .path
 }
 
@@ -41,15 +40,10 @@ pub fn small_pages_plant_path() -> &'static Path {
     static PLANT: OnceLock<Built> = OnceLock::new();
     &PLANT
         .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
             let mut options =
                 tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
             options.pages.page_triangles = 1024;
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant-small-pages.tw", options)
+            plant("plant-small-pages.tw", options)
         })
         .path
 }
