@@ -97,7 +97,8 @@ pub enum Command {
 
 #[derive(Args, Debug)]
 pub struct ImportArgs {
-    /// Memory that vertex tables of OBJ/PLY files may use before spilling to disk.
+    /// Memory that vertex tables of OBJ/PLY files may use before spilling to disk (`build`: at
+    /// most a quarter of `--memory`).
     #[arg(long, default_value = "192M", value_parser = parse_bytes)]
     pub vertex_memory: u64,
     /// Directory for spill files (default: the system's temp dir).

@@ -62,9 +62,21 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     o
 }
 
+/// The importers' options, their vertex tables held to a quarter of `--memory` (the ingest
+/// phase's share of the budget; the working file's write buffers and the scene's object
+/// records are the rest).
+fn import_options(args: &BuildArgs) -> tw_io::format::ImportOptions {
+    let mut import = args.import.options();
+    import.vertex_memory = import.vertex_memory.min((args.memory / 4).min(usize::MAX as u64) as usize);
+    import
+}
+
 pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    let scene = Scene::open(&args.inputs, SceneOptions { import: args.import.options() })?;
+    // The budget is a promise about the resident set: one heap for every thread, so memory one
+    // phase or worker freed is there for the next instead of resident in an arena of its own.
+    tw_core::mem::use_one_heap_arena();
+    let scene = Scene::open(&args.inputs, SceneOptions { import: import_options(&args) })?;
     let opts = options(&args);
     let mut bars = Bars { bar: None, quiet };
     let r = tw_build::build(scene, &args.output, &opts, &mut bars)
