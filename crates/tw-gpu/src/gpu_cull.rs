@@ -607,7 +607,7 @@ impl Renderer {
             });
         }
         let encode_start = Instant::now();
-        self.write_uniforms(camera, size, !COLOR_FORMAT.is_srgb());
+        self.write_uniforms(camera, size);
         let compact = self.gpu_cull_compacts();
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
         let occluders: Vec<Candidate> =
@@ -647,7 +647,7 @@ impl Renderer {
         let color_view = self.color_view.clone();
         let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT };
         let att = self.attachments(&shade, size, self.depth_view.clone());
-        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples).clone();
+        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples, self.mode).clone();
         let cull = self.gpu_cull.as_ref().expect("made above");
         let set0 = cull.sets[0].buffers.as_ref().expect("prepared above");
         // Handles, so that the depth resolve below may borrow the renderer.

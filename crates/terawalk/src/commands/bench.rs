@@ -163,6 +163,9 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                 }
             }
             records.push(rec);
+            if tracing::enabled!(tracing::Level::DEBUG) {
+                tracing::debug!("{name} frame {i}: {}", memory_now());
+            }
             bar.inc(1);
         }
         bar.finish_and_clear();
@@ -184,6 +187,13 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         };
         let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
         print_run(&run);
+        tracing::info!("after {}: {}", run.name, memory_now());
+        if std::env::var_os("TW_MALLOC_STATS").is_some() {
+            extern "C" {
+                fn malloc_stats();
+            }
+            unsafe { malloc_stats() };
+        }
         runs.push(run);
     }
     if !reference_frames.is_empty() {
@@ -337,6 +347,12 @@ fn image_frames(len: usize, n: usize) -> Vec<usize> {
     }
     let n = n.min(len);
     (0..n).map(|k| k * (len - 1) / (n - 1).max(1)).collect()
+}
+
+/// The resident set now and its peak so far (VmRSS, VmHWM), for the memory traces.
+fn memory_now() -> String {
+    let mb = |b: Option<u64>| b.map_or("?".to_string(), |b| format!("{:.0} MB", b as f64 / 1e6));
+    format!("RSS {}, peak {}", mb(tw_report::rss_bytes()), mb(tw_report::peak_rss_bytes()))
 }
 
 fn color_mode(c: RenderColoring) -> ColorMode {
