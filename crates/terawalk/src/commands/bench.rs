@@ -188,12 +188,6 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
         print_run(&run);
         tracing::info!("after {}: {}", run.name, memory_now());
-        if std::env::var_os("TW_MALLOC_STATS").is_some() {
-            extern "C" {
-                fn malloc_stats();
-            }
-            unsafe { malloc_stats() };
-        }
         runs.push(run);
     }
     if !reference_frames.is_empty() {
