@@ -151,7 +151,8 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item = Some(pipeline(device, &self.layout, &module, ("vs_main", &[]), "fs_items", ITEM_FORMAT, 1));
+            self.item =
+                Some(pipeline(device, &self.layout, &module, ("vs_main", &[]), "fs_items", ITEM_FORMAT, 1));
         }
         self.item.as_ref().expect("just created")
     }

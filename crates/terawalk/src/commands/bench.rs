@@ -123,7 +123,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         bar.finish_and_clear();
     }
     for (ri, &strategy) in strategies.iter().enumerate() {
-        let name = if args.reference { "reference".to_string() } else { strategy.name().to_string() };
+        // A strategy given again (`--occlusion none,queries,none`: does memory come back down?)
+        // is a run of its own: "none #2" (the report's runs have distinct names).
+        let repeat = strategies[..ri].iter().filter(|&&s| s == strategy).count();
+        let name = match (args.reference, repeat) {
+            (true, _) => "reference".to_string(),
+            (false, 0) => strategy.name().to_string(),
+            (false, k) => format!("{} #{}", strategy.name(), k + 1),
+        };
         let settings = FrameSettings {
             tau: args.error,
             frustum_culling: true,
