@@ -540,6 +540,8 @@ impl Renderer {
         self.set_object_colors(store.objects().iter().map(|o| o.color));
     }
 
+    /// Colours the next passes by `mode`; each mode is a shaded pipeline of its own, made the
+    /// first time it draws (draw.wgsl `COLOR_MODE`).
     pub fn set_color_mode(&mut self, mode: ColorMode) {
         self.mode = mode;
     }
