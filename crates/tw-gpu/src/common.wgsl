@@ -7,10 +7,10 @@ struct Uniforms {
     view_proj: mat4x4<f32>,
     // xyz: eye in scene space.
     eye: vec4<f32>,
-    // xyz: unit direction towards the sun; w: 1 when the target needs sRGB encoding here.
+    // xyz: unit direction towards the sun; w: unused (0).
     sun: vec4<f32>,
-    // x: colour mode (0 material, 1 object, 2 level, 3 cluster); y: object colours in the
-    // table; z: default colour (RGBA8).
+    // x: unused (0: the colour mode is the pipeline constant COLOR_MODE, draw.wgsl); y: object
+    // colours in the table; z: default colour (RGBA8).
     params: vec4<u32>,
     // xyz: unit direction from the view's target towards the eye (the headlight).
     headlight: vec4<f32>,

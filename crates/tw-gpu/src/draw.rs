@@ -8,6 +8,7 @@
 //! Shaders: common.wgsl (uniforms, slot table, vertex stage), draw.wgsl (shading), ids.wgsl
 //! (item buffer).
 
+use crate::color::ColorMode;
 use crate::pool::{DrawArgs, UNIT};
 
 pub(crate) const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -38,7 +39,7 @@ pub(crate) struct Pipelines {
     pub bind_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
     shade: wgpu::ShaderModule,
-    shaded: Vec<((wgpu::TextureFormat, u32), wgpu::RenderPipeline)>,
+    shaded: Vec<((wgpu::TextureFormat, u32, ColorMode), wgpu::RenderPipeline)>,
     item: Option<wgpu::RenderPipeline>,
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
     pub primitive_index: bool,
@@ -98,18 +99,36 @@ impl Pipelines {
         }
     }
 
-    /// The shaded pipeline drawing into `format` with `samples` per pixel, created on first use.
+    /// The shaded pipeline drawing into `format` with `samples` per pixel in colour `mode`,
+    /// created on first use. The mode and whether the shader encodes sRGB (a non-sRGB `format`)
+    /// are the shader's pipeline constants (draw.wgsl `COLOR_MODE`, `ENCODE_SRGB`), not
+    /// uniforms: lavapipe (Mesa 22.3) recompiles, and keeps, a copy of a shader that branches
+    /// on uniform values at every bind (docs/RUNTIME.md, "Memory").
     pub fn shaded(
         &mut self,
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
         samples: u32,
+        mode: ColorMode,
     ) -> &wgpu::RenderPipeline {
-        let i = match self.shaded.iter().position(|(k, _)| *k == (format, samples)) {
+        let key = (format, samples, mode);
+        let i = match self.shaded.iter().position(|(k, _)| *k == key) {
             Some(i) => i,
             None => {
-                let p = pipeline(device, &self.layout, &self.shade, "vs_shade", "fs_main", format, samples);
-                self.shaded.push(((format, samples), p));
+                let constants = [
+                    ("COLOR_MODE", mode.code() as f64),
+                    ("ENCODE_SRGB", if format.is_srgb() { 0.0 } else { 1.0 }),
+                ];
+                let p = pipeline(
+                    device,
+                    &self.layout,
+                    &self.shade,
+                    ("vs_shade", &constants),
+                    "fs_main",
+                    format,
+                    samples,
+                );
+                self.shaded.push((key, p));
                 self.shaded.len() - 1
             }
         };
@@ -132,7 +151,8 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item = Some(pipeline(device, &self.layout, &module, "vs_main", "fs_items", ITEM_FORMAT, 1));
+            self.item =
+                Some(pipeline(device, &self.layout, &module, ("vs_main", &[]), "fs_items", ITEM_FORMAT, 1));
         }
         self.item.as_ref().expect("just created")
     }
@@ -142,7 +162,7 @@ fn pipeline(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
-    vertex: &str,
+    (vertex, constants): (&str, &[(&str, f64)]),
     fragment: &str,
     format: wgpu::TextureFormat,
     samples: u32,
@@ -153,7 +173,7 @@ fn pipeline(
         vertex: wgpu::VertexState {
             module,
             entry_point: Some(vertex),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: UNIT,
                 step_mode: wgpu::VertexStepMode::Vertex,

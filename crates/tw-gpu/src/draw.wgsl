@@ -30,6 +30,16 @@ fn hash_color(id: u32) -> vec3<f32> {
     return vec3<f32>(val, p, q);
 }
 
+// What the shaded pipeline draws, fixed when the pipeline is made (draw.rs `Pipelines::shaded`),
+// not read from the uniforms: Mesa 22.3's lavapipe compiles a new copy of a shader whose branches
+// depend on uniform-buffer values alone (it "inlines" those values) every time the pipeline is
+// bound, and never frees the copies — ~0.3 MB of process memory a render pass (docs/RUNTIME.md,
+// "Memory"). So no branch here may test a uniform alone.
+// The colour mode (ColorMode::code): 0 material, 1 object, 2 level, 3 cluster.
+override COLOR_MODE: u32 = 0u;
+// Whether the target needs sRGB encoding here (a non-sRGB target format).
+override ENCODE_SRGB: bool = false;
+
 // level_color in color.rs.
 fn level_color(level: u32) -> vec3<f32> {
     var palette = array<vec3<f32>, 8>(
@@ -41,7 +51,7 @@ fn level_color(level: u32) -> vec3<f32> {
 }
 
 fn base_color(object: u32, slot: u32) -> vec3<f32> {
-    let mode = u.params.x;
+    let mode = COLOR_MODE;
     if (mode == 1u) {
         return hash_color(object);
     }
@@ -106,7 +116,7 @@ fn vs_shade(
     let sun = max(dot(n, u.sun.xyz), 0.0);
     let base = pow(base_color(object, slot), vec3<f32>(2.2));
     var rgb = min(base * (0.18 + 0.62 * head + 0.35 * sun), vec3<f32>(1.0));
-    if (u.sun.w > 0.5) {
+    if (ENCODE_SRGB) {
         // A non-sRGB target (the renderer's own Rgba8Unorm target, a Bgra8Unorm surface): encode
         // here, once per vertex, instead of per fragment in the rasterizer (on llvmpipe the sRGB
         // write was a quarter of an interior frame's fill cost).

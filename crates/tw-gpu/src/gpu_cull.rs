@@ -83,7 +83,6 @@ struct CullUniform {
     view_proj: [[f32; 4]; 4],
     size: [u32; 4],
     params: [f32; 4],
-    mode: [u32; 4],
     levels: [[u32; 4]; MAX_LEVELS],
 }
 
@@ -99,7 +98,7 @@ pub(crate) struct Candidate {
 
 const _: () = assert!(std::mem::size_of::<Candidate>() == 64);
 const _: () = assert!(std::mem::size_of::<DrawArgs>() == 20);
-const _: () = assert!(std::mem::size_of::<CullUniform>() == 368);
+const _: () = assert!(std::mem::size_of::<CullUniform>() == 352);
 
 impl Candidate {
     fn new((lo, hi): (Vec3, Vec3), args: DrawArgs) -> Candidate {
@@ -243,7 +242,10 @@ pub(crate) struct GpuCull {
     copy2: wgpu::ComputePipeline,
     reduce: wgpu::ComputePipeline,
     cull_layout: wgpu::BindGroupLayout,
+    /// `cs_cull` writing the candidates' draw arguments in place (`WRITE_ARGS`), and writing
+    /// the flags only (compaction follows, or the boxes are the occluders').
     cull: wgpu::ComputePipeline,
+    cull_flags: wgpu::ComputePipeline,
     compact: wgpu::ComputePipeline,
     pyramid: Option<Pyramid>,
     /// 0: the candidates, 1: the occluders.
@@ -277,6 +279,7 @@ fn compute_pipeline(
     layout: &wgpu::BindGroupLayout,
     module: &wgpu::ShaderModule,
     entry: &str,
+    constants: &[(&str, f64)],
 ) -> wgpu::ComputePipeline {
     let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(entry),
@@ -288,7 +291,7 @@ fn compute_pipeline(
         layout: Some(&pl),
         module,
         entry_point: Some(entry),
-        compilation_options: Default::default(),
+        compilation_options: wgpu::PipelineCompilationOptions { constants, ..Default::default() },
         cache: None,
     })
 }
@@ -343,11 +346,12 @@ impl GpuCull {
             (set, resolve)
         });
         GpuCull {
-            copy: compute_pipeline(device, &build_layout, &build, "cs_copy"),
-            copy2: compute_pipeline(device, &build_layout, &build, "cs_copy2"),
-            reduce: compute_pipeline(device, &build_layout, &build, "cs_reduce"),
-            cull: compute_pipeline(device, &cull_layout, &cull, "cs_cull"),
-            compact: compute_pipeline(device, &cull_layout, &cull, "cs_compact"),
+            copy: compute_pipeline(device, &build_layout, &build, "cs_copy", &[]),
+            copy2: compute_pipeline(device, &build_layout, &build, "cs_copy2", &[]),
+            reduce: compute_pipeline(device, &build_layout, &build, "cs_reduce", &[]),
+            cull: compute_pipeline(device, &cull_layout, &cull, "cs_cull", &[("WRITE_ARGS", 1.0)]),
+            cull_flags: compute_pipeline(device, &cull_layout, &cull, "cs_cull", &[("WRITE_ARGS", 0.0)]),
+            compact: compute_pipeline(device, &cull_layout, &cull, "cs_compact", &[]),
             build_layout,
             cull_layout,
             pyramid: None,
@@ -445,13 +449,12 @@ impl GpuCull {
         Ok(self.pyramid.as_ref().expect("just made"))
     }
 
-    fn uniform(&self, view_proj: &Mat4, n: usize, compact: bool, write_args: bool) -> CullUniform {
+    fn uniform(&self, view_proj: &Mat4, n: usize) -> CullUniform {
         let p = self.pyramid.as_ref().expect("pyramid made before the uniform");
         CullUniform {
             view_proj: view_proj.to_cols_array_2d(),
             size: [p.size.0, p.size.1, p.levels.len() as u32, n as u32],
             params: [RECT_SLACK_PX + GPU_RECT_GUARD_PX + self.spread, DEPTH_MARGIN, GPU_DEPTH_GUARD, 0.0],
-            mode: [compact as u32, write_args as u32, 0, 0],
             levels: p.level_table(),
         }
     }
@@ -498,7 +501,9 @@ impl GpuCull {
         let pyramid = self.pyramid.as_ref().expect("pyramid made before encoding");
         pyramid.encode_build(&mut pass, self, from_depth);
         if let Some(bind) = &bind {
-            pass.set_pipeline(&self.cull);
+            // Set 0 (the candidates) gets its draw arguments written in place unless they are
+            // compacted; set 1 (the occluders') only its flags.
+            pass.set_pipeline(if set == 0 && !compact { &self.cull } else { &self.cull_flags });
             pass.set_bind_group(0, bind, &[]);
             pass.dispatch_workgroups((n as u32).div_ceil(64), 1, 1);
             if compact {
@@ -607,7 +612,7 @@ impl Renderer {
             });
         }
         let encode_start = Instant::now();
-        self.write_uniforms(camera, size, !COLOR_FORMAT.is_srgb());
+        self.write_uniforms(camera, size);
         let compact = self.gpu_cull_compacts();
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
         let occluders: Vec<Candidate> =
@@ -616,10 +621,10 @@ impl Renderer {
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(&self.device));
         cull.spread = spread;
         cull.pyramid(&self.device, &self.queue, &self.depth)?;
-        let u0 = cull.uniform(&view_proj, list.len(), compact, true);
+        let u0 = cull.uniform(&view_proj, list.len());
         cull.sets[0].prepare(&self.device, &self.queue, &list, &u0);
         if !occluders.is_empty() {
-            let u1 = cull.uniform(&view_proj, occluders.len(), false, false);
+            let u1 = cull.uniform(&view_proj, occluders.len());
             cull.sets[1].prepare(&self.device, &self.queue, &occluders, &u1);
         }
         let mut encoder =
@@ -647,7 +652,7 @@ impl Renderer {
         let color_view = self.color_view.clone();
         let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT };
         let att = self.attachments(&shade, size, self.depth_view.clone());
-        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples).clone();
+        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples, self.mode).clone();
         let cull = self.gpu_cull.as_ref().expect("made above");
         let set0 = cull.sets[0].buffers.as_ref().expect("prepared above");
         // Handles, so that the depth resolve below may borrow the renderer.
@@ -798,7 +803,7 @@ fn test_boxes(
     boxes: &[(Vec3, Vec3)],
 ) -> Result<Vec<HzbResult>, GpuError> {
     let list: Vec<Candidate> = boxes.iter().map(|&b| Candidate::new(b, DrawArgs::zeroed())).collect();
-    let u = cull.uniform(view_proj, list.len(), false, false);
+    let u = cull.uniform(view_proj, list.len());
     cull.sets[1].prepare(device, queue, &list, &u);
     let mut encoder = device.create_command_encoder(&Default::default());
     cull.encode(device, &mut encoder, from_depth, 1, list.len(), false, 0);

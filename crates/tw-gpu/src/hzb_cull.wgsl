@@ -13,8 +13,6 @@ struct Cull {
     // x: rectangle slack (px, RECT_SLACK_PX + the GPU guard); y: DEPTH_MARGIN; z: the GPU's
     // relative depth guard.
     params: vec4<f32>,
-    // x: 1 = compact behind the count, 0 = in place; y: 1 = write draw arguments, 0 = flags only.
-    mode: vec4<u32>,
     // Per level: offset in the pyramid buffer, width, height.
     levels: array<vec4<u32>, 16>,
 };
@@ -40,6 +38,11 @@ struct State {
 };
 
 @group(0) @binding(0) var<uniform> u: Cull;
+
+// Whether cs_cull writes the draw arguments in place (instance_count 0 when culled): a pipeline
+// constant (gpu_cull.rs `cull` / `cull_flags`), not a uniform, as no branch may test a uniform
+// alone (draw.wgsl: lavapipe would compile a new copy of the shader at every dispatch).
+override WRITE_ARGS: bool = true;
 @group(0) @binding(1) var<storage, read> pyramid: array<f32>;
 @group(0) @binding(2) var<storage, read> candidates: array<Candidate>;
 @group(0) @binding(3) var<storage, read_write> out_args: array<DrawArgs>;
@@ -141,7 +144,7 @@ fn cs_cull(@builtin(global_invocation_id) id: vec3<u32>) {
     let c = candidates[i];
     let flag = test_box(c.lo.xyz, c.hi.xyz);
     state.flags[i] = flag;
-    if (u.mode.y == 1u && u.mode.x == 0u) {
+    if (WRITE_ARGS) {
         var a = c.args;
         a.instance_count = select(0u, 1u, flag == VISIBLE && c.args.index_count > 0u);
         out_args[i] = a;

@@ -540,6 +540,8 @@ impl Renderer {
         self.set_object_colors(store.objects().iter().map(|o| o.color));
     }
 
+    /// Colours the next passes by `mode`; each mode is a shaded pipeline of its own, made the
+    /// first time it draws (draw.wgsl `COLOR_MODE`).
     pub fn set_color_mode(&mut self, mode: ColorMode) {
         self.mode = mode;
     }
@@ -846,7 +848,10 @@ impl Renderer {
         self.item_buffer(camera, store.header().grid_step, &pages.clusters())
     }
 
-    fn write_uniforms(&self, camera: &Camera, (width, height): (u32, u32), srgb_in_shader: bool) {
+    /// The draw shaders' uniforms for `camera` on a target of `size`. Nothing a shader branches
+    /// on alone goes here (draw.wgsl: the colour mode and the sRGB encoding are pipeline
+    /// constants, [`draw::Pipelines::shaded`]).
+    fn write_uniforms(&self, camera: &Camera, (width, height): (u32, u32)) {
         let aspect = width as f32 / height as f32;
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
         // The sun: from above (the camera's up), tilted towards a fixed scene direction.
@@ -856,8 +861,8 @@ impl Renderer {
         let u = Uniforms {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
-            sun: sun.extend(if srgb_in_shader { 1.0 } else { 0.0 }).to_array(),
-            params: [self.mode.code(), self.object_color_count, color::pack(DEFAULT_COLOR), 0],
+            sun: sun.extend(0.0).to_array(),
+            params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
             headlight: (camera.eye - camera.target).normalize_or(Vec3::Z).extend(0.0).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
@@ -956,8 +961,7 @@ impl Renderer {
             return Err(GpuError::Size { width: size.0, height: size.1, max });
         }
         let items = matches!(pass, Pass::Items);
-        let srgb_in_shader = matches!(pass, Pass::Shade { format, .. } if !format.is_srgb());
-        self.write_uniforms(camera, size, srgb_in_shader);
+        self.write_uniforms(camera, size);
         let depth_view = self.depth_view_for(size);
         if items && self.items.is_none() {
             let t = self.device.create_texture(&wgpu::TextureDescriptor {
@@ -1102,7 +1106,7 @@ impl Renderer {
             _ => None,
         };
         let pipeline = match format {
-            Some(f) => self.pipelines.shaded(&self.device, f, att.samples).clone(),
+            Some(f) => self.pipelines.shaded(&self.device, f, att.samples, self.mode).clone(),
             None => self.pipelines.item(&self.device).clone(),
         };
         let mut own = None;

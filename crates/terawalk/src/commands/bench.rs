@@ -123,7 +123,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         bar.finish_and_clear();
     }
     for (ri, &strategy) in strategies.iter().enumerate() {
-        let name = if args.reference { "reference".to_string() } else { strategy.name().to_string() };
+        // A strategy given again (`--occlusion none,queries,none`: does memory come back down?)
+        // is a run of its own: "none #2" (the report's runs have distinct names).
+        let repeat = strategies[..ri].iter().filter(|&&s| s == strategy).count();
+        let name = match (args.reference, repeat) {
+            (true, _) => "reference".to_string(),
+            (false, 0) => strategy.name().to_string(),
+            (false, k) => format!("{} #{}", strategy.name(), k + 1),
+        };
         let settings = FrameSettings {
             tau: args.error,
             frustum_culling: true,
@@ -163,6 +170,9 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                 }
             }
             records.push(rec);
+            if tracing::enabled!(tracing::Level::DEBUG) {
+                tracing::debug!("{name} frame {i}: {}", memory_now());
+            }
             bar.inc(1);
         }
         bar.finish_and_clear();
@@ -184,6 +194,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         };
         let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
         print_run(&run);
+        tracing::info!("after {}: {}", run.name, memory_now());
         runs.push(run);
     }
     if !reference_frames.is_empty() {
@@ -337,6 +348,12 @@ fn image_frames(len: usize, n: usize) -> Vec<usize> {
     }
     let n = n.min(len);
     (0..n).map(|k| k * (len - 1) / (n - 1).max(1)).collect()
+}
+
+/// The resident set now and its peak so far (VmRSS, VmHWM), for the memory traces.
+fn memory_now() -> String {
+    let mb = |b: Option<u64>| b.map_or("?".to_string(), |b| format!("{:.0} MB", b as f64 / 1e6));
+    format!("RSS {}, peak {}", mb(tw_report::rss_bytes()), mb(tw_report::peak_rss_bytes()))
 }
 
 fn color_mode(c: RenderColoring) -> ColorMode {
