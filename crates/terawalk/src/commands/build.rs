@@ -62,6 +62,9 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     o
 }
 
+/// The smallest `--memory` the build is known to keep (docs/BUILD.md, "Memory").
+const MIN_HELD_BUDGET: u64 = 128 << 20;
+
 /// The importers' options, their vertex tables held to a quarter of `--memory` (the ingest
 /// phase's share of the budget; the working file's write buffers and the scene's object
 /// records are the rest).
@@ -76,6 +79,15 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     // The budget is a promise about the resident set: one heap for every thread, so memory one
     // phase or worker freed is there for the next instead of resident in an arena of its own.
     tw_core::mem::use_one_heap_arena();
+    if args.memory < MIN_HELD_BUDGET {
+        tracing::warn!(
+            "--memory {} is below {}: the build's fixed part (the program, the LOD workers' \
+             working memory, minimum bucket and I/O buffer sizes) takes 60-90 MB, so its peak \
+             will exceed the budget",
+            fmt_bytes(args.memory),
+            fmt_bytes(MIN_HELD_BUDGET)
+        );
+    }
     let scene = Scene::open(&args.inputs, SceneOptions { import: import_options(&args) })?;
     let opts = options(&args);
     let mut bars = Bars { bar: None, quiet };
