@@ -30,14 +30,13 @@
 use std::ops::Range;
 use std::path::Path;
 
-use rayon::prelude::*;
 use tempfile::TempPath;
 
 use crate::error::BuildError;
 use crate::ingest::Ingested;
 use crate::redefine::Redefined;
 use crate::types::{CellMesh, GRID_STEPS};
-use crate::workio::{temp_path, SpillWriter};
+use crate::workio::{map_sub_chunks, temp_path, SpillWriter};
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 35;
@@ -247,22 +246,29 @@ fn write_group(
     let mut writer = SpillWriter::direct(paths.iter().map(|p| p.to_path_buf()).collect(), buf_size)?;
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
-    let mut recs: Vec<Option<Rec>> = Vec::new();
-    ing.work.scan(|_, tris| {
-        recs.clear();
-        recs.resize(tris.len(), None);
-        recs.par_chunks_mut(4096).zip(tris.par_chunks(4096)).for_each(|(out, tris)| {
-            for (o, t) in out.iter_mut().zip(tris) {
-                let cell = cells.cell_of(t);
+    // The pool decodes, assigns, quantizes and encodes each sub-chunk of the working file, its
+    // records grouped by bucket (stable: file order within a bucket); this thread only appends
+    // each sub-chunk's runs, in order, so every bucket file gets its triangles in file order.
+    ing.work.scan_raw(|_, bytes| {
+        let parts = map_sub_chunks(bytes, crate::ingest::RECORD_BYTES, |_, b| {
+            let mut recs: Vec<(u32, [u8; RECORD_BYTES])> =
+                Vec::with_capacity(b.len() / crate::ingest::RECORD_BYTES);
+            for t in crate::ingest::records(b) {
+                let cell = cells.cell_of(&t);
                 let b = bucket_of.get(cell as usize).map_or(usize::MAX, |&b| b as usize);
                 if (first..end).contains(&b) {
                     let q = t.p.map(|v| work.quantize(grid, v));
-                    *o = Some(Rec { q, object: t.object, cell });
+                    recs.push(((b - first) as u32, Rec { q, object: t.object, cell }.encode()));
                 }
             }
+            group_by_bucket(&recs, group.len())
         });
-        for r in recs.iter().flatten() {
-            writer.write(bucket_of[r.cell as usize] as usize - first, &r.encode())?;
+        for (out, start) in &parts {
+            for (b, w) in start.windows(2).enumerate() {
+                if w[1] > w[0] {
+                    writer.write(b, &out[w[0] * RECORD_BYTES..w[1] * RECORD_BYTES])?;
+                }
+            }
         }
         Ok(())
     })?;
@@ -272,6 +278,27 @@ fn write_group(
         .zip(group)
         .map(|(path, (cells, triangles))| BucketFile { path, cells: cells.clone(), triangles: *triangles })
         .collect())
+}
+
+/// Encoded records `(bucket, bytes)` grouped by bucket (`0..buckets`), stable: the bytes of
+/// bucket `b`'s records are `out[start[b] * RECORD_BYTES..start[b + 1] * RECORD_BYTES]`, in
+/// input order. Returns `(out, start)`.
+fn group_by_bucket(recs: &[(u32, [u8; RECORD_BYTES])], buckets: usize) -> (Vec<u8>, Vec<usize>) {
+    let mut start = vec![0usize; buckets + 1];
+    for &(b, _) in recs {
+        start[b as usize + 1] += 1;
+    }
+    for b in 0..buckets {
+        start[b + 1] += start[b];
+    }
+    let mut fill = start.clone();
+    let mut out = vec![0u8; recs.len() * RECORD_BYTES];
+    for (b, r) in recs {
+        let at = &mut fill[*b as usize];
+        out[*at * RECORD_BYTES..(*at + 1) * RECORD_BYTES].copy_from_slice(r);
+        *at += 1;
+    }
+    (out, start)
 }
 
 /// One bucket in memory, its triangles grouped by cell.

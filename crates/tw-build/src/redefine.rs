@@ -80,8 +80,9 @@ use rayon::prelude::*;
 
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
-use crate::ingest::{Ingested, WorkFile, WorkTri};
+use crate::ingest::{record_object, records, Ingested, WorkFile, WorkTri, RECORD_BYTES};
 use crate::types::{Grid, GridBox};
+use crate::workio::{for_each_lane, SUB_CHUNK};
 
 /// The thresholds of object redefinition (see the module docs for their meaning and units).
 #[derive(Clone, Debug, PartialEq)]
@@ -241,15 +242,22 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
         objects: ing.objects.iter().filter(|o| o.triangles > 0).count() as u64,
         ..Default::default()
     };
+    let mut lap = crate::types::StepTimer::new("redefine");
     let mut samples = sample_objects(ing, params)?;
+    lap.step("pass A: samples");
     report.samples = samples.points.len() as u64;
     let mut assign = Assigner::default();
     let piece_object = partition_objects(ing, params, &scale, &mut samples, &mut assign, &mut report);
+    lap.step("partition-I");
     let pieces = piece_stats(ing, &assign, piece_object.len())?;
+    lap.step("pass B: pieces");
     let clusters = cluster_pieces(params, &scale, &pieces, &mut report);
+    lap.step("clustering");
     let cell_count =
         partition_clusters(ing, params, &scale, &samples, &pieces, &clusters, &mut assign, &mut report);
+    lap.step("partition-II");
     let cells = cell_stats(ing, &assign, cell_count)?;
+    lap.step("pass C: cells");
     // Drop the cells no triangle reached.
     let mut new_id = vec![u32::MAX; cells.len()];
     let mut kept = Vec::new();
@@ -470,16 +478,50 @@ impl Assigner {
     }
 }
 
-/// Maps every triangle of a chunk in parallel (fixed sub-chunks: the result does not depend on
-/// the number of threads).
-fn map_chunk(tris: &[WorkTri], out: &mut Vec<u32>, f: impl Fn(&WorkTri) -> u32 + Sync) {
+/// Decodes and maps every triangle of a chunk of raw working-file records in parallel (fixed
+/// sub-chunks: the result does not depend on the number of threads).
+fn map_records(bytes: &[u8], out: &mut Vec<u32>, f: impl Fn(&WorkTri) -> u32 + Sync) {
     out.clear();
-    out.resize(tris.len(), 0);
-    out.par_chunks_mut(4096).zip(tris.par_chunks(4096)).for_each(|(o, t)| {
-        for (o, t) in o.iter_mut().zip(t) {
-            *o = f(t);
+    out.resize(bytes.len() / RECORD_BYTES, 0);
+    out.par_chunks_mut(SUB_CHUNK).zip(bytes.par_chunks(SUB_CHUNK * RECORD_BYTES)).for_each(|(o, b)| {
+        for (o, t) in o.iter_mut().zip(records(b)) {
+            *o = f(&t);
         }
     });
+}
+
+/// Lanes of the per-piece and per-cell statistics ([`for_each_lane`]): fixed, so that the
+/// floating-point sums happen in the same order for any number of threads.
+const LANES: usize = 4;
+
+/// Per-key statistics of the keys one lane owns (key `k` at `k / LANES`).
+struct LaneStats {
+    count: Vec<u64>,
+    bounds: Vec<FBox>,
+    /// Sum of centroids (pieces only; empty for cells).
+    sum: Vec<[f64; 3]>,
+}
+
+impl LaneStats {
+    /// The lanes for keys `0..n`, with centroid sums if `sums`.
+    fn lanes(n: usize, sums: bool) -> Vec<LaneStats> {
+        (0..LANES)
+            .map(|l| {
+                let len = (n + LANES - 1 - l) / LANES;
+                LaneStats {
+                    count: vec![0; len],
+                    bounds: vec![FBox::EMPTY; len],
+                    sum: if sums { vec![[0.0; 3]; len] } else { Vec::new() },
+                }
+            })
+            .collect()
+    }
+
+    /// Key `k`'s figures back out of the lanes: (count, bounds, sum).
+    fn get(lanes: &[LaneStats], k: usize) -> (u64, FBox, [f64; 3]) {
+        let (l, j) = (&lanes[k % LANES], k / LANES);
+        (l.count[j], l.bounds[j], l.sum.get(j).copied().unwrap_or_default())
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -509,10 +551,14 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
     }
     let mut points = vec![[0f32; 3]; start.last().copied().unwrap_or(0)];
     let mut seen = vec![0u64; objects.len()];
+    // The next sampled triangle of each object (counted within the object): the multiples of
+    // its stride, so that only sampled triangles are decoded (none for unsampled objects).
+    let mut next: Vec<u64> = stride.iter().map(|&s| if s > 0 { 0 } else { u64::MAX }).collect();
     let corrupt = |message: String| BuildError::Corrupt { path: ing.work.path().to_path_buf(), message };
-    ing.work.scan(|first, tris| {
-        for (k, t) in tris.iter().enumerate() {
-            let o = t.object as usize;
+    // Serial, but it reads only the object ids: the reader thread only reads.
+    ing.work.scan_raw(|first, bytes| {
+        for k in 0..bytes.len() / RECORD_BYTES {
+            let o = record_object(bytes, k) as usize;
             let Some(n) = seen.get_mut(o) else {
                 return Err(corrupt(format!(
                     "triangle {} has object {o} of {}",
@@ -520,13 +566,14 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
                     objects.len()
                 )));
             };
-            let s = stride[o];
-            if s > 0 && *n % s == 0 {
+            if *n == next[o] {
+                let s = stride[o];
                 let i = start[o] + (*n / s) as usize;
                 if i >= start[o + 1] {
                     return Err(corrupt(format!("object {o} has more triangles than ingest counted")));
                 }
-                points[i] = t.centroid();
+                points[i] = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]).centroid();
+                next[o] += s;
             }
             *n += 1;
         }
@@ -662,27 +709,39 @@ struct Pieces {
     centre: Vec<[f32; 3]>,
 }
 
+/// Pass B. Parallel: the pool decodes each chunk and finds the pieces ([`map_records`]), then
+/// accumulates them in [`LANES`] lanes by piece, so that each piece's centroid sum adds its
+/// triangles in file order, as a serial loop would.
 fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, BuildError> {
-    let mut count = vec![0u64; n];
-    let mut bounds = vec![FBox::EMPTY; n];
-    let mut sum = vec![[0f64; 3]; n];
+    let mut lanes = LaneStats::lanes(n, true);
     let mut ids = Vec::new();
-    ing.work.scan(|_, tris| {
-        map_chunk(tris, &mut ids, |t| assign.piece(t));
-        for (t, &p) in tris.iter().zip(&ids) {
-            let p = p as usize;
-            count[p] += 1;
-            let b = &mut bounds[p];
+    ing.work.scan_raw(|_, bytes| {
+        map_records(bytes, &mut ids, |t| assign.piece(t));
+        for_each_lane(&mut lanes, &ids, |lane, k, p| {
+            let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+            let j = p as usize / LANES;
+            lane.count[j] += 1;
+            let b = &mut lane.bounds[j];
             for v in t.p {
                 b.grow(v);
             }
             let c = t.centroid();
+            let sum = &mut lane.sum[j];
             for i in 0..3 {
-                sum[p][i] += c[i] as f64;
+                sum[i] += c[i] as f64;
             }
-        }
+        });
         Ok(())
     })?;
+    let (mut count, mut bounds, mut sum) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    for p in 0..n {
+        let (c, b, s) = LaneStats::get(&lanes, p);
+        count.push(c);
+        bounds.push(b);
+        sum.push(s);
+    }
+    drop(lanes);
     let grid = bounds
         .iter()
         .zip(&count)
@@ -1063,26 +1122,34 @@ fn partition_clusters(
 // ---------------------------------------------------------------------------------------------
 // Pass C: cell statistics
 
+/// Pass C, parallel as pass B (counts and boxes do not depend on the order, lanes or not).
 fn cell_stats(ing: &Ingested, assign: &Assigner, n: u32) -> Result<Vec<CellInfo>, BuildError> {
     let n = n as usize;
-    let mut count = vec![0u64; n];
-    let mut bounds = vec![FBox::EMPTY; n];
+    let mut lanes = LaneStats::lanes(n, false);
     let mut ids = Vec::new();
     let mut bad = None;
-    ing.work.scan(|first, tris| {
-        map_chunk(tris, &mut ids, |t| assign.cell(t));
-        for (k, (t, &c)) in tris.iter().zip(&ids).enumerate() {
-            let Some(cnt) = count.get_mut(c as usize) else {
-                bad = Some(first + k as u64);
-                continue;
-            };
-            *cnt += 1;
-            for v in t.p {
-                bounds[c as usize].grow(v);
-            }
+    ing.work.scan_raw(|first, bytes| {
+        map_records(bytes, &mut ids, |t| assign.cell(t));
+        if let Some(k) = ids.iter().rposition(|&c| c as usize >= n) {
+            bad = Some(first + k as u64);
         }
+        for_each_lane(&mut lanes, &ids, |lane, k, c| {
+            let j = c as usize / LANES;
+            let Some(cnt) = lane.count.get_mut(j) else { return };
+            *cnt += 1;
+            let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+            for v in t.p {
+                lane.bounds[j].grow(v);
+            }
+        });
         Ok(())
     })?;
+    let (count, bounds): (Vec<u64>, Vec<FBox>) = (0..n)
+        .map(|c| {
+            let (cnt, b, _) = LaneStats::get(&lanes, c);
+            (cnt, b)
+        })
+        .unzip();
     if let Some(t) = bad {
         // Only reachable through a bug in the plans; say so rather than panic later.
         return Err(BuildError::Corrupt {
@@ -1371,5 +1438,104 @@ mod tests {
             assert!(!(v < u && u < v), "no value between");
         }
         assert!(next_up(-f32::from_bits(1)) == 0.0 || next_up(-f32::from_bits(1)) == -0.0);
+    }
+
+    /// Passes A, B and C against the obvious serial loops over decoded triangles, on a plant
+    /// of several scan chunks, on pools of 1 and 3 threads: bit for bit the same samples, counts,
+    /// boxes and centres (the centroid sums must add in file order).
+    #[test]
+    fn parallel_passes_equal_the_serial_loops() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = crate::ingest::tests::ingest_plant(dir.path(), 150_000);
+        assert!(ing.triangles > crate::ingest::SCAN_CHUNK as u64, "several chunks");
+        let p = RedefineParams::default();
+        let scale = Scale::new(&ing, &p);
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let mut samples = sample_objects(&ing, &p).unwrap();
+                // Pass A, serially: every stride-th triangle of each sampled object.
+                let mut seen = vec![0u64; ing.objects.len()];
+                let mut expected = vec![[0f32; 3]; samples.points.len()];
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            let o = t.object as usize;
+                            let s = samples.stride[o];
+                            if s > 0 && seen[o] % s == 0 {
+                                expected[samples.start[o] + (seen[o] / s) as usize] = t.centroid();
+                            }
+                            seen[o] += 1;
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert!(samples
+                    .points
+                    .iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+
+                let mut assign = Assigner::default();
+                let mut report = RedefineReport::default();
+                let n = partition_objects(&ing, &p, &scale, &mut samples, &mut assign, &mut report).len();
+                assert!(report.split_objects > 0, "the plant has split objects");
+                let pieces = piece_stats(&ing, &assign, n).unwrap();
+                let (mut count, mut sum, mut lo, mut hi) = (
+                    vec![0u64; n],
+                    vec![[0f64; 3]; n],
+                    vec![[f32::INFINITY; 3]; n],
+                    vec![[f32::NEG_INFINITY; 3]; n],
+                );
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            let q = assign.piece(t) as usize;
+                            count[q] += 1;
+                            let c = t.centroid();
+                            for i in 0..3 {
+                                sum[q][i] += c[i] as f64;
+                                for v in t.p {
+                                    lo[q][i] = lo[q][i].min(v[i]);
+                                    hi[q][i] = hi[q][i].max(v[i]);
+                                }
+                            }
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert_eq!(pieces.count, count);
+                for q in 0..n {
+                    let c = count[q].max(1) as f64;
+                    let centre = sum[q].map(|s| (s / c) as f32);
+                    assert_eq!(pieces.centre[q].map(f32::to_bits), centre.map(f32::to_bits), "piece {q}");
+                    assert_eq!(pieces.bounds[q].min.map(f32::to_bits), lo[q].map(f32::to_bits));
+                    assert_eq!(pieces.bounds[q].max.map(f32::to_bits), hi[q].map(f32::to_bits));
+                }
+
+                let clusters = cluster_pieces(&p, &scale, &pieces, &mut report);
+                let cells = partition_clusters(
+                    &ing,
+                    &p,
+                    &scale,
+                    &samples,
+                    &pieces,
+                    &clusters,
+                    &mut assign,
+                    &mut report,
+                );
+                let stats = cell_stats(&ing, &assign, cells).unwrap();
+                let mut tris_of = vec![0u64; cells as usize];
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            tris_of[assign.cell(t) as usize] += 1;
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert_eq!(stats.iter().map(|c| c.triangles).collect::<Vec<_>>(), tris_of);
+            });
+        }
     }
 }

@@ -130,6 +130,7 @@ impl SeamFiles {
         let mut parts =
             SpillWriter::direct(part_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?;
 
+        let mut lap = crate::types::StepTimer::new("seams");
         // 1. Open positions of every cell, by partition.
         let mut open_positions = 0u64;
         let mut done = 0u64;
@@ -167,6 +168,7 @@ impl SeamFiles {
 
         // 2. Seams of each partition, to the seam files of their cells' buckets.
         drop(parts.finish()?);
+        lap.step("open positions");
         let out_paths: Vec<TempPath> =
             (0..cells.bucket_count()).map(|_| temp_path(work_dir, "tw-seams-")).collect::<Result<_, _>>()?;
         let mut outs =
@@ -206,6 +208,7 @@ impl SeamFiles {
             }
         }
         drop(outs.finish()?);
+        lap.step("partitions");
         let buckets = out_paths.into_iter().zip(counts).collect();
         Ok(SeamFiles { buckets, open_positions, seams, partitions })
     }

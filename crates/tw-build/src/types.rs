@@ -190,3 +190,22 @@ mod tests {
         assert_eq!(g.quantize([1.0; 3]), [0, 0, 0]);
     }
 }
+
+/// Times the steps of a phase: each [`StepTimer::step`] logs (debug level, target `tw_build`)
+/// the seconds since the previous one, for profiling the build (`TERAWALK_LOG=tw_build=debug`).
+pub struct StepTimer {
+    phase: &'static str,
+    last: std::time::Instant,
+}
+
+impl StepTimer {
+    pub fn new(phase: &'static str) -> StepTimer {
+        StepTimer { phase, last: std::time::Instant::now() }
+    }
+
+    pub fn step(&mut self, step: &str) {
+        let now = std::time::Instant::now();
+        tracing::debug!(phase = self.phase, step, seconds = (now - self.last).as_secs_f64(), "step");
+        self.last = now;
+    }
+}
