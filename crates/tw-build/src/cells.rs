@@ -378,10 +378,10 @@ impl PositionTable {
 }
 
 /// Reads a file of fixed-size records (`size` bytes each) and decodes each.
-pub(crate) fn read_records<T: Clone + Send>(
+pub(crate) fn read_records<T>(
     path: &Path,
     size: usize,
-    decode: impl Fn(&[u8]) -> T + Send,
+    decode: impl Fn(&[u8]) -> T,
 ) -> Result<Vec<T>, BuildError> {
     let len = std::fs::metadata(path).map_err(|e| BuildError::io(path, e))?.len();
     if len % size as u64 != 0 {
@@ -391,11 +391,24 @@ pub(crate) fn read_records<T: Clone + Send>(
         });
     }
     let n = len / size as u64;
+    // Decoded straight into the result on this thread (the direct reader's own thread reads
+    // ahead): no second thread and no copy of the decoded records.
+    let buffer = len.clamp(1, 4 << 20) as usize;
+    let mut file =
+        tw_core::direct_io::DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
+    if file.file_len() != len {
+        return Err(BuildError::Corrupt { path: path.to_path_buf(), message: "changed while read".into() });
+    }
     let mut out = Vec::with_capacity(n as usize);
-    crate::workio::read_ahead(path, n, size, 1 << 14, decode, |_, chunk| {
-        out.extend_from_slice(chunk);
-        Ok(())
-    })?;
+    let mut bytes = vec![0u8; (1 << 14) * size];
+    let mut left = n as usize;
+    while left > 0 {
+        let k = left.min(1 << 14);
+        let b = &mut bytes[..k * size];
+        std::io::Read::read_exact(&mut file, b).map_err(|e| BuildError::io(path, e))?;
+        out.extend(b.chunks_exact(size).map(&decode));
+        left -= k;
+    }
     Ok(out)
 }
 
