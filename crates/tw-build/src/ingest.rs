@@ -127,6 +127,15 @@ impl WorkFile {
     pub fn scan_raw(&self, f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>) -> Result<(), BuildError> {
         crate::workio::read_ahead_raw(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, f)
     }
+
+    /// [`WorkFile::scan_raw`] over the triangles `range` only.
+    pub fn scan_range_raw(
+        &self,
+        range: std::ops::Range<u64>,
+        f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        crate::workio::read_range_raw(&self.path, self.triangles, range, RECORD_BYTES, SCAN_CHUNK, f)
+    }
 }
 
 /// The object id of record `k` of raw working-file records (see [`WorkFile::scan_raw`]).

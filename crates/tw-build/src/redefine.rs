@@ -256,7 +256,16 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
     let cell_count =
         partition_clusters(ing, params, &scale, &samples, &pieces, &clusters, &mut assign, &mut report);
     lap.step("partition-II");
-    let cells = cell_stats(ing, &assign, cell_count)?;
+    if tracing::enabled!(tracing::Level::DEBUG) {
+        let cut: u64 = (0..pieces.count.len())
+            .filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_)))
+            .map(|q| pieces.count[q])
+            .sum();
+        let cut_objects =
+            (0..ing.objects.len()).filter(|&o| matches!(assign.object_piece[o], Route::Plan(_))).count();
+        tracing::debug!(cut_piece_triangles = cut, split_objects = cut_objects, "partition-II routes");
+    }
+    let cells = cell_stats(ing, &assign, &pieces, &piece_object, &samples.span, cell_count)?;
     lap.step("pass C: cells");
     // Drop the cells no triangle reached.
     let mut new_id = vec![u32::MAX; cells.len()];
@@ -367,6 +376,8 @@ impl FBox {
         }
     }
 
+    /// Grows to contain `o`, which must not be empty (an empty box's +∞ minimum would become
+    /// this box's maximum).
     fn union(&mut self, o: &FBox) {
         self.grow(o.min);
         self.grow(o.max);
@@ -533,6 +544,8 @@ struct Samples {
     start: Vec<usize>,
     /// Triangles per sample of each object (0: not sampled).
     stride: Vec<u64>,
+    /// The working-file triangles from each object's first to its last (empty: no triangle).
+    span: Vec<std::ops::Range<u64>>,
 }
 
 fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildError> {
@@ -554,6 +567,7 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
     // The next sampled triangle of each object (counted within the object): the multiples of
     // its stride, so that only sampled triangles are decoded (none for unsampled objects).
     let mut next: Vec<u64> = stride.iter().map(|&s| if s > 0 { 0 } else { u64::MAX }).collect();
+    let mut span = vec![0..0u64; objects.len()];
     let corrupt = |message: String| BuildError::Corrupt { path: ing.work.path().to_path_buf(), message };
     // Serial, but it reads only the object ids: the reader thread only reads.
     ing.work.scan_raw(|first, bytes| {
@@ -566,6 +580,11 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
                     objects.len()
                 )));
             };
+            let at = first + k as u64;
+            if *n == 0 {
+                span[o].start = at;
+            }
+            span[o].end = at + 1;
             if *n == next[o] {
                 let s = stride[o];
                 let i = start[o] + (*n / s) as usize;
@@ -585,7 +604,7 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
             seen[o], objects[o].triangles
         )));
     }
-    Ok(Samples { points, start, stride })
+    Ok(Samples { points, start, stride, span })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1122,34 +1141,96 @@ fn partition_clusters(
 // ---------------------------------------------------------------------------------------------
 // Pass C: cell statistics
 
-/// Pass C, parallel as pass B (counts and boxes do not depend on the order, lanes or not).
-fn cell_stats(ing: &Ingested, assign: &Assigner, n: u32) -> Result<Vec<CellInfo>, BuildError> {
+/// Gaps (in triangles) between the file spans of pass C's objects that are read through
+/// rather than skipped (10 MB: a few reads' worth).
+const SPAN_GAP: u64 = 1 << 18;
+
+/// Pass C: the count and box of every cell. A piece placed whole in a cell (`Route::Fixed`)
+/// adds its pass-B count and box; only the triangles of pieces that a partition-II plan cuts
+/// are read again, from the file spans of their objects ([`Samples::span`]), decoded and
+/// accumulated in lanes as in pass B. Counts are sums and boxes minima and maxima, so the result
+/// does not depend on the order (a −0 and a +0 bound quantize to the same grid point).
+fn cell_stats(
+    ing: &Ingested,
+    assign: &Assigner,
+    pieces: &Pieces,
+    piece_object: &[u32],
+    span: &[std::ops::Range<u64>],
+    n: u32,
+) -> Result<Vec<CellInfo>, BuildError> {
     let n = n as usize;
+    let mut count = vec![0u64; n];
+    let mut bounds = vec![FBox::EMPTY; n];
+    let mut bad = None;
+    let mut cut_objects = Vec::new();
+    for (q, &tris) in pieces.count.iter().enumerate() {
+        if tris == 0 {
+            continue;
+        }
+        match assign.piece_cell[q] {
+            Route::Fixed(c) => match count.get_mut(c as usize) {
+                Some(cnt) => {
+                    *cnt += tris;
+                    bounds[c as usize].union(&pieces.bounds[q]);
+                }
+                None => bad = Some(span[piece_object[q] as usize].start),
+            },
+            Route::Plan(_) => cut_objects.push(piece_object[q]),
+        }
+    }
+    // The spans to read: the cut objects' spans, sorted, joined across small gaps.
+    cut_objects.dedup();
+    let mut spans: Vec<std::ops::Range<u64>> =
+        cut_objects.iter().map(|&o| span[o as usize].clone()).collect();
+    spans.sort_unstable_by_key(|r| (r.start, r.end));
+    let mut joined: Vec<std::ops::Range<u64>> = Vec::new();
+    for r in spans {
+        match joined.last_mut() {
+            Some(last) if r.start <= last.end + SPAN_GAP => last.end = last.end.max(r.end),
+            _ => joined.push(r),
+        }
+    }
+    let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
+    tracing::debug!(spans = joined.len(), triangles = read, of = ing.work.triangles, "pass C reads");
+    // Triangles of whole pieces in the spans are skipped (`u32::MAX`); a plan that gives no
+    // cell is a bug, reported (`n`) rather than left to panic.
     let mut lanes = LaneStats::lanes(n, false);
     let mut ids = Vec::new();
-    let mut bad = None;
-    ing.work.scan_raw(|first, bytes| {
-        map_records(bytes, &mut ids, |t| assign.cell(t));
-        if let Some(k) = ids.iter().rposition(|&c| c as usize >= n) {
-            bad = Some(first + k as u64);
-        }
-        for_each_lane(&mut lanes, &ids, |lane, k, c| {
-            let j = c as usize / LANES;
-            let Some(cnt) = lane.count.get_mut(j) else { return };
-            *cnt += 1;
-            let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
-            for v in t.p {
-                lane.bounds[j].grow(v);
+    for r in joined {
+        ing.work.scan_range_raw(r, |first, bytes| {
+            map_records(bytes, &mut ids, |t| match assign.piece_cell[assign.piece(t) as usize] {
+                Route::Fixed(_) => u32::MAX,
+                Route::Plan(root) => {
+                    let c = walk(&assign.plan2, root, t.centroid());
+                    if (c as usize) < n {
+                        c
+                    } else {
+                        n as u32
+                    }
+                }
+            });
+            if let Some(k) = ids.iter().rposition(|&c| c != u32::MAX && c as usize >= n) {
+                bad = Some(first + k as u64);
             }
-        });
-        Ok(())
-    })?;
-    let (count, bounds): (Vec<u64>, Vec<FBox>) = (0..n)
-        .map(|c| {
-            let (cnt, b, _) = LaneStats::get(&lanes, c);
-            (cnt, b)
-        })
-        .unzip();
+            for_each_lane(&mut lanes, &ids, |lane, k, c| {
+                let j = c as usize / LANES;
+                let Some(cnt) = lane.count.get_mut(j) else { return };
+                *cnt += 1;
+                let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+                for v in t.p {
+                    lane.bounds[j].grow(v);
+                }
+            });
+            Ok(())
+        })?;
+    }
+    for c in 0..n {
+        let (cnt, b, _) = LaneStats::get(&lanes, c);
+        if cnt > 0 {
+            count[c] += cnt;
+            bounds[c].union(&b);
+        }
+    }
     if let Some(t) = bad {
         // Only reachable through a bug in the plans; say so rather than panic later.
         return Err(BuildError::Corrupt {
@@ -1448,12 +1529,26 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let ing = crate::ingest::tests::ingest_plant(dir.path(), 150_000);
         assert!(ing.triangles > crate::ingest::SCAN_CHUNK as u64, "several chunks");
-        let p = RedefineParams::default();
-        let scale = Scale::new(&ing, &p);
-        for threads in [1, 3] {
+        // The defaults split objects (partition-I); without partition-I and with small cells,
+        // partition-II cuts whole large objects by plan (pass C reads them again).
+        let presets = [
+            (RedefineParams::default(), false),
+            (
+                RedefineParams {
+                    s1: 10.0,
+                    r1: 1e9,
+                    max_cell_triangles: 4096,
+                    t2: 2000,
+                    ..Default::default()
+                },
+                true,
+            ),
+        ];
+        for ((p, cuts), threads) in presets.iter().flat_map(|p| [(p, 1), (p, 3)]) {
+            let scale = Scale::new(&ing, p);
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
-                let mut samples = sample_objects(&ing, &p).unwrap();
+                let mut samples = sample_objects(&ing, p).unwrap();
                 // Pass A, serially: every stride-th triangle of each sampled object.
                 let mut seen = vec![0u64; ing.objects.len()];
                 let mut expected = vec![[0f32; 3]; samples.points.len()];
@@ -1478,8 +1573,9 @@ mod tests {
 
                 let mut assign = Assigner::default();
                 let mut report = RedefineReport::default();
-                let n = partition_objects(&ing, &p, &scale, &mut samples, &mut assign, &mut report).len();
-                assert!(report.split_objects > 0, "the plant has split objects");
+                let piece_object = partition_objects(&ing, p, &scale, &mut samples, &mut assign, &mut report);
+                let n = piece_object.len();
+                assert!(*cuts || report.split_objects > 0, "the plant has split objects");
                 let pieces = piece_stats(&ing, &assign, n).unwrap();
                 let (mut count, mut sum, mut lo, mut hi) = (
                     vec![0u64; n],
@@ -1513,7 +1609,7 @@ mod tests {
                     assert_eq!(pieces.bounds[q].max.map(f32::to_bits), hi[q].map(f32::to_bits));
                 }
 
-                let clusters = cluster_pieces(&p, &scale, &pieces, &mut report);
+                let clusters = cluster_pieces(p, &scale, &pieces, &mut report);
                 let cells = partition_clusters(
                     &ing,
                     &p,
@@ -1524,17 +1620,32 @@ mod tests {
                     &mut assign,
                     &mut report,
                 );
-                let stats = cell_stats(&ing, &assign, cells).unwrap();
+                let cut = (0..n).filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_))).count();
+                assert!(
+                    !cuts || (cut > 0 && cut < n),
+                    "some pieces cut by a plan ({cut} of {n}), some whole"
+                );
+                let stats = cell_stats(&ing, &assign, &pieces, &piece_object, &samples.span, cells).unwrap();
                 let mut tris_of = vec![0u64; cells as usize];
+                let mut box_of = vec![FBox::EMPTY; cells as usize];
                 ing.work
                     .scan(|_, tris| {
                         for t in tris {
-                            tris_of[assign.cell(t) as usize] += 1;
+                            let c = assign.cell(t) as usize;
+                            tris_of[c] += 1;
+                            for v in t.p {
+                                box_of[c].grow(v);
+                            }
                         }
                         Ok(())
                     })
                     .unwrap();
                 assert_eq!(stats.iter().map(|c| c.triangles).collect::<Vec<_>>(), tris_of);
+                for (c, info) in stats.iter().enumerate() {
+                    if tris_of[c] > 0 {
+                        assert_eq!(info.bounds, box_of[c].to_grid(&ing.work, &ing.grid), "cell {c}");
+                    }
+                }
             });
         }
     }

@@ -253,9 +253,19 @@ where
 /// each) without decoding them, so that the caller can decode and process a chunk in parallel
 /// ([`map_sub_chunks`], [`for_each_lane`]) while the reader thread only reads. Memory: three
 /// chunks of bytes and three read buffers of up to 4 MiB.
-pub fn read_ahead_raw<F>(
+pub fn read_ahead_raw<F>(path: &Path, records: u64, size: usize, chunk: usize, f: F) -> Result<(), BuildError>
+where
+    F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
+{
+    read_range_raw(path, records, 0..records, size, chunk, f)
+}
+
+/// [`read_ahead_raw`] over the records `range` of a file of `file_records` records: `f` gets
+/// the index (in the file) of each chunk's first record.
+pub fn read_range_raw<F>(
     path: &Path,
-    records: u64,
+    file_records: u64,
+    range: std::ops::Range<u64>,
     size: usize,
     chunk: usize,
     mut f: F,
@@ -263,16 +273,20 @@ pub fn read_ahead_raw<F>(
 where
     F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
 {
+    assert!(range.start <= range.end && range.end <= file_records, "{range:?} of {file_records} records");
+    let records = range.end - range.start;
     let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
-    let mut file = DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
+    let mut file = DirectReader::open_at(path, buffer, range.start * size as u64)
+        .map_err(|e| BuildError::io(path, e))?;
     let len = file.file_len();
-    if len != records * size as u64 {
+    if len != file_records * size as u64 {
         return Err(BuildError::Corrupt {
             path: path.to_path_buf(),
-            message: format!("{len} bytes, expected {records} records of {size} bytes"),
+            message: format!("{len} bytes, expected {file_records} records of {size} bytes"),
         });
     }
     let chunk = chunk.max(1);
+    let base = range.start;
     std::thread::scope(|scope| {
         let (tx, rx) = sync_channel::<Result<(u64, Vec<u8>), std::io::Error>>(1);
         let (give_back, recycled) = sync_channel::<Vec<u8>>(2);
@@ -286,7 +300,7 @@ where
                     let _ = tx.send(Err(e));
                     return;
                 }
-                if tx.send(Ok((done, bytes))).is_err() {
+                if tx.send(Ok((base + done, bytes))).is_err() {
                     return; // the consumer stopped
                 }
                 done += n as u64;
@@ -478,6 +492,17 @@ mod tests {
             })
             .unwrap();
             assert_eq!(seen, data, "{n} records in chunks of {chunk}");
+        }
+        let (path, data) = records_file(dir.path(), 3000);
+        for range in [0..0, 0..1, 5..5, 511..513, 512..1024, 7..3000, 2999..3000, 0..3000] {
+            let mut seen = Vec::new();
+            read_range_raw(&path, 3000, range.clone(), 8, 100, |first, b| {
+                assert_eq!(first, range.start + seen.len() as u64 / 8);
+                seen.extend_from_slice(b);
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(seen, data[range.start as usize * 8..range.end as usize * 8], "{range:?}");
         }
         let (path, _) = records_file(dir.path(), 10);
         let e = read_ahead_raw(&path, 11, 8, 4, |_, _| Ok(())).unwrap_err();
