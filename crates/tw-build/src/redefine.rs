@@ -1557,7 +1557,7 @@ mod tests {
                         for t in tris {
                             let o = t.object as usize;
                             let s = samples.stride[o];
-                            if s > 0 && seen[o] % s == 0 {
+                            if s > 0 && seen[o].is_multiple_of(s) {
                                 expected[samples.start[o] + (seen[o] / s) as usize] = t.centroid();
                             }
                             seen[o] += 1;
@@ -1612,7 +1612,7 @@ mod tests {
                 let clusters = cluster_pieces(p, &scale, &pieces, &mut report);
                 let cells = partition_clusters(
                     &ing,
-                    &p,
+                    p,
                     &scale,
                     &samples,
                     &pieces,
