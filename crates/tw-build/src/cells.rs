@@ -7,7 +7,9 @@
 //!    appends it to a *bucket* file. A bucket is a contiguous range of cells (in cell order, i.e.
 //!    hierarchy leaf order once [`Redefined::order_by_hierarchy`] ran) sized so that reading it
 //!    fits the memory budget. At most [`MAX_OPEN_BUCKETS`] bucket files are written per pass;
-//!    a tiny budget over a huge input takes several passes rather than more open files.
+//!    a tiny budget over a huge input takes several passes rather than more open files. The
+//!    pool decodes, assigns, quantizes and encodes each sub-chunk of 4096 triangles, grouped by
+//!    bucket; the calling thread appends the groups in order (file order within each bucket).
 //! 2. [`CellFiles::read_bucket`]: reads one bucket, groups its triangles by cell (a counting
 //!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
 //!    [`CellMesh`], its vertices deduplicated by exact grid position (an open-addressing table with

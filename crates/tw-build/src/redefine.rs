@@ -31,7 +31,14 @@
 //! - B (`piece_stats`): after partition-I planned the pieces from the samples, the exact triangle
 //!   count, bounds and centre of mass of every piece.
 //! - C (`cell_stats`): after clustering and partition-II, the exact count and bounds of every
-//!   cell (empty cells, possible since plans come from samples, are dropped).
+//!   cell (empty cells, possible since plans come from samples, are dropped). Pieces placed
+//!   whole add their pass-B figures; only the objects whose pieces a partition-II plan cuts
+//!   are read again (their spans of the file, recorded in pass A).
+//!
+//! Threads: the passes get raw records from a reader thread ([`WorkFile::scan_raw`]); the pool
+//! decodes them and finds each triangle's piece or cell in fixed sub-chunks, then accumulates
+//! in `LANES` lanes by key ([`for_each_lane`]), so that every piece's centroid sum adds its
+//! triangles in file order whatever the number of threads. Pass A only counts object ids.
 //!
 //! Memory: O(objects + samples + pieces · `neighbours`), nothing per triangle.
 //!
