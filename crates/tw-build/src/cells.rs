@@ -7,7 +7,9 @@
 //!    appends it to a *bucket* file. A bucket is a contiguous range of cells (in cell order, i.e.
 //!    hierarchy leaf order once [`Redefined::order_by_hierarchy`] ran) sized so that reading it
 //!    fits the memory budget. At most [`MAX_OPEN_BUCKETS`] bucket files are written per pass;
-//!    a tiny budget over a huge input takes several passes rather than more open files.
+//!    a tiny budget over a huge input takes several passes rather than more open files. The
+//!    pool decodes, assigns, quantizes and encodes each sub-chunk of 4096 triangles, grouped by
+//!    bucket; the calling thread appends the groups in order (file order within each bucket).
 //! 2. [`CellFiles::read_bucket`]: reads one bucket, groups its triangles by cell (a counting
 //!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
 //!    [`CellMesh`], its vertices deduplicated by exact grid position (an open-addressing table with
@@ -30,14 +32,13 @@
 use std::ops::Range;
 use std::path::Path;
 
-use rayon::prelude::*;
 use tempfile::TempPath;
 
 use crate::error::BuildError;
 use crate::ingest::Ingested;
 use crate::redefine::Redefined;
 use crate::types::{CellMesh, GRID_STEPS};
-use crate::workio::{temp_path, SpillWriter};
+use crate::workio::{map_sub_chunks, temp_path, SpillWriter};
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 35;
@@ -247,22 +248,29 @@ fn write_group(
     let mut writer = SpillWriter::direct(paths.iter().map(|p| p.to_path_buf()).collect(), buf_size)?;
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
-    let mut recs: Vec<Option<Rec>> = Vec::new();
-    ing.work.scan(|_, tris| {
-        recs.clear();
-        recs.resize(tris.len(), None);
-        recs.par_chunks_mut(4096).zip(tris.par_chunks(4096)).for_each(|(out, tris)| {
-            for (o, t) in out.iter_mut().zip(tris) {
-                let cell = cells.cell_of(t);
+    // The pool decodes, assigns, quantizes and encodes each sub-chunk of the working file, its
+    // records grouped by bucket (stable: file order within a bucket); this thread only appends
+    // each sub-chunk's runs, in order, so every bucket file gets its triangles in file order.
+    ing.work.scan_raw(|_, bytes| {
+        let parts = map_sub_chunks(bytes, crate::ingest::RECORD_BYTES, |_, b| {
+            let mut recs: Vec<(u32, [u8; RECORD_BYTES])> =
+                Vec::with_capacity(b.len() / crate::ingest::RECORD_BYTES);
+            for t in crate::ingest::records(b) {
+                let cell = cells.cell_of(&t);
                 let b = bucket_of.get(cell as usize).map_or(usize::MAX, |&b| b as usize);
                 if (first..end).contains(&b) {
                     let q = t.p.map(|v| work.quantize(grid, v));
-                    *o = Some(Rec { q, object: t.object, cell });
+                    recs.push(((b - first) as u32, Rec { q, object: t.object, cell }.encode()));
                 }
             }
+            group_by_bucket(&recs, group.len())
         });
-        for r in recs.iter().flatten() {
-            writer.write(bucket_of[r.cell as usize] as usize - first, &r.encode())?;
+        for (out, start) in &parts {
+            for (b, w) in start.windows(2).enumerate() {
+                if w[1] > w[0] {
+                    writer.write(b, &out[w[0] * RECORD_BYTES..w[1] * RECORD_BYTES])?;
+                }
+            }
         }
         Ok(())
     })?;
@@ -272,6 +280,27 @@ fn write_group(
         .zip(group)
         .map(|(path, (cells, triangles))| BucketFile { path, cells: cells.clone(), triangles: *triangles })
         .collect())
+}
+
+/// Encoded records `(bucket, bytes)` grouped by bucket (`0..buckets`), stable: the bytes of
+/// bucket `b`'s records are `out[start[b] * RECORD_BYTES..start[b + 1] * RECORD_BYTES]`, in
+/// input order. Returns `(out, start)`.
+fn group_by_bucket(recs: &[(u32, [u8; RECORD_BYTES])], buckets: usize) -> (Vec<u8>, Vec<usize>) {
+    let mut start = vec![0usize; buckets + 1];
+    for &(b, _) in recs {
+        start[b as usize + 1] += 1;
+    }
+    for b in 0..buckets {
+        start[b + 1] += start[b];
+    }
+    let mut fill = start.clone();
+    let mut out = vec![0u8; recs.len() * RECORD_BYTES];
+    for (b, r) in recs {
+        let at = &mut fill[*b as usize];
+        out[*at * RECORD_BYTES..(*at + 1) * RECORD_BYTES].copy_from_slice(r);
+        *at += 1;
+    }
+    (out, start)
 }
 
 /// One bucket in memory, its triangles grouped by cell.
@@ -351,10 +380,10 @@ impl PositionTable {
 }
 
 /// Reads a file of fixed-size records (`size` bytes each) and decodes each.
-pub(crate) fn read_records<T: Clone + Send>(
+pub(crate) fn read_records<T>(
     path: &Path,
     size: usize,
-    decode: impl Fn(&[u8]) -> T + Send,
+    decode: impl Fn(&[u8]) -> T,
 ) -> Result<Vec<T>, BuildError> {
     let len = std::fs::metadata(path).map_err(|e| BuildError::io(path, e))?.len();
     if len % size as u64 != 0 {
@@ -364,11 +393,24 @@ pub(crate) fn read_records<T: Clone + Send>(
         });
     }
     let n = len / size as u64;
+    // Decoded straight into the result on this thread (the direct reader's own thread reads
+    // ahead): no second thread and no copy of the decoded records.
+    let buffer = len.clamp(1, 4 << 20) as usize;
+    let mut file =
+        tw_core::direct_io::DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
+    if file.file_len() != len {
+        return Err(BuildError::Corrupt { path: path.to_path_buf(), message: "changed while read".into() });
+    }
     let mut out = Vec::with_capacity(n as usize);
-    crate::workio::read_ahead(path, n, size, 1 << 14, decode, |_, chunk| {
-        out.extend_from_slice(chunk);
-        Ok(())
-    })?;
+    let mut bytes = vec![0u8; (1 << 14) * size];
+    let mut left = n as usize;
+    while left > 0 {
+        let k = left.min(1 << 14);
+        let b = &mut bytes[..k * size];
+        std::io::Read::read_exact(&mut file, b).map_err(|e| BuildError::io(path, e))?;
+        out.extend(b.chunks_exact(size).map(&decode));
+        left -= k;
+    }
     Ok(out)
 }
 

@@ -77,8 +77,9 @@ impl WorkTri {
         out[36..40].copy_from_slice(&self.object.to_le_bytes());
     }
 
+    /// The triangle of one working-file record ([`RECORD_BYTES`] bytes).
     #[inline]
-    fn decode(b: &[u8]) -> WorkTri {
+    pub fn decode(b: &[u8]) -> WorkTri {
         let f = |k: usize| f32::from_le_bytes([b[4 * k], b[4 * k + 1], b[4 * k + 2], b[4 * k + 3]]);
         WorkTri {
             p: [[f(0), f(1), f(2)], [f(3), f(4), f(5)], [f(6), f(7), f(8)]],
@@ -119,6 +120,34 @@ impl WorkFile {
     pub fn scan(&self, f: impl FnMut(u64, &[WorkTri]) -> Result<(), BuildError>) -> Result<(), BuildError> {
         crate::workio::read_ahead(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, WorkTri::decode, f)
     }
+
+    /// Like [`WorkFile::scan`], but hands out each chunk's raw records ([`RECORD_BYTES`] each;
+    /// [`WorkTri::decode`], [`record_object`]) undecoded: the reader thread only reads, and the
+    /// caller decodes and processes the chunk on the pool ([`crate::workio::map_sub_chunks`]).
+    pub fn scan_raw(&self, f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>) -> Result<(), BuildError> {
+        crate::workio::read_ahead_raw(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, f)
+    }
+
+    /// [`WorkFile::scan_raw`] over the triangles `range` only.
+    pub fn scan_range_raw(
+        &self,
+        range: std::ops::Range<u64>,
+        f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>,
+    ) -> Result<(), BuildError> {
+        crate::workio::read_range_raw(&self.path, self.triangles, range, RECORD_BYTES, SCAN_CHUNK, f)
+    }
+}
+
+/// The object id of record `k` of raw working-file records (see [`WorkFile::scan_raw`]).
+#[inline]
+pub fn record_object(bytes: &[u8], k: usize) -> u32 {
+    let o = k * RECORD_BYTES + 36;
+    u32::from_le_bytes([bytes[o], bytes[o + 1], bytes[o + 2], bytes[o + 3]])
+}
+
+/// The triangles of raw working-file records, in order.
+pub fn records(bytes: &[u8]) -> impl Iterator<Item = WorkTri> + '_ {
+    bytes.chunks_exact(RECORD_BYTES).map(WorkTri::decode)
 }
 
 /// What ingest produced: the working file, the grid, the objects.

@@ -220,7 +220,9 @@ fn build_with_pool(
     // 2. Redefine objects and build the hierarchy.
     progress.phase("redefine", 0, "");
     let mut red = pool.install(|| redefine(&ing, &options.redefine))?;
+    let mut lap = crate::types::StepTimer::new("redefine");
     let hierarchy = red.order_by_hierarchy();
+    lap.step("hierarchy");
     progress.end_phase();
     t.lap("redefine+hierarchy");
 

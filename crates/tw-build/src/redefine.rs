@@ -31,7 +31,14 @@
 //! - B (`piece_stats`): after partition-I planned the pieces from the samples, the exact triangle
 //!   count, bounds and centre of mass of every piece.
 //! - C (`cell_stats`): after clustering and partition-II, the exact count and bounds of every
-//!   cell (empty cells, possible since plans come from samples, are dropped).
+//!   cell (empty cells, possible since plans come from samples, are dropped). Pieces placed
+//!   whole add their pass-B figures; only the objects whose pieces a partition-II plan cuts
+//!   are read again (their spans of the file, recorded in pass A).
+//!
+//! Threads: the passes get raw records from a reader thread ([`WorkFile::scan_raw`]); the pool
+//! decodes them and finds each triangle's piece or cell in fixed sub-chunks, then accumulates
+//! in `LANES` lanes by key ([`for_each_lane`]), so that every piece's centroid sum adds its
+//! triangles in file order whatever the number of threads. Pass A only counts object ids.
 //!
 //! Memory: O(objects + samples + pieces · `neighbours`), nothing per triangle.
 //!
@@ -80,8 +87,9 @@ use rayon::prelude::*;
 
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
-use crate::ingest::{Ingested, WorkFile, WorkTri};
+use crate::ingest::{record_object, records, Ingested, WorkFile, WorkTri, RECORD_BYTES};
 use crate::types::{Grid, GridBox};
+use crate::workio::{for_each_lane, SUB_CHUNK};
 
 /// The thresholds of object redefinition (see the module docs for their meaning and units).
 #[derive(Clone, Debug, PartialEq)]
@@ -241,15 +249,31 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
         objects: ing.objects.iter().filter(|o| o.triangles > 0).count() as u64,
         ..Default::default()
     };
+    let mut lap = crate::types::StepTimer::new("redefine");
     let mut samples = sample_objects(ing, params)?;
+    lap.step("pass A: samples");
     report.samples = samples.points.len() as u64;
     let mut assign = Assigner::default();
     let piece_object = partition_objects(ing, params, &scale, &mut samples, &mut assign, &mut report);
+    lap.step("partition-I");
     let pieces = piece_stats(ing, &assign, piece_object.len())?;
+    lap.step("pass B: pieces");
     let clusters = cluster_pieces(params, &scale, &pieces, &mut report);
+    lap.step("clustering");
     let cell_count =
         partition_clusters(ing, params, &scale, &samples, &pieces, &clusters, &mut assign, &mut report);
-    let cells = cell_stats(ing, &assign, cell_count)?;
+    lap.step("partition-II");
+    if tracing::enabled!(tracing::Level::DEBUG) {
+        let cut: u64 = (0..pieces.count.len())
+            .filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_)))
+            .map(|q| pieces.count[q])
+            .sum();
+        let cut_objects =
+            (0..ing.objects.len()).filter(|&o| matches!(assign.object_piece[o], Route::Plan(_))).count();
+        tracing::debug!(cut_piece_triangles = cut, split_objects = cut_objects, "partition-II routes");
+    }
+    let cells = cell_stats(ing, &assign, &pieces, &piece_object, &samples.span, cell_count)?;
+    lap.step("pass C: cells");
     // Drop the cells no triangle reached.
     let mut new_id = vec![u32::MAX; cells.len()];
     let mut kept = Vec::new();
@@ -359,6 +383,8 @@ impl FBox {
         }
     }
 
+    /// Grows to contain `o`, which must not be empty (an empty box's +∞ minimum would become
+    /// this box's maximum).
     fn union(&mut self, o: &FBox) {
         self.grow(o.min);
         self.grow(o.max);
@@ -470,16 +496,50 @@ impl Assigner {
     }
 }
 
-/// Maps every triangle of a chunk in parallel (fixed sub-chunks: the result does not depend on
-/// the number of threads).
-fn map_chunk(tris: &[WorkTri], out: &mut Vec<u32>, f: impl Fn(&WorkTri) -> u32 + Sync) {
+/// Decodes and maps every triangle of a chunk of raw working-file records in parallel (fixed
+/// sub-chunks: the result does not depend on the number of threads).
+fn map_records(bytes: &[u8], out: &mut Vec<u32>, f: impl Fn(&WorkTri) -> u32 + Sync) {
     out.clear();
-    out.resize(tris.len(), 0);
-    out.par_chunks_mut(4096).zip(tris.par_chunks(4096)).for_each(|(o, t)| {
-        for (o, t) in o.iter_mut().zip(t) {
-            *o = f(t);
+    out.resize(bytes.len() / RECORD_BYTES, 0);
+    out.par_chunks_mut(SUB_CHUNK).zip(bytes.par_chunks(SUB_CHUNK * RECORD_BYTES)).for_each(|(o, b)| {
+        for (o, t) in o.iter_mut().zip(records(b)) {
+            *o = f(&t);
         }
     });
+}
+
+/// Lanes of the per-piece and per-cell statistics ([`for_each_lane`]): fixed, so that the
+/// floating-point sums happen in the same order for any number of threads.
+const LANES: usize = 4;
+
+/// Per-key statistics of the keys one lane owns (key `k` at `k / LANES`).
+struct LaneStats {
+    count: Vec<u64>,
+    bounds: Vec<FBox>,
+    /// Sum of centroids (pieces only; empty for cells).
+    sum: Vec<[f64; 3]>,
+}
+
+impl LaneStats {
+    /// The lanes for keys `0..n`, with centroid sums if `sums`.
+    fn lanes(n: usize, sums: bool) -> Vec<LaneStats> {
+        (0..LANES)
+            .map(|l| {
+                let len = (n + LANES - 1 - l) / LANES;
+                LaneStats {
+                    count: vec![0; len],
+                    bounds: vec![FBox::EMPTY; len],
+                    sum: if sums { vec![[0.0; 3]; len] } else { Vec::new() },
+                }
+            })
+            .collect()
+    }
+
+    /// Key `k`'s figures back out of the lanes: (count, bounds, sum).
+    fn get(lanes: &[LaneStats], k: usize) -> (u64, FBox, [f64; 3]) {
+        let (l, j) = (&lanes[k % LANES], k / LANES);
+        (l.count[j], l.bounds[j], l.sum.get(j).copied().unwrap_or_default())
+    }
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -491,6 +551,8 @@ struct Samples {
     start: Vec<usize>,
     /// Triangles per sample of each object (0: not sampled).
     stride: Vec<u64>,
+    /// The working-file triangles from each object's first to its last (empty: no triangle).
+    span: Vec<std::ops::Range<u64>>,
 }
 
 fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildError> {
@@ -509,10 +571,15 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
     }
     let mut points = vec![[0f32; 3]; start.last().copied().unwrap_or(0)];
     let mut seen = vec![0u64; objects.len()];
+    // The next sampled triangle of each object (counted within the object): the multiples of
+    // its stride, so that only sampled triangles are decoded (none for unsampled objects).
+    let mut next: Vec<u64> = stride.iter().map(|&s| if s > 0 { 0 } else { u64::MAX }).collect();
+    let mut span = vec![0..0u64; objects.len()];
     let corrupt = |message: String| BuildError::Corrupt { path: ing.work.path().to_path_buf(), message };
-    ing.work.scan(|first, tris| {
-        for (k, t) in tris.iter().enumerate() {
-            let o = t.object as usize;
+    // Serial, but it reads only the object ids: the reader thread only reads.
+    ing.work.scan_raw(|first, bytes| {
+        for k in 0..bytes.len() / RECORD_BYTES {
+            let o = record_object(bytes, k) as usize;
             let Some(n) = seen.get_mut(o) else {
                 return Err(corrupt(format!(
                     "triangle {} has object {o} of {}",
@@ -520,13 +587,19 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
                     objects.len()
                 )));
             };
-            let s = stride[o];
-            if s > 0 && *n % s == 0 {
+            let at = first + k as u64;
+            if *n == 0 {
+                span[o].start = at;
+            }
+            span[o].end = at + 1;
+            if *n == next[o] {
+                let s = stride[o];
                 let i = start[o] + (*n / s) as usize;
                 if i >= start[o + 1] {
                     return Err(corrupt(format!("object {o} has more triangles than ingest counted")));
                 }
-                points[i] = t.centroid();
+                points[i] = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]).centroid();
+                next[o] += s;
             }
             *n += 1;
         }
@@ -538,7 +611,7 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
             seen[o], objects[o].triangles
         )));
     }
-    Ok(Samples { points, start, stride })
+    Ok(Samples { points, start, stride, span })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -662,27 +735,39 @@ struct Pieces {
     centre: Vec<[f32; 3]>,
 }
 
+/// Pass B. Parallel: the pool decodes each chunk and finds the pieces ([`map_records`]), then
+/// accumulates them in [`LANES`] lanes by piece, so that each piece's centroid sum adds its
+/// triangles in file order, as a serial loop would.
 fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, BuildError> {
-    let mut count = vec![0u64; n];
-    let mut bounds = vec![FBox::EMPTY; n];
-    let mut sum = vec![[0f64; 3]; n];
+    let mut lanes = LaneStats::lanes(n, true);
     let mut ids = Vec::new();
-    ing.work.scan(|_, tris| {
-        map_chunk(tris, &mut ids, |t| assign.piece(t));
-        for (t, &p) in tris.iter().zip(&ids) {
-            let p = p as usize;
-            count[p] += 1;
-            let b = &mut bounds[p];
+    ing.work.scan_raw(|_, bytes| {
+        map_records(bytes, &mut ids, |t| assign.piece(t));
+        for_each_lane(&mut lanes, &ids, |lane, k, p| {
+            let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+            let j = p as usize / LANES;
+            lane.count[j] += 1;
+            let b = &mut lane.bounds[j];
             for v in t.p {
                 b.grow(v);
             }
             let c = t.centroid();
+            let sum = &mut lane.sum[j];
             for i in 0..3 {
-                sum[p][i] += c[i] as f64;
+                sum[i] += c[i] as f64;
             }
-        }
+        });
         Ok(())
     })?;
+    let (mut count, mut bounds, mut sum) =
+        (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    for p in 0..n {
+        let (c, b, s) = LaneStats::get(&lanes, p);
+        count.push(c);
+        bounds.push(b);
+        sum.push(s);
+    }
+    drop(lanes);
     let grid = bounds
         .iter()
         .zip(&count)
@@ -1063,26 +1148,96 @@ fn partition_clusters(
 // ---------------------------------------------------------------------------------------------
 // Pass C: cell statistics
 
-fn cell_stats(ing: &Ingested, assign: &Assigner, n: u32) -> Result<Vec<CellInfo>, BuildError> {
+/// Gaps (in triangles) between the file spans of pass C's objects that are read through
+/// rather than skipped (10 MB: a few reads' worth).
+const SPAN_GAP: u64 = 1 << 18;
+
+/// Pass C: the count and box of every cell. A piece placed whole in a cell (`Route::Fixed`)
+/// adds its pass-B count and box; only the triangles of pieces that a partition-II plan cuts
+/// are read again, from the file spans of their objects ([`Samples::span`]), decoded and
+/// accumulated in lanes as in pass B. Counts are sums and boxes minima and maxima, so the result
+/// does not depend on the order (a −0 and a +0 bound quantize to the same grid point).
+fn cell_stats(
+    ing: &Ingested,
+    assign: &Assigner,
+    pieces: &Pieces,
+    piece_object: &[u32],
+    span: &[std::ops::Range<u64>],
+    n: u32,
+) -> Result<Vec<CellInfo>, BuildError> {
     let n = n as usize;
     let mut count = vec![0u64; n];
     let mut bounds = vec![FBox::EMPTY; n];
-    let mut ids = Vec::new();
     let mut bad = None;
-    ing.work.scan(|first, tris| {
-        map_chunk(tris, &mut ids, |t| assign.cell(t));
-        for (k, (t, &c)) in tris.iter().zip(&ids).enumerate() {
-            let Some(cnt) = count.get_mut(c as usize) else {
-                bad = Some(first + k as u64);
-                continue;
-            };
-            *cnt += 1;
-            for v in t.p {
-                bounds[c as usize].grow(v);
-            }
+    let mut cut_objects = Vec::new();
+    for (q, &tris) in pieces.count.iter().enumerate() {
+        if tris == 0 {
+            continue;
         }
-        Ok(())
-    })?;
+        match assign.piece_cell[q] {
+            Route::Fixed(c) => match count.get_mut(c as usize) {
+                Some(cnt) => {
+                    *cnt += tris;
+                    bounds[c as usize].union(&pieces.bounds[q]);
+                }
+                None => bad = Some(span[piece_object[q] as usize].start),
+            },
+            Route::Plan(_) => cut_objects.push(piece_object[q]),
+        }
+    }
+    // The spans to read: the cut objects' spans, sorted, joined across small gaps.
+    cut_objects.dedup();
+    let mut spans: Vec<std::ops::Range<u64>> =
+        cut_objects.iter().map(|&o| span[o as usize].clone()).collect();
+    spans.sort_unstable_by_key(|r| (r.start, r.end));
+    let mut joined: Vec<std::ops::Range<u64>> = Vec::new();
+    for r in spans {
+        match joined.last_mut() {
+            Some(last) if r.start <= last.end + SPAN_GAP => last.end = last.end.max(r.end),
+            _ => joined.push(r),
+        }
+    }
+    let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
+    tracing::debug!(spans = joined.len(), triangles = read, of = ing.work.triangles, "pass C reads");
+    // Triangles of whole pieces in the spans are skipped (`u32::MAX`); a plan that gives no
+    // cell is a bug, reported (`n`) rather than left to panic.
+    let mut lanes = LaneStats::lanes(n, false);
+    let mut ids = Vec::new();
+    for r in joined {
+        ing.work.scan_range_raw(r, |first, bytes| {
+            map_records(bytes, &mut ids, |t| match assign.piece_cell[assign.piece(t) as usize] {
+                Route::Fixed(_) => u32::MAX,
+                Route::Plan(root) => {
+                    let c = walk(&assign.plan2, root, t.centroid());
+                    if (c as usize) < n {
+                        c
+                    } else {
+                        n as u32
+                    }
+                }
+            });
+            if let Some(k) = ids.iter().rposition(|&c| c != u32::MAX && c as usize >= n) {
+                bad = Some(first + k as u64);
+            }
+            for_each_lane(&mut lanes, &ids, |lane, k, c| {
+                let j = c as usize / LANES;
+                let Some(cnt) = lane.count.get_mut(j) else { return };
+                *cnt += 1;
+                let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+                for v in t.p {
+                    lane.bounds[j].grow(v);
+                }
+            });
+            Ok(())
+        })?;
+    }
+    for c in 0..n {
+        let (cnt, b, _) = LaneStats::get(&lanes, c);
+        if cnt > 0 {
+            count[c] += cnt;
+            bounds[c].union(&b);
+        }
+    }
     if let Some(t) = bad {
         // Only reachable through a bug in the plans; say so rather than panic later.
         return Err(BuildError::Corrupt {
@@ -1371,5 +1526,134 @@ mod tests {
             assert!(!(v < u && u < v), "no value between");
         }
         assert!(next_up(-f32::from_bits(1)) == 0.0 || next_up(-f32::from_bits(1)) == -0.0);
+    }
+
+    /// Passes A, B and C against the obvious serial loops over decoded triangles, on a plant
+    /// of several scan chunks, on pools of 1 and 3 threads: bit for bit the same samples, counts,
+    /// boxes and centres (the centroid sums must add in file order).
+    #[test]
+    fn parallel_passes_equal_the_serial_loops() {
+        let dir = tempfile::tempdir().unwrap();
+        let ing = crate::ingest::tests::ingest_plant(dir.path(), 150_000);
+        assert!(ing.triangles > crate::ingest::SCAN_CHUNK as u64, "several chunks");
+        // The defaults split objects (partition-I); without partition-I and with small cells,
+        // partition-II cuts whole large objects by plan (pass C reads them again).
+        let presets = [
+            (RedefineParams::default(), false),
+            (
+                RedefineParams {
+                    s1: 10.0,
+                    r1: 1e9,
+                    max_cell_triangles: 4096,
+                    t2: 2000,
+                    ..Default::default()
+                },
+                true,
+            ),
+        ];
+        for ((p, cuts), threads) in presets.iter().flat_map(|p| [(p, 1), (p, 3)]) {
+            let scale = Scale::new(&ing, p);
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let mut samples = sample_objects(&ing, p).unwrap();
+                // Pass A, serially: every stride-th triangle of each sampled object.
+                let mut seen = vec![0u64; ing.objects.len()];
+                let mut expected = vec![[0f32; 3]; samples.points.len()];
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            let o = t.object as usize;
+                            let s = samples.stride[o];
+                            if s > 0 && seen[o].is_multiple_of(s) {
+                                expected[samples.start[o] + (seen[o] / s) as usize] = t.centroid();
+                            }
+                            seen[o] += 1;
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert!(samples
+                    .points
+                    .iter()
+                    .zip(&expected)
+                    .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+
+                let mut assign = Assigner::default();
+                let mut report = RedefineReport::default();
+                let piece_object = partition_objects(&ing, p, &scale, &mut samples, &mut assign, &mut report);
+                let n = piece_object.len();
+                assert!(*cuts || report.split_objects > 0, "the plant has split objects");
+                let pieces = piece_stats(&ing, &assign, n).unwrap();
+                let (mut count, mut sum, mut lo, mut hi) = (
+                    vec![0u64; n],
+                    vec![[0f64; 3]; n],
+                    vec![[f32::INFINITY; 3]; n],
+                    vec![[f32::NEG_INFINITY; 3]; n],
+                );
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            let q = assign.piece(t) as usize;
+                            count[q] += 1;
+                            let c = t.centroid();
+                            for i in 0..3 {
+                                sum[q][i] += c[i] as f64;
+                                for v in t.p {
+                                    lo[q][i] = lo[q][i].min(v[i]);
+                                    hi[q][i] = hi[q][i].max(v[i]);
+                                }
+                            }
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert_eq!(pieces.count, count);
+                for q in 0..n {
+                    let c = count[q].max(1) as f64;
+                    let centre = sum[q].map(|s| (s / c) as f32);
+                    assert_eq!(pieces.centre[q].map(f32::to_bits), centre.map(f32::to_bits), "piece {q}");
+                    assert_eq!(pieces.bounds[q].min.map(f32::to_bits), lo[q].map(f32::to_bits));
+                    assert_eq!(pieces.bounds[q].max.map(f32::to_bits), hi[q].map(f32::to_bits));
+                }
+
+                let clusters = cluster_pieces(p, &scale, &pieces, &mut report);
+                let cells = partition_clusters(
+                    &ing,
+                    p,
+                    &scale,
+                    &samples,
+                    &pieces,
+                    &clusters,
+                    &mut assign,
+                    &mut report,
+                );
+                let cut = (0..n).filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_))).count();
+                assert!(
+                    !cuts || (cut > 0 && cut < n),
+                    "some pieces cut by a plan ({cut} of {n}), some whole"
+                );
+                let stats = cell_stats(&ing, &assign, &pieces, &piece_object, &samples.span, cells).unwrap();
+                let mut tris_of = vec![0u64; cells as usize];
+                let mut box_of = vec![FBox::EMPTY; cells as usize];
+                ing.work
+                    .scan(|_, tris| {
+                        for t in tris {
+                            let c = assign.cell(t) as usize;
+                            tris_of[c] += 1;
+                            for v in t.p {
+                                box_of[c].grow(v);
+                            }
+                        }
+                        Ok(())
+                    })
+                    .unwrap();
+                assert_eq!(stats.iter().map(|c| c.triangles).collect::<Vec<_>>(), tris_of);
+                for (c, info) in stats.iter().enumerate() {
+                    if tris_of[c] > 0 {
+                        assert_eq!(info.bounds, box_of[c].to_grid(&ing.work, &ing.grid), "cell {c}");
+                    }
+                }
+            });
+        }
     }
 }

@@ -130,10 +130,10 @@ impl SeamFiles {
         let mut parts =
             SpillWriter::direct(part_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?;
 
+        let mut lap = crate::types::StepTimer::new("seams");
         // 1. Open positions of every cell, by partition.
         let mut open_positions = 0u64;
         let mut done = 0u64;
-        let mut record = [0u8; OPEN_RECORD_BYTES];
         // The next bucket is read on a helper thread while the pool works on this one (two
         // buckets held; the LOD phase holds as many).
         std::thread::scope(|scope| -> Result<(), BuildError> {
@@ -148,16 +148,25 @@ impl SeamFiles {
                     next = Some(scope.spawn(move || cells.read_bucket(b + 1)));
                 }
                 let ids: Vec<u32> = bucket.cells().collect();
-                let per_cell: Vec<Vec<[u32; 3]>> = pool.install(|| {
-                    ids.par_iter().map(|&c| crate::hlod::open_positions(&bucket.mesh(c))).collect()
+                // The pool finds each cell's open positions and encodes their records, grouped
+                // by partition (in position order within each); this thread appends them, cell
+                // by cell, so every partition file gets its records in the serial order.
+                let per_cell: Vec<(Vec<u8>, Vec<usize>)> = pool.install(|| {
+                    ids.par_iter()
+                        .map(|&c| {
+                            let open = crate::hlod::open_positions(&bucket.mesh(c));
+                            open_records(&open, c, partitions)
+                        })
+                        .collect()
                 });
                 drop(bucket);
-                for (open, &cell) in per_cell.iter().zip(&ids) {
-                    for &p in open {
-                        put_u32s(&mut record, &[p[0], p[1], p[2], cell]);
-                        parts.write(partition_of(p, partitions), &record)?;
+                for (bytes, start) in &per_cell {
+                    for (k, w) in start.windows(2).enumerate() {
+                        if w[1] > w[0] {
+                            parts.write(k, &bytes[w[0] * OPEN_RECORD_BYTES..w[1] * OPEN_RECORD_BYTES])?;
+                        }
                     }
-                    open_positions += open.len() as u64;
+                    open_positions += (bytes.len() / OPEN_RECORD_BYTES) as u64;
                 }
                 done += ids.len() as u64;
                 advance(done);
@@ -167,6 +176,7 @@ impl SeamFiles {
 
         // 2. Seams of each partition, to the seam files of their cells' buckets.
         drop(parts.finish()?);
+        lap.step("open positions");
         let out_paths: Vec<TempPath> =
             (0..cells.bucket_count()).map(|_| temp_path(work_dir, "tw-seams-")).collect::<Result<_, _>>()?;
         let mut outs =
@@ -206,6 +216,7 @@ impl SeamFiles {
             }
         }
         drop(outs.finish()?);
+        lap.step("partitions");
         let buckets = out_paths.into_iter().zip(counts).collect();
         Ok(SeamFiles { buckets, open_positions, seams, partitions })
     }
@@ -225,6 +236,31 @@ impl SeamFiles {
         }
         Ok(SeamTable::from_unsorted(records))
     }
+}
+
+/// The (position, cell) records of `cell`'s open positions grouped by partition, stable: the
+/// bytes of partition `k` are `bytes[start[k] * OPEN_RECORD_BYTES..start[k + 1] * …]`, in the
+/// order of `open`. Returns `(bytes, start)`.
+fn open_records(open: &[[u32; 3]], cell: u32, partitions: usize) -> (Vec<u8>, Vec<usize>) {
+    let part: Vec<u32> = open.iter().map(|&p| partition_of(p, partitions) as u32).collect();
+    let mut start = vec![0usize; partitions + 1];
+    for &k in &part {
+        start[k as usize + 1] += 1;
+    }
+    for k in 0..partitions {
+        start[k + 1] += start[k];
+    }
+    let mut fill = start.clone();
+    let mut bytes = vec![0u8; open.len() * OPEN_RECORD_BYTES];
+    for (&p, &k) in open.iter().zip(&part) {
+        let at = &mut fill[k as usize];
+        put_u32s(
+            &mut bytes[*at * OPEN_RECORD_BYTES..(*at + 1) * OPEN_RECORD_BYTES],
+            &[p[0], p[1], p[2], cell],
+        );
+        *at += 1;
+    }
+    (bytes, start)
 }
 
 /// The partition of position `p` (a multiplicative hash, the same on every machine).
@@ -336,5 +372,30 @@ mod tests {
         }
         assert!(seen.iter().all(|&s| s));
         assert_eq!(partition_of([5, 6, 7], 1), 0);
+    }
+
+    #[test]
+    fn open_records_group_by_partition_in_input_order() {
+        let open: Vec<[u32; 3]> = (0..300u32).map(|x| [x, x * 5 % 17, 3]).collect();
+        for partitions in [1, 2, 7] {
+            let (bytes, start) = open_records(&open, 42, partitions);
+            assert_eq!(start.len(), partitions + 1);
+            assert_eq!(start[partitions] * OPEN_RECORD_BYTES, bytes.len());
+            for k in 0..partitions {
+                let got: Vec<[u32; 4]> = bytes
+                    [start[k] * OPEN_RECORD_BYTES..start[k + 1] * OPEN_RECORD_BYTES]
+                    .chunks_exact(OPEN_RECORD_BYTES)
+                    .map(get_u32s::<4>)
+                    .collect();
+                let want: Vec<[u32; 4]> = open
+                    .iter()
+                    .filter(|&&p| partition_of(p, partitions) == k)
+                    .map(|p| [p[0], p[1], p[2], 42])
+                    .collect();
+                assert_eq!(got, want, "partition {k} of {partitions}");
+            }
+        }
+        let (bytes, start) = open_records(&[], 0, 3);
+        assert!(bytes.is_empty() && start == vec![0; 4]);
     }
 }

@@ -165,6 +165,25 @@ pub fn in_cut(dag: &LodDag, cluster: usize, tau: f32) -> bool {
     c.self_error <= tau && tau < dag.groups[c.group as usize].error
 }
 
+/// Times the steps of a phase: each [`StepTimer::step`] logs (debug level, target `tw_build`)
+/// the seconds since the previous one, for profiling the build (`TERAWALK_LOG=tw_build=debug`).
+pub struct StepTimer {
+    phase: &'static str,
+    last: std::time::Instant,
+}
+
+impl StepTimer {
+    pub fn new(phase: &'static str) -> StepTimer {
+        StepTimer { phase, last: std::time::Instant::now() }
+    }
+
+    pub fn step(&mut self, step: &str) {
+        let now = std::time::Instant::now();
+        tracing::debug!(phase = self.phase, step, seconds = (now - self.last).as_secs_f64(), "step");
+        self.last = now;
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

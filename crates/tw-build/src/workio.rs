@@ -249,6 +249,127 @@ where
     })
 }
 
+/// Like [`read_ahead`], but hands out the raw bytes of each chunk (whole records, `size` bytes
+/// each) without decoding them, so that the caller can decode and process a chunk in parallel
+/// ([`map_sub_chunks`], [`for_each_lane`]) while the reader thread only reads. Memory: three
+/// chunks of bytes and three read buffers of up to 4 MiB.
+pub fn read_ahead_raw<F>(path: &Path, records: u64, size: usize, chunk: usize, f: F) -> Result<(), BuildError>
+where
+    F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
+{
+    read_range_raw(path, records, 0..records, size, chunk, f)
+}
+
+/// [`read_ahead_raw`] over the records `range` of a file of `file_records` records: `f` gets
+/// the index (in the file) of each chunk's first record.
+pub fn read_range_raw<F>(
+    path: &Path,
+    file_records: u64,
+    range: std::ops::Range<u64>,
+    size: usize,
+    chunk: usize,
+    mut f: F,
+) -> Result<(), BuildError>
+where
+    F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
+{
+    assert!(range.start <= range.end && range.end <= file_records, "{range:?} of {file_records} records");
+    let records = range.end - range.start;
+    let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
+    let mut file = DirectReader::open_at(path, buffer, range.start * size as u64)
+        .map_err(|e| BuildError::io(path, e))?;
+    let len = file.file_len();
+    if len != file_records * size as u64 {
+        return Err(BuildError::Corrupt {
+            path: path.to_path_buf(),
+            message: format!("{len} bytes, expected {file_records} records of {size} bytes"),
+        });
+    }
+    let chunk = chunk.max(1);
+    let base = range.start;
+    std::thread::scope(|scope| {
+        let (tx, rx) = sync_channel::<Result<(u64, Vec<u8>), std::io::Error>>(1);
+        let (give_back, recycled) = sync_channel::<Vec<u8>>(2);
+        let reader = scope.spawn(move || {
+            let mut done = 0u64;
+            while done < records {
+                let n = (records - done).min(chunk as u64) as usize;
+                let mut bytes = recycled.try_recv().unwrap_or_default();
+                bytes.resize(n * size, 0);
+                if let Err(e) = file.read_exact(&mut bytes) {
+                    let _ = tx.send(Err(e));
+                    return;
+                }
+                if tx.send(Ok((base + done, bytes))).is_err() {
+                    return; // the consumer stopped
+                }
+                done += n as u64;
+            }
+        });
+        let mut result = Ok(());
+        for item in rx.iter() {
+            match item {
+                Ok((first, bytes)) => {
+                    if let Err(e) = f(first, &bytes) {
+                        result = Err(e);
+                        break;
+                    }
+                    let _ = give_back.try_send(bytes);
+                }
+                Err(e) => {
+                    result = Err(BuildError::io(path, e));
+                    break;
+                }
+            }
+        }
+        drop(rx);
+        let _ = reader.join();
+        result
+    })
+}
+
+/// Records per task of [`map_sub_chunks`]: a fixed number, so that what each task sees (and
+/// so any per-task result) does not depend on the number of threads.
+pub const SUB_CHUNK: usize = 4096;
+
+/// Splits `bytes` (whole records of `size` bytes) into sub-chunks of [`SUB_CHUNK`] records,
+/// calls `f(index of the sub-chunk's first record, its bytes)` for each on the current rayon
+/// pool, and returns the results in record order. `bytes.len()` must be a multiple of `size`.
+pub fn map_sub_chunks<T, F>(bytes: &[u8], size: usize, f: F) -> Vec<T>
+where
+    T: Send,
+    F: Fn(usize, &[u8]) -> T + Sync,
+{
+    use rayon::prelude::*;
+    debug_assert!(size > 0 && bytes.len().is_multiple_of(size));
+    bytes.par_chunks(SUB_CHUNK * size).enumerate().map(|(k, b)| f(k * SUB_CHUNK, b)).collect()
+}
+
+/// Work split by key, for accumulations that must happen in input order per key (floating-point
+/// sums): lane `l` of `lanes.len()` owns the keys `k` with `k % lanes.len() == l` and calls
+/// `f(its state, position in keys, key)` for each of them, in input order. Lanes run in
+/// parallel on the current rayon pool, so per key the calls are exactly those of a serial loop
+/// over `keys`, whatever the number of threads. Keys `u32::MAX` (no key) are skipped.
+pub fn for_each_lane<S, F>(lanes: &mut [S], keys: &[u32], f: F)
+where
+    S: Send,
+    F: Fn(&mut S, usize, u32) + Sync,
+{
+    use rayon::prelude::*;
+    let n = lanes.len() as u32;
+    if n == 0 {
+        return;
+    }
+    lanes.par_iter_mut().enumerate().for_each(|(l, state)| {
+        let l = l as u32;
+        for (i, &k) in keys.iter().enumerate() {
+            if k != u32::MAX && k % n == l {
+                f(state, i, k);
+            }
+        }
+    });
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -348,5 +469,93 @@ mod tests {
         .unwrap_err();
         assert!(matches!(e, BuildError::Empty));
         assert_eq!(calls, 3);
+    }
+
+    fn records_file(dir: &Path, n: u32) -> (PathBuf, Vec<u8>) {
+        let path = dir.join("raw");
+        let data: Vec<u8> = (0..n).flat_map(|k| [k.to_le_bytes(), (k * 7).to_le_bytes()].concat()).collect();
+        std::fs::write(&path, &data).unwrap();
+        (path, data)
+    }
+
+    #[test]
+    fn read_ahead_raw_hands_out_every_byte_in_whole_records() {
+        let dir = tempfile::tempdir().unwrap();
+        for (n, chunk) in [(0u32, 5usize), (1, 5), (5, 5), (6, 5), (10_000, 333), (10_000, 1)] {
+            let (path, data) = records_file(dir.path(), n);
+            let mut seen = Vec::new();
+            read_ahead_raw(&path, n as u64, 8, chunk, |first, b| {
+                assert_eq!(first * 8, seen.len() as u64);
+                assert!(b.len() % 8 == 0 && b.len() <= chunk * 8 && !b.is_empty());
+                seen.extend_from_slice(b);
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(seen, data, "{n} records in chunks of {chunk}");
+        }
+        let (path, data) = records_file(dir.path(), 3000);
+        for range in [0..0, 0..1, 5..5, 511..513, 512..1024, 7..3000, 2999..3000, 0..3000] {
+            let mut seen = Vec::new();
+            read_range_raw(&path, 3000, range.clone(), 8, 100, |first, b| {
+                assert_eq!(first, range.start + seen.len() as u64 / 8);
+                seen.extend_from_slice(b);
+                Ok(())
+            })
+            .unwrap();
+            assert_eq!(seen, data[range.start as usize * 8..range.end as usize * 8], "{range:?}");
+        }
+        let (path, _) = records_file(dir.path(), 10);
+        let e = read_ahead_raw(&path, 11, 8, 4, |_, _| Ok(())).unwrap_err();
+        assert!(e.to_string().contains("expected 11 records"), "{e}");
+    }
+
+    #[test]
+    fn map_sub_chunks_equals_the_serial_map_at_every_size_and_thread_count() {
+        let size = 3;
+        for records in [0, 1, SUB_CHUNK - 1, SUB_CHUNK, SUB_CHUNK + 1, 3 * SUB_CHUNK + 17] {
+            let bytes: Vec<u8> = (0..records * size).map(|i| (i * 31 % 251) as u8).collect();
+            let serial: Vec<(usize, u64)> = bytes
+                .chunks(SUB_CHUNK * size)
+                .enumerate()
+                .map(|(k, b)| (k * SUB_CHUNK, b.iter().map(|&x| x as u64).sum()))
+                .collect();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let par = pool.install(|| {
+                    map_sub_chunks(&bytes, size, |first, b| {
+                        assert!(b.len() % size == 0 && b.len() <= SUB_CHUNK * size);
+                        (first, b.iter().map(|&x| x as u64).sum::<u64>())
+                    })
+                });
+                assert_eq!(par, serial, "{records} records, {threads} threads");
+            }
+        }
+    }
+
+    #[test]
+    fn lanes_see_each_key_in_input_order_like_a_serial_loop() {
+        // An order-sensitive accumulation (each key's list of positions), per key.
+        let keys: Vec<u32> =
+            (0..5000u32).map(|i| if i % 97 == 0 { u32::MAX } else { i * 7919 % 13 }).collect();
+        let mut serial = vec![Vec::new(); 13];
+        for (i, &k) in keys.iter().enumerate() {
+            if k != u32::MAX {
+                serial[k as usize].push(i);
+            }
+        }
+        for lanes in [1usize, 2, 4, 5] {
+            let mut state: Vec<Vec<Vec<usize>>> = (0..lanes).map(|_| vec![Vec::new(); 13]).collect();
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+            pool.install(|| for_each_lane(&mut state, &keys, |s, i, k| s[k as usize].push(i)));
+            for k in 0..13 {
+                assert_eq!(state[k % lanes][k], serial[k], "key {k}, {lanes} lanes");
+                for (l, s) in state.iter().enumerate() {
+                    assert!(l == k % lanes || s[k].is_empty(), "key {k} only in its lane");
+                }
+            }
+        }
+        for_each_lane(&mut Vec::<u32>::new(), &keys, |_, _, _| unreachable!());
+        let mut one = vec![0usize];
+        for_each_lane(&mut one, &[], |_, _, _| unreachable!());
     }
 }

@@ -187,11 +187,21 @@ pub struct DirectReader {
     buf: AlignedBuf,
     /// Next byte of `buf` to hand out.
     pos: usize,
+    /// Bytes still to skip before the first one handed out ([`DirectReader::open_at`]).
+    skip: usize,
 }
 
 impl DirectReader {
     /// Opens `path` for reading with buffers of `buffer` bytes (rounded up to 4 KiB).
     pub fn open(path: &Path, buffer: usize) -> io::Result<DirectReader> {
+        DirectReader::open_at(path, buffer, 0)
+    }
+
+    /// Opens `path` for reading from byte `offset` on (any offset: the reads start at the
+    /// aligned offset below it and the bytes before `offset` are skipped). Reading stops where
+    /// the caller stops: at most three buffers are read past what it took.
+    pub fn open_at(path: &Path, buffer: usize, offset: u64) -> io::Result<DirectReader> {
+        let aligned = offset - offset % DIRECT_ALIGN as u64;
         let (file, direct) = open_maybe_direct(OpenOptions::new().read(true), path)?;
         let len = file.metadata()?.len();
         let (to_reader, recycled) = sync_channel::<AlignedBuf>(READS_IN_FLIGHT);
@@ -200,7 +210,7 @@ impl DirectReader {
         }
         let (to_caller, filled) = sync_channel::<io::Result<AlignedBuf>>(READS_IN_FLIGHT);
         let thread = std::thread::Builder::new().name("tw-direct-reader".into()).spawn(move || {
-            let mut source = Source { file, direct, offset: 0, eof: false };
+            let mut source = Source { file, direct, offset: aligned, eof: false };
             while !source.eof {
                 let Ok(mut buf) = recycled.recv() else { return }; // the caller stopped
                 let r = source.fill(&mut buf).map(|()| buf);
@@ -218,6 +228,7 @@ impl DirectReader {
             thread: Some(thread),
             buf: AlignedBuf::empty(),
             pos: 0,
+            skip: (offset - aligned) as usize,
         })
     }
 
@@ -292,7 +303,8 @@ impl Read for DirectReader {
                 }
             };
             let done = std::mem::replace(&mut self.buf, next);
-            self.pos = 0;
+            self.pos = self.skip.min(self.buf.len());
+            self.skip -= self.pos;
             if done.capacity() > 0 {
                 if let Some(tx) = &self.recycle {
                     let _ = tx.try_send(done);
@@ -510,6 +522,23 @@ mod tests {
         b.extend_from_slice(&[1; 10]);
         let r = w.write(&b);
         assert_eq!(r.is_err(), w.is_direct());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn open_at_starts_at_any_offset() {
+        let dir = tempfile_dir();
+        let path = dir.join("f");
+        let data: Vec<u8> = (0..3 * DIRECT_ALIGN as u32 + 123).map(|i| (i * 7 % 251) as u8).collect();
+        std::fs::write(&path, &data).unwrap();
+        for offset in [0, 1, 4095, 4096, 4097, 8191, data.len() - 1, data.len(), data.len() + 5] {
+            for buffer in [4096, 1 << 20] {
+                let mut r = DirectReader::open_at(&path, buffer, offset as u64).unwrap();
+                let mut got = Vec::new();
+                r.read_to_end(&mut got).unwrap();
+                assert_eq!(got, data[offset.min(data.len())..], "offset {offset}, buffer {buffer}");
+            }
+        }
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
