@@ -76,9 +76,7 @@ fn import_options(args: &BuildArgs) -> tw_io::format::ImportOptions {
 
 pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    // The budget is a promise about the resident set: one heap for every thread, so memory one
-    // phase or worker freed is there for the next instead of resident in an arena of its own.
-    tw_core::mem::use_one_heap_arena();
+    // (main has made every thread allocate from one heap arena: tw_core::mem::use_one_heap_arena.)
     if args.memory < MIN_HELD_BUDGET {
         tracing::warn!(
             "--memory {} is below {}: the build's fixed part (the program, the LOD workers' \
