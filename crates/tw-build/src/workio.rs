@@ -197,13 +197,7 @@ where
     // Small files (a bucket's seams) get a buffer their size.
     let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
     let mut file = DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
-    let len = file.file_len();
-    if len != records * size as u64 {
-        return Err(BuildError::Corrupt {
-            path: path.to_path_buf(),
-            message: format!("{len} bytes, expected {records} records of {size} bytes"),
-        });
-    }
+    check_length(path, file.file_len(), records, size)?;
     let chunk = chunk.max(1);
     std::thread::scope(|scope| {
         let (tx, rx) = sync_channel::<Result<(u64, Vec<T>), std::io::Error>>(1);
@@ -227,23 +221,7 @@ where
                 done += n as u64;
             }
         });
-        let mut result = Ok(());
-        for item in rx.iter() {
-            match item {
-                Ok((first, items)) => {
-                    if let Err(e) = f(first, &items) {
-                        result = Err(e);
-                        break;
-                    }
-                    let _ = give_back.try_send(items);
-                }
-                Err(e) => {
-                    result = Err(BuildError::io(path, e));
-                    break;
-                }
-            }
-        }
-        drop(rx);
+        let result = drain_chunks(path, rx, &give_back, |first, items: &Vec<T>| f(first, items));
         let _ = reader.join();
         result
     })
@@ -278,13 +256,7 @@ where
     let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
     let mut file = DirectReader::open_at(path, buffer, range.start * size as u64)
         .map_err(|e| BuildError::io(path, e))?;
-    let len = file.file_len();
-    if len != file_records * size as u64 {
-        return Err(BuildError::Corrupt {
-            path: path.to_path_buf(),
-            message: format!("{len} bytes, expected {file_records} records of {size} bytes"),
-        });
-    }
+    check_length(path, file.file_len(), file_records, size)?;
     let chunk = chunk.max(1);
     let base = range.start;
     std::thread::scope(|scope| {
@@ -306,26 +278,38 @@ where
                 done += n as u64;
             }
         });
-        let mut result = Ok(());
-        for item in rx.iter() {
-            match item {
-                Ok((first, bytes)) => {
-                    if let Err(e) = f(first, &bytes) {
-                        result = Err(e);
-                        break;
-                    }
-                    let _ = give_back.try_send(bytes);
-                }
-                Err(e) => {
-                    result = Err(BuildError::io(path, e));
-                    break;
-                }
-            }
-        }
-        drop(rx);
+        let result = drain_chunks(path, rx, &give_back, |first, bytes: &Vec<u8>| f(first, bytes));
         let _ = reader.join();
         result
     })
+}
+
+/// A working file of `records` records of `size` bytes must be `len` bytes long.
+fn check_length(path: &Path, len: u64, records: u64, size: usize) -> Result<(), BuildError> {
+    if len != records * size as u64 {
+        return Err(BuildError::Corrupt {
+            path: path.to_path_buf(),
+            message: format!("{len} bytes, expected {records} records of {size} bytes"),
+        });
+    }
+    Ok(())
+}
+
+/// The consumer side of the read-ahead functions: hands each chunk from the reader thread to
+/// `f` in order and gives its buffer back for reuse; stops at the first error of either side.
+/// Dropping `rx` on return stops the reader.
+fn drain_chunks<B>(
+    path: &Path,
+    rx: std::sync::mpsc::Receiver<Result<(u64, B), std::io::Error>>,
+    give_back: &std::sync::mpsc::SyncSender<B>,
+    mut f: impl FnMut(u64, &B) -> Result<(), BuildError>,
+) -> Result<(), BuildError> {
+    for item in rx.iter() {
+        let (first, chunk) = item.map_err(|e| BuildError::io(path, e))?;
+        f(first, &chunk)?;
+        let _ = give_back.try_send(chunk);
+    }
+    Ok(())
 }
 
 /// Records per task of [`map_sub_chunks`]: a fixed number, so that what each task sees (and

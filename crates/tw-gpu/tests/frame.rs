@@ -14,6 +14,9 @@ use tw_gpu::{ColorMode, DrawMode, GpuError, Image, Renderer, Target};
 use tw_runtime::{Camera, ClusterRef, Hzb, HzbResult, PageCache, SelectOptions, Selector};
 use tw_store::{PageCluster, Store};
 
+mod common;
+use common::{key, quad};
+
 const W: u32 = 320;
 const H: u32 = 200;
 
@@ -210,24 +213,7 @@ fn indirect_equals_direct_vulkan() {
 }
 
 // ---------------------------------------------------------------------------------------------
-// A small synthetic scene: axis-aligned quads facing a camera on +z.
-
-fn key(page: u32) -> ClusterRef {
-    ClusterRef { page, index_in_page: 0, group: 0 }
-}
-
-/// A quad at height `z` over `[x0, x1] × [y0, y1]` (grid units), of object `object`.
-fn quad(x0: u32, y0: u32, x1: u32, y1: u32, z: u32, object: u32) -> PageCluster {
-    PageCluster {
-        positions: vec![[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]],
-        indices: vec![0, 1, 2, 0, 2, 3],
-        objects: vec![object, object],
-        self_error: 0.0,
-        self_sphere: [0.0, 0.0, 0.0, 1.0],
-        group: 0,
-        level: 0,
-    }
-}
+// A small synthetic scene: axis-aligned quads facing a camera on +z (`common::quad`).
 
 /// A strip over `[x0, x1] × [0, 100]` at height `z` of 128 triangles (64 quads along y).
 fn strip(x0: u32, x1: u32, z: u32, object: u32) -> PageCluster {

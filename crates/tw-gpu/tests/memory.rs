@@ -16,8 +16,11 @@
 
 use glam::Vec3;
 use tw_gpu::{ColorMode, GpuError, Renderer, Target};
-use tw_runtime::{Camera, ClusterRef as ClusterKey};
+use tw_runtime::{Camera, ClusterRef};
 use tw_store::PageCluster;
+
+mod common;
+use common::{key, quad};
 
 const W: u32 = 160;
 const H: u32 = 100;
@@ -25,23 +28,6 @@ const FRAMES: usize = 100;
 /// Allowed growth over [`FRAMES`] frames: far below the ~0.3 MB a pass of the leak (> 100 MB
 /// here), above the allocator's noise.
 const SLACK_BYTES: u64 = 16 << 20;
-
-fn key(page: u32) -> ClusterKey {
-    ClusterKey { page, index_in_page: 0, group: 0 }
-}
-
-/// A quad at height `z` over `[x0, x1] × [y0, y1]` (grid units), of object `object`.
-fn quad(x0: u32, y0: u32, x1: u32, y1: u32, z: u32, object: u32) -> PageCluster {
-    PageCluster {
-        positions: vec![[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]],
-        indices: vec![0, 1, 2, 0, 2, 3],
-        objects: vec![object, object],
-        self_error: 0.0,
-        self_sphere: [0.0, 0.0, 0.0, 1.0],
-        group: 0,
-        level: 0,
-    }
-}
 
 /// Looking down -z at the centre of [0, 100]², from z = 200, turning a little each frame.
 fn camera(frame: usize) -> Camera {
@@ -60,7 +46,7 @@ fn camera(frame: usize) -> Camera {
 /// HZB cull and its draw where the device has it.
 fn frame(r: &mut Renderer, i: usize, scene: &[PageCluster], gpu_cull: bool) {
     let cam = camera(i);
-    let list: Vec<(ClusterKey, &PageCluster)> =
+    let list: Vec<(ClusterRef, &PageCluster)> =
         scene.iter().enumerate().map(|(k, c)| (key(k as u32 + 1), c)).collect();
     let (occluders, candidates) = list.split_at(1);
     let boxes: Vec<(Vec3, Vec3)> = candidates
