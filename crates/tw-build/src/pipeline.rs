@@ -269,12 +269,14 @@ fn build_with_pool(
         let result = for_each_in_order(
             pool,
             cells.cell_count(),
+            lod_window(options.memory),
             |i| {
                 let b = cells.bucket_of_cell(i as u32);
                 let loaded = queue.get(b)?;
                 let external = |p: [u32; 3]| loaded.seams.contains(p);
                 Some(build_cell_lod_with_seams(&loaded.bucket.mesh(i as u32), &grid, &options.lod, &external))
             },
+            |dag| dag.as_ref().map_or(0, LodDag::heap_bytes),
             |i, dag| {
                 let cell = i as u32;
                 let b = cells.bucket_of_cell(cell);
@@ -302,7 +304,12 @@ fn build_with_pool(
         );
         queue.stop();
         let loaded = loader.join().map_err(|_| BuildError::Param("bucket loader panicked".into()))?;
-        result?;
+        let held = result?;
+        tracing::debug!(
+            results = held.results,
+            bytes = held.bytes,
+            "lod: most cell DAGs held ahead of the consumer"
+        );
         loaded
     })?;
     progress.end_phase();
@@ -481,35 +488,74 @@ impl BucketQueue {
     }
 }
 
-/// Results [`for_each_in_order`] may hold ahead of the consumer.
-const IN_ORDER_WINDOW: usize = 16;
+/// How far [`for_each_in_order`] may run ahead of its consumer: at most `results` indices past
+/// the one the consumer waits for, and, past that one, no new index while the results produced
+/// and not yet consumed weigh more than `bytes`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Window {
+    results: usize,
+    bytes: usize,
+}
+
+/// Cell DAGs the LOD phase may hold ahead of its consumer: 16, and a sixteenth of the budget.
+/// Under load the consumer (HLOD, pages) falls behind the pool and the window fills; at 10^8
+/// triangles and `--memory 256M`, 16 DAGs of the largest cells (65,536 triangles, ~2.5 MB each)
+/// would be 40 MB of a 268 MB budget.
+fn lod_window(memory: u64) -> Window {
+    Window { results: 16, bytes: (memory / 16).min(usize::MAX as u64) as usize }
+}
+
+/// What [`for_each_in_order`] held at most ahead of its consumer.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+struct WindowUse {
+    results: usize,
+    bytes: usize,
+}
 
 /// Runs `produce(i)` for `i` in `0..n` on `pool` (workers take indices in increasing order) and
 /// hands the results to `consume` on the calling thread in index order, as soon as each is
-/// ready. A worker does not start index `i` before `i - IN_ORDER_WINDOW` is consumed, so at most
-/// `IN_ORDER_WINDOW` + one per worker results are held, however slow `consume` is (without the
-/// window, a consumer slower than the pool let a whole bucket's cell DAGs pile up: ~250 MB on
-/// the 10^8-triangle plant). On the first error of `consume` the workers stop taking new
-/// indices and the error is returned.
-fn for_each_in_order<T, P, C>(
+/// ready. A worker does not start index `i` while it is `window.results` or more past the next
+/// index to consume, nor, unless `i` is that index, while the produced results waiting for the
+/// consumer weigh (`weigh`) more than `window.bytes`. So at most `window.results` + one per
+/// worker results are held, and past `window.bytes` only one more per worker, however slow
+/// `consume` is (without a window, a consumer slower than the pool let a whole bucket's cell
+/// DAGs pile up: ~250 MB on the 10^8-triangle plant). The consumer always gets its next index:
+/// the worker that took it does not wait. On the first error of `consume` the workers stop
+/// taking new indices and the error is returned. Returns the most it held.
+fn for_each_in_order<T, P, W, C>(
     pool: &rayon::ThreadPool,
     n: usize,
+    window: Window,
     produce: P,
+    weigh: W,
     mut consume: C,
-) -> Result<(), BuildError>
+) -> Result<WindowUse, BuildError>
 where
     T: Send,
     P: Fn(usize) -> T + Sync,
+    W: Fn(&T) -> usize + Sync,
     C: FnMut(usize, T) -> Result<(), BuildError>,
 {
     use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
-    // How many results `consume` has taken, and a condition to wait for it to grow.
-    let consumed = (std::sync::Mutex::new(0usize), std::sync::Condvar::new());
+    /// Results produced and consumed so far, the weight of those not yet consumed, and the
+    /// most held.
+    #[derive(Default)]
+    struct Ahead {
+        produced: usize,
+        consumed: usize,
+        bytes: usize,
+        most: WindowUse,
+    }
+    fn lock(m: &std::sync::Mutex<Ahead>) -> std::sync::MutexGuard<'_, Ahead> {
+        m.lock().unwrap_or_else(|e| e.into_inner())
+    }
+    // And a condition to wait for the consumer.
+    let state = (std::sync::Mutex::new(Ahead::default()), std::sync::Condvar::new());
     let (tx, rx) = std::sync::mpsc::channel::<(usize, T)>();
     std::thread::scope(|scope| {
-        let (next, stop, produce, consumed) = (&next, &stop, &produce, &consumed);
+        let (next, stop, produce, weigh, state) = (&next, &stop, &produce, &weigh, &state);
         scope.spawn(move || {
             pool.scope(|s| {
                 for _ in 0..pool.current_num_threads() {
@@ -522,14 +568,28 @@ where
                         if i >= n {
                             return;
                         }
-                        // The consumer always makes progress: index `done` < `i` is produced
-                        // by a worker that is not waiting here.
-                        let mut done = consumed.0.lock().unwrap_or_else(|e| e.into_inner());
-                        while i >= *done + IN_ORDER_WINDOW && !stop.load(Ordering::Relaxed) {
-                            done = consumed.1.wait(done).unwrap_or_else(|e| e.into_inner());
+                        let mut st = lock(&state.0);
+                        while !stop.load(Ordering::Relaxed) {
+                            let done = st.consumed;
+                            if i < done + window.results && (i == done || st.bytes <= window.bytes) {
+                                break;
+                            }
+                            st = state.1.wait(st).unwrap_or_else(|e| e.into_inner());
                         }
-                        drop(done);
-                        if stop.load(Ordering::Relaxed) || tx.send((i, produce(i))).is_err() {
+                        drop(st);
+                        if stop.load(Ordering::Relaxed) {
+                            return;
+                        }
+                        let result = produce(i);
+                        let weight = weigh(&result);
+                        {
+                            let mut st = lock(&state.0);
+                            st.produced += 1;
+                            st.bytes += weight;
+                            st.most.results = st.most.results.max(st.produced - st.consumed);
+                            st.most.bytes = st.most.bytes.max(st.bytes);
+                        }
+                        if tx.send((i, result)).is_err() {
                             return;
                         }
                     });
@@ -542,17 +602,22 @@ where
         for (i, item) in rx.iter() {
             waiting.insert(i, item);
             while let Some(item) = waiting.remove(&expected) {
+                let weight = weigh(&item);
                 let result = consume(expected, item);
                 if result.is_err() {
                     stop.store(true, Ordering::Relaxed);
                 }
                 expected += 1;
-                *consumed.0.lock().unwrap_or_else(|e| e.into_inner()) = expected;
-                consumed.1.notify_all();
+                {
+                    let mut st = lock(&state.0);
+                    st.consumed = expected;
+                    st.bytes -= weight;
+                }
+                state.1.notify_all();
                 result?;
             }
         }
-        Ok(())
+        Ok(lock(&state.0).most)
     })
 }
 
@@ -826,10 +891,18 @@ mod tests {
                 std::thread::sleep(std::time::Duration::from_micros(((i * 7919) % 13) as u64 * 50));
                 i * i
             };
-            for_each_in_order(&pool(threads), 100, produce, |i, v| {
-                got.push((i, v));
-                Ok(())
-            })
+            let window = Window { results: 16, bytes: usize::MAX };
+            for_each_in_order(
+                &pool(threads),
+                100,
+                window,
+                produce,
+                |_| 0,
+                |i, v| {
+                    got.push((i, v));
+                    Ok(())
+                },
+            )
             .unwrap();
             assert_eq!(got, (0..100).map(|i| (i, i * i)).collect::<Vec<_>>(), "{threads} threads");
         }
@@ -840,13 +913,16 @@ mod tests {
         use std::sync::atomic::{AtomicUsize, Ordering};
         let produced = AtomicUsize::new(0);
         let mut most_ahead = 0;
-        for_each_in_order(
+        let window = Window { results: 16, bytes: usize::MAX };
+        let held = for_each_in_order(
             &pool(4),
             200,
+            window,
             |i| {
                 produced.fetch_add(1, Ordering::SeqCst);
                 i
             },
+            |_| 0,
             |i, _| {
                 std::thread::sleep(std::time::Duration::from_micros(200));
                 most_ahead = most_ahead.max(produced.load(Ordering::SeqCst) - i);
@@ -854,12 +930,82 @@ mod tests {
             },
         )
         .unwrap();
-        assert!(most_ahead <= IN_ORDER_WINDOW + 4, "{most_ahead} results held");
+        assert!(most_ahead <= window.results + 4, "{most_ahead} results held");
+        assert!(held.results <= window.results + 4 && held.results >= 2, "{held:?}");
+    }
+
+    #[test]
+    fn for_each_in_order_holds_a_bounded_weight_for_a_slow_consumer() {
+        // Results of 1,000 bytes, at most 2,500 held: the count window (16) never binds, the
+        // weight does, and every result still arrives in order.
+        let window = Window { results: 16, bytes: 2_500 };
+        for threads in [1, 2, 4] {
+            let mut got = Vec::new();
+            let held = for_each_in_order(
+                &pool(threads),
+                200,
+                window,
+                |i| vec![i as u8; 1_000],
+                |v| v.len(),
+                |i, v| {
+                    std::thread::sleep(std::time::Duration::from_micros(100));
+                    got.push((i, v[0]));
+                    Ok(())
+                },
+            )
+            .unwrap();
+            assert_eq!(got, (0..200).map(|i| (i, i as u8)).collect::<Vec<_>>(), "{threads} threads");
+            // Past the weight, one more result per worker (and the consumer's next one).
+            assert!(held.bytes <= 2_500 + 1_000 * (threads + 1), "{threads} threads: {held:?}");
+        }
+    }
+
+    #[test]
+    fn for_each_in_order_makes_progress_when_one_result_outweighs_the_window() {
+        let window = Window { results: 4, bytes: 10 };
+        let mut got = 0;
+        for_each_in_order(
+            &pool(3),
+            50,
+            window,
+            |i| vec![0u8; 100 + i],
+            |v| v.len(),
+            |_, _| {
+                got += 1;
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(got, 50);
+    }
+
+    #[test]
+    fn lod_window_is_a_sixteenth_of_the_budget() {
+        assert_eq!(lod_window(256 << 20), Window { results: 16, bytes: 16 << 20 });
+    }
+
+    #[test]
+    fn a_dags_heap_bytes_count_its_clusters_and_groups() {
+        let empty = LodDag::default();
+        assert_eq!(empty.heap_bytes(), 0);
+        let dag = LodDag {
+            clusters: vec![LodCluster {
+                positions: vec![[0; 3]; 3],
+                indices: vec![0, 1, 2],
+                objects: vec![7],
+                ..LodCluster::default()
+            }],
+            groups: vec![LodGroup { clusters: vec![0], ..LodGroup::default() }],
+        };
+        let own = 3 * 12 + 3 + 4 + 4;
+        let structs = std::mem::size_of::<LodCluster>() + std::mem::size_of::<LodGroup>();
+        assert_eq!(dag.heap_bytes(), own + structs);
     }
 
     #[test]
     fn for_each_in_order_handles_nothing() {
-        for_each_in_order(&pool(2), 0, |i| i, |_, _| panic!("nothing to consume")).unwrap();
+        let window = Window { results: 16, bytes: usize::MAX };
+        for_each_in_order(&pool(2), 0, window, |i| i, |_| 0, |_, _| panic!("nothing to consume")).unwrap();
     }
 
     #[test]
@@ -869,11 +1015,13 @@ mod tests {
         let r = for_each_in_order(
             &pool(2),
             100_000,
+            Window { results: 16, bytes: usize::MAX },
             |i| {
                 produced.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 std::thread::sleep(std::time::Duration::from_micros(20));
                 i
             },
+            |_| 0,
             |i, _| {
                 consumed.push(i);
                 if i == 5 {

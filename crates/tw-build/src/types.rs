@@ -158,6 +158,27 @@ pub struct LodDag {
     pub groups: Vec<LodGroup>,
 }
 
+impl LodDag {
+    /// Bytes the DAG holds on the heap (its vectors' capacities), for memory accounting.
+    pub fn heap_bytes(&self) -> usize {
+        use std::mem::size_of;
+        let clusters: usize = self
+            .clusters
+            .iter()
+            .map(|c| {
+                c.positions.capacity() * size_of::<[u32; 3]>()
+                    + c.indices.capacity()
+                    + (c.objects.capacity() + c.refined_from.capacity()) * size_of::<u32>()
+            })
+            .sum();
+        let groups: usize = self.groups.iter().map(|g| g.clusters.capacity() * size_of::<u32>()).sum();
+        clusters
+            + groups
+            + self.clusters.capacity() * size_of::<LodCluster>()
+            + self.groups.capacity() * size_of::<LodGroup>()
+    }
+}
+
 /// The render rule, in object space: cluster `c` is part of the cut for error threshold `tau`
 /// (scene units) when `self_error <= tau < group.error`. (The runtime uses the projected form.)
 pub fn in_cut(dag: &LodDag, cluster: usize, tau: f32) -> bool {
