@@ -298,6 +298,9 @@ fn build_with_pool(
                 if cell + 1 == cells.bucket_cells(b).end {
                     drop(loaded);
                     queue.release(b);
+                    // A bucket's meshes and DAGs are freed: give their pages back, or the
+                    // fragments between live blocks stay resident (one heap for all threads).
+                    tw_core::mem::return_free_heap_pages();
                 }
                 Ok(())
             },
