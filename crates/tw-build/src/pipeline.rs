@@ -556,7 +556,7 @@ where
     }
     // And a condition to wait for the consumer.
     let state = (std::sync::Mutex::new(Ahead::default()), std::sync::Condvar::new());
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, T)>();
+    let (tx, rx) = std::sync::mpsc::channel::<(usize, T, usize)>();
     std::thread::scope(|scope| {
         let (next, stop, produce, weigh, state) = (&next, &stop, &produce, &weigh, &state);
         scope.spawn(move || {
@@ -592,7 +592,7 @@ where
                             st.most.results = st.most.results.max(st.produced - st.consumed);
                             st.most.bytes = st.most.bytes.max(st.bytes);
                         }
-                        if tx.send((i, result)).is_err() {
+                        if tx.send((i, result, weight)).is_err() {
                             return;
                         }
                     });
@@ -600,12 +600,12 @@ where
             });
             drop(tx);
         });
-        let mut waiting: std::collections::BTreeMap<usize, T> = std::collections::BTreeMap::new();
+        // Results that came before their turn, with their weights.
+        let mut waiting: std::collections::BTreeMap<usize, (T, usize)> = std::collections::BTreeMap::new();
         let mut expected = 0usize;
-        for (i, item) in rx.iter() {
-            waiting.insert(i, item);
-            while let Some(item) = waiting.remove(&expected) {
-                let weight = weigh(&item);
+        for (i, item, weight) in rx.iter() {
+            waiting.insert(i, (item, weight));
+            while let Some((item, weight)) = waiting.remove(&expected) {
                 let result = consume(expected, item);
                 if result.is_err() {
                     stop.store(true, Ordering::Relaxed);
