@@ -26,8 +26,8 @@
 //! 3. splits the result into clusters (≤ 128 triangles, ≤ 255 vertices) and groups them.
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
-//! step: they get the same finite `error` (= the new clusters' `self_error`, ≥ every child
-//! cluster's `self_error`) and the same `sphere` (= the new clusters' `self_sphere`, containing
+//! step: they get the same finite `error` (= the new clusters' `self_error` = the largest child
+//! cluster `self_error` plus this simplification's own error, as in [`crate::lod`]) and the same `sphere` (= the new clusters' `self_sphere`, containing
 //! every child root group's sphere). The caller applies that to its stored groups
 //! ([`HlodNode::replaced`]). The node's new groups are roots until the parent node is built.
 //!
@@ -38,7 +38,7 @@
 //! first incident triangle in the merged mesh, majority of the three vertices).
 
 use crate::lod::{
-    adapter, grow_sphere, round_up, sphere_center64, triangle_object, vertex_objects, Frame,
+    accumulate, adapter, grow_sphere, round_up, sphere_center64, triangle_object, vertex_objects, Frame,
     MAX_CLUSTER_TRIANGLES, MAX_CLUSTER_VERTICES, MIN_ERROR,
 };
 use crate::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
@@ -327,7 +327,9 @@ pub fn build_hlod(
             }
         }
     }
-    let error = child_error.max(round_up(error_local as f64 * frame.step)).max(MIN_ERROR);
+    // Accumulated from the input, as in the cells (crate::lod, "Accumulated errors"): the
+    // children's largest error plus this simplification's own, measured against their clusters.
+    let error = accumulate(child_error, round_up(error_local as f64 * frame.step)).max(MIN_ERROR);
 
     // 3. Re-cluster and group.
     let vertex_object = vertex_objects(positions.len(), &indices, &objects);

@@ -8,11 +8,21 @@
 //! group; stuck groups are left to HLOD). Clusters are built with meshopt's spatial clusterizer.
 //! The output is mapped onto the model of [`crate::types`] (see ISSUE3 "Cluster DAG model"):
 //!
-//! * every meshopt group becomes a [`LodGroup`]: `error` = the group's simplified error in scene
-//!   units (`f32::INFINITY` for terminal groups), `sphere` = its simplified bounds;
+//! * every meshopt group becomes a [`LodGroup`]: `error` = the error of the clusters that replace
+//!   it, *accumulated* from the input (below) in scene units (`f32::INFINITY` for terminal
+//!   groups), `sphere` = its simplified bounds;
 //! * every meshopt cluster becomes a [`LodCluster`]: `self_error`/`self_sphere` are exactly the
 //!   `error`/`sphere` of the group it was simplified from (`refined_from`), or 0 and its own
 //!   bounding sphere for input clusters.
+//!
+//! Accumulated errors: meshopt measures each simplification against *its own input*, the
+//! group's clusters, which are themselves simplified; clusterlod's default error is the max of
+//! that and the inputs' errors, which bounds the distance to the previous level but not to the
+//! full-resolution surface. Here a group's error is the largest of its members' (accumulated)
+//! self errors *plus* its own simplification's error (`simplify_error_merge_previous` = 0 gives
+//! the latter alone): by the triangle inequality that bounds the distance from the input, so τ
+//! pixels mean τ pixels from full detail at every level. Measured on the plants: BENCHMARKS.md,
+//! "Accumulated errors, 2026-12-05".
 //!
 //! Monotonicity is enforced after the fact (group error ≥ member self errors, group sphere
 //! contains member self spheres, finite errors ≥ [`MIN_ERROR`] so that τ = 0 selects exactly the
@@ -139,14 +149,18 @@ pub fn build_cell_lod_with_seams(
     // also ranks triangles by vertex valence, which cost ~5% of a build's CPU time on the 10^7
     // plant for 0.9% smaller pages (BENCHMARKS.md, "Build throughput, 2026-12-05").
     config.optimize_clusters_level = 0;
+    // Each group's own simplification error alone; accumulated below (module comment).
+    config.simplify_error_merge_previous = 0.0;
+    config.simplify_error_merge_additive = 0.0;
     // No sloppy fallback: its vertex clustering can open holes inside a group (cracks in a cut;
     // see plant_cell_dag_is_valid_complete_and_crack_free). A stuck group becomes a root
     // instead, which HLOD simplifies further.
     config.simplify_fallback_sloppy = false;
     let clod_mesh = ClodMesh { vertex_lock: Some(&locks), ..ClodMesh::new(&indices, &adapter) };
 
-    // Raw output, in meshopt's local units; converted and made monotone below.
+    // Raw output, in meshopt's local units; converted, accumulated and made monotone below.
     struct RawGroup {
+        /// The error of this group's own simplification (against its clusters), scene units.
         error: f32,
         sphere: Sphere,
         clusters: Vec<u32>,
@@ -198,7 +212,7 @@ pub fn build_cell_lod_with_seams(
     let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
     let mut steps: std::collections::HashSet<(u32, [u32; 4])> = std::collections::HashSet::new();
     for raw in raw_groups {
-        let mut g = LodGroup { error: raw.error, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
+        let mut g = LodGroup { error: 0.0, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
         for &ci in &g.clusters {
             let c = &mut clusters[ci as usize];
             match u32::try_from(refined[ci as usize]) {
@@ -222,6 +236,8 @@ pub fn build_cell_lod_with_seams(
             g.level = g.level.max(c.level);
             grow_sphere(&mut g.sphere, sphere_center64(&c.self_sphere), c.self_sphere.radius as f64);
         }
+        // g.error is now the largest member self error (≥ 0, finite).
+        g.error = accumulate(g.error, raw.error);
         if g.error.is_finite() {
             g.error = g.error.max(MIN_ERROR);
             // One step, one (error, sphere): see the module comment ("Step identity").
@@ -233,6 +249,16 @@ pub fn build_cell_lod_with_seams(
     }
     debug_assert!(originals.all_taken());
     LodDag { clusters, groups }
+}
+
+/// The error of a simplification step's output measured from the input: its inputs' largest
+/// (accumulated) error plus the step's own, rounded up so that the f32 sum never falls below the
+/// exact one (module comment, "Accumulated errors"). Infinite stays infinite.
+pub(crate) fn accumulate(inputs: f32, step: f32) -> f32 {
+    if !(inputs.is_finite() && step.is_finite()) {
+        return f32::INFINITY;
+    }
+    round_up(inputs as f64 + step as f64)
 }
 
 /// The bits of a group's error and sphere: what the store identifies a simplification step by.
@@ -562,6 +588,101 @@ mod tests {
         let total: usize = dag.clusters.iter().map(|c| c.indices.len() / 3).sum();
         let ratio = total as f64 / mesh.triangle_count() as f64;
         assert!((1.5..2.5).contains(&ratio), "all levels / input = {ratio}");
+    }
+
+    /// The point of triangle `t` closest to the origin (Ericson, "Real-Time Collision
+    /// Detection" §5.1.5).
+    fn closest_to_origin(t: [[f64; 3]; 3]) -> [f64; 3] {
+        let sub = |a: [f64; 3], b: [f64; 3]| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+        let along = |a: [f64; 3], d: [f64; 3], s: f64| [a[0] + d[0] * s, a[1] + d[1] * s, a[2] + d[2] * s];
+        let [a, b, c] = t;
+        let (ab, ac, ap) = (sub(b, a), sub(c, a), sub([0.0; 3], a));
+        let (d1, d2) = (dot(ab, ap), dot(ac, ap));
+        if d1 <= 0.0 && d2 <= 0.0 {
+            return a;
+        }
+        let bp = sub([0.0; 3], b);
+        let (d3, d4) = (dot(ab, bp), dot(ac, bp));
+        if d3 >= 0.0 && d4 <= d3 {
+            return b;
+        }
+        let vc = d1 * d4 - d3 * d2;
+        if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+            return along(a, ab, d1 / (d1 - d3));
+        }
+        let cp = sub([0.0; 3], c);
+        let (d5, d6) = (dot(ab, cp), dot(ac, cp));
+        if d6 >= 0.0 && d5 <= d6 {
+            return c;
+        }
+        let vb = d5 * d2 - d1 * d6;
+        if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+            return along(a, ac, d2 / (d2 - d6));
+        }
+        let va = d3 * d6 - d5 * d4;
+        if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+            return along(b, sub(c, b), (d4 - d3) / ((d4 - d3) + (d5 - d6)));
+        }
+        let denom = 1.0 / (va + vb + vc);
+        let (v, w) = (vb * denom, vc * denom);
+        [a[0] + ab[0] * v + ac[0] * w, a[1] + ab[1] * v + ac[1] * w, a[2] + ab[2] * v + ac[2] * w]
+    }
+
+    #[test]
+    fn errors_do_not_fall_behind_the_distance_from_the_input_with_depth() {
+        // Every vertex of a tessellated sphere lies on the sphere, so a simplified triangle's
+        // distance from the input surface is about how far it dips inside: R − |closest point
+        // to the centre|.
+        let r = 10.0;
+        let soup = icosphere([0.0; 3], r, 5, 1);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build(&mesh, &grid);
+        let scene = |p: [u32; 3]| grid.to_input(p);
+        let dip = |c: &LodCluster| -> f64 {
+            c.indices
+                .chunks_exact(3)
+                .map(|t| {
+                    let tri = [0, 1, 2].map(|k| scene(c.positions[t[k] as usize]));
+                    let q = closest_to_origin(tri);
+                    r - (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt()
+                })
+                .fold(0.0, f64::max)
+        };
+        let deepest = dag.clusters.iter().map(|c| c.level).max().unwrap_or(0) as usize;
+        assert!(deepest >= 4, "several levels");
+        // The worst dip ÷ self error per level. meshopt's quadric error measures the kept
+        // vertices' distance to the removed triangles' planes, not how far a wide triangle
+        // dips between them: on a sphere it reads about half the dip at level 1. What the
+        // accumulation guarantees is that this underestimate does not grow with the levels
+        // (with the max of the steps' errors, clusterlod's default, it stays at ~2× down to
+        // level 3 and above 1.5× to the root; accumulated: 2.0, 1.3, 1.1, 0.9, … 0.7).
+        let mut worst = vec![0.0f64; deepest + 1];
+        for c in dag.clusters.iter().filter(|c| c.level > 0) {
+            let w = &mut worst[c.level as usize];
+            *w = w.max(dip(c) / c.self_error as f64);
+        }
+        assert!(worst[1] < 2.5, "level 1 reads {:.2}× less than the dip", worst[1]);
+        for level in 2..=deepest {
+            assert!(
+                worst[level] <= worst[1] * 0.8,
+                "level {level}: dip ÷ error {:.2} against {:.2} at level 1 (all: {worst:?})",
+                worst[level],
+                worst[1]
+            );
+        }
+    }
+
+    #[test]
+    fn accumulate_adds_rounding_up_and_keeps_infinity() {
+        for (a, b) in [(0.1f32, 0.2f32), (1e-7, 3.0), (16_777_216.0, 1.0), (0.0, 0.0)] {
+            let s = accumulate(a, b);
+            assert!(s as f64 >= a as f64 + b as f64, "{a} + {b} -> {s}");
+            assert!(s <= (a + b).next_up(), "{a} + {b} -> {s}: at most one ulp above");
+        }
+        assert_eq!(accumulate(f32::INFINITY, 1.0), f32::INFINITY);
+        assert_eq!(accumulate(1.0, f32::INFINITY), f32::INFINITY);
     }
 
     #[test]
