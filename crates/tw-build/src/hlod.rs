@@ -27,8 +27,9 @@
 //!
 //! All of the children's root groups are replaced by the node's clusters as one simplification
 //! step: they get the same finite `error` (= the new clusters' `self_error` = the largest child
-//! cluster `self_error` plus this simplification's own error, as in [`crate::lod`]) and the same `sphere` (= the new clusters' `self_sphere`, containing
-//! every child root group's sphere). The caller applies that to its stored groups
+//! cluster `self_error` plus this simplification's own error, as in [`crate::lod`]) and the
+//! same `sphere` (= the new clusters' `self_sphere`, containing every child root group's
+//! sphere). The caller applies that to its stored groups
 //! ([`HlodNode::replaced`]). The node's new groups are roots until the parent node is built.
 //!
 //! Memory: a node holds only its children's roots, so a bottom-up pass needs

@@ -20,9 +20,12 @@
 //! that and the inputs' errors, which bounds the distance to the previous level but not to the
 //! full-resolution surface. Here a group's error is the largest of its members' (accumulated)
 //! self errors *plus* its own simplification's error (`simplify_error_merge_previous` = 0 gives
-//! the latter alone): by the triangle inequality that bounds the distance from the input, so τ
-//! pixels mean τ pixels from full detail at every level. Measured on the plants: BENCHMARKS.md,
-//! "Accumulated errors, 2026-12-05".
+//! the latter alone). By the triangle inequality, if each step's error bounded that step's
+//! distance, the sum would bound the distance from the input, so τ pixels mean τ pixels from
+//! full detail at every level. meshopt's quadric error is an estimate, not a bound (on a sphere
+//! it reads half the true distance at the first level), but with the sum that underestimate
+//! no longer persists down the levels (`errors_do_not_fall_behind_the_distance_from_the_input_
+//! with_depth`). Measured on the plants: BENCHMARKS.md, "Accumulated errors, 2026-12-05".
 //!
 //! Monotonicity is enforced after the fact (group error ≥ member self errors, group sphere
 //! contains member self spheres, finite errors ≥ [`MIN_ERROR`] so that τ = 0 selects exactly the
