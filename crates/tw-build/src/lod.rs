@@ -148,10 +148,6 @@ pub fn build_cell_lod_with_seams(
     // for ~5% more clusters and ~3% more page bytes. A fill weight of 1 keeps clusters full.
     config.cluster_spatial = true;
     config.cluster_fill_weight = 1.0;
-    // Level 0 of meshopt's in-cluster triangle reordering instead of clusterlod's 1: level 1
-    // also ranks triangles by vertex valence, which cost ~5% of a build's CPU time on the 10^7
-    // plant for 0.9% smaller pages (BENCHMARKS.md, "Build throughput, 2026-12-05").
-    config.optimize_clusters_level = 0;
     // Each group's own simplification error alone; accumulated below (module comment).
     config.simplify_error_merge_previous = 0.0;
     config.simplify_error_merge_additive = 0.0;
