@@ -148,6 +148,12 @@ pub fn build_cell_lod_with_seams(
     // for ~5% more clusters and ~3% more page bytes. A fill weight of 1 keeps clusters full.
     config.cluster_spatial = true;
     config.cluster_fill_weight = 1.0;
+    // Level 0 of meshopt's in-cluster triangle reordering instead of clusterlod's 1 (which also
+    // ranks triangles by vertex valence): ~5% less build CPU on the 10^7 plant for ~1% more page
+    // bytes (BENCHMARKS.md, "Build throughput, 2026-12-05"). The order is HLOD's input order too;
+    // a different order once folded the spheres fixture's coarse HLOD levels, which HLOD's area
+    // check now rejects (crate::hlod, step 2).
+    config.optimize_clusters_level = 0;
     // Each group's own simplification error alone; accumulated below (module comment).
     config.simplify_error_merge_previous = 0.0;
     config.simplify_error_merge_additive = 0.0;
