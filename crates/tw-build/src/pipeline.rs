@@ -493,8 +493,8 @@ impl BucketQueue {
 
 /// How far [`for_each_in_order`] may run ahead of its consumer: at most `results` indices past
 /// the one the consumer waits for, and, past that one, no new index while the results produced
-/// and not yet consumed weigh more than `bytes`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// and not yet consumed weigh more than `bytes`. Also what it held at most, as it returns.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Window {
     results: usize,
     bytes: usize,
@@ -506,13 +506,6 @@ struct Window {
 /// would be 40 MB of a 268 MB budget.
 fn lod_window(memory: u64) -> Window {
     Window { results: 16, bytes: (memory / 16).min(usize::MAX as u64) as usize }
-}
-
-/// What [`for_each_in_order`] held at most ahead of its consumer.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct WindowUse {
-    results: usize,
-    bytes: usize,
 }
 
 /// Runs `produce(i)` for `i` in `0..n` on `pool` (workers take indices in increasing order) and
@@ -532,7 +525,7 @@ fn for_each_in_order<T, P, W, C>(
     produce: P,
     weigh: W,
     mut consume: C,
-) -> Result<WindowUse, BuildError>
+) -> Result<Window, BuildError>
 where
     T: Send,
     P: Fn(usize) -> T + Sync,
@@ -549,7 +542,7 @@ where
         produced: usize,
         consumed: usize,
         bytes: usize,
-        most: WindowUse,
+        most: Window,
     }
     fn lock(m: &std::sync::Mutex<Ahead>) -> std::sync::MutexGuard<'_, Ahead> {
         m.lock().unwrap_or_else(|e| e.into_inner())

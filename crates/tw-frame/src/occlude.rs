@@ -86,8 +86,9 @@ impl Occlusion {
     /// four give the image of `none`; what differs is speed. Measured (BENCHMARKS.md) on Mesa's
     /// CPU drivers, lavapipe and llvmpipe: `hzb` is the fastest (8.2–8.6× `none` over the
     /// 10^8-triangle plant's walk and fly-over, `gpu-hzb` 4.2–4.3×: building the pyramid in
-    /// compute costs more than on the CPU there; session 17). On a real GPU, `gpu-hzb` (no depth read-back, the culling
-    /// feeding indirect draws on the GPU) where compute and indirect draws exist, else `hzb`.
+    /// compute costs more than on the CPU there; session 17). On a real GPU, `gpu-hzb` (no
+    /// depth read-back, the culling feeding indirect draws on the GPU) where compute and
+    /// indirect draws exist, else `hzb`.
     /// Measured once, on an NVIDIA H200 (BENCHMARKS.md, "On a real GPU"): the frames there are
     /// CPU-bound and the strategies close — gpu-hzb 1.04× none at 10^7 (hzb 0.79×), 1.00× at
     /// 10^8 (hzb 1.27×) — while gpu-hzb draws 6–87× fewer triangles than none; so it stays.
