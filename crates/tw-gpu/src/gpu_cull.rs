@@ -601,7 +601,7 @@ impl Renderer {
             // Conservative: draw them all, in batches, and keep every occluder.
             self.pool.release_batch(&keys);
             let view = self.color_view.clone();
-            let shade = Pass::Shade { view: &view, format: COLOR_FORMAT };
+            let shade = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
             self.depth_stale = self.samples > 1;
             self.draw_pass(None, shade, size, camera, grid_step, candidates, None, false)?;
             return Ok(GpuCullResult {
@@ -650,7 +650,7 @@ impl Renderer {
             self.bind_generation = self.pool.generation;
         }
         let color_view = self.color_view.clone();
-        let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT };
+        let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT, own: true };
         let att = self.attachments(&shade, size, self.depth_view.clone());
         let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples, self.mode).clone();
         let cull = self.gpu_cull.as_ref().expect("made above");

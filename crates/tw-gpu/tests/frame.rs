@@ -795,6 +795,27 @@ fn msaa(backends: wgpu::Backends) {
     assert!(four.covered_pixels() >= covered, "{backends:?}: multisampling lost pixels");
     assert!(partial > 100 && partial < covered / 4, "{backends:?}: {partial} edge pixels");
     assert!(inner_differ < covered / 100, "{backends:?}: {inner_differ} inner pixels differ");
+
+    // The own target's colour is resolved once, when read: a frame drawn in two passes reads
+    // as the same frame drawn in one, and so does the own colour texture a viewer copies.
+    r.begin_frame();
+    r.draw(Target::Own, &top_camera(), 1.0, &list[..1], true).unwrap();
+    r.draw(Target::Own, &top_camera(), 1.0, &list[1..], false).unwrap();
+    let (device, queue) = (r.device().0.clone(), r.device().1.clone());
+    assert_eq!(read_texture(&device, &queue, r.color_texture()), four.rgba, "{backends:?}: own texture");
+    assert_eq!(r.read_color().unwrap().rgba, four.rgba, "{backends:?}: two passes");
+    // A caller's view of the own size shares the multisampled target: drawing into it keeps
+    // the own frame, not yet resolved, intact.
+    r.begin_frame();
+    r.draw(Target::Own, &top_camera(), 1.0, &list, true).unwrap();
+    let format = wgpu::TextureFormat::Rgba8UnormSrgb;
+    let tex = target(&device, format, W, H);
+    r.render_to_view(&top_camera(), 1.0, &list[..1], &tex.create_view(&Default::default()), format, (W, H))
+        .unwrap();
+    let own = read_texture(&device, &queue, r.color_texture());
+    assert_eq!(own, four.rgba, "{backends:?}: own frame after a view");
+    assert_ne!(read_texture(&device, &queue, &tex), four.rgba, "{backends:?}: the view's frame");
+
     assert!(r.set_samples(3).is_err());
     r.set_samples(1).unwrap();
     let again = r.render_clusters(&top_camera(), 1.0, &list).unwrap();

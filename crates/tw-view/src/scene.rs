@@ -408,7 +408,7 @@ impl Scene {
             }
         } else {
             // The own target's colour into the scene texture (no wait).
-            let own = walk.renderer().color_texture();
+            let own = walk.renderer_mut().color_texture();
             let mut encoder = g
                 .device
                 .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scene copy") });
