@@ -31,7 +31,9 @@
 //! triangles of every cluster that passed its box test are tested against the same pyramid
 //! ([`tw_runtime::triangle_test`]), the second pass draws the visible candidates' triangles
 //! and the occluders' visible triangles their first pass left out, and the history keeps each
-//! cluster's visible triangles, which are all the next first pass draws.
+//! cluster's visible triangles, which are all the next first pass draws. The triangles an
+//! occluder drew in its first pass are tested only every [`RETEST_PERIOD`]-th frame (they are
+//! in the image either way; only the history learns from their test).
 
 use std::time::{Duration, Instant};
 
@@ -147,6 +149,19 @@ pub struct OcclusionState {
     /// `hzb` only: also test the triangles of visible clusters
     /// ([`crate::FrameSettings::triangle_culling`]).
     pub triangle_culling: bool,
+    /// Frames drawn with occlusion culling (staggers the occluders' triangle re-tests).
+    pub(crate) frames: u64,
+}
+
+/// Every how many frames an occluder's triangles drawn in the first pass are tested again
+/// (see [`draw_culled`]); the others only keep them in the history.
+const RETEST_PERIOD: u64 = 4;
+
+/// Whether `cluster`'s first-pass triangles are tested again in frame `frame`: every
+/// [`RETEST_PERIOD`]-th frame, at a phase set by the cluster, so the re-tests spread evenly.
+fn retest(cluster: &ClusterRef, frame: u64) -> bool {
+    let phase = (cluster.page as u64).wrapping_mul(0x9E37_79B9).wrapping_add(cluster.index_in_page as u64);
+    phase.wrapping_add(frame).is_multiple_of(RETEST_PERIOD)
 }
 
 impl OcclusionState {
@@ -234,20 +249,38 @@ pub fn draw_culled(
             if state.triangle_culling {
                 // The visible clusters' triangles against the same pyramid: the candidates draw
                 // theirs, the occluders the ones their first pass left out.
-                let triangles = |list: &[ClusterRef]| {
+                let triangles = |list: &[ClusterRef], assumed: Option<&[TriangleMask]>| {
                     let clusters: Vec<&PageCluster> = decoded(list).into_iter().map(|(_, c)| c).collect();
-                    test_triangles(&clusters, grid_step, &hzb, &view_proj, renderer.depth_rounding() as f64)
+                    let rounding = renderer.depth_rounding() as f64;
+                    test_triangles(&clusters, assumed, grid_step, &hzb, &view_proj, rounding)
                 };
-                let (t_masks, o_masks) = (triangles(&t.visible), triangles(&o.visible));
-                let candidates = t.visible.iter().copied().zip(t_masks);
-                let occluders = o.visible.iter().copied().zip(o_masks);
                 // `o.visible` keeps the order of `split.occluders`, so one walk finds what each
                 // drew in the first pass (not found: nothing, and all its visible triangles go).
                 let mut first_pass = split.occluders.iter().zip(&split.occluder_masks);
-                let rest = occluders.clone().filter_map(|(k, m)| {
-                    let drawn = first_pass.find(|(f, _)| **f == k).map_or(0, |(_, &d)| d);
-                    (m & !drawn != 0).then_some((k, m & !drawn))
-                });
+                let drawn: Vec<TriangleMask> = o
+                    .visible
+                    .iter()
+                    .map(|k| first_pass.find(|(f, _)| *f == k).map_or(0, |(_, &d)| d))
+                    .collect();
+                // The triangles an occluder drew in the first pass are in the image whatever
+                // their test says, so only the history would learn from it (which of them to
+                // draw first next frame): they are assumed visible, and tested again only every
+                // RETEST_PERIOD-th frame per cluster (staggered), which drops those that became
+                // hidden from the history.
+                let frame = state.frames;
+                let assumed: Vec<TriangleMask> = o
+                    .visible
+                    .iter()
+                    .zip(&drawn)
+                    .map(|(k, &d)| if retest(k, frame) { 0 } else { d })
+                    .collect();
+                let (t_masks, o_masks) = (triangles(&t.visible, None), triangles(&o.visible, Some(&assumed)));
+                let candidates = t.visible.iter().copied().zip(t_masks);
+                let occluders = o.visible.iter().copied().zip(o_masks);
+                let rest = occluders
+                    .clone()
+                    .zip(&drawn)
+                    .filter_map(|((k, m), &drawn)| (m & !drawn != 0).then_some((k, m & !drawn)));
                 let second: Vec<(ClusterRef, TriangleMask)> = candidates.clone().chain(rest).collect();
                 let history: Vec<(ClusterRef, TriangleMask)> = candidates.chain(occluders).collect();
                 (t.visible, second, history, t.occluded)
@@ -320,8 +353,33 @@ pub fn draw_culled(
     renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&second), Some(&second_masks), false)?;
     let t = Instant::now();
     state.history.update_masked(history);
+    state.frames = state.frames.wrapping_add(1);
     cull_time += t.elapsed();
     let mut drawn = split.occluders;
     drawn.extend_from_slice(&visible);
     Ok(Culled { stats, cull_time, drawn, occluded })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every cluster's first-pass triangles are re-tested exactly once in any
+    /// [`RETEST_PERIOD`] consecutive frames, and the clusters of a frame are spread over the
+    /// phases rather than all re-tested together.
+    #[test]
+    fn retests_come_once_a_period_and_are_staggered() {
+        let clusters: Vec<ClusterRef> = (0..64u32)
+            .flat_map(|page| (0..8u32).map(move |i| ClusterRef { page, index_in_page: i, group: 0 }))
+            .collect();
+        for start in [0u64, 5, u64::MAX - 2] {
+            for c in &clusters {
+                let n = (0..RETEST_PERIOD).filter(|&f| retest(c, start.wrapping_add(f))).count();
+                assert_eq!(n, 1, "{c:?} from frame {start}");
+            }
+        }
+        let in_frame = clusters.iter().filter(|c| retest(c, 7)).count();
+        let even = clusters.len() / RETEST_PERIOD as usize;
+        assert!(in_frame > even / 2 && in_frame < even * 2, "{in_frame} of {} re-tested", clusters.len());
+    }
 }

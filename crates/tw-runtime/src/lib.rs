@@ -75,4 +75,6 @@ pub use pathgen::{
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};
-pub use triangle_test::{full_mask, test_triangles, visible_triangles, TriangleMask};
+pub use triangle_test::{
+    full_mask, test_triangles, visible_triangles, visible_triangles_assuming, TriangleMask,
+};

@@ -113,6 +113,24 @@ pub fn visible_triangles(
     view_proj: &Mat4,
     depth_rounding: f64,
 ) -> TriangleMask {
+    visible_triangles_assuming(cluster, grid_step, hzb, view_proj, depth_rounding, 0)
+}
+
+/// [`visible_triangles`], with the triangles of `assumed` reported visible without a test.
+/// Reporting a hidden triangle visible is always safe (it is drawn for nothing); the caller uses
+/// this for triangles it already drew, whose test would change nothing in the image.
+pub fn visible_triangles_assuming(
+    cluster: &PageCluster,
+    grid_step: f64,
+    hzb: &Hzb,
+    view_proj: &Mat4,
+    depth_rounding: f64,
+    assumed: TriangleMask,
+) -> TriangleMask {
+    let all = full_mask(cluster.indices.len() / 3);
+    if assumed & all == all {
+        return all;
+    }
     let (w, h) = hzb.size();
     let abs_view_proj = Mat4::from_cols_array(&view_proj.to_cols_array().map(f32::abs));
     let vertices: Vec<Vertex> = cluster
@@ -123,8 +141,11 @@ pub fn visible_triangles(
             vertex(view_proj, &abs_view_proj, p, (w, h))
         })
         .collect();
-    let mut mask: TriangleMask = 0;
+    let mut mask: TriangleMask = assumed & all;
     for (t, tri) in cluster.indices.chunks_exact(3).enumerate().take(128) {
+        if assumed >> t & 1 == 1 {
+            continue;
+        }
         let visible = match [tri[0], tri[1], tri[2]].map(|i| vertices.get(i as usize)) {
             [Some(a), Some(b), Some(c)] => match [a.screen, b.screen, c.screen] {
                 [Some(a), Some(b), Some(c)] => projected_shows(hzb, [a, b, c], depth_rounding),
@@ -445,9 +466,11 @@ fn round_up(depth: f64) -> f32 {
     }
 }
 
-/// [`visible_triangles`] of many clusters, in parallel; the output keeps the input order.
+/// [`visible_triangles`] of many clusters, in parallel; the output keeps the input order. With
+/// `assumed` (one mask per cluster), [`visible_triangles_assuming`].
 pub fn test_triangles(
     clusters: &[&PageCluster],
+    assumed: Option<&[TriangleMask]>,
     grid_step: f64,
     hzb: &Hzb,
     view_proj: &Mat4,
@@ -455,8 +478,12 @@ pub fn test_triangles(
 ) -> Vec<TriangleMask> {
     clusters
         .par_iter()
+        .enumerate()
         .with_min_len(16)
-        .map(|c| visible_triangles(c, grid_step, hzb, view_proj, depth_rounding))
+        .map(|(i, c)| {
+            let assumed = assumed.and_then(|a| a.get(i)).copied().unwrap_or(0);
+            visible_triangles_assuming(c, grid_step, hzb, view_proj, depth_rounding, assumed)
+        })
         .collect()
 }
 
@@ -547,7 +574,13 @@ mod tests {
         ]);
         let m = visible_triangles(&c, 1.0 / 16.0, &hzb, &vp, 0.0);
         assert_eq!(m, 0b01110, "mask {m:#b}");
-        assert_eq!(test_triangles(&[&c, &c], 1.0 / 16.0, &hzb, &vp, 0.0), vec![m, m]);
+        assert_eq!(test_triangles(&[&c, &c], None, 1.0 / 16.0, &hzb, &vp, 0.0), vec![m, m]);
+        // Assumed triangles are reported visible untested; the others are tested as before.
+        let assumed = [0b00001, 0b11111, 0b10000];
+        assert_eq!(
+            test_triangles(&[&c, &c, &c], Some(&assumed), 1.0 / 16.0, &hzb, &vp, 0.0),
+            vec![m | 0b00001, 0b11111, m | 0b10000]
+        );
     }
 
     /// The sample test on screen-space corners against the wall scene (pixels x < 32 hold the
