@@ -15,6 +15,8 @@ fn main() {
     // resident in an arena of its own (the 10^8 build at --memory 256M: 445-514 -> 245-251 MB;
     // a 10^8 bench with reference frames at --memory 512M: 2,510 -> 1,730 MB).
     tw_core::mem::use_one_heap_arena();
+    // Before any thread starts: it may set an environment variable (see the module).
+    tw_gpu::headless::quiet_device_select();
     let cli = cli::Cli::parse();
     init_logging(cli.verbose, cli.quiet);
     on_interrupt_remove_temporaries();

@@ -226,6 +226,18 @@ fn render_writes_a_png_of_a_store() {
         out.contains("adapter:") && out.contains("triangles drawn") && out.contains("frame.png"),
         "{out}"
     );
+    // Without a display session, Mesa's device-select layer is kept from printing libwayland's
+    // "error: XDG_RUNTIME_DIR is invalid" (tw_gpu::headless): a run that works prints no error.
+    let o = Command::new(env!("CARGO_BIN_EXE_terawalk"))
+        .args(["render", "p.tw", "-o", "quiet.png", "--size", "320x200"])
+        .current_dir(dir.path())
+        .env_remove("XDG_RUNTIME_DIR")
+        .env_remove("WAYLAND_SOCKET")
+        .env_remove("NODEVICE_SELECT")
+        .output()
+        .expect("runs");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("error"), "a successful render printed: {}", stderr(&o));
     let png = std::fs::read(dir.path().join("frame.png")).unwrap();
     assert_eq!(&png[1..4], b"PNG");
     // IHDR: width and height, big-endian, at bytes 16..24.

@@ -46,6 +46,7 @@ pub mod depth;
 pub mod draw;
 pub mod error;
 pub mod gpu_cull;
+pub mod headless;
 pub mod ids;
 pub mod image;
 pub mod msaa;
