@@ -6,8 +6,10 @@
 //! written when it reaches [`PageParams::page_triangles`]. Groups of the top of the hierarchy go
 //! to separate "root" pages, which the runtime keeps resident. The page index and the position of
 //! each group's first cluster are reported back so that the group table can point at them.
+//! Clusters arrive encoded (`tw_store::EncodedCluster`, a cell's on the pool that built its
+//! DAG): a page is the concatenation of its clusters' encodings.
 
-use tw_store::{PageCluster, StoreWriter};
+use tw_store::{EncodedCluster, StoreWriter};
 
 use crate::error::BuildError;
 
@@ -34,7 +36,7 @@ pub struct GroupPlacement {
 }
 
 struct OpenPage {
-    clusters: Vec<PageCluster>,
+    clusters: Vec<EncodedCluster>,
     triangles: usize,
     /// (group, first cluster) of every group in the page.
     groups: Vec<(u32, u32)>,
@@ -55,20 +57,20 @@ impl PagePacker {
         PagePacker { params, open: Vec::new(), placements: Vec::new(), pages_written: 0, root_pages: 0 }
     }
 
-    /// Adds one group (all its clusters, whose `group` field is already the scene-wide id).
+    /// Adds one group (all its clusters, encoded with the scene-wide group id).
     pub fn add_group(
         &mut self,
         writer: &mut StoreWriter,
         group: u32,
         level: u8,
         root: bool,
-        clusters: Vec<PageCluster>,
+        clusters: Vec<EncodedCluster>,
     ) -> Result<(), BuildError> {
         let slot = level as usize * 2 + root as usize;
         if self.open.len() <= slot {
             self.open.resize_with(slot + 1, || None);
         }
-        let tris: usize = clusters.iter().map(|c| c.triangle_count()).sum();
+        let tris: usize = clusters.iter().map(|c| c.triangles).sum();
         if let Some(p) = &self.open[slot] {
             if p.triangles > 0 && p.triangles + tris > self.params.page_triangles {
                 self.flush(writer, slot)?;
@@ -88,7 +90,7 @@ impl PagePacker {
     fn flush(&mut self, writer: &mut StoreWriter, slot: usize) -> Result<(), BuildError> {
         let Some(page) = self.open[slot].take() else { return Ok(()) };
         let root = slot % 2 == 1;
-        let index = writer.add_page(&page.clusters, root).map_err(BuildError::store)?;
+        let index = writer.add_encoded_page(&page.clusters, root).map_err(BuildError::store)?;
         self.pages_written += 1;
         self.root_pages += root as u32;
         for (group, first_cluster) in page.groups {

@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use tw_io::scene::SceneProgress;
 use tw_io::Scene;
-use tw_store::{PageCluster, StoreInfo, StoreWriter};
+use tw_store::{EncodedCluster, PageCluster, StoreInfo, StoreWriter};
 
 use crate::cells::CellFiles;
 use crate::error::BuildError;
@@ -254,6 +254,8 @@ fn build_with_pool(
     let mut state = LodState::new(&hierarchy, options);
     let grid = ing.grid;
     let mut done_triangles = 0u64;
+    // The consumer's working time: the floor of this phase however many cores the pool has.
+    let mut consumer_busy = std::time::Duration::ZERO;
     // One pass over every cell (cells are numbered in bucket order): the pool builds the cells'
     // DAGs, taking cells in order; this thread consumes them in cell order (pages, HLOD) as they
     // come, so the sequential part overlaps the parallel one. A loader thread reads the next
@@ -274,28 +276,42 @@ fn build_with_pool(
                 let b = cells.bucket_of_cell(i as u32);
                 let loaded = queue.get(b)?;
                 let external = |p: [u32; 3]| loaded.seams.contains(p);
-                Some(build_cell_lod_with_seams(&loaded.bucket.mesh(i as u32), &grid, &options.lod, &external))
+                let dag =
+                    build_cell_lod_with_seams(&loaded.bucket.mesh(i as u32), &grid, &options.lod, &external);
+                // The cell's clusters are encoded here, on the pool: the consumer only sets
+                // their group ids and concatenates them into pages.
+                let encoded = encode_clusters(&dag);
+                Some((dag, encoded))
             },
-            |dag| dag.as_ref().map_or(0, LodDag::heap_bytes),
-            |i, dag| {
-                let cell = i as u32;
-                let b = cells.bucket_of_cell(cell);
-                let (Some(dag), Some(loaded)) = (dag, queue.get(b)) else {
+            |cell| {
+                cell.as_ref().map_or(0, |(dag, encoded)| {
+                    let encoded_bytes =
+                        encoded.as_ref().map_or(0, |e| e.iter().map(|c| c.bytes.capacity()).sum());
+                    dag.heap_bytes() + encoded_bytes
+                })
+            },
+            |i, cell| {
+                let cell_index = i as u32;
+                let b = cells.bucket_of_cell(cell_index);
+                let (Some((dag, encoded)), Some(loaded)) = (cell, queue.get(b)) else {
                     queue.stop();
                     return Err(queue.take_error());
                 };
-                let leaf = state.leaf_of_cell[cell as usize];
-                let r = state
-                    .add_cell(&mut writer, leaf, dag, &loaded.seams)
+                let leaf = state.leaf_of_cell[cell_index as usize];
+                let busy_since = Instant::now();
+                let r = encoded
+                    .map_err(|m| invalid_cluster(leaf, m))
+                    .and_then(|encoded| state.add_cell(&mut writer, leaf, dag, encoded, &loaded.seams))
                     .and_then(|()| state.complete_upwards(&mut writer, leaf, &grid, &options.hlod));
+                consumer_busy += busy_since.elapsed();
                 if r.is_err() {
                     // Workers waiting for a bucket the loader will not read must wake up.
                     queue.stop();
                     return r;
                 }
-                done_triangles += red.cells[cell as usize].triangles;
+                done_triangles += red.cells[cell_index as usize].triangles;
                 progress.advance(done_triangles);
-                if cell + 1 == cells.bucket_cells(b).end {
+                if cell_index + 1 == cells.bucket_cells(b).end {
                     drop(loaded);
                     queue.release(b);
                     // A bucket's meshes and DAGs are freed: give their pages back, or the
@@ -313,6 +329,7 @@ fn build_with_pool(
             bytes = held.bytes,
             "lod: most cell DAGs held ahead of the consumer"
         );
+        tracing::debug!(seconds = consumer_busy.as_secs_f64(), "lod: consumer (HLOD, pages) busy");
         loaded
     })?;
     progress.end_phase();
@@ -689,7 +706,8 @@ impl<'h> LodState<'h> {
         }
     }
 
-    /// Gives `dag`'s groups scene ids, sends their clusters to pages and records the groups and
+    /// Gives `dag`'s groups scene ids, sends their clusters (`encoded`: one per cluster of
+    /// `dag`, see [`encode_clusters`]) to pages and records the groups and
     /// their sources: the union of their clusters' `refined_from`, which are indices into `dag`
     /// when `local_sources` (a cell's DAG) and scene ids otherwise (an HLOD node's). Sources are
     /// always groups emitted earlier (the store writer checks it). Returns the scene id of `dag.groups[0]`.
@@ -698,17 +716,33 @@ impl<'h> LodState<'h> {
         writer: &mut StoreWriter,
         node: u32,
         dag: &LodDag,
+        mut encoded: Vec<EncodedCluster>,
         local_sources: bool,
     ) -> Result<u32, BuildError> {
+        if encoded.len() != dag.clusters.len() {
+            let m = format!("{} encoded clusters for {}", encoded.len(), dag.clusters.len());
+            return Err(invalid_cluster(node, m));
+        }
         let base = self.groups.len() as u32;
         let mut group_sources: Vec<u32> = Vec::new();
         let root = (self.depth[node as usize] as usize) <= self.root_depth
             && !self.hierarchy.nodes[node as usize].is_leaf();
         for (gi, g) in dag.groups.iter().enumerate() {
             let id = base + gi as u32;
-            let clusters: Vec<PageCluster> =
-                g.clusters.iter().map(|&c| page_cluster(&dag.clusters[c as usize], id)).collect();
-            let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
+            let mut clusters: Vec<EncodedCluster> = Vec::with_capacity(g.clusters.len());
+            for &c in &g.clusters {
+                // Each cluster is in one group: taken once.
+                let mut e = encoded.get_mut(c as usize).map(std::mem::take).unwrap_or_default();
+                if e.bytes.is_empty() {
+                    return Err(invalid_cluster(
+                        node,
+                        format!("cluster {c} of group {gi} is missing or repeated"),
+                    ));
+                }
+                e.set_group(id);
+                clusters.push(e);
+            }
+            let triangles: usize = clusters.iter().map(|c| c.triangles).sum();
             self.clusters += clusters.len() as u64;
             self.stored_triangles += triangles as u64;
             group_sources.clear();
@@ -733,9 +767,10 @@ impl<'h> LodState<'h> {
         writer: &mut StoreWriter,
         leaf: u32,
         dag: LodDag,
+        encoded: Vec<EncodedCluster>,
         seams: &SeamTable,
     ) -> Result<(), BuildError> {
-        let base = self.emit(writer, leaf, &dag, true)?;
+        let base = self.emit(writer, leaf, &dag, encoded, true)?;
         let roots = roots_of(&dag, base);
         let root_seams = seams.retain(root_positions(&roots), self.cell_range[leaf as usize]);
         let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
@@ -793,7 +828,8 @@ impl<'h> LodState<'h> {
                 e.error = hl.error;
                 e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
             }
-            let base = self.emit(writer, parent, &hl.dag, false)?;
+            let encoded = encode_clusters(&hl.dag).map_err(|m| invalid_cluster(parent, m))?;
+            let base = self.emit(writer, parent, &hl.dag, encoded, false)?;
             let roots = hl.roots(base);
             let root_seams = seams.retain(root_positions(&roots), range);
             self.roots[parent as usize] = Some((roots, root_seams));
@@ -805,6 +841,20 @@ impl<'h> LodState<'h> {
 /// Every vertex position of `roots`' clusters (repeats included).
 fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
     roots.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
+}
+
+/// Every cluster of `dag`, encoded for a page (group id 0 until [`LodState::emit`] sets it).
+fn encode_clusters(dag: &LodDag) -> Result<Vec<EncodedCluster>, String> {
+    dag.clusters
+        .iter()
+        .enumerate()
+        .map(|(i, c)| EncodedCluster::new(&page_cluster(c, 0)).map_err(|m| format!("cluster {i}: {m}")))
+        .collect()
+}
+
+/// A cluster the page codec refuses (a bug of the build, reported rather than written).
+fn invalid_cluster(node: u32, message: String) -> BuildError {
+    BuildError::store(tw_store::StoreError::Invalid(format!("hierarchy node {node}: {message}")))
 }
 
 fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {

@@ -159,6 +159,68 @@ pub fn encode_page(clusters: &[PageCluster], out: &mut Vec<u8>) -> Result<PageSu
     encode_page_with(clusters, out, None)
 }
 
+/// One cluster encoded on its own, as it will appear in a page: a page's bytes are its clusters'
+/// encodings one after the other, so clusters can be encoded on any thread, long before the
+/// page they go into is known, and concatenated later ([`encoded_page`]). The group id is the
+/// one field a builder may learn only later; [`EncodedCluster::set_group`] rewrites it.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct EncodedCluster {
+    pub bytes: Vec<u8>,
+    /// The cluster's [`decoded_len`].
+    pub decoded_len: usize,
+    pub triangles: usize,
+    pub level: u8,
+}
+
+/// Where the group id sits in a cluster's header (after counts, level and modes).
+const GROUP_OFFSET: usize = 4;
+
+impl EncodedCluster {
+    /// Encodes `c` (in canonical form, like [`encode_page`]); fails on a cluster that breaks the
+    /// limits of [`PageCluster::validate`].
+    pub fn new(c: &PageCluster) -> Result<EncodedCluster, String> {
+        c.validate()?;
+        let mut bytes = Vec::with_capacity(CLUSTER_HEADER_LEN + 8 * c.triangle_count());
+        encode_cluster(&c.canonical(), &mut bytes, None)?;
+        Ok(EncodedCluster {
+            bytes,
+            decoded_len: decoded_len(c.positions.len(), c.triangle_count()),
+            triangles: c.triangle_count(),
+            level: c.level,
+        })
+    }
+
+    /// The group id stored in the cluster's header.
+    pub fn group(&self) -> u32 {
+        let b = &self.bytes[GROUP_OFFSET..GROUP_OFFSET + 4];
+        u32::from_le_bytes([b[0], b[1], b[2], b[3]])
+    }
+
+    /// Rewrites the group id; the bytes are then those of the cluster encoded with that id.
+    pub fn set_group(&mut self, group: u32) {
+        self.bytes[GROUP_OFFSET..GROUP_OFFSET + 4].copy_from_slice(&group.to_le_bytes());
+    }
+}
+
+/// Appends the page made of `clusters` (each from [`EncodedCluster::new`]) to `out`: the same
+/// bytes as [`encode_page`] of the clusters they encode.
+pub fn encoded_page(clusters: &[EncodedCluster], out: &mut Vec<u8>) -> Result<PageSummary, String> {
+    if clusters.is_empty() {
+        return Err("a page needs at least one cluster".into());
+    }
+    let start = out.len();
+    let mut s = PageSummary { level_min: u8::MAX, ..Default::default() };
+    for c in clusters {
+        out.extend_from_slice(&c.bytes);
+        s.decoded_len += c.decoded_len;
+        s.triangles += c.triangles;
+        s.level_min = s.level_min.min(c.level);
+        s.level_max = s.level_max.max(c.level);
+    }
+    s.encoded_len = out.len() - start;
+    Ok(s)
+}
+
 pub(crate) fn encode_page_with(
     clusters: &[PageCluster],
     out: &mut Vec<u8>,
@@ -661,6 +723,33 @@ mod tests {
             round_trip(&cs, Some(mode));
         }
         round_trip(&cs, None);
+    }
+
+    #[test]
+    fn clusters_encoded_apart_make_the_same_page() {
+        let mut cs = grid_clusters(24, 16, 3, [1000, 2000, 3000], 3);
+        cs[1].level = 3;
+        let mut whole = Vec::new();
+        let expected = encode_page(&cs, &mut whole).unwrap();
+        // Encoded one by one under another group id, which is set afterwards.
+        let encoded: Vec<EncodedCluster> = cs
+            .iter()
+            .map(|c| {
+                let mut e = EncodedCluster::new(&PageCluster { group: 12345, ..c.clone() }).unwrap();
+                assert_eq!(e.group(), 12345);
+                e.set_group(c.group);
+                assert_eq!(e.group(), c.group);
+                e
+            })
+            .collect();
+        let mut apart = vec![0xAB];
+        let s = encoded_page(&encoded, &mut apart).unwrap();
+        assert_eq!(&apart[1..], &whole[..]);
+        assert_eq!(s, expected);
+        assert_eq!((s.level_min, s.level_max), (0, 3));
+        assert!(encoded_page(&[], &mut apart).is_err());
+        let bad = PageCluster { indices: vec![0, 1], ..cs[0].clone() };
+        assert!(EncodedCluster::new(&bad).is_err());
     }
 
     #[test]

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 
 use tw_core::direct_io::AlignedWriter;
 
-use crate::codec::{self, PageCluster};
+use crate::codec::{self, EncodedCluster, PageCluster};
 use crate::error::StoreError;
 use crate::format::{
     checksum, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Section, SectionKind, StrRef,
@@ -124,17 +124,41 @@ impl StoreWriter {
     /// Encodes `clusters` as the next page and writes it; returns its index. `root` marks a page
     /// of the coarsest levels that the runtime keeps resident.
     pub fn add_page(&mut self, clusters: &[PageCluster], root: bool) -> Result<u32, StoreError> {
-        let index =
-            u32::try_from(self.pages.len()).map_err(|_| StoreError::Invalid("too many pages".into()))?;
+        let index = self.next_page_index()?;
         self.scratch.clear();
         let s = codec::encode_page(clusters, &mut self.scratch)
             .map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
+        self.write_scratch_page(index, s, clusters.len(), root)
+    }
+
+    /// [`StoreWriter::add_page`] for clusters encoded beforehand ([`EncodedCluster::new`], on
+    /// any thread): writes the same bytes as `add_page` of the clusters they encode.
+    pub fn add_encoded_page(&mut self, clusters: &[EncodedCluster], root: bool) -> Result<u32, StoreError> {
+        let index = self.next_page_index()?;
+        self.scratch.clear();
+        let s = codec::encoded_page(clusters, &mut self.scratch)
+            .map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
+        self.write_scratch_page(index, s, clusters.len(), root)
+    }
+
+    fn next_page_index(&self) -> Result<u32, StoreError> {
+        u32::try_from(self.pages.len()).map_err(|_| StoreError::Invalid("too many pages".into()))
+    }
+
+    /// Writes the page encoded in `scratch` and records it in the page table.
+    fn write_scratch_page(
+        &mut self,
+        index: u32,
+        s: codec::PageSummary,
+        cluster_count: usize,
+        root: bool,
+    ) -> Result<u32, StoreError> {
         let too_big = || StoreError::Invalid(format!("page {index}: more than 4 GiB"));
         let entry = PageEntry {
             offset: self.pos,
             compressed_len: u32::try_from(s.encoded_len).map_err(|_| too_big())?,
             uncompressed_len: u32::try_from(s.decoded_len).map_err(|_| too_big())?,
-            cluster_count: clusters.len() as u32,
+            cluster_count: cluster_count as u32,
             triangle_count: s.triangles as u32,
             checksum: checksum(&self.scratch),
             level_min: s.level_min,
