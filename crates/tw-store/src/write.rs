@@ -124,35 +124,26 @@ impl StoreWriter {
     /// Encodes `clusters` as the next page and writes it; returns its index. `root` marks a page
     /// of the coarsest levels that the runtime keeps resident.
     pub fn add_page(&mut self, clusters: &[PageCluster], root: bool) -> Result<u32, StoreError> {
-        let index = self.next_page_index()?;
-        self.scratch.clear();
-        let s = codec::encode_page(clusters, &mut self.scratch)
-            .map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
-        self.write_scratch_page(index, s, clusters.len(), root)
+        self.add_page_with(clusters.len(), root, |out| codec::encode_page(clusters, out))
     }
 
     /// [`StoreWriter::add_page`] for clusters encoded beforehand ([`EncodedCluster::new`], on
     /// any thread): writes the same bytes as `add_page` of the clusters they encode.
     pub fn add_encoded_page(&mut self, clusters: &[EncodedCluster], root: bool) -> Result<u32, StoreError> {
-        let index = self.next_page_index()?;
-        self.scratch.clear();
-        let s = codec::encoded_page(clusters, &mut self.scratch)
-            .map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
-        self.write_scratch_page(index, s, clusters.len(), root)
+        self.add_page_with(clusters.len(), root, |out| codec::encoded_page(clusters, out))
     }
 
-    fn next_page_index(&self) -> Result<u32, StoreError> {
-        u32::try_from(self.pages.len()).map_err(|_| StoreError::Invalid("too many pages".into()))
-    }
-
-    /// Writes the page encoded in `scratch` and records it in the page table.
-    fn write_scratch_page(
+    /// Writes the page that `encode` appends to an empty buffer and records it in the page table.
+    fn add_page_with(
         &mut self,
-        index: u32,
-        s: codec::PageSummary,
         cluster_count: usize,
         root: bool,
+        encode: impl FnOnce(&mut Vec<u8>) -> Result<codec::PageSummary, String>,
     ) -> Result<u32, StoreError> {
+        let index =
+            u32::try_from(self.pages.len()).map_err(|_| StoreError::Invalid("too many pages".into()))?;
+        self.scratch.clear();
+        let s = encode(&mut self.scratch).map_err(|m| StoreError::Invalid(format!("page {index}: {m}")))?;
         let too_big = || StoreError::Invalid(format!("page {index}: more than 4 GiB"));
         let entry = PageEntry {
             offset: self.pos,

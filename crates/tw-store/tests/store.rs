@@ -9,7 +9,7 @@ use tw_store::format::{
     checksum, Header, PageEntry, Reader, SectionKind, GROUP_LEN, HEADER_CRC_AT, HEADER_LEN, NODE_LEN,
     PAGE_ENTRY_LEN, SOURCE_LEN,
 };
-use tw_store::{Group, Node, Object, PageCluster, Store, StoreError, StoreInfo, StoreWriter};
+use tw_store::{EncodedCluster, Group, Node, Object, PageCluster, Store, StoreError, StoreInfo, StoreWriter};
 
 fn info(input_triangles: u64) -> StoreInfo {
     StoreInfo {
@@ -257,6 +257,29 @@ fn round_trip_of_a_few_pages() {
 #[test]
 fn identical_input_gives_identical_bytes() {
     assert_eq!(store_bytes(&scene()), store_bytes(&scene()));
+}
+
+#[test]
+fn pages_of_clusters_encoded_apart_give_the_same_store() {
+    let s = scene();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("encoded.tw");
+    let mut w = StoreWriter::create(&path).unwrap();
+    for (i, (clusters, root)) in s.pages.iter().enumerate() {
+        // Encoded under group 0, as a builder's worker does, and given the group afterwards.
+        let encoded: Vec<EncodedCluster> = clusters
+            .iter()
+            .map(|c| {
+                let mut e = EncodedCluster::new(&PageCluster { group: 0, ..c.clone() }).unwrap();
+                e.set_group(c.group);
+                e
+            })
+            .collect();
+        assert_eq!(w.add_encoded_page(&encoded, *root).unwrap(), i as u32);
+    }
+    assert!(matches!(w.add_encoded_page(&[], false), Err(StoreError::Invalid(m)) if m.contains("page")));
+    w.finish(&info(36), &s.objects, &s.nodes, &s.groups, &s.sources).unwrap();
+    assert_eq!(std::fs::read(&path).unwrap(), store_bytes(&s));
 }
 
 #[test]
