@@ -9,7 +9,9 @@
 //! Clusters arrive encoded (`tw_store::EncodedCluster`, a cell's on the pool that built its
 //! DAG): a page is the concatenation of its clusters' encodings.
 
-use tw_store::{EncodedCluster, StoreWriter};
+use tw_store::{EncodedCluster, PageCluster, StoreWriter};
+
+use crate::types::{LodCluster, LodDag};
 
 use crate::error::BuildError;
 
@@ -105,5 +107,31 @@ impl PagePacker {
             self.flush(writer, slot)?;
         }
         Ok((self.placements, self.pages_written, self.root_pages))
+    }
+}
+
+/// Every cluster of `dag`, encoded for a page (group id 0 until the pipeline sets it).
+pub(crate) fn encode_clusters(dag: &LodDag) -> Result<Vec<EncodedCluster>, String> {
+    dag.clusters
+        .iter()
+        .enumerate()
+        .map(|(i, c)| EncodedCluster::new(&page_cluster(c, 0)).map_err(|m| format!("cluster {i}: {m}")))
+        .collect()
+}
+
+fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
+    PageCluster {
+        positions: c.positions.clone(),
+        indices: c.indices.clone(),
+        objects: c.objects.clone(),
+        self_error: c.self_error,
+        self_sphere: [
+            c.self_sphere.center[0],
+            c.self_sphere.center[1],
+            c.self_sphere.center[2],
+            c.self_sphere.radius,
+        ],
+        group,
+        level: c.level,
     }
 }

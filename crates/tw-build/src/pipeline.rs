@@ -10,11 +10,13 @@
 //!    with a cell outside the node's cell range, where a neighbouring subtree may be drawn finer
 //!    ([`crate::hlod::build_hlod`]); each bucket reads its own seams, and a subtree passes up
 //!    only those at its roots' vertices;
-//! 5. one pass over all cells: LOD of the cells on the pool ([`crate::lod::build_cell_lod`])
-//!    while, on the calling thread, in leaf order as they become ready, the cells' groups go to
-//!    pages ([`crate::pages`]) and their roots up the tree, where each node whose children are
-//!    complete gets its HLOD groups at once — so only the roots of the subtrees on the current
-//!    path are held in memory; a loader thread reads the next bucket (and its seams) while the
+//! 5. one pass over all cells: LOD of the cells on the pool ([`crate::lod::build_cell_lod`],
+//!    their clusters encoded there too) while, on the calling thread (the consumer), in leaf
+//!    order as they become ready, the cells' groups go to pages ([`crate::pages`]) and their
+//!    roots up the tree. A node whose children are complete has its HLOD built by the pool
+//!    between cells (`hlod_jobs`) and emitted `HLOD_LAG` cells later, a point fixed by
+//!    the cell order — so only the roots of the subtrees on the current path, and the nodes in
+//!    flight, are held in memory; a loader thread reads the next bucket (and its seams) while the
 //!    current one is built (`BucketQueue`: two buckets held, each a sixth of the budget);
 //! 6. write: group (with each group's sources, the groups its clusters were simplified from),
 //!    node and object tables, atomically ([`tw_store::StoreWriter`]).
@@ -26,17 +28,18 @@ use std::time::Instant;
 
 use tw_io::scene::SceneProgress;
 use tw_io::Scene;
-use tw_store::{EncodedCluster, PageCluster, StoreInfo, StoreWriter};
+use tw_store::{EncodedCluster, StoreInfo, StoreWriter};
 
 use crate::cells::CellFiles;
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
-use crate::hlod::{build_hlod, roots_of, HlodOutcome, HlodParams, Roots};
+use crate::hlod::{roots_of, HlodOutcome, HlodParams, Roots};
+use crate::hlod_jobs::{HlodBuilt, HlodInput, HlodJob, HlodJobs};
 use crate::lod::{build_cell_lod_with_seams, LodParams};
-use crate::pages::{PagePacker, PageParams};
+use crate::pages::{encode_clusters, PagePacker, PageParams};
 use crate::redefine::{redefine, RedefineParams, RedefineReport};
 use crate::seams::{SeamFiles, SeamTable};
-use crate::types::{LodCluster, LodDag, LodGroup};
+use crate::types::{LodDag, LodGroup};
 
 /// Everything `terawalk build` can set.
 #[derive(Clone, Debug)]
@@ -262,6 +265,7 @@ fn build_with_pool(
     // bucket and its seams while the current one is built, so the pool neither waits for the
     // read nor drains at a bucket's end (at most two buckets are held).
     let queue = BucketQueue::new(cells.bucket_count());
+    let jobs = HlodJobs::new(&grid, &options.hlod);
     std::thread::scope(|scope| -> Result<(), BuildError> {
         let loader = scope.spawn(|| {
             queue.load_all(|b| {
@@ -283,6 +287,7 @@ fn build_with_pool(
                 let encoded = encode_clusters(&dag);
                 Some((dag, encoded))
             },
+            &|| jobs.run_one(),
             |cell| {
                 cell.as_ref().map_or(0, |(dag, encoded)| {
                     let encoded_bytes =
@@ -302,7 +307,10 @@ fn build_with_pool(
                 let r = encoded
                     .map_err(|m| invalid_cluster(leaf, m))
                     .and_then(|encoded| state.add_cell(&mut writer, leaf, dag, encoded, &loaded.seams))
-                    .and_then(|()| state.complete_upwards(&mut writer, leaf, &grid, &options.hlod));
+                    .and_then(|()| {
+                        state.start_parent(leaf, i + HLOD_LAG, &jobs);
+                        state.emit_due(&mut writer, Some(i), &jobs)
+                    });
                 consumer_busy += busy_since.elapsed();
                 if r.is_err() {
                     // Workers waiting for a bucket the loader will not read must wake up.
@@ -324,6 +332,10 @@ fn build_with_pool(
         queue.stop();
         let loaded = loader.join().map_err(|_| BuildError::Param("bucket loader panicked".into()))?;
         let held = result?;
+        // The nodes still pending: the top of the hierarchy, above the last cells.
+        let busy_since = Instant::now();
+        state.emit_due(&mut writer, None, &jobs)?;
+        consumer_busy += busy_since.elapsed();
         tracing::debug!(
             results = held.results,
             bytes = held.bytes,
@@ -540,6 +552,7 @@ fn for_each_in_order<T, P, W, C>(
     n: usize,
     window: Window,
     produce: P,
+    side: &(dyn Fn() -> bool + Sync),
     weigh: W,
     mut consume: C,
 ) -> Result<Window, BuildError>
@@ -574,6 +587,8 @@ where
                 for _ in 0..pool.current_num_threads() {
                     let tx = tx.clone();
                     s.spawn(move |_| loop {
+                        // Side jobs first: the consumer will need them before the next index.
+                        while !stop.load(Ordering::Relaxed) && side() {}
                         if stop.load(Ordering::Relaxed) {
                             return;
                         }
@@ -587,7 +602,18 @@ where
                             if i < done + window.results && (i == done || st.bytes <= window.bytes) {
                                 break;
                             }
-                            st = state.1.wait(st).unwrap_or_else(|e| e.into_inner());
+                            // Held up by the window: do side jobs meanwhile (the consumer starts
+                            // them, and wakes the workers after every result it takes).
+                            drop(st);
+                            let ran = side();
+                            st = lock(&state.0);
+                            if !ran {
+                                let done = st.consumed;
+                                if i < done + window.results && (i == done || st.bytes <= window.bytes) {
+                                    break;
+                                }
+                                st = state.1.wait(st).unwrap_or_else(|e| e.into_inner());
+                            }
                         }
                         drop(st);
                         if stop.load(Ordering::Relaxed) {
@@ -634,6 +660,11 @@ where
     })
 }
 
+/// Cells the consumer takes between starting an HLOD node and emitting it: the time the pool
+/// has to build it. Emitting at a point fixed by the cell order keeps the store independent of
+/// the threads; a node not built by then is built by the consumer itself.
+const HLOD_LAG: usize = 8;
+
 /// The bottom-up state of phase 5.
 struct LodState<'h> {
     hierarchy: &'h Hierarchy,
@@ -658,6 +689,8 @@ struct LodState<'h> {
     hlod: Vec<HlodDepthStats>,
     /// Cells, their level-0 triangles and their root groups' triangles (where the cell DAG stops).
     cell_counts: (u64, u64, u64),
+    /// HLOD nodes started and not yet emitted, with the cell after which each is due.
+    pending: std::collections::VecDeque<(usize, std::sync::Arc<HlodJob>)>,
 }
 
 impl<'h> LodState<'h> {
@@ -703,6 +736,7 @@ impl<'h> LodState<'h> {
             stored_triangles: 0,
             hlod: Vec::new(),
             cell_counts: (0, 0, 0),
+            pending: std::collections::VecDeque::new(),
         }
     }
 
@@ -781,60 +815,79 @@ impl<'h> LodState<'h> {
         Ok(())
     }
 
-    /// Builds the HLOD of every ancestor of `node` whose children are all complete.
-    fn complete_upwards(
+    /// Starts the HLOD of `node`'s parent if all its children are complete, to be emitted when
+    /// the consumer has taken cell `due` (or at the end).
+    fn start_parent(&mut self, node: u32, due: usize, jobs: &HlodJobs) {
+        let parent = self.parent[node as usize];
+        if parent == u32::MAX {
+            return;
+        }
+        let children = self.hierarchy.nodes[parent as usize].children();
+        if children.clone().any(|c| self.roots[c].is_none()) {
+            return;
+        }
+        let (children, child_seams): (Vec<Roots>, Vec<SeamTable>) =
+            children.map(|c| self.roots[c].take().expect("checked above")).unzip();
+        let range = self.cell_range[parent as usize];
+        let job = jobs.start(HlodInput { node: parent, children, child_seams, range });
+        self.pending.push_back((due, job));
+    }
+
+    /// Emits the started HLOD nodes that are due once cell `cell` has been taken, in the order
+    /// they were started (with `None`, all of them, and the ancestors they complete). The
+    /// order depends on the cell order alone, not on which thread built a node or when.
+    fn emit_due(
         &mut self,
         writer: &mut StoreWriter,
-        mut node: u32,
-        grid: &crate::types::Grid,
-        params: &HlodParams,
+        cell: Option<usize>,
+        jobs: &HlodJobs,
     ) -> Result<(), BuildError> {
-        loop {
-            let parent = self.parent[node as usize];
-            if parent == u32::MAX {
+        while let Some((due, _)) = self.pending.front() {
+            if cell.is_some_and(|c| *due > c) {
                 return Ok(());
             }
-            let children = self.hierarchy.nodes[parent as usize].children();
-            if children.clone().any(|c| self.roots[c].is_none()) {
-                return Ok(());
-            }
-            let (child_roots, child_seams): (Vec<Roots>, Vec<SeamTable>) =
-                children.map(|c| self.roots[c].take().expect("checked above")).unzip();
-            let seams = SeamTable::merge(&child_seams);
-            // Only seams with cells outside this node's subtree stay locked.
-            let range = self.cell_range[parent as usize];
-            let external = |p: [u32; 3]| seams.external(p, range);
-            let hl = build_hlod(&child_roots, grid, params, &external);
-            let depth = self.depth[parent as usize] as usize;
-            if self.hlod.len() <= depth {
-                self.hlod.resize(depth + 1, HlodDepthStats::default());
-            }
-            let (d, st) = (&mut self.hlod[depth], &hl.stats);
-            d.nodes += 1;
-            d.triangles_in += st.triangles_in as u64;
-            d.target += st.target as u64;
-            d.triangles_out += st.triangles_out as u64;
-            d.on_target += (st.triangles_out <= st.target + st.target / 8) as u64;
-            match st.outcome {
-                HlodOutcome::Unchanged => d.unchanged += 1,
-                HlodOutcome::Regular => d.regular += 1,
-                HlodOutcome::Sloppy => d.sloppy += 1,
-                HlodOutcome::Merged => d.merged += 1,
-            }
-            d.max_error = d.max_error.max(st.error);
-            d.pruned += st.pruned as u64;
-            for &g in &hl.replaced {
-                let e = &mut self.groups[g as usize];
-                e.error = hl.error;
-                e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
-            }
-            let encoded = encode_clusters(&hl.dag).map_err(|m| invalid_cluster(parent, m))?;
-            let base = self.emit(writer, parent, &hl.dag, encoded, false)?;
-            let roots = hl.roots(base);
-            let root_seams = seams.retain(root_positions(&roots), range);
-            self.roots[parent as usize] = Some((roots, root_seams));
-            node = parent;
+            let (_, job) = self.pending.pop_front().expect("checked above");
+            let built = jobs.result(&job).map_err(BuildError::Param)?;
+            let node = built.node;
+            self.emit_hlod(writer, *built)?;
+            self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG, jobs);
         }
+        Ok(())
+    }
+
+    /// Records a built HLOD node: its statistics, the error and sphere of the groups it
+    /// replaces, its groups (to pages), and its roots for its parent.
+    fn emit_hlod(&mut self, writer: &mut StoreWriter, built: HlodBuilt) -> Result<(), BuildError> {
+        let HlodBuilt { node, hl, encoded, seams, range } = built;
+        let depth = self.depth[node as usize] as usize;
+        if self.hlod.len() <= depth {
+            self.hlod.resize(depth + 1, HlodDepthStats::default());
+        }
+        let (d, st) = (&mut self.hlod[depth], &hl.stats);
+        d.nodes += 1;
+        d.triangles_in += st.triangles_in as u64;
+        d.target += st.target as u64;
+        d.triangles_out += st.triangles_out as u64;
+        d.on_target += (st.triangles_out <= st.target + st.target / 8) as u64;
+        match st.outcome {
+            HlodOutcome::Unchanged => d.unchanged += 1,
+            HlodOutcome::Regular => d.regular += 1,
+            HlodOutcome::Sloppy => d.sloppy += 1,
+            HlodOutcome::Merged => d.merged += 1,
+        }
+        d.max_error = d.max_error.max(st.error);
+        d.pruned += st.pruned as u64;
+        for &g in &hl.replaced {
+            let e = &mut self.groups[g as usize];
+            e.error = hl.error;
+            e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
+        }
+        let encoded = encoded.map_err(|m| invalid_cluster(node, m))?;
+        let base = self.emit(writer, node, &hl.dag, encoded, false)?;
+        let roots = hl.roots(base);
+        let root_seams = seams.retain(root_positions(&roots), range);
+        self.roots[node as usize] = Some((roots, root_seams));
+        Ok(())
     }
 }
 
@@ -843,35 +896,9 @@ fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
     roots.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
 }
 
-/// Every cluster of `dag`, encoded for a page (group id 0 until [`LodState::emit`] sets it).
-fn encode_clusters(dag: &LodDag) -> Result<Vec<EncodedCluster>, String> {
-    dag.clusters
-        .iter()
-        .enumerate()
-        .map(|(i, c)| EncodedCluster::new(&page_cluster(c, 0)).map_err(|m| format!("cluster {i}: {m}")))
-        .collect()
-}
-
 /// A cluster the page codec refuses (a bug of the build, reported rather than written).
 fn invalid_cluster(node: u32, message: String) -> BuildError {
     BuildError::store(tw_store::StoreError::Invalid(format!("hierarchy node {node}: {message}")))
-}
-
-fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
-    PageCluster {
-        positions: c.positions.clone(),
-        indices: c.indices.clone(),
-        objects: c.objects.clone(),
-        self_error: c.self_error,
-        self_sphere: [
-            c.self_sphere.center[0],
-            c.self_sphere.center[1],
-            c.self_sphere.center[2],
-            c.self_sphere.radius,
-        ],
-        group,
-        level: c.level,
-    }
 }
 
 fn store_group(g: &LodGroup, node: u32, triangles: u32, cluster_count: u32) -> tw_store::Group {
@@ -923,6 +950,7 @@ fn store_nodes(h: &Hierarchy, node_groups: &[(u32, u32)], groups: &[tw_store::Gr
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::types::LodCluster;
 
     fn pool(n: usize) -> rayon::ThreadPool {
         rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap()
@@ -943,6 +971,7 @@ mod tests {
                 100,
                 window,
                 produce,
+                &|| false,
                 |_| 0,
                 |i, v| {
                     got.push((i, v));
@@ -968,6 +997,7 @@ mod tests {
                 produced.fetch_add(1, Ordering::SeqCst);
                 i
             },
+            &|| false,
             |_| 0,
             |i, _| {
                 std::thread::sleep(std::time::Duration::from_micros(200));
@@ -992,6 +1022,7 @@ mod tests {
                 200,
                 window,
                 |i| vec![i as u8; 1_000],
+                &|| false,
                 |v| v.len(),
                 |i, v| {
                     std::thread::sleep(std::time::Duration::from_micros(100));
@@ -1015,6 +1046,7 @@ mod tests {
             50,
             window,
             |i| vec![0u8; 100 + i],
+            &|| false,
             |v| v.len(),
             |_, _| {
                 got += 1;
@@ -1023,6 +1055,42 @@ mod tests {
         )
         .unwrap();
         assert_eq!(got, 50);
+    }
+
+    #[test]
+    fn for_each_in_order_runs_side_jobs_on_the_workers() {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        // The consumer queues a side job with every result; workers take them between indices.
+        let queued = AtomicUsize::new(0);
+        let ran = AtomicUsize::new(0);
+        let side = || {
+            let take = queued.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |q| q.checked_sub(1)).is_ok();
+            if take {
+                ran.fetch_add(1, Ordering::SeqCst);
+            }
+            take
+        };
+        let mut got = 0;
+        for_each_in_order(
+            &pool(2),
+            300,
+            Window { results: 4, bytes: usize::MAX },
+            |i| {
+                std::thread::sleep(std::time::Duration::from_micros(50));
+                i
+            },
+            &side,
+            |_| 0,
+            |i, v| {
+                assert_eq!(i, v);
+                got += 1;
+                queued.fetch_add(1, Ordering::SeqCst);
+                Ok(())
+            },
+        )
+        .unwrap();
+        assert_eq!(got, 300);
+        assert!(ran.load(Ordering::SeqCst) > 0, "no side job ran on a worker");
     }
 
     #[test]
@@ -1051,7 +1119,8 @@ mod tests {
     #[test]
     fn for_each_in_order_handles_nothing() {
         let window = Window { results: 16, bytes: usize::MAX };
-        for_each_in_order(&pool(2), 0, window, |i| i, |_| 0, |_, _| panic!("nothing to consume")).unwrap();
+        for_each_in_order(&pool(2), 0, window, |i| i, &|| false, |_| 0, |_, _| panic!("nothing to consume"))
+            .unwrap();
     }
 
     #[test]
@@ -1067,6 +1136,7 @@ mod tests {
                 std::thread::sleep(std::time::Duration::from_micros(20));
                 i
             },
+            &|| false,
             |_| 0,
             |i, _| {
                 consumed.push(i);
