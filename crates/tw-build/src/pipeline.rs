@@ -341,7 +341,10 @@ fn build_with_pool(
             bytes = held.bytes,
             "lod: most cell DAGs held ahead of the consumer"
         );
-        tracing::debug!(seconds = consumer_busy.as_secs_f64(), "lod: consumer busy (pages, HLOD nodes emitted, or built when due)");
+        tracing::debug!(
+            seconds = consumer_busy.as_secs_f64(),
+            "lod: consumer busy (pages, HLOD nodes emitted, or built when due)"
+        );
         loaded
     })?;
     progress.end_phase();
