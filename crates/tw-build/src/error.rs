@@ -33,6 +33,9 @@ pub enum BuildError {
     /// A working file does not hold what this build wrote into it (changed on disk meanwhile).
     #[error("{}: working file is corrupt: {message}", path.display())]
     Corrupt { path: PathBuf, message: String },
+    /// A helper thread or job of the build failed where it never should (a bug).
+    #[error("internal error (a bug of terawalk, please report it): {0}")]
+    Internal(String),
 }
 
 impl BuildError {

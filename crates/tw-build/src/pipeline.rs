@@ -260,8 +260,9 @@ fn build_with_pool(
     // The consumer's working time: the floor of this phase however many cores the pool has.
     let mut consumer_busy = std::time::Duration::ZERO;
     // One pass over every cell (cells are numbered in bucket order): the pool builds the cells'
-    // DAGs, taking cells in order; this thread consumes them in cell order (pages, HLOD) as they
-    // come, so the sequential part overlaps the parallel one. A loader thread reads the next
+    // DAGs, taking cells in order, and the HLOD nodes this thread starts; this thread consumes
+    // the DAGs in cell order (pages; HLOD nodes started and emitted) as they come, so the
+    // sequential part overlaps the parallel one. A loader thread reads the next
     // bucket and its seams while the current one is built, so the pool neither waits for the
     // read nor drains at a bucket's end (at most two buckets are held).
     let queue = BucketQueue::new(cells.bucket_count());
@@ -330,7 +331,7 @@ fn build_with_pool(
             },
         );
         queue.stop();
-        let loaded = loader.join().map_err(|_| BuildError::Param("bucket loader panicked".into()))?;
+        let loaded = loader.join().map_err(|_| BuildError::Internal("the bucket loader panicked".into()))?;
         let held = result?;
         // The nodes still pending: the top of the hierarchy, above the last cells.
         let busy_since = Instant::now();
@@ -548,8 +549,10 @@ fn lod_window(memory: u64) -> Window {
 /// worker results are held, and past `window.bytes` only one more per worker, however slow
 /// `consume` is (without a window, a consumer slower than the pool let a whole bucket's cell
 /// DAGs pile up: ~250 MB on the 10^8-triangle plant). The consumer always gets its next index:
-/// the worker that took it does not wait. On the first error of `consume` the workers stop
-/// taking new indices and the error is returned. Returns the most it held.
+/// the worker that took it does not wait. Workers call `side` (until it returns false: it ran
+/// nothing) before taking an index and while the window holds them back: work that `consume`
+/// queues for the pool. On the first error of `consume` the workers stop taking new indices
+/// and the error is returned. Returns the most it held.
 fn for_each_in_order<T, P, W, C>(
     pool: &rayon::ThreadPool,
     n: usize,
@@ -850,7 +853,7 @@ impl<'h> LodState<'h> {
                 return Ok(());
             }
             let (_, job) = self.pending.pop_front().expect("checked above");
-            let built = jobs.result(&job).map_err(BuildError::Param)?;
+            let built = jobs.result(&job).map_err(BuildError::Internal)?;
             let node = built.node;
             self.emit_hlod(writer, *built)?;
             self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG, jobs);

@@ -142,7 +142,7 @@ impl SeamFiles {
             for b in 0..n {
                 let bucket = match next.take().map(|h| h.join()) {
                     Some(Ok(r)) => r?,
-                    _ => return Err(BuildError::Param("bucket reader panicked".into())),
+                    _ => return Err(BuildError::Internal("the bucket reader panicked".into())),
                 };
                 if b + 1 < n {
                     next = Some(scope.spawn(move || cells.read_bucket(b + 1)));
