@@ -11,9 +11,8 @@
 
 use tw_store::{EncodedCluster, PageCluster, StoreWriter};
 
-use crate::types::{LodCluster, LodDag};
-
 use crate::error::BuildError;
+use crate::types::{LodCluster, LodDag};
 
 /// Page sizing.
 #[derive(Clone, Copy, Debug)]
@@ -115,11 +114,12 @@ pub(crate) fn encode_clusters(dag: &LodDag) -> Result<Vec<EncodedCluster>, Strin
     dag.clusters
         .iter()
         .enumerate()
-        .map(|(i, c)| EncodedCluster::new(&page_cluster(c, 0)).map_err(|m| format!("cluster {i}: {m}")))
+        .map(|(i, c)| EncodedCluster::new(&page_cluster(c)).map_err(|m| format!("cluster {i}: {m}")))
         .collect()
 }
 
-fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
+/// `c` as the codec takes it, under group 0.
+fn page_cluster(c: &LodCluster) -> PageCluster {
     PageCluster {
         positions: c.positions.clone(),
         indices: c.indices.clone(),
@@ -131,7 +131,7 @@ fn page_cluster(c: &LodCluster, group: u32) -> PageCluster {
             c.self_sphere.center[2],
             c.self_sphere.radius,
         ],
-        group,
+        group: 0,
         level: c.level,
     }
 }

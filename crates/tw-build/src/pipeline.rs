@@ -602,22 +602,17 @@ where
                         if i >= n {
                             return;
                         }
+                        let fits = |st: &Ahead| {
+                            i < st.consumed + window.results && (i == st.consumed || st.bytes <= window.bytes)
+                        };
                         let mut st = lock(&state.0);
-                        while !stop.load(Ordering::Relaxed) {
-                            let done = st.consumed;
-                            if i < done + window.results && (i == done || st.bytes <= window.bytes) {
-                                break;
-                            }
+                        while !stop.load(Ordering::Relaxed) && !fits(&st) {
                             // Held up by the window: do side jobs meanwhile (the consumer starts
                             // them, and wakes the workers after every result it takes).
                             drop(st);
                             let ran = side();
                             st = lock(&state.0);
-                            if !ran {
-                                let done = st.consumed;
-                                if i < done + window.results && (i == done || st.bytes <= window.bytes) {
-                                    break;
-                                }
+                            if !ran && !fits(&st) {
                                 st = state.1.wait(st).unwrap_or_else(|e| e.into_inner());
                             }
                         }

@@ -179,9 +179,14 @@ impl EncodedCluster {
     /// Encodes `c` (in canonical form, like [`encode_page`]); fails on a cluster that breaks the
     /// limits of [`PageCluster::validate`].
     pub fn new(c: &PageCluster) -> Result<EncodedCluster, String> {
+        EncodedCluster::with_mode(c, None)
+    }
+
+    /// [`EncodedCluster::new`], with the position encoding forced (tests) or chosen (`None`).
+    fn with_mode(c: &PageCluster, force: Option<PositionMode>) -> Result<EncodedCluster, String> {
         c.validate()?;
         let mut bytes = Vec::with_capacity(CLUSTER_HEADER_LEN + 8 * c.triangle_count());
-        encode_cluster(&c.canonical(), &mut bytes, None)?;
+        encode_cluster(&c.canonical(), &mut bytes, force)?;
         Ok(EncodedCluster {
             bytes,
             decoded_len: decoded_len(c.positions.len(), c.triangle_count()),
@@ -226,21 +231,14 @@ pub(crate) fn encode_page_with(
     out: &mut Vec<u8>,
     force: Option<PositionMode>,
 ) -> Result<PageSummary, String> {
-    if clusters.is_empty() {
-        return Err("a page needs at least one cluster".into());
-    }
-    let start = out.len();
-    let mut s = PageSummary { level_min: u8::MAX, ..Default::default() };
-    for (i, c) in clusters.iter().enumerate() {
-        c.validate().map_err(|m| format!("cluster {i} of the page: {m}"))?;
-        encode_cluster(&c.canonical(), out, force)?;
-        s.decoded_len += decoded_len(c.positions.len(), c.triangle_count());
-        s.triangles += c.triangle_count();
-        s.level_min = s.level_min.min(c.level);
-        s.level_max = s.level_max.max(c.level);
-    }
-    s.encoded_len = out.len() - start;
-    Ok(s)
+    let encoded = clusters
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            EncodedCluster::with_mode(c, force).map_err(|m| format!("cluster {i} of the page: {m}"))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    encoded_page(&encoded, out)
 }
 
 fn bits32(x: u32) -> u32 {
