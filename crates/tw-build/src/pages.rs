@@ -9,7 +9,7 @@
 //! Clusters arrive encoded (`tw_store::EncodedCluster`, a cell's on the pool that built its
 //! DAG): a page is the concatenation of its clusters' encodings.
 
-use tw_store::{EncodedCluster, PageCluster, StoreWriter};
+use tw_store::{ClusterParts, EncodedCluster, StoreWriter};
 
 use crate::error::BuildError;
 use crate::types::{LodCluster, LodDag};
@@ -114,16 +114,16 @@ pub(crate) fn encode_clusters(dag: &LodDag) -> Result<Vec<EncodedCluster>, Strin
     dag.clusters
         .iter()
         .enumerate()
-        .map(|(i, c)| EncodedCluster::new(&page_cluster(c)).map_err(|m| format!("cluster {i}: {m}")))
+        .map(|(i, c)| EncodedCluster::from_parts(cluster_parts(c)).map_err(|m| format!("cluster {i}: {m}")))
         .collect()
 }
 
 /// `c` as the codec takes it, under group 0.
-fn page_cluster(c: &LodCluster) -> PageCluster {
-    PageCluster {
-        positions: c.positions.clone(),
-        indices: c.indices.clone(),
-        objects: c.objects.clone(),
+fn cluster_parts(c: &LodCluster) -> ClusterParts<'_> {
+    ClusterParts {
+        positions: &c.positions,
+        indices: &c.indices,
+        objects: &c.objects,
         self_error: c.self_error,
         self_sphere: [
             c.self_sphere.center[0],

@@ -72,7 +72,7 @@ pub mod format;
 mod read;
 mod write;
 
-pub use codec::{EncodedCluster, PageCluster, MAX_TRIANGLES, MAX_VERTICES};
+pub use codec::{ClusterParts, EncodedCluster, PageCluster, MAX_TRIANGLES, MAX_VERTICES};
 pub use error::{CodecError, StoreError};
 pub use format::{Group, GroupLinks, Header, Node, PageEntry, FORMAT_VERSION};
 pub use read::{Store, VerifyReport};
