@@ -28,6 +28,11 @@
 //! in order (`append`): the working file, the bounds and the object records are those of the
 //! one-by-one path, whatever the thread count.
 //!
+//! Each object's record also keeps what redefinition's pass B would otherwise read the file
+//! for, for the objects it does not cut: the box of its vertices' offsets and the sum of its
+//! triangles' centroids, added one triangle at a time in file order (pieces compute the
+//! centroids in parallel; they are summed as the pieces are appended, in order).
+//!
 //! Memory: O(objects) (one record per object) and two batches' records; the triangles go to
 //! disk as they arrive.
 
@@ -221,6 +226,9 @@ pub fn ingest_in(
             name: o.name,
             color: o.color,
             triangles: o.triangles,
+            offset_min: o.min,
+            offset_max: o.max,
+            centroid_sum: o.sum,
             bounds: if o.triangles == 0 {
                 GridBox::EMPTY
             } else {
@@ -237,6 +245,17 @@ struct ObjectAcc {
     triangles: u64,
     min: [f32; 3],
     max: [f32; 3],
+    /// Centroids summed one triangle at a time in file order (see [`ObjectRecord::centroid_sum`]).
+    sum: [f64; 3],
+}
+
+impl ObjectAcc {
+    #[inline]
+    fn add_centroid(&mut self, c: [f32; 3]) {
+        for i in 0..3 {
+            self.sum[i] += c[i] as f64;
+        }
+    }
 }
 
 struct IngestSink<'p> {
@@ -285,9 +304,13 @@ fn append(
         if let Some(e) = p.error.take() {
             return Err(e);
         }
+        let mut centroids = p.centroids.iter();
         for &(object, n, min, max) in &p.runs {
             let acc = &mut objects[object as usize];
             acc.triangles += n;
+            for &c in centroids.by_ref().take(n as usize) {
+                acc.add_centroid(c);
+            }
             for i in 0..3 {
                 acc.min[i] = acc.min[i].min(min[i]);
                 acc.max[i] = acc.max[i].max(max[i]);
@@ -316,6 +339,8 @@ struct Piece {
     bytes: Vec<u8>,
     /// (object, triangles, min, max) per run of one object.
     runs: Vec<(ObjectId, u64, [f32; 3], [f32; 3])>,
+    /// Each triangle's centroid, in order (summed per object when appended).
+    centroids: Vec<[f32; 3]>,
     error: Option<PieceError>,
 }
 
@@ -325,6 +350,7 @@ impl Piece {
     fn fill(&mut self, batch: &dyn TriangleBatch, origin: [f64; 3], objects: usize) {
         self.bytes.clear();
         self.runs.clear();
+        self.centroids.clear();
         self.error = None;
         let mut tris = Vec::with_capacity(BATCH_STEP);
         for start in self.range.clone().step_by(BATCH_STEP) {
@@ -364,8 +390,10 @@ impl Piece {
                 }
             }
             let mut rec = [0u8; RECORD_BYTES];
-            WorkTri { p, object: t.object }.encode(&mut rec);
+            let tri = WorkTri { p, object: t.object };
+            tri.encode(&mut rec);
             self.bytes.extend_from_slice(&rec);
+            self.centroids.push(tri.centroid());
         }
         Ok(())
     }
@@ -413,12 +441,14 @@ impl IngestSink<'_> {
                 acc.max[i] = acc.max[i].max(x);
             }
         }
+        let tri = WorkTri { p, object };
+        acc.add_centroid(tri.centroid());
         for i in 0..3 {
             self.min[i] = self.min[i].min(acc.min[i]);
             self.max[i] = self.max[i].max(acc.max[i]);
         }
         let mut rec = [0u8; RECORD_BYTES];
-        WorkTri { p, object }.encode(&mut rec);
+        tri.encode(&mut rec);
         if let Err(e) = self.out.write(0, &rec) {
             return Err(self.fail(e));
         }
@@ -441,6 +471,7 @@ impl TriangleSink for IngestSink<'_> {
             triangles: 0,
             min: [f32::INFINITY; 3],
             max: [f32::NEG_INFINITY; 3],
+            sum: [0.0; 3],
         });
         Ok(())
     }

@@ -85,6 +85,13 @@ pub struct ObjectRecord {
     pub color: Option<[u8; 4]>,
     pub triangles: u64,
     pub bounds: GridBox,
+    /// The box of its vertices as working-file offsets (`f32`, before quantization; +∞/−∞
+    /// when it has no triangle): what a scan of its triangles would find.
+    pub offset_min: [f32; 3],
+    pub offset_max: [f32; 3],
+    /// The sum of its triangles' centroids ([`crate::ingest::WorkTri::centroid`] as `f64`),
+    /// added in working-file order: what a serial scan of its triangles would find.
+    pub centroid_sum: [f64; 3],
 }
 
 /// The indexed mesh of one cell (a redefined object: a hierarchy leaf), read back from the
