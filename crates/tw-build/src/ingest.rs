@@ -252,8 +252,8 @@ struct ObjectAcc {
 impl ObjectAcc {
     #[inline]
     fn add_centroid(&mut self, c: [f32; 3]) {
-        for i in 0..3 {
-            self.sum[i] += c[i] as f64;
+        for (s, x) in self.sum.iter_mut().zip(c) {
+            *s += x as f64;
         }
     }
 }
