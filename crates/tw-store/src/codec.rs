@@ -176,8 +176,20 @@ impl ClusterParts<'_> {
 /// Rotates each triangle to its lexicographically smallest rotation (keeps the winding).
 fn rotate_triangles(indices: &mut [u8]) {
     for t in indices.chunks_exact_mut(3) {
-        let r = [[t[0], t[1], t[2]], [t[1], t[2], t[0]], [t[2], t[0], t[1]]];
-        let best = r.into_iter().min().unwrap_or([t[0], t[1], t[2]]);
+        let (a, b, c) = (t[0], t[1], t[2]);
+        // Distinct indices (all but degenerate triangles): the rotation that starts at the
+        // smallest. Otherwise compare the three rotations whole.
+        let best = if a != b && b != c && a != c {
+            if a < b && a < c {
+                [a, b, c]
+            } else if b < c {
+                [b, c, a]
+            } else {
+                [c, a, b]
+            }
+        } else {
+            [[a, b, c], [b, c, a], [c, a, b]].into_iter().min().unwrap_or([a, b, c])
+        };
         t.copy_from_slice(&best);
     }
 }
@@ -824,6 +836,20 @@ mod tests {
         assert!(encoded_page(&[], &mut apart).is_err());
         let bad = PageCluster { indices: vec![0, 1], ..cs[0].clone() };
         assert!(EncodedCluster::new(&bad).is_err());
+    }
+
+    #[test]
+    fn triangles_rotate_to_their_smallest_rotation() {
+        for a in 0..5u8 {
+            for b in 0..5u8 {
+                for c in 0..5u8 {
+                    let mut t = [a, b, c];
+                    rotate_triangles(&mut t);
+                    let best = [[a, b, c], [b, c, a], [c, a, b]].into_iter().min().unwrap();
+                    assert_eq!(t, best, "{a} {b} {c}");
+                }
+            }
+        }
     }
 
     #[test]
