@@ -1297,6 +1297,17 @@ mod tests {
 
     use crate::ingest::tests::ListObject as Obj;
 
+    #[test]
+    fn spans_to_read_are_sorted_joined_across_small_gaps_and_skip_empty_objects() {
+        let g = SPAN_GAP;
+        let span = vec![5 * g..6 * g, 0..0, 10..20, 20 + g..30 + g, 4 * g..4 * g + 1, 7..7];
+        // Objects 2 and 3 are one gap apart (joined); 4 and 0 are more than a gap from 3 but
+        // within one of each other; 1 and 5 have no triangle.
+        assert_eq!(joined_spans(&[0, 1, 2, 3, 4, 5], &span), vec![10..30 + g, 4 * g..6 * g]);
+        assert_eq!(joined_spans(&[3], &span), vec![20 + g..30 + g]);
+        assert!(joined_spans(&[1, 5], &span).is_empty());
+    }
+
     /// A strip of `n` triangles along x from `x0` to `x0 + len`, at (y, z).
     fn strip(name: &str, n: usize, x0: f64, len: f64, y: f64, z: f64) -> Obj {
         let dx = len / n as f64;
