@@ -738,9 +738,10 @@ struct Pieces {
     centre: Vec<[f32; 3]>,
 }
 
-/// Pass B. Parallel: the pool decodes each chunk and finds the pieces ([`map_records`]), then
-/// accumulates them in [`LANES`] lanes by piece, so that each piece's centroid sum adds its
-/// triangles in file order, as a serial loop would.
+/// Pass B. A piece that is a whole object takes its ingest figures; only the file spans of the
+/// objects partition-I cuts ([`Samples::span`]) are read. Parallel: the pool decodes each chunk
+/// and finds the pieces ([`map_records`]), then accumulates them in [`LANES`] lanes by piece,
+/// so that each piece's centroid sum adds its triangles in file order, as a serial loop would.
 fn piece_stats(
     ing: &Ingested,
     assign: &Assigner,
