@@ -133,13 +133,14 @@ impl WorkFile {
         crate::workio::read_ahead_raw(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, f)
     }
 
-    /// [`WorkFile::scan_raw`] over the triangles `range` only.
-    pub fn scan_range_raw(
+    /// [`WorkFile::scan_raw`] over the triangles of `ranges` only, in the order given (each
+    /// range read on its own: nothing between them is read).
+    pub fn scan_ranges_raw(
         &self,
-        range: std::ops::Range<u64>,
+        ranges: &[std::ops::Range<u64>],
         f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>,
     ) -> Result<(), BuildError> {
-        crate::workio::read_range_raw(&self.path, self.triangles, range, RECORD_BYTES, SCAN_CHUNK, f)
+        crate::workio::read_ranges_raw(&self.path, self.triangles, ranges, RECORD_BYTES, SCAN_CHUNK, f)
     }
 }
 

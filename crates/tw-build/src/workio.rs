@@ -246,36 +246,57 @@ pub fn read_range_raw<F>(
     range: std::ops::Range<u64>,
     size: usize,
     chunk: usize,
+    f: F,
+) -> Result<(), BuildError>
+where
+    F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
+{
+    read_ranges_raw(path, file_records, std::slice::from_ref(&range), size, chunk, f)
+}
+
+/// [`read_range_raw`] over several record ranges, in the order given, through one reader: a
+/// chunk never spans two ranges, and each range is read from the device alone (its bytes
+/// rounded out to whole blocks; nothing between the ranges), so that many small ranges cost
+/// little more than their bytes.
+pub fn read_ranges_raw<F>(
+    path: &Path,
+    file_records: u64,
+    ranges: &[std::ops::Range<u64>],
+    size: usize,
+    chunk: usize,
     mut f: F,
 ) -> Result<(), BuildError>
 where
     F: FnMut(u64, &[u8]) -> Result<(), BuildError>,
 {
-    assert!(range.start <= range.end && range.end <= file_records, "{range:?} of {file_records} records");
-    let records = range.end - range.start;
-    let buffer = (records * size as u64).clamp(1, READ_BUFFER as u64) as usize;
-    let mut file = DirectReader::open_at(path, buffer, range.start * size as u64)
-        .map_err(|e| BuildError::io(path, e))?;
+    for range in ranges {
+        assert!(range.start <= range.end && range.end <= file_records, "{range:?} of {file_records} records");
+    }
+    let total: u64 = ranges.iter().map(|r| r.end - r.start).sum();
+    let buffer = (total * size as u64).clamp(1, READ_BUFFER as u64) as usize;
+    let bytes = ranges.iter().map(|r| r.start * size as u64..r.end * size as u64).collect();
+    let mut file = DirectReader::open_ranges(path, buffer, bytes).map_err(|e| BuildError::io(path, e))?;
     check_length(path, file.file_len(), file_records, size)?;
     let chunk = chunk.max(1);
-    let base = range.start;
     std::thread::scope(|scope| {
         let (tx, rx) = sync_channel::<Result<(u64, Vec<u8>), std::io::Error>>(1);
         let (give_back, recycled) = sync_channel::<Vec<u8>>(2);
         let reader = scope.spawn(move || {
-            let mut done = 0u64;
-            while done < records {
-                let n = (records - done).min(chunk as u64) as usize;
-                let mut bytes = recycled.try_recv().unwrap_or_default();
-                bytes.resize(n * size, 0);
-                if let Err(e) = file.read_exact(&mut bytes) {
-                    let _ = tx.send(Err(e));
-                    return;
+            for range in ranges {
+                let mut at = range.start;
+                while at < range.end {
+                    let n = (range.end - at).min(chunk as u64) as usize;
+                    let mut bytes = recycled.try_recv().unwrap_or_default();
+                    bytes.resize(n * size, 0);
+                    if let Err(e) = file.read_exact(&mut bytes) {
+                        let _ = tx.send(Err(e));
+                        return;
+                    }
+                    if tx.send(Ok((at, bytes))).is_err() {
+                        return; // the consumer stopped
+                    }
+                    at += n as u64;
                 }
-                if tx.send(Ok((base + done, bytes))).is_err() {
-                    return; // the consumer stopped
-                }
-                done += n as u64;
             }
         });
         let result = drain_chunks(path, rx, &give_back, |first, bytes: &Vec<u8>| f(first, bytes));
@@ -487,6 +508,24 @@ mod tests {
             })
             .unwrap();
             assert_eq!(seen, data[range.start as usize * 8..range.end as usize * 8], "{range:?}");
+        }
+        // Several ranges through one reader: chunks never span two, indices are the file's.
+        let ranges = [0..0, 3..250, 250..251, 700..1400, 2990..3000];
+        let mut seen = Vec::new();
+        let mut firsts = Vec::new();
+        read_ranges_raw(&path, 3000, &ranges, 8, 100, |first, b| {
+            firsts.push((first, b.len() as u64 / 8));
+            seen.extend_from_slice(b);
+            Ok(())
+        })
+        .unwrap();
+        let expected: Vec<u8> = ranges
+            .iter()
+            .flat_map(|r| data[r.start as usize * 8..r.end as usize * 8].iter().copied())
+            .collect();
+        assert_eq!(seen, expected);
+        for (first, n) in firsts {
+            assert!(ranges.iter().any(|r| r.start <= first && first + n <= r.end), "chunk {first}+{n}");
         }
         let (path, _) = records_file(dir.path(), 10);
         let e = read_ahead_raw(&path, 11, 8, 4, |_, _| Ok(())).unwrap_err();

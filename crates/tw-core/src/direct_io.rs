@@ -177,18 +177,21 @@ const READS_IN_FLIGHT: usize = 3;
 /// A sequential reader of a whole file, direct where possible. A background thread reads the
 /// next buffers while the caller consumes this one, so the device's latency (direct reads are
 /// synchronous) overlaps the caller's work. Memory: three buffers.
+///
+/// [`DirectReader::open_ranges`] reads only some byte ranges of the file, one after the other,
+/// as if they were one stream: each range costs one read per buffer it fills, never more than
+/// its own bytes rounded out to [`DIRECT_ALIGN`].
 pub struct DirectReader {
     len: u64,
     direct: bool,
-    /// Filled buffers from the reader thread; an error ends the stream.
-    filled: Option<Receiver<io::Result<AlignedBuf>>>,
+    /// Filled buffers from the reader thread, each with the count of bytes at its start that
+    /// come before its range (alignment); an error ends the stream.
+    filled: Option<Receiver<io::Result<(AlignedBuf, usize)>>>,
     recycle: Option<SyncSender<AlignedBuf>>,
     thread: Option<JoinHandle<()>>,
     buf: AlignedBuf,
     /// Next byte of `buf` to hand out.
     pos: usize,
-    /// Bytes still to skip before the first one handed out ([`DirectReader::open_at`]).
-    skip: usize,
 }
 
 impl DirectReader {
@@ -201,19 +204,29 @@ impl DirectReader {
     /// aligned offset below it and the bytes before `offset` are skipped). Reading stops where
     /// the caller stops: at most three buffers are read past what it took.
     pub fn open_at(path: &Path, buffer: usize, offset: u64) -> io::Result<DirectReader> {
-        let aligned = offset - offset % DIRECT_ALIGN as u64;
+        DirectReader::open_ranges(path, buffer, vec![offset..u64::MAX])
+    }
+
+    /// Opens `path` for reading the bytes of `ranges` (any offsets), in the order given, as one
+    /// stream. A range that runs past the end of the file gives the bytes up to the end.
+    pub fn open_ranges(
+        path: &Path,
+        buffer: usize,
+        ranges: Vec<std::ops::Range<u64>>,
+    ) -> io::Result<DirectReader> {
         let (file, direct) = open_maybe_direct(OpenOptions::new().read(true), path)?;
         let len = file.metadata()?.len();
         let (to_reader, recycled) = sync_channel::<AlignedBuf>(READS_IN_FLIGHT);
         for _ in 0..READS_IN_FLIGHT {
             to_reader.send(AlignedBuf::new(buffer)).expect("the channel has room");
         }
-        let (to_caller, filled) = sync_channel::<io::Result<AlignedBuf>>(READS_IN_FLIGHT);
+        let (to_caller, filled) = sync_channel::<io::Result<(AlignedBuf, usize)>>(READS_IN_FLIGHT);
+        let ranges = ranges.into_iter().filter(|r| r.start < r.end).collect();
         let thread = std::thread::Builder::new().name("tw-direct-reader".into()).spawn(move || {
-            let mut source = Source { file, direct, offset: aligned, eof: false };
-            while !source.eof {
+            let mut source = Source { file, direct, ranges };
+            while !source.ranges.is_empty() {
                 let Ok(mut buf) = recycled.recv() else { return }; // the caller stopped
-                let r = source.fill(&mut buf).map(|()| buf);
+                let r = source.fill(&mut buf).map(|skip| (buf, skip));
                 let failed = r.is_err();
                 if to_caller.send(r).is_err() || failed {
                     return;
@@ -228,7 +241,6 @@ impl DirectReader {
             thread: Some(thread),
             buf: AlignedBuf::empty(),
             pos: 0,
-            skip: (offset - aligned) as usize,
         })
     }
 
@@ -247,28 +259,39 @@ impl DirectReader {
 struct Source {
     file: File,
     direct: bool,
-    /// File offset of the next read.
-    offset: u64,
-    eof: bool,
+    /// Byte ranges still to read, the first one partly read perhaps (never empty ones).
+    ranges: std::collections::VecDeque<std::ops::Range<u64>>,
 }
 
 impl Source {
-    /// Fills `buf` from the file (short only at the end of the file).
-    fn fill(&mut self, buf: &mut AlignedBuf) -> io::Result<()> {
-        let mut filled = 0;
+    /// Fills `buf` from the first range: as much of it as fits, read from the aligned offset at
+    /// or below its start and cut at its end (or the file's). Returns the count of bytes before
+    /// the range's start at the front of `buf`.
+    fn fill(&mut self, buf: &mut AlignedBuf) -> io::Result<usize> {
+        let Some(range) = self.ranges.front_mut() else {
+            buf.set_len(0);
+            return Ok(0);
+        };
+        let aligned = range.start - range.start % DIRECT_ALIGN as u64;
+        let skip = (range.start - aligned) as usize;
         let cap = buf.capacity();
+        // Only the range's bytes, rounded out to whole blocks.
+        let want = (range.end - aligned).div_ceil(DIRECT_ALIGN as u64).saturating_mul(DIRECT_ALIGN as u64);
+        let want = want.min(cap as u64) as usize;
+        let mut filled = 0;
+        let mut eof = false;
         // A direct read must start aligned, and only the file's end may leave a buffer short.
-        while filled < cap {
-            let offset = self.offset + filled as u64;
-            match read_at(&self.file, &mut buf.storage()[filled..], offset) {
+        while filled < want {
+            let offset = aligned + filled as u64;
+            match read_at(&self.file, &mut buf.storage()[filled..want], offset) {
                 Ok(0) => {
-                    self.eof = true;
+                    eof = true;
                     break;
                 }
                 Ok(n) => {
                     filled += n;
                     if self.direct && !filled.is_multiple_of(DIRECT_ALIGN) {
-                        self.eof = true; // only the last block of a file is short
+                        eof = true; // only the last block of a file is short
                         break;
                     }
                 }
@@ -280,9 +303,15 @@ impl Source {
                 Err(e) => return Err(e),
             }
         }
-        buf.set_len(filled);
-        self.offset += filled as u64;
-        Ok(())
+        let end = aligned + filled as u64;
+        if eof || end >= range.end {
+            buf.set_len(((range.end.min(end) - aligned) as usize).max(skip.min(filled)));
+            self.ranges.pop_front();
+        } else {
+            buf.set_len(filled);
+            range.start = end;
+        }
+        Ok(skip.min(buf.len()))
     }
 }
 
@@ -290,8 +319,8 @@ impl Read for DirectReader {
     fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
         while self.pos == self.buf.len() {
             let Some(filled) = &self.filled else { return Ok(0) };
-            let next = match filled.recv() {
-                Ok(Ok(buf)) => buf,
+            let (next, skip) = match filled.recv() {
+                Ok(Ok(next)) => next,
                 Ok(Err(e)) => {
                     self.filled = None;
                     return Err(e);
@@ -303,8 +332,7 @@ impl Read for DirectReader {
                 }
             };
             let done = std::mem::replace(&mut self.buf, next);
-            self.pos = self.skip.min(self.buf.len());
-            self.skip -= self.pos;
+            self.pos = skip;
             if done.capacity() > 0 {
                 if let Some(tx) = &self.recycle {
                     let _ = tx.try_send(done);
@@ -537,6 +565,37 @@ mod tests {
                 let mut got = Vec::new();
                 r.read_to_end(&mut got).unwrap();
                 assert_eq!(got, data[offset.min(data.len())..], "offset {offset}, buffer {buffer}");
+            }
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn open_ranges_reads_exactly_the_ranges_in_order() {
+        let dir = tempfile_dir();
+        let path = dir.join("f");
+        let data: Vec<u8> = (0..5 * DIRECT_ALIGN as u32 + 321).map(|i| (i * 13 % 251) as u8).collect();
+        std::fs::write(&path, &data).unwrap();
+        let n = data.len() as u64;
+        let cases: Vec<Vec<std::ops::Range<u64>>> = vec![
+            vec![],
+            vec![0..0, 5..5],
+            vec![0..n],
+            vec![1..2, 3..4095, 4095..4097, 8192..8193],
+            vec![100..9000, 9000..9001, 12_000..n],
+            // Out of order, repeated, across the end of the file.
+            vec![9000..9100, 10..20, 10..20, n - 3..n + 100, n + 5..n + 9],
+        ];
+        for ranges in cases {
+            let expected: Vec<u8> = ranges
+                .iter()
+                .flat_map(|r| data[(r.start.min(n) as usize)..(r.end.min(n) as usize)].iter().copied())
+                .collect();
+            for buffer in [4096, 10_000, 1 << 20] {
+                let mut r = DirectReader::open_ranges(&path, buffer, ranges.clone()).unwrap();
+                let mut got = Vec::new();
+                r.read_to_end(&mut got).unwrap();
+                assert_eq!(got, expected, "{ranges:?}, buffer {buffer}");
             }
         }
         std::fs::remove_dir_all(&dir).unwrap();
