@@ -204,7 +204,7 @@ impl DirectReader {
     /// aligned offset below it and the bytes before `offset` are skipped). Reading stops where
     /// the caller stops: at most three buffers are read past what it took.
     pub fn open_at(path: &Path, buffer: usize, offset: u64) -> io::Result<DirectReader> {
-        DirectReader::open_ranges(path, buffer, vec![offset..u64::MAX])
+        DirectReader::open_ranges(path, buffer, std::iter::once(offset..u64::MAX).collect())
     }
 
     /// Opens `path` for reading the bytes of `ranges` (any offsets), in the order given, as one
