@@ -47,6 +47,7 @@ use tw_io::{
 };
 
 use crate::error::BuildError;
+use crate::sampling::{CentroidSamples, OnlineSampler};
 use crate::types::{Grid, GridBox, ObjectRecord};
 use crate::workio::SpillWriter;
 
@@ -171,6 +172,10 @@ pub struct Ingested {
     pub triangles: u64,
     /// What streaming the inputs found (files, degenerate triangles dropped, bytes read).
     pub summary: SceneSummary,
+    /// Redefinition's centroid samples, taken while streaming ([`crate::sampling`]): `None`
+    /// when ingest was given no rule or the sampler gave up; taken by the first
+    /// [`crate::redefine::redefine`] whose rule they follow.
+    pub samples: std::sync::Mutex<Option<CentroidSamples>>,
 }
 
 /// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
@@ -181,15 +186,17 @@ pub fn ingest(
     work_dir: &Path,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
-    ingest_in(scene, work_dir, None, progress)
+    ingest_in(scene, work_dir, None, None, progress)
 }
 
-/// [`ingest`], converting batches on `pool` (the global pool when `None`). The working file is
-/// the same whatever the pool.
+/// [`ingest`], converting batches on `pool` (the global pool when `None`), and taking
+/// redefinition's centroid samples with `sampler` on the way. The working file is the same
+/// whatever the pool.
 pub fn ingest_in(
     scene: Scene,
     work_dir: &Path,
     pool: Option<&rayon::ThreadPool>,
+    sampler: Option<OnlineSampler>,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
     let path = crate::workio::temp_path(work_dir, "tw-triangles-")?;
@@ -206,6 +213,7 @@ pub fn ingest_in(
         pieces: Vec::new(),
         pending: Vec::new(),
         pending_count: 0,
+        sampler,
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
     // The last batch's triangles; their errors come before any the stream stopped at later.
@@ -218,6 +226,12 @@ pub fn ingest_in(
     drop(sink.out.finish()?);
     let Some(origin) = sink.origin else { return Err(BuildError::Empty) };
     let work = WorkFile { path, origin, triangles: sink.triangles };
+    let counts: Vec<u64> = sink.objects.iter().map(|o| o.triangles).collect();
+    let sampled = sink.sampler.is_some();
+    let samples = sink.sampler.take().and_then(|s| s.finish(&counts));
+    if sampled {
+        tracing::debug!(online = samples.is_some(), "ingest: centroid samples");
+    }
     let (min, max) = (work.position(sink.min), work.position(sink.max));
     let grid = Grid::for_bounds(min, max);
     let objects = sink
@@ -230,6 +244,7 @@ pub fn ingest_in(
             offset_min: o.min,
             offset_max: o.max,
             centroid_sum: o.sum,
+            span: o.span,
             bounds: if o.triangles == 0 {
                 GridBox::EMPTY
             } else {
@@ -237,7 +252,16 @@ pub fn ingest_in(
             },
         })
         .collect();
-    Ok(Ingested { triangles: work.triangles, work, min, max, grid, objects, summary })
+    Ok(Ingested {
+        triangles: work.triangles,
+        work,
+        min,
+        max,
+        grid,
+        objects,
+        summary,
+        samples: std::sync::Mutex::new(samples),
+    })
 }
 
 struct ObjectAcc {
@@ -248,6 +272,7 @@ struct ObjectAcc {
     max: [f32; 3],
     /// Centroids summed one triangle at a time in file order (see [`ObjectRecord::centroid_sum`]).
     sum: [f64; 3],
+    span: std::ops::Range<u64>,
 }
 
 impl ObjectAcc {
@@ -256,6 +281,15 @@ impl ObjectAcc {
         for (s, x) in self.sum.iter_mut().zip(c) {
             *s += x as f64;
         }
+    }
+
+    /// Extends the span by `n` triangles from the file's triangle `at` on.
+    #[inline]
+    fn extend_span(&mut self, at: u64, n: u64) {
+        if self.span.is_empty() {
+            self.span.start = at;
+        }
+        self.span.end = at + n;
     }
 }
 
@@ -275,6 +309,7 @@ struct IngestSink<'p> {
     pieces: Vec<Piece>,
     pending: Vec<Piece>,
     pending_count: usize,
+    sampler: Option<OnlineSampler>,
 }
 
 /// The stored offset of `p` from the origin `o`, or why it cannot be stored.
@@ -293,6 +328,7 @@ fn offset_from(o: [f64; 3], p: [f64; 3]) -> Result<[f32; 3], BuildError> {
 /// Appends converted pieces in order: their records to `out`, their counts and bounds to the
 /// objects' and the scene's (in the order the one-by-one path folds them). Stops at the first
 /// piece that failed.
+#[allow(clippy::too_many_arguments)]
 fn append(
     pieces: &mut [Piece],
     out: &mut SpillWriter,
@@ -300,6 +336,7 @@ fn append(
     triangles: &mut u64,
     scene_min: &mut [f32; 3],
     scene_max: &mut [f32; 3],
+    sampler: &mut Option<OnlineSampler>,
 ) -> Result<(), PieceError> {
     for p in pieces {
         if let Some(e) = p.error.take() {
@@ -309,8 +346,12 @@ fn append(
         for &(object, n, min, max) in &p.runs {
             let acc = &mut objects[object as usize];
             acc.triangles += n;
+            acc.extend_span(*triangles, n);
             for &c in centroids.by_ref().take(n as usize) {
                 acc.add_centroid(c);
+                if let Some(s) = sampler.as_mut() {
+                    s.add(object, || c);
+                }
             }
             for i in 0..3 {
                 acc.min[i] = acc.min[i].min(min[i]);
@@ -414,8 +455,9 @@ impl IngestSink<'_> {
         if n == 0 {
             return Ok(());
         }
-        let IngestSink { out, objects, triangles, min, max, pending, .. } = self;
-        append(&mut pending[..n], out, objects, triangles, min, max).map_err(|e| self.piece_failed(e))
+        let IngestSink { out, objects, triangles, min, max, pending, sampler, .. } = self;
+        append(&mut pending[..n], out, objects, triangles, min, max, sampler)
+            .map_err(|e| self.piece_failed(e))
     }
 
     fn fail(&mut self, e: BuildError) -> ImportError {
@@ -444,6 +486,10 @@ impl IngestSink<'_> {
         }
         let tri = WorkTri { p, object };
         acc.add_centroid(tri.centroid());
+        acc.extend_span(self.triangles, 1);
+        if let Some(s) = self.sampler.as_mut() {
+            s.add(object, || tri.centroid());
+        }
         for i in 0..3 {
             self.min[i] = self.min[i].min(acc.min[i]);
             self.max[i] = self.max[i].max(acc.max[i]);
@@ -473,6 +519,7 @@ impl TriangleSink for IngestSink<'_> {
             min: [f32::INFINITY; 3],
             max: [f32::NEG_INFINITY; 3],
             sum: [0.0; 3],
+            span: 0..0,
         });
         Ok(())
     }
@@ -510,12 +557,14 @@ impl TriangleSink for IngestSink<'_> {
         // Convert this batch while a thread of the pool appends the previous one.
         let objects = self.objects.len();
         let pending = std::mem::take(&mut self.pending_count);
-        let IngestSink { pool, out, objects: accs, triangles, min, max, pieces, pending: done, .. } = self;
+        let IngestSink {
+            pool, out, objects: accs, triangles, min, max, pieces, pending: done, sampler, ..
+        } = self;
         let (work, done) = (&mut pieces[..count], &mut done[..pending]);
         let mut both = || {
             rayon::join(
                 || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects)),
-                || append(done, out, accs, triangles, min, max),
+                || append(done, out, accs, triangles, min, max, sampler),
             )
             .1
         };
@@ -768,12 +817,26 @@ pub(crate) mod tests {
         w.finish().unwrap();
         let options = tw_io::format::ImportOptions { vertex_memory: 1 << 18, spill_dir: None };
         let open = || tw_io::open_source(&ply, &options).unwrap();
-        let one_by_one =
-            ingest(Scene::from_sources(vec![Box::new(OneByOne(open()))]), dir.path(), &mut |_| {}).unwrap();
+        // A sample budget small enough that the global stride doubles several times.
+        let rule = crate::sampling::SampleRule { t1: 1000, max_samples: 3000, min_samples_per_object: 16 };
+        let sampler = || Some(OnlineSampler::new(rule, 1 << 30));
+        let one_by_one = ingest_in(
+            Scene::from_sources(vec![Box::new(OneByOne(open()))]),
+            dir.path(),
+            None,
+            sampler(),
+            &mut |_| {},
+        )
+        .unwrap();
+        let samples = |i: &Ingested| i.samples.lock().unwrap().clone();
+        let expected = samples(&one_by_one).expect("the plant's objects are contiguous");
+        assert!(expected.points.len() > 3000 && expected.stride.iter().any(|&s| s > 1));
         for threads in [1, 2, 3] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             let got =
-                ingest_in(Scene::from_sources(vec![open()]), dir.path(), Some(&pool), &mut |_| {}).unwrap();
+                ingest_in(Scene::from_sources(vec![open()]), dir.path(), Some(&pool), sampler(), &mut |_| {})
+                    .unwrap();
+            assert_eq!(samples(&got).as_ref(), Some(&expected));
             assert_eq!(got.triangles, one_by_one.triangles);
             assert_eq!(got.work.origin, one_by_one.work.origin);
             assert_eq!((got.min, got.max), (one_by_one.min, one_by_one.max));
@@ -807,7 +870,7 @@ pub(crate) mod tests {
         std::fs::write(&ply, bytes).unwrap();
         let scene = Scene::open(&[&ply], Default::default()).unwrap();
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
-        let r = ingest_in(scene, dir.path(), Some(&pool), &mut |_| {});
+        let r = ingest_in(scene, dir.path(), Some(&pool), None, &mut |_| {});
         assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");
     }
 }

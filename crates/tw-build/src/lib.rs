@@ -20,6 +20,7 @@ pub mod lod;
 pub mod pages;
 pub mod pipeline;
 pub mod redefine;
+pub mod sampling;
 pub mod seams;
 pub mod types;
 pub mod workio;

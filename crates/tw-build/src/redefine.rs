@@ -24,10 +24,12 @@
 //! splits are *planned* from a deterministic sample and *applied* while streaming: every split is
 //! a kd-tree of planes over centroids, and a triangle's cell is a pure function of its object id
 //! and its centroid ([`Redefined::cell_of`]), evaluated the same way in every pass.
-//! Three passes over the working file:
-//! - A (`sample_objects`): every object of more than `t1` triangles keeps every `stride`-th
-//!   triangle centroid (the stride keeps the total under `max_samples`, and at least
-//!   `min_samples_per_object` per object).
+//! Three passes, of which only B and C usually read the working file:
+//! - A (`sample_objects`): every object of more than `t1` triangles keeps the centroids of every
+//!   `stride`-th triangle, a power of two that keeps the total between `max_samples` and twice
+//!   that, and at least `min_samples_per_object` per object ([`crate::sampling`]). Ingest takes
+//!   these samples while it streams the triangles; the file is read for them only when it could
+//!   not (objects not contiguous in the input), with the same result.
 //! - B (`piece_stats`): after partition-I planned the pieces from the samples, the exact triangle
 //!   count, bounds and centre of mass of every piece. An object partition-I leaves whole is one
 //!   piece, whose figures ingest already summed in file order (`ObjectRecord::centroid_sum`
@@ -36,7 +38,7 @@
 //! - C (`cell_stats`): after clustering and partition-II, the exact count and bounds of every
 //!   cell (empty cells, possible since plans come from samples, are dropped). Pieces placed
 //!   whole add their pass-B figures; only the objects whose pieces a partition-II plan cuts
-//!   are read again (their spans of the file, recorded in pass A).
+//!   are read again (their spans of the file, recorded by ingest).
 //!
 //! Threads: the passes get raw records from a reader thread ([`WorkFile::scan_raw`]); the pool
 //! decodes them and finds each triangle's piece or cell in fixed sub-chunks, then accumulates
@@ -91,6 +93,7 @@ use rayon::prelude::*;
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
 use crate::ingest::{record_object, records, Ingested, WorkFile, WorkTri, RECORD_BYTES};
+use crate::sampling::SampleRule;
 use crate::types::{Grid, GridBox};
 use crate::workio::{for_each_lane, SUB_CHUNK};
 
@@ -124,8 +127,9 @@ pub struct RedefineParams {
     pub min_cell_triangles: u64,
     /// Clustering: each piece is joined to at most this many nearest pieces within `D`.
     pub neighbours: usize,
-    /// Centroid samples kept in memory for planning splits (16 bytes each), at most, plus
-    /// `min_samples_per_object` for each sampled object.
+    /// Centroid samples kept in memory for planning splits (12 bytes each): between this and
+    /// twice this, plus up to twice `min_samples_per_object` for each sampled object (ingest
+    /// holds up to 8 times this while streaming: [`crate::sampling`]).
     pub max_samples: u64,
     /// Every object of more than `t1` triangles keeps at least this many samples.
     pub min_samples_per_object: u64,
@@ -140,6 +144,15 @@ impl Default for RedefineParams {
 impl RedefineParams {
     /// The thesis table: t1 1000, s1 0.1 × model dimension, r1 2.5, D 0.1 × largest dimension,
     /// K 1500, V 10⁻³ × scene volume, s2 2·s1, t2 10·t1, r2 0.5·r1; plus terawalk's cell cap.
+    /// The rule of redefinition's centroid samples ([`crate::sampling`]).
+    pub fn sample_rule(&self) -> SampleRule {
+        SampleRule {
+            t1: self.t1,
+            max_samples: self.max_samples,
+            min_samples_per_object: self.min_samples_per_object,
+        }
+    }
+
     pub fn gigawalk() -> RedefineParams {
         RedefineParams {
             t1: 1000,
@@ -558,14 +571,30 @@ struct Samples {
     span: Vec<std::ops::Range<u64>>,
 }
 
+/// Pass A: the samples of [`SampleRule`]. Ingest takes them while streaming
+/// ([`crate::sampling::OnlineSampler`]); only when it could not (no rule, another rule,
+/// interleaved objects) is the working file read for them. Both give the same samples.
 fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildError> {
+    let rule = p.sample_rule();
+    let span = ing.objects.iter().map(|o| o.span.clone()).collect();
+    let online = ing.samples.lock().map(|mut s| s.take()).unwrap_or(None);
+    match online {
+        Some(s) if s.rule == Some(rule) && s.stride.len() == ing.objects.len() => {
+            tracing::debug!(samples = s.points.len(), "pass A: samples taken by ingest");
+            return Ok(Samples { points: s.points, start: s.start, stride: s.stride, span });
+        }
+        _ => tracing::debug!("pass A: reading the working file for samples"),
+    }
+    let mut samples = sample_file(ing, &rule)?;
+    samples.span = span;
+    Ok(samples)
+}
+
+/// Pass A over the working file: [`SampleRule`]'s samples.
+fn sample_file(ing: &Ingested, rule: &SampleRule) -> Result<Samples, BuildError> {
     let objects = &ing.objects;
-    let large: u64 = objects.iter().filter(|o| o.triangles > p.t1).map(|o| o.triangles).sum();
-    let r = large.div_ceil(p.max_samples).max(1);
-    let stride: Vec<u64> = objects
-        .iter()
-        .map(|o| if o.triangles > p.t1 { r.min(o.triangles / p.min_samples_per_object).max(1) } else { 0 })
-        .collect();
+    let large = rule.large(objects.iter().map(|o| o.triangles));
+    let stride: Vec<u64> = objects.iter().map(|o| rule.stride(o.triangles, large)).collect();
     let mut start = Vec::with_capacity(objects.len() + 1);
     start.push(0usize);
     for (o, &s) in objects.iter().zip(&stride) {
@@ -577,7 +606,6 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
     // The next sampled triangle of each object (counted within the object): the multiples of
     // its stride, so that only sampled triangles are decoded (none for unsampled objects).
     let mut next: Vec<u64> = stride.iter().map(|&s| if s > 0 { 0 } else { u64::MAX }).collect();
-    let mut span = vec![0..0u64; objects.len()];
     let corrupt = |message: String| BuildError::Corrupt { path: ing.work.path().to_path_buf(), message };
     // Serial, but it reads only the object ids: the reader thread only reads.
     ing.work.scan_raw(|first, bytes| {
@@ -590,11 +618,6 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
                     objects.len()
                 )));
             };
-            let at = first + k as u64;
-            if *n == 0 {
-                span[o].start = at;
-            }
-            span[o].end = at + 1;
             if *n == next[o] {
                 let s = stride[o];
                 let i = start[o] + (*n / s) as usize;
@@ -614,7 +637,7 @@ fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildEr
             seen[o], objects[o].triangles
         )));
     }
-    Ok(Samples { points, start, stride, span })
+    Ok(Samples { points, start, stride, span: Vec::new() })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -1295,6 +1318,37 @@ mod tests {
     use crate::ingest::tests::{ingest_list, ingest_plant};
 
     use crate::ingest::tests::ListObject as Obj;
+
+    #[test]
+    fn samples_taken_by_ingest_equal_pass_a_over_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        for p in [
+            RedefineParams::default(),
+            // A budget small enough that ingest's global stride doubles several times.
+            RedefineParams { max_samples: 5000, min_samples_per_object: 8, ..Default::default() },
+        ] {
+            let rule = p.sample_rule();
+            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
+                triangles: 300_000,
+                seed: 5,
+            })
+            .unwrap();
+            let scene = tw_io::Scene::from_sources(vec![Box::new(src)]);
+            let sampler = crate::sampling::OnlineSampler::new(rule, 1 << 30);
+            let ing = crate::ingest::ingest_in(scene, dir.path(), None, Some(sampler), &mut |_| {}).unwrap();
+            assert!(ing.samples.lock().unwrap().is_some(), "the plant's objects are contiguous");
+            let online = sample_objects(&ing, &p).unwrap();
+            // Taken once: a second redefinition reads the file.
+            assert!(ing.samples.lock().unwrap().is_none());
+            let file = sample_objects(&ing, &p).unwrap();
+            assert!(online.points.len() as u64 >= p.max_samples.min(1000));
+            assert_eq!(online.stride, file.stride);
+            assert_eq!(online.start, file.start);
+            assert_eq!(online.span, file.span);
+            let bits = |s: &Samples| s.points.iter().map(|c| c.map(f32::to_bits)).collect::<Vec<_>>();
+            assert!(bits(&online) == bits(&file));
+        }
+    }
 
     #[test]
     fn spans_to_read_are_sorted_joined_across_small_gaps_and_skip_empty_objects() {

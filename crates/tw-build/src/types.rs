@@ -92,6 +92,8 @@ pub struct ObjectRecord {
     /// The sum of its triangles' centroids ([`crate::ingest::WorkTri::centroid`] as `f64`),
     /// added in working-file order: what a serial scan of its triangles would find.
     pub centroid_sum: [f64; 3],
+    /// The working-file triangles from its first to its last (empty: no triangle).
+    pub span: std::ops::Range<u64>,
 }
 
 /// The indexed mesh of one cell (a redefined object: a hierarchy leaf), read back from the
