@@ -342,16 +342,18 @@ fn append(
         if let Some(e) = p.error.take() {
             return Err(e);
         }
-        let mut centroids = p.centroids.iter();
+        let mut first = 0;
         for &(object, n, min, max) in &p.runs {
             let acc = &mut objects[object as usize];
             acc.triangles += n;
             acc.extend_span(*triangles, n);
-            for &c in centroids.by_ref().take(n as usize) {
+            let centroids = &p.centroids[first..first + n as usize];
+            first += n as usize;
+            for &c in centroids {
                 acc.add_centroid(c);
-                if let Some(s) = sampler.as_mut() {
-                    s.add(object, || c);
-                }
+            }
+            if let Some(s) = sampler.as_mut() {
+                s.add_run(object, centroids);
             }
             for i in 0..3 {
                 acc.min[i] = acc.min[i].min(min[i]);
@@ -488,7 +490,7 @@ impl IngestSink<'_> {
         acc.add_centroid(tri.centroid());
         acc.extend_span(self.triangles, 1);
         if let Some(s) = self.sampler.as_mut() {
-            s.add(object, || tri.centroid());
+            s.add(object, tri.centroid());
         }
         for i in 0..3 {
             self.min[i] = self.min[i].min(acc.min[i]);

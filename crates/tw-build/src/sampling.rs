@@ -157,35 +157,64 @@ impl OnlineSampler {
         *t = t.saturating_add_signed(n);
     }
 
-    /// The next triangle of `object`, whose centroid is `centroid()` (called only for the
-    /// triangles it keeps).
-    #[inline]
-    pub fn add(&mut self, object: u32, centroid: impl FnOnce() -> [f32; 3]) {
-        if self.gave_up {
+    /// The next triangle of `object`, whose centroid is `centroid`.
+    pub fn add(&mut self, object: u32, centroid: [f32; 3]) {
+        self.add_run(object, std::slice::from_ref(&centroid));
+    }
+
+    /// The next triangles of `object`, whose centroids are `centroids`. Costs little more than
+    /// the samples it keeps: the stride is constant over long stretches, and only its multiples
+    /// are visited.
+    pub fn add_run(&mut self, object: u32, centroids: &[[f32; 3]]) {
+        if self.gave_up || centroids.is_empty() {
             return;
         }
         if self.open != Some(object) && !self.switch_to(Some(object)) {
             return;
         }
         let o = object as usize;
-        let index = self.objects[o].seen;
-        self.objects[o].seen += 1;
-        let (old, want) =
-            (self.objects[o].stride, stride_for(self.global, index + 1, self.rule.min_samples_per_object));
-        if want > old {
-            // Below G until now (a stride never exceeds G): its samples move to the tally of
-            // their new stride.
-            let before = self.open_points.len() as i64;
-            thin(&mut self.open_points, old, want);
-            self.tally(old, -before);
-            self.objects[o].stride = want;
-            self.tally(want, self.open_points.len() as i64);
-        }
-        let stride = self.objects[o].stride;
-        if index.is_multiple_of(stride) {
-            self.open_points.push(centroid());
-            self.tally(stride, 1);
-            self.check_memory();
+        let min = self.rule.min_samples_per_object.max(1);
+        let mut i = 0;
+        while i < centroids.len() {
+            let seen = self.objects[o].seen;
+            // The stride for this triangle (the object's count becomes seen + 1) …
+            let (old, want) = (self.objects[o].stride, stride_for(self.global, seen + 1, min));
+            if want > old {
+                // Below G until now (a stride never exceeds G): its samples move to the tally
+                // of their new stride.
+                let before = self.open_points.len() as i64;
+                thin(&mut self.open_points, old, want);
+                self.tally(old, -before);
+                self.objects[o].stride = want;
+                self.tally(want, self.open_points.len() as i64);
+            }
+            let stride = self.objects[o].stride;
+            // … holds until the count reaches the next power of two times min (or G changes).
+            let p = floor_pow2(((seen + 1) / min).max(1));
+            let limit = if p >= self.global { u64::MAX } else { min.saturating_mul(2 * p) };
+            let n = ((centroids.len() - i) as u64).min(limit.saturating_sub(seen + 1).max(1)) as usize;
+            // Its multiples among triangles seen .. seen + n.
+            let mut j = seen.next_multiple_of(stride);
+            let global = self.global;
+            let mut done = n;
+            while j < seen + n as u64 {
+                self.open_points.push(centroids[i + (j - seen) as usize]);
+                self.tally(stride, 1);
+                // Doubling G thins this object by its count so far: triangle j is its last.
+                self.objects[o].seen = j + 1;
+                self.check_memory();
+                if self.gave_up {
+                    return;
+                }
+                if self.global != global {
+                    // The strides changed: go on after this triangle.
+                    done = (j - seen) as usize + 1;
+                    break;
+                }
+                j += stride;
+            }
+            self.objects[o].seen = seen + done as u64;
+            i += done;
         }
     }
 
@@ -259,7 +288,7 @@ impl OnlineSampler {
         if let Some(o) = self.open {
             let s = &mut self.objects[o as usize];
             if s.stride == old {
-                let to = stride_for(self.global, s.seen, self.rule.min_samples_per_object);
+                let to = stride_for(self.global, s.seen, self.rule.min_samples_per_object).max(s.stride);
                 thin(&mut self.open_points, s.stride, to);
                 s.stride = to;
             }
@@ -374,7 +403,7 @@ mod tests {
         let mut s = OnlineSampler::new(rule, u64::MAX);
         let mut counts = vec![0u64; objects];
         for &(o, c) in stream {
-            s.add(o, || c);
+            s.add(o, c);
             counts[o as usize] += 1;
         }
         s.finish(&counts)
@@ -423,6 +452,31 @@ mod tests {
     }
 
     #[test]
+    fn runs_of_any_length_give_the_samples_of_one_by_one() {
+        let sizes = [0u64, 5, 1000, 1001, 4096, 70_000, 3, 250_000, 1500, 9999];
+        let stream = contiguous(&sizes);
+        for (max_samples, min) in [(2_000_000, 64), (1000, 64), (300, 2), (5000, 16)] {
+            let rule = SampleRule { t1: 1000, max_samples, min_samples_per_object: min };
+            let expected = Some(by_rule(rule, &stream, sizes.len()));
+            for run in [1usize, 2, 7, 64, 1000, 100_000] {
+                let mut s = OnlineSampler::new(rule, u64::MAX);
+                let mut at = 0;
+                for (o, &n) in sizes.iter().enumerate() {
+                    let centroids: Vec<[f32; 3]> = stream[at..at + n as usize].iter().map(|t| t.1).collect();
+                    // Runs of varying length, as batches cut them.
+                    for (k, chunk) in centroids.chunks(run).enumerate() {
+                        let (a, b) = chunk.split_at(chunk.len().min(k % 3));
+                        s.add_run(o as u32, a);
+                        s.add_run(o as u32, b);
+                    }
+                    at += n as usize;
+                }
+                assert!(s.finish(&sizes) == expected, "{max_samples} {min}, runs of {run}");
+            }
+        }
+    }
+
+    #[test]
     fn objects_closed_out_of_id_order_are_laid_out_by_id() {
         let sizes = [3000u64, 20, 7000, 1500];
         let mut stream = Vec::new();
@@ -445,7 +499,7 @@ mod tests {
         let mut s = OnlineSampler::new(rule, u64::MAX);
         let mut peak = 0;
         for &(o, c) in &stream {
-            s.add(o, || c);
+            s.add(o, c);
             peak = peak.max(s.held_at_global + s.held_below);
         }
         assert!(s.global > 8, "G = {}", s.global);
@@ -462,7 +516,7 @@ mod tests {
         // Stride 1 until 64 · 2 triangles, then 2, …: thousands of samples held.
         let mut s = OnlineSampler::new(rule, 1000 * 12);
         for &(o, c) in &stream {
-            s.add(o, || c);
+            s.add(o, c);
         }
         assert!(s.gave_up());
         assert_eq!(s.finish(&sizes), None);
@@ -477,7 +531,7 @@ mod tests {
         let stream = contiguous(&[50, 50]);
         let mut s = OnlineSampler::new(rule, u64::MAX);
         for &(o, c) in &stream {
-            s.add(o, || c);
+            s.add(o, c);
         }
         assert_eq!(s.finish(&[50, 51]), None);
     }
