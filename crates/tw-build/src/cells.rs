@@ -42,8 +42,9 @@ use crate::workio::{map_sub_chunks, temp_path, SpillWriter};
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 35;
-/// Memory per triangle of a bucket being read: the decoded record (44 bytes) and its sort index.
-pub const BUCKET_BYTES_PER_TRIANGLE: u64 = std::mem::size_of::<Rec>() as u64 + 4;
+/// Memory per triangle of a bucket being read: its record, as read (decoded only when a cell's
+/// mesh is built), and its sort index.
+pub const BUCKET_BYTES_PER_TRIANGLE: u64 = RECORD_BYTES as u64 + 4;
 /// Memory per triangle of the cell whose mesh is being built (an upper bound: the position
 /// table, at most 48 bytes, positions, indices and object ids).
 pub const CELL_BYTES_PER_TRIANGLE: u64 = 3 * 16 + 3 * 8 + 3 * 12 + 12 + 4;
@@ -70,10 +71,21 @@ impl Rec {
         out
     }
 
-    fn decode(b: &[u8]) -> Rec {
+    /// Vertex `v` (0..3) of an encoded record.
+    #[inline]
+    fn position_of(b: &[u8], v: usize) -> [u32; 3] {
         let g = |k: usize| u32::from_le_bytes([b[3 * k], b[3 * k + 1], b[3 * k + 2], 0]);
-        let u = |o: usize| u32::from_le_bytes([b[o], b[o + 1], b[o + 2], b[o + 3]]);
-        Rec { q: [[g(0), g(1), g(2)], [g(3), g(4), g(5)], [g(6), g(7), g(8)]], object: u(27), cell: u(31) }
+        [g(3 * v), g(3 * v + 1), g(3 * v + 2)]
+    }
+
+    #[inline]
+    fn object_of(b: &[u8]) -> u32 {
+        u32::from_le_bytes([b[27], b[28], b[29], b[30]])
+    }
+
+    #[inline]
+    fn cell_of(b: &[u8]) -> u32 {
+        u32::from_le_bytes([b[31], b[32], b[33], b[34]])
     }
 }
 
@@ -181,19 +193,23 @@ impl CellFiles {
         if len != bf.triangles * RECORD_BYTES as u64 {
             return Err(corrupt(format!("{len} bytes, expected {} triangles", bf.triangles)));
         }
-        let recs = read_records(path, RECORD_BYTES, Rec::decode)?;
-        let n = recs.len();
+        // The raw records: the reader thread only reads and sorts; the pool decodes each
+        // cell's records as it builds the cell's mesh (`Bucket::mesh`).
+        let bytes = read_raw(path, len)?;
+        let n = bytes.len() / RECORD_BYTES;
         // Counting sort by cell: stable, so input order within each cell.
         let cells = bf.cells.clone();
         let mut start = vec![0usize; cells.len() + 1];
-        for (i, r) in recs.iter().enumerate() {
-            if !cells.contains(&r.cell) {
-                return Err(corrupt(format!("triangle {i} has cell {} outside {cells:?}", r.cell)));
+        for (i, r) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+            let (object, cell) = (Rec::object_of(r), Rec::cell_of(r));
+            if !cells.contains(&cell) {
+                return Err(corrupt(format!("triangle {i} has cell {cell} outside {cells:?}")));
             }
-            if r.object >= self.objects || r.q.iter().flatten().any(|&v| v > GRID_STEPS) {
-                return Err(corrupt(format!("triangle {i} has a bad object id or grid position")));
+            // Grid positions are 24-bit fields: always within GRID_STEPS.
+            if object >= self.objects {
+                return Err(corrupt(format!("triangle {i} has a bad object id")));
             }
-            start[(r.cell - cells.start) as usize + 1] += 1;
+            start[(cell - cells.start) as usize + 1] += 1;
         }
         for k in 0..cells.len() {
             start[k + 1] += start[k];
@@ -208,12 +224,12 @@ impl CellFiles {
         }
         let mut fill = start.clone();
         let mut order = vec![0u32; n];
-        for (i, r) in recs.iter().enumerate() {
-            let k = (r.cell - cells.start) as usize;
+        for (i, r) in bytes.chunks_exact(RECORD_BYTES).enumerate() {
+            let k = (Rec::cell_of(r) - cells.start) as usize;
             order[fill[k]] = i as u32;
             fill[k] += 1;
         }
-        Ok(Bucket { cells, recs, order, start })
+        Ok(Bucket { cells, bytes, order, start })
     }
 
     /// Calls `f` with every cell's mesh, in cell order. Memory: one bucket and one cell.
@@ -306,7 +322,8 @@ fn group_by_bucket(recs: &[(u32, [u8; RECORD_BYTES])], buckets: usize) -> (Vec<u
 /// One bucket in memory, its triangles grouped by cell.
 pub struct Bucket {
     cells: Range<u32>,
-    recs: Vec<Rec>,
+    /// The records as read ([`RECORD_BYTES`] each).
+    bytes: Vec<u8>,
     /// Record indices in cell order; cell `cells.start + k` is `order[start[k]..start[k + 1]]`.
     order: Vec<u32>,
     start: Vec<usize>,
@@ -334,11 +351,11 @@ impl Bucket {
         let mut indices = Vec::with_capacity(3 * tris.len());
         let mut objects = Vec::with_capacity(tris.len());
         for &i in tris {
-            let r = &self.recs[i as usize];
-            for q in &r.q {
-                indices.push(table.vertex(*q));
+            let r = &self.bytes[i as usize * RECORD_BYTES..(i as usize + 1) * RECORD_BYTES];
+            for v in 0..3 {
+                indices.push(table.vertex(Rec::position_of(r, v)));
             }
-            objects.push(r.object);
+            objects.push(Rec::object_of(r));
         }
         CellMesh { positions: table.positions, indices, objects }
     }
@@ -377,6 +394,19 @@ impl PositionTable {
             i = (i + 1) & mask;
         }
     }
+}
+
+/// Reads the `len` bytes of `path` (direct where the file system allows).
+fn read_raw(path: &Path, len: u64) -> Result<Vec<u8>, BuildError> {
+    let buffer = len.clamp(1, 4 << 20) as usize;
+    let mut file =
+        tw_core::direct_io::DirectReader::open(path, buffer).map_err(|e| BuildError::io(path, e))?;
+    if file.file_len() != len {
+        return Err(BuildError::Corrupt { path: path.to_path_buf(), message: "changed while read".into() });
+    }
+    let mut bytes = vec![0u8; len as usize];
+    std::io::Read::read_exact(&mut file, &mut bytes).map_err(|e| BuildError::io(path, e))?;
+    Ok(bytes)
 }
 
 /// Reads a file of fixed-size records (`size` bytes each) and decodes each.
