@@ -272,7 +272,7 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
     let mut assign = Assigner::default();
     let piece_object = partition_objects(ing, params, &scale, &mut samples, &mut assign, &mut report);
     lap.step("partition-I");
-    let pieces = piece_stats(ing, &assign, piece_object.len(), &samples.span)?;
+    let pieces = piece_stats(ing, &assign, piece_object.len())?;
     lap.step("pass B: pieces");
     let clusters = cluster_pieces(params, &scale, &pieces, &mut report);
     lap.step("clustering");
@@ -288,7 +288,7 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
             (0..ing.objects.len()).filter(|&o| matches!(assign.object_piece[o], Route::Plan(_))).count();
         tracing::debug!(cut_piece_triangles = cut, split_objects = cut_objects, "partition-II routes");
     }
-    let cells = cell_stats(ing, &assign, &pieces, &piece_object, &samples.span, cell_count)?;
+    let cells = cell_stats(ing, &assign, &pieces, &piece_object, cell_count)?;
     lap.step("pass C: cells");
     // Drop the cells no triangle reached.
     let mut new_id = vec![u32::MAX; cells.len()];
@@ -567,8 +567,6 @@ struct Samples {
     start: Vec<usize>,
     /// Triangles per sample of each object (0: not sampled).
     stride: Vec<u64>,
-    /// The working-file triangles from each object's first to its last (empty: no triangle).
-    span: Vec<std::ops::Range<u64>>,
 }
 
 /// Pass A: the samples of [`SampleRule`]. Ingest takes them while streaming
@@ -576,18 +574,15 @@ struct Samples {
 /// interleaved objects) is the working file read for them. Both give the same samples.
 fn sample_objects(ing: &Ingested, p: &RedefineParams) -> Result<Samples, BuildError> {
     let rule = p.sample_rule();
-    let span = ing.objects.iter().map(|o| o.span.clone()).collect();
     let online = ing.samples.lock().map(|mut s| s.take()).unwrap_or(None);
     match online {
         Some(s) if s.rule == Some(rule) && s.stride.len() == ing.objects.len() => {
             tracing::debug!(samples = s.points.len(), "pass A: samples taken by ingest");
-            return Ok(Samples { points: s.points, start: s.start, stride: s.stride, span });
+            return Ok(Samples { points: s.points, start: s.start, stride: s.stride });
         }
         _ => tracing::debug!("pass A: reading the working file for samples"),
     }
-    let mut samples = sample_file(ing, &rule)?;
-    samples.span = span;
-    Ok(samples)
+    sample_file(ing, &rule)
 }
 
 /// Pass A over the working file: [`SampleRule`]'s samples.
@@ -637,7 +632,7 @@ fn sample_file(ing: &Ingested, rule: &SampleRule) -> Result<Samples, BuildError>
             seen[o], objects[o].triangles
         )));
     }
-    Ok(Samples { points, start, stride, span: Vec::new() })
+    Ok(Samples { points, start, stride })
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -762,22 +757,17 @@ struct Pieces {
 }
 
 /// Pass B. A piece that is a whole object takes its ingest figures; only the file spans of the
-/// objects partition-I cuts ([`Samples::span`]) are read. Parallel: the pool decodes each chunk
+/// objects partition-I cuts ([`crate::types::ObjectRecord::span`]) are read. Parallel: the pool decodes each chunk
 /// and finds the pieces ([`map_records`]), then accumulates them in [`LANES`] lanes by piece,
 /// so that each piece's centroid sum adds its triangles in file order, as a serial loop would.
-fn piece_stats(
-    ing: &Ingested,
-    assign: &Assigner,
-    n: usize,
-    span: &[std::ops::Range<u64>],
-) -> Result<Pieces, BuildError> {
+fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, BuildError> {
     let mut lanes = LaneStats::lanes(n, true);
     // A whole object is one piece, and ingest summed exactly what a scan of its triangles
     // would (count, box, centroids in file order): only the objects partition-I cut are read.
     let cut: Vec<u32> = (0..ing.objects.len() as u32)
         .filter(|&o| matches!(assign.object_piece[o as usize], Route::Plan(_)))
         .collect();
-    let joined = joined_spans(&cut, span);
+    let joined = joined_spans(&cut, |o| ing.objects[o as usize].span.clone());
     let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
     tracing::debug!(spans = joined.len(), triangles = read, of = ing.work.triangles, "pass B reads");
     let mut ids = Vec::new();
@@ -1207,9 +1197,9 @@ const SPAN_GAP: u64 = 1 << 12;
 
 /// The working-file ranges to read for `objects` (their spans, sorted, joined across gaps of at
 /// most [`SPAN_GAP`] triangles).
-fn joined_spans(objects: &[u32], span: &[std::ops::Range<u64>]) -> Vec<std::ops::Range<u64>> {
+fn joined_spans(objects: &[u32], span: impl Fn(u32) -> std::ops::Range<u64>) -> Vec<std::ops::Range<u64>> {
     let mut spans: Vec<std::ops::Range<u64>> =
-        objects.iter().map(|&o| span[o as usize].clone()).filter(|r| !r.is_empty()).collect();
+        objects.iter().map(|&o| span(o)).filter(|r| !r.is_empty()).collect();
     spans.sort_unstable_by_key(|r| (r.start, r.end));
     let mut joined: Vec<std::ops::Range<u64>> = Vec::new();
     for r in spans {
@@ -1223,7 +1213,7 @@ fn joined_spans(objects: &[u32], span: &[std::ops::Range<u64>]) -> Vec<std::ops:
 
 /// Pass C: the count and box of every cell. A piece placed whole in a cell (`Route::Fixed`)
 /// adds its pass-B count and box; only the triangles of pieces that a partition-II plan cuts
-/// are read again, from the file spans of their objects ([`Samples::span`]), decoded and
+/// are read again, from the file spans of their objects ([`crate::types::ObjectRecord::span`]), decoded and
 /// accumulated in lanes as in pass B. Counts are sums and boxes minima and maxima, so the result
 /// does not depend on the order (a −0 and a +0 bound quantize to the same grid point).
 fn cell_stats(
@@ -1231,7 +1221,6 @@ fn cell_stats(
     assign: &Assigner,
     pieces: &Pieces,
     piece_object: &[u32],
-    span: &[std::ops::Range<u64>],
     n: u32,
 ) -> Result<Vec<CellInfo>, BuildError> {
     let n = n as usize;
@@ -1249,13 +1238,13 @@ fn cell_stats(
                     *cnt += tris;
                     bounds[c as usize].union(&pieces.bounds[q]);
                 }
-                None => bad = Some(span[piece_object[q] as usize].start),
+                None => bad = Some(ing.objects[piece_object[q] as usize].span.start),
             },
             Route::Plan(_) => cut_objects.push(piece_object[q]),
         }
     }
     cut_objects.dedup();
-    let joined = joined_spans(&cut_objects, span);
+    let joined = joined_spans(&cut_objects, |o| ing.objects[o as usize].span.clone());
     let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
     tracing::debug!(spans = joined.len(), triangles = read, of = ing.work.triangles, "pass C reads");
     // Triangles of whole pieces in the spans are skipped (`u32::MAX`); a plan that gives no
@@ -1344,7 +1333,6 @@ mod tests {
             assert!(online.points.len() as u64 >= p.max_samples.min(1000));
             assert_eq!(online.stride, file.stride);
             assert_eq!(online.start, file.start);
-            assert_eq!(online.span, file.span);
             let bits = |s: &Samples| s.points.iter().map(|c| c.map(f32::to_bits)).collect::<Vec<_>>();
             assert!(bits(&online) == bits(&file));
         }
@@ -1353,12 +1341,13 @@ mod tests {
     #[test]
     fn spans_to_read_are_sorted_joined_across_small_gaps_and_skip_empty_objects() {
         let g = SPAN_GAP;
-        let span = vec![5 * g..6 * g, 0..0, 10..20, 20 + g..30 + g, 4 * g..4 * g + 1, 7..7];
+        let span = [5 * g..6 * g, 0..0, 10..20, 20 + g..30 + g, 4 * g..4 * g + 1, 7..7];
         // Objects 2 and 3 are one gap apart (joined); 4 and 0 are more than a gap from 3 but
         // within one of each other; 1 and 5 have no triangle.
-        assert_eq!(joined_spans(&[0, 1, 2, 3, 4, 5], &span), vec![10..30 + g, 4 * g..6 * g]);
-        assert_eq!(joined_spans(&[3], &span), vec![20 + g..30 + g]);
-        assert!(joined_spans(&[1, 5], &span).is_empty());
+        let span = |o: u32| span[o as usize].clone();
+        assert_eq!(joined_spans(&[0, 1, 2, 3, 4, 5], span), vec![10..30 + g, 4 * g..6 * g]);
+        assert_eq!(joined_spans(&[3], span), vec![20 + g..30 + g]);
+        assert!(joined_spans(&[1, 5], span).is_empty());
     }
 
     /// A strip of `n` triangles along x from `x0` to `x0 + len`, at (y, z).
@@ -1682,7 +1671,7 @@ mod tests {
                 let piece_object = partition_objects(&ing, p, &scale, &mut samples, &mut assign, &mut report);
                 let n = piece_object.len();
                 assert!(*cuts || report.split_objects > 0, "the plant has split objects");
-                let pieces = piece_stats(&ing, &assign, n, &samples.span).unwrap();
+                let pieces = piece_stats(&ing, &assign, n).unwrap();
                 let (mut count, mut sum, mut lo, mut hi) = (
                     vec![0u64; n],
                     vec![[0f64; 3]; n],
@@ -1731,7 +1720,7 @@ mod tests {
                     !cuts || (cut > 0 && cut < n),
                     "some pieces cut by a plan ({cut} of {n}), some whole"
                 );
-                let stats = cell_stats(&ing, &assign, &pieces, &piece_object, &samples.span, cells).unwrap();
+                let stats = cell_stats(&ing, &assign, &pieces, &piece_object, cells).unwrap();
                 let mut tris_of = vec![0u64; cells as usize];
                 let mut box_of = vec![FBox::EMPTY; cells as usize];
                 ing.work

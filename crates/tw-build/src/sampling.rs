@@ -113,19 +113,17 @@ struct ObjectSamples {
 }
 
 /// Keeps the samples of `points` (taken every `from` triangles) at multiples of `to` (a power of
-/// two ≥ `from`), in place; returns how many were dropped.
-fn thin(points: &mut Vec<[f32; 3]>, from: u64, to: u64) -> u64 {
+/// two ≥ `from`), in place.
+fn thin(points: &mut Vec<[f32; 3]>, from: u64, to: u64) {
     let step = (to / from.max(1)) as usize;
     if step <= 1 {
-        return 0;
+        return;
     }
-    let before = points.len();
     let mut k = 0;
     points.retain(|_| {
         k += 1;
         (k - 1) % step == 0
     });
-    (before - points.len()) as u64
 }
 
 impl OnlineSampler {
