@@ -1,9 +1,9 @@
 #!/usr/bin/env bash
-# terawalk on a lent GPU machine (the `device` tool; BENCHMARKS.md "On a real GPU"): adapters,
+# terawalk on a machine with a real GPU (docs/benchmarks-log.md "On a real GPU"): adapters,
 # a 10^7 and a 10^8 plant built there, benches of every strategy. Prepare here, in the repo root:
 #   strip -o .dev/terawalk target/release/terawalk   (carry limit 64 MiB; .dev and .gl ignored)
-#   and the Vulkan/EGL loaders into .gl (see the device README), then run it there with
-#   carry [".dev", ".gl"] and timeout 560: `bash scripts/device-check.sh`. Results land in $OUT.
+#   and the Vulkan/EGL loaders into .gl (their .deb packages, unpacked there), then run it there
+#   with carry [".dev", ".gl"] and timeout 560: `bash scripts/device-check.sh`. Results land in $OUT.
 # N10, N100 and F shrink it for a dry run on lavapipe (e.g. N10=200k N100=500k F=40).
 set -u -o pipefail
 T0=$(date +%s)

@@ -182,7 +182,7 @@ pub struct PreviewArgs {
     #[arg(long, value_enum, default_value = "iso")]
     pub view: View,
     /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees".
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// How to colour objects.
     #[arg(long, value_enum, default_value = "material")]
@@ -223,7 +223,7 @@ pub struct RenderArgs {
     pub samples: SamplesChoice,
     /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
     /// whole scene from an oblique direction.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// Pixel error threshold τ of the LOD cut (0 = full resolution).
     #[arg(long, default_value_t = 1.0)]
@@ -234,6 +234,10 @@ pub struct RenderArgs {
     /// Memory budget of the decoded page cache.
     #[arg(long, default_value = "1G", value_parser = parse_bytes)]
     pub memory: u64,
+    /// Write the image and exit 0 even when store pages fail their checksum (their geometry is
+    /// drawn from coarser levels, or missing); without it such a frame fails the command.
+    #[arg(long)]
+    pub allow_damaged: bool,
 }
 
 #[derive(Args, Debug)]
@@ -242,7 +246,7 @@ pub struct ViewArgs {
     pub store: PathBuf,
     /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees".
     /// Default: the first frame of --path, else the whole scene from an oblique direction.
-    #[arg(long)]
+    #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// A camera path (JSON, as `terawalk path` writes and `bench` reads) to play back.
     #[arg(long)]
@@ -382,6 +386,10 @@ pub struct BenchArgs {
     /// How to colour triangles.
     #[arg(long, value_enum, default_value = "material")]
     pub color: RenderColoring,
+    /// Exit 0 even when store pages fail their checksum (the report lists them); without it a
+    /// damaged store fails the command after the report is written.
+    #[arg(long)]
+    pub allow_damaged: bool,
 }
 
 /// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device
@@ -505,9 +513,10 @@ pub struct BuildArgs {
     /// Memory budget for the whole build (peak resident memory).
     #[arg(long, default_value = "2G", value_parser = parse_bytes)]
     pub memory: u64,
-    /// Worker threads (default: all cores). The output is the same for any count.
-    #[arg(long)]
-    pub threads: Option<usize>,
+    /// Worker threads (default: all cores; at most 4 per core). The output is the same for any
+    /// count.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65_536))]
+    pub threads: Option<u32>,
     /// Up axis of the model.
     #[arg(long, default_value = "z", value_parser = ["x", "y", "z"])]
     pub up: String,
@@ -517,6 +526,10 @@ pub struct BuildArgs {
     /// Directory for working files (default: next to the output).
     #[arg(long)]
     pub work_dir: Option<PathBuf>,
+    /// Most bytes the build may write to disk, working files and the store together (default:
+    /// no cap). Every write also leaves 256 MiB free on its disk, cap or not.
+    #[arg(long, value_parser = parse_bytes)]
+    pub temp_space: Option<u64>,
     /// Most triangles per cluster, the unit of LOD selection and occlusion culling: smaller
     /// clusters cull closer to the exact visible set but make more draws and a larger store.
     #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(4..=128))]

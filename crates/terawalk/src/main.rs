@@ -15,6 +15,7 @@ fn main() {
     // resident in an arena of its own (the 10^8 build at --memory 256M: 445-514 -> 245-251 MB;
     // a 10^8 bench with reference frames at --memory 512M: 2,510 -> 1,730 MB).
     tw_core::mem::use_one_heap_arena();
+    exit_quietly_on_closed_pipe();
     // Before any thread starts: it may set an environment variable (see the module).
     tw_gpu::headless::quiet_device_select();
     let cli = cli::Cli::parse();
@@ -33,8 +34,36 @@ fn main() {
         cli::Command::Path(a) => commands::path::run(a, cli.quiet),
     };
     if let Err(e) = result {
-        eprintln!("error: {e:#}");
+        eprintln!("error: {}", error_text(&e));
         std::process::exit(1);
+    }
+}
+
+/// The error and its causes, "outer: inner", each said once: many errors carry their cause's
+/// text in their own (an I/O error named with its path), and the chain would repeat it.
+fn error_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let s = cause.to_string();
+        if s.is_empty() || text.contains(&s) {
+            continue;
+        }
+        if !text.is_empty() {
+            text.push_str(": ");
+        }
+        text.push_str(&s);
+    }
+    text
+}
+
+/// `terawalk info s.tw | head -1`: when the reader of standard output goes away, end as Unix
+/// tools do (killed by SIGPIPE, which the shell does not report) instead of panicking in
+/// `println!` (Rust ignores SIGPIPE, so the write fails with EPIPE).
+fn exit_quietly_on_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: resetting a signal's disposition to the default before any thread starts.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
 }
 

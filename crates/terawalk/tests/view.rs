@@ -65,7 +65,7 @@ fn view_help_has_examples() {
 fn a_missing_store_is_a_clear_error_before_any_window() {
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["view", "nowhere.tw"], dir.path());
-    assert_clean_error(&o, "cannot open store nowhere.tw");
+    assert_clean_error(&o, "cannot open the store: nowhere.tw");
 }
 
 #[test]
@@ -73,12 +73,12 @@ fn a_corrupt_store_is_a_clear_error_before_any_window() {
     let dir = tempfile::tempdir().unwrap();
     std::fs::write(dir.path().join("bad.tw"), vec![0x5au8; 4096]).unwrap();
     let o = terawalk(&["view", "bad.tw"], dir.path());
-    assert_clean_error(&o, "cannot open store bad.tw");
+    assert_clean_error(&o, "cannot open the store: bad.tw");
     // A truncated real store.
     let bytes = std::fs::read(store()).unwrap();
     std::fs::write(dir.path().join("cut.tw"), &bytes[..bytes.len() / 3]).unwrap();
     let o = terawalk(&["view", "cut.tw"], dir.path());
-    assert_clean_error(&o, "cannot open store cut.tw");
+    assert_clean_error(&o, "cannot open the store: cut.tw");
 }
 
 #[test]

@@ -1,15 +1,16 @@
-//! Distributing the triangles into their cells, out of core (terawalk issue #3, phases 2–3: the
+//! Distributing the triangles into their cells, out of core (docs/BUILD.md, phases 4–5: the
 //! working files that the LOD phase reads; the bucketing follows the usual external
 //! distribution sort).
 //!
 //! 1. [`CellFiles::distribute`]: one streaming pass over the working file gives every triangle
-//!    its cell ([`Redefined::cell_of`]) and its grid position ([`WorkFile::quantize`]), and
-//!    appends it to a *bucket* file. A bucket is a contiguous range of cells (in cell order, i.e.
-//!    hierarchy leaf order once [`Redefined::order_by_hierarchy`] ran) sized so that reading it
-//!    fits the memory budget. At most [`MAX_OPEN_BUCKETS`] bucket files are written per pass;
-//!    a tiny budget over a huge input takes several passes rather than more open files. The
-//!    pool decodes, assigns, quantizes and encodes each sub-chunk of 4096 triangles, grouped by
-//!    bucket; the calling thread appends the groups in order (file order within each bucket).
+//!    its cell ([`Redefined::cell_of`]) and its grid position
+//!    ([`WorkFile::quantize`](crate::ingest::WorkFile::quantize)), and appends it to a *bucket*
+//!    file. A bucket is a contiguous range of cells (in cell order, i.e. hierarchy leaf order once
+//!    [`Redefined::order_by_hierarchy`] ran) sized so that reading it fits the memory budget. At
+//!    most [`MAX_OPEN_BUCKETS`] bucket files are written per pass; a tiny budget over a huge input
+//!    takes several passes rather than more open files. The pool decodes, assigns, quantizes and
+//!    encodes each sub-chunk of 4096 triangles, grouped by bucket; the calling thread appends the
+//!    groups in order (file order within each bucket).
 //! 2. [`CellFiles::read_bucket`]: reads one bucket, groups its triangles by cell (a counting
 //!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
 //!    [`CellMesh`], its vertices deduplicated by exact grid position (an open-addressing table with
@@ -24,8 +25,9 @@
 //! Memory: reading a bucket holds its records and a sort index, [`BUCKET_BYTES_PER_TRIANGLE`]
 //! bytes per triangle, plus the mesh being built (at most [`CELL_BYTES_PER_TRIANGLE`] per
 //! triangle of the cell). Buckets are sized so that both together stay within the budget; a
-//! single cell that cannot fit is an error naming the cell (cells are capped at
-//! `RedefineParams::max_cell_triangles`, 65 536 triangles, about 9.4 MB, by default).
+//! single cell that cannot fit is an error naming the cell and `--memory` (cells are capped at
+//! `RedefineParams::max_cell_triangles`, 65 536 triangles, about 10.7 MB, by default; no cell
+//! is larger, `redefine`'s count split sees to that).
 //! Triangles that quantization makes degenerate are kept: every input triangle is in exactly one
 //! cell.
 
@@ -121,7 +123,7 @@ impl CellFiles {
             let c = cell_triangles.iter().position(|&t| t == largest).unwrap_or(0);
             return Err(BuildError::Limit(format!(
                 "cell {c} has {largest} triangles and needs {} MB to read, more than the memory budget \
-                 of {} MB: raise the budget or lower the largest cell size",
+                 of {} MB for a bucket of cells: raise the build's budget (`terawalk build --memory`)",
                 (per_bucket(largest) + per_cell).div_ceil(1 << 20),
                 memory_budget >> 20
             )));
@@ -267,12 +269,12 @@ fn write_group(
     // The pool decodes, assigns, quantizes and encodes each sub-chunk of the working file, its
     // records grouped by bucket (stable: file order within a bucket); this thread only appends
     // each sub-chunk's runs, in order, so every bucket file gets its triangles in file order.
-    ing.work.scan_raw(|_, bytes| {
-        let parts = map_sub_chunks(bytes, crate::ingest::RECORD_BYTES, |_, b| {
+    ing.work.scan_raw(|chunk_start, bytes| {
+        let parts = map_sub_chunks(bytes, crate::ingest::RECORD_BYTES, |at, b| {
             let mut recs: Vec<(u32, [u8; RECORD_BYTES])> =
                 Vec::with_capacity(b.len() / crate::ingest::RECORD_BYTES);
-            for t in crate::ingest::records(b) {
-                let cell = cells.cell_of(&t);
+            for (k, t) in crate::ingest::records(b).enumerate() {
+                let cell = cells.cell_of(&t, chunk_start + (at + k) as u64);
                 let b = bucket_of.get(cell as usize).map_or(usize::MAX, |&b| b as usize);
                 if (first..end).contains(&b) {
                     let q = t.p.map(|v| work.quantize(grid, v));
@@ -342,7 +344,8 @@ impl Bucket {
     }
 
     /// The indexed mesh of `cell` (a cell of this bucket): triangles in input order, vertices
-    /// deduplicated by grid position, numbered in order of first use.
+    /// deduplicated by grid position, numbered in order of first use, and exact duplicate
+    /// triangles left out (`remove_duplicate_triangles`; `CellMesh::duplicates` counts them).
     pub fn mesh(&self, cell: u32) -> CellMesh {
         assert!(self.cells.contains(&cell), "cell {cell} is not in bucket {:?}", self.cells);
         let k = (cell - self.cells.start) as usize;
@@ -357,8 +360,69 @@ impl Bucket {
             }
             objects.push(Rec::object_of(r));
         }
-        CellMesh { positions: table.positions, indices, objects }
+        // The position table's slots go before the triangle table is made: the two are never
+        // held together (CELL_BYTES_PER_TRIANGLE counts the larger).
+        let positions = table.positions;
+        drop(table.slots);
+        let duplicates = remove_duplicate_triangles(&mut indices, &mut objects);
+        CellMesh { positions, indices, objects, duplicates }
     }
+}
+
+/// Removes, in place, every triangle whose three vertices equal an earlier triangle's in the
+/// same cyclic order (any rotation of the corners: `a b c`, `b c a` and `c a b` are one
+/// triangle), keeping the first (its object too); returns how many went. Stable: the triangles
+/// kept stay in input order, so a cell without duplicates is unchanged and its store identical.
+///
+/// The mirrored winding (`a c b`) is *not* a duplicate: it is the same surface facing the other
+/// way, which is how CAD exports make a sheet visible from both sides, and the renderer's
+/// back-face culling and shading tell the two apart. Duplicates only ever add work (copies
+/// draw to the same pixels and z-fight); at a million copies of one triangle they also made a
+/// vertex of a million triangles, which the clusterizer handles in quadratic time.
+///
+/// Memory: a table of at most 16 bytes per triangle (open addressing, load ≤ 1/2), less than
+/// the position table dropped before it. The hash is fixed, so the result does not depend on
+/// anything but the triangles.
+fn remove_duplicate_triangles(indices: &mut Vec<u32>, objects: &mut Vec<u32>) -> u64 {
+    let n = indices.len() / 3;
+    // Rotated so that the smallest index comes first: one key per cyclic order.
+    let key = |t: &[u32]| -> [u32; 3] {
+        let m = (0..3).min_by_key(|&i| t[i]).unwrap_or(0);
+        [t[m], t[(m + 1) % 3], t[(m + 2) % 3]]
+    };
+    let len = (2 * n).next_power_of_two().max(16);
+    let mask = len - 1;
+    // Kept triangle index + 1 per slot (0: empty).
+    let mut slots = vec![0u32; len];
+    let mut kept = 0usize;
+    for t in 0..n {
+        let k = key(&indices[3 * t..3 * t + 3]);
+        let h = ((k[0] as u64) | (k[1] as u64) << 32).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            ^ (k[2] as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+        let mut i = (h >> 32) as usize & mask;
+        let duplicate = loop {
+            let s = slots[i] as usize;
+            if s == 0 {
+                slots[i] = kept as u32 + 1;
+                break false;
+            }
+            // Kept triangles are already moved to their final place (before `kept`).
+            if key(&indices[3 * (s - 1)..3 * s]) == k {
+                break true;
+            }
+            i = (i + 1) & mask;
+        };
+        if !duplicate {
+            if kept != t {
+                indices.copy_within(3 * t..3 * t + 3, 3 * kept);
+                objects[kept] = objects[t];
+            }
+            kept += 1;
+        }
+    }
+    indices.truncate(3 * kept);
+    objects.truncate(kept);
+    (n - kept) as u64
 }
 
 /// Vertex ids by exact grid position, numbered in order of first use: an open-addressing table
@@ -460,6 +524,7 @@ pub(crate) mod tests {
                 assert_eq!(c, next, "cells in order");
                 next += 1;
                 assert_eq!(m.objects.len(), m.triangle_count());
+                assert_eq!(m.duplicates, 0, "these inputs have no duplicate triangle");
                 for (t, &o) in m.indices.chunks_exact(3).zip(&m.objects) {
                     v.push(([t[0], t[1], t[2]].map(|i| m.positions[i as usize]), o));
                 }
@@ -500,6 +565,24 @@ pub(crate) mod tests {
         let got = mesh_triangles(&files);
         assert_eq!(got.len(), 200_000);
         assert_eq!(got, direct_triangles(&ing));
+    }
+
+    #[test]
+    fn duplicate_triangles_go_in_any_rotation_but_not_mirrored() {
+        // 0 1 2 | 1 2 0 (rotation) | 0 2 1 (mirror) | 3 4 5 | 2 0 1 (rotation) | 3 4 5 | 5 4 3
+        let mut indices = vec![0, 1, 2, 1, 2, 0, 0, 2, 1, 3, 4, 5, 2, 0, 1, 3, 4, 5, 5, 4, 3];
+        let mut objects = vec![10, 11, 12, 13, 14, 15, 16];
+        assert_eq!(remove_duplicate_triangles(&mut indices, &mut objects), 3);
+        assert_eq!(indices, [0, 1, 2, 0, 2, 1, 3, 4, 5, 5, 4, 3], "the first kept, in order");
+        assert_eq!(objects, [10, 12, 13, 16]);
+        // Nothing to remove: unchanged.
+        let (mut i, mut o) = (vec![0, 1, 2, 2, 1, 3], vec![1, 2]);
+        assert_eq!(remove_duplicate_triangles(&mut i, &mut o), 0);
+        assert_eq!((i, o), (vec![0, 1, 2, 2, 1, 3], vec![1, 2]));
+        // Many copies (a vertex of 100 000 triangles): one left.
+        let (mut i, mut o) = ([7, 8, 9].repeat(100_000), vec![0; 100_000]);
+        assert_eq!(remove_duplicate_triangles(&mut i, &mut o), 99_999);
+        assert_eq!(i, [7, 8, 9]);
     }
 
     #[test]
@@ -605,6 +688,7 @@ pub(crate) mod tests {
         let e = CellFiles::distribute(&ing, &r, dir.path(), 1000).err().unwrap();
         assert!(matches!(e, BuildError::Limit(_)));
         assert!(e.to_string().contains("memory budget"), "{e}");
+        assert!(e.to_string().contains("--memory"), "the advice names the option: {e}");
     }
 
     #[test]

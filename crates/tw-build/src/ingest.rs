@@ -1,13 +1,13 @@
 //! Phase 1, ingest: streams every input triangle into one on-disk working file and computes the
 //! scene bounds, the scene-wide [`Grid`] and one [`ObjectRecord`] per input object
-//! (GigaWalk §4.2 starts from "the objects in the initial database"; terawalk issue #3, phase 1).
+//! (GigaWalk §4.2 starts from "the objects in the initial database"; docs/BUILD.md, phase 1).
 //!
 //! # Working file
 //!
 //! One record of [`RECORD_BYTES`] = 40 bytes per triangle, in input order, little endian:
 //! three vertices of three `f32` each, relative to a *provisional origin* (the first vertex of the
 //! scene, kept in f64), then the `u32` object id. Nothing else of a triangle is kept (no normals,
-//! no per-vertex colours: see the shared decisions of issue #3).
+//! no per-vertex colours: docs/DESIGN.md, D11).
 //!
 //! # Precision, and why borders still never crack
 //!

@@ -26,4 +26,4 @@ pub mod types;
 pub mod workio;
 
 pub use error::BuildError;
-pub use pipeline::{build, BuildOptions, BuildProgress, BuildReport, NoProgress};
+pub use pipeline::{build, max_worker_threads, BuildOptions, BuildProgress, BuildReport, NoProgress};

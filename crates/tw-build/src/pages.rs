@@ -1,4 +1,4 @@
-//! Phase 5: packing clusters into pages (DESIGN decision 4; Manocha §5.4 for the paging idea).
+//! Phase 5: packing clusters into pages (docs/DESIGN.md, D4; Manocha §5.4 for the paging idea).
 //!
 //! Groups arrive one at a time (a cell's LOD groups, then HLOD groups as the hierarchy is built
 //! bottom-up). Each group goes whole into the open page of its LOD level, so that a page holds

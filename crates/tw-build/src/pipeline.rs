@@ -41,12 +41,19 @@ use crate::redefine::{redefine, RedefineParams, RedefineReport};
 use crate::seams::{SeamFiles, SeamTable};
 use crate::types::{LodDag, LodGroup};
 
+/// The most worker threads a build starts: 4 per core. More cannot run at once and only add
+/// contention and memory (each LOD worker holds a cell's working set; 10,000 threads on 2 cores
+/// ran for minutes at a load of 4,000); the output is the same for any count.
+pub fn max_worker_threads() -> usize {
+    4 * std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
 /// Everything `terawalk build` can set.
 #[derive(Clone, Debug)]
 pub struct BuildOptions {
     /// Memory budget in bytes for the whole build (peak RSS goal).
     pub memory: u64,
-    /// Worker threads (None: all cores).
+    /// Worker threads (None: all cores; at most [`max_worker_threads`]).
     pub threads: Option<usize>,
     /// Up axis: 0 x, 1 y, 2 z.
     pub up: u8,
@@ -121,6 +128,10 @@ pub struct BuildReport {
     pub phases: Vec<(String, f64)>,
     pub input_triangles: u64,
     pub degenerate_dropped: u64,
+    /// Exact duplicate triangles left out (same three grid positions in the same cyclic order
+    /// as an earlier triangle of the cell: `crate::cells::Bucket::mesh`); `input_triangles`
+    /// counts them.
+    pub duplicate_dropped: u64,
     pub objects: u64,
     pub redefine: RedefineReport,
     pub nodes: u64,
@@ -185,10 +196,28 @@ pub fn build(
 ) -> Result<BuildReport, BuildError> {
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = options.threads {
-        pool = pool.num_threads(n.max(1));
+        pool = pool.num_threads(n.clamp(1, max_worker_threads()));
     }
     let pool = pool.build().map_err(|e| BuildError::Param(format!("thread pool: {e}")))?;
     build_with_pool(scene, output, options, progress, &pool)
+}
+
+/// The name prefix of a build's working directory.
+const WORK_DIR_PREFIX: &str = ".terawalk-build-";
+
+/// Removes what earlier builds killed without a chance to clean up (SIGKILL, a crash) left in
+/// the working folder and beside the output: working directories and temporary stores that no
+/// live build holds (`tw_store::cleanup::remove_stale`). Each is logged: they may be gigabytes.
+fn remove_stale_temporaries(output: &Path, work_root: &Path) {
+    let mut removed = tw_store::cleanup::remove_stale(work_root, &[WORK_DIR_PREFIX]);
+    let out_dir = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    if let Some(name) = output.file_name() {
+        let prefix = tw_store::temporary_prefix(&name.to_string_lossy());
+        removed.extend(tw_store::cleanup::remove_stale(out_dir, &[&prefix]));
+    }
+    for p in &removed {
+        tracing::warn!("removed {}, left behind by an earlier build that was killed", p.display());
+    }
 }
 
 /// The phases; parallel steps run on `pool` (the importers themselves need not be `Send`).
@@ -204,11 +233,13 @@ fn build_with_pool(
         Some(d) => d.clone(),
         None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
     };
+    remove_stale_temporaries(output, &work_root);
     let work = tempfile::Builder::new()
-        .prefix(".terawalk-build-")
+        .prefix(WORK_DIR_PREFIX)
         .tempdir_in(&work_root)
         .map_err(|e| BuildError::io(&work_root, e))?;
     let _cleanup = tw_store::cleanup::register(work.path());
+    let _lock = tw_store::cleanup::lock_dir(work.path()).map_err(|e| BuildError::io(work.path(), e))?;
     let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
     let mut t = Timer { report: &mut report, start: Instant::now() };
 
@@ -271,6 +302,8 @@ fn build_with_pool(
     // read nor drains at a bucket's end (at most two buckets are held).
     let queue = BucketQueue::new(cells.bucket_count());
     let jobs = HlodJobs::new(&grid, &options.hlod);
+    // Summed on the pool: the total does not depend on the order.
+    let duplicates = std::sync::atomic::AtomicU64::new(0);
     std::thread::scope(|scope| -> Result<(), BuildError> {
         let loader = scope.spawn(|| {
             queue.load_all(|b| {
@@ -285,8 +318,9 @@ fn build_with_pool(
                 let b = cells.bucket_of_cell(i as u32);
                 let loaded = queue.get(b)?;
                 let external = |p: [u32; 3]| loaded.seams.contains(p);
-                let dag =
-                    build_cell_lod_with_seams(&loaded.bucket.mesh(i as u32), &grid, &options.lod, &external);
+                let mesh = loaded.bucket.mesh(i as u32);
+                duplicates.fetch_add(mesh.duplicates, std::sync::atomic::Ordering::Relaxed);
+                let dag = build_cell_lod_with_seams(&mesh, &grid, &options.lod, &external);
                 // The cell's clusters are encoded here, on the pool: the consumer only sets
                 // their group ids and concatenates them into pages.
                 let encoded = encode_clusters(&dag);
@@ -406,6 +440,7 @@ fn build_with_pool(
 
     report.input_triangles = ing.triangles;
     report.degenerate_dropped = ing.summary.degenerate;
+    report.duplicate_dropped = duplicates.into_inner();
     report.objects = ing.objects.len() as u64;
     report.redefine = red.report.clone();
     report.nodes = nodes.len() as u64;

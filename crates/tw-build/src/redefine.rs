@@ -1,20 +1,23 @@
 //! Phase 2: GigaWalk's object redefinition, out of core (Baxter et al. 2002, GigaWalk §4.2;
-//! Govindaraju 2004 thesis §3.3 and its parameter table, summarised in
-//! `NOTES-govindaraju-2004-thesis.md` §1.1).
+//! Govindaraju 2004 thesis §3.3 and its parameter table; docs/DESIGN.md, D12).
 //!
 //! The input objects are redefined into *cells*, the leaves of the scene hierarchy:
-//! 1. **Partition-I** ([`partition_objects`]): an object with more than `t1` triangles whose box
+//! 1. **Partition-I** (`partition_objects`): an object with more than `t1` triangles whose box
 //!    has a diagonal above `s1` or an aspect ratio above `r1` is split along its longest axis at
 //!    the median of its triangle centroids (the next axis when that split is unbalanced), and the
 //!    pieces again, until every piece meets the thresholds.
-//! 2. **Clustering** ([`cluster_pieces`]): Felzenszwalb–Huttenlocher segmentation of the graph
+//! 2. **Clustering** (`cluster_pieces`): Felzenszwalb–Huttenlocher segmentation of the graph
 //!    whose nodes are the pieces and whose edges join pieces whose boxes are within distance `D`:
 //!    edges by ascending weight, Kruskal style; components `C1`, `C2` merge when
 //!    `w ≤ min(I(C1) + K/|C1|, I(C2) + K/|C2|)` (`I(C)` = the largest MST edge inside `C`), never
 //!    when the merged box's volume would exceed `V`.
-//! 3. **Partition-II** ([`partition_clusters`]): a cluster with more than `t2` triangles and a
+//! 3. **Partition-II** (`partition_clusters`): a cluster with more than `t2` triangles and a
 //!    diagonal above `s2` or an aspect ratio above `r2` is split about its centre of mass
 //!    (recursively), as is any cluster above `max_cell_triangles`.
+//!
+//! 4. **Count split** (`split_by_count`): a cell still above `max_cell_triangles` (space could
+//!    not split it: its triangles' centroids coincide, or every plane left them on one side, or
+//!    the samples misjudged its count) is cut into runs of consecutive working-file triangles.
 //!
 //! The hierarchy over the resulting cells is built by [`Redefined::order_by_hierarchy`].
 //!
@@ -24,7 +27,8 @@
 //! splits are *planned* from a deterministic sample and *applied* while streaming: every split is
 //! a kd-tree of planes over centroids, and a triangle's cell is a pure function of its object id
 //! and its centroid ([`Redefined::cell_of`]), evaluated the same way in every pass.
-//! Three passes, of which only B and C usually read the working file:
+//! Three passes, of which only B and C usually read the working file (and a fourth, D, only
+//! when a cell is above `max_cell_triangles` after C):
 //! - A (`sample_objects`): every object of more than `t1` triangles keeps the centroids of every
 //!   `stride`-th triangle, a power of two that keeps the total between `max_samples` and twice
 //!   that, and at least `min_samples_per_object` per object ([`crate::sampling`]). Ingest takes
@@ -39,13 +43,19 @@
 //!   cell (empty cells, possible since plans come from samples, are dropped). Pieces placed
 //!   whole add their pass-B figures; only the objects whose pieces a partition-II plan cuts
 //!   are read again (their spans of the file, recorded by ingest).
+//! - D (`split_by_count`): for the cells above `max_cell_triangles`, the count and box of
+//!   their triangles per block of consecutive working-file triangles (the spans of the objects
+//!   that reach them), from which each is cut into runs of whole blocks. A triangle's cell is
+//!   then a function of its object, its centroid and, in those cells only, its position in the
+//!   working file ([`Redefined::cell_of`]).
 //!
 //! Threads: the passes get raw records from a reader thread ([`WorkFile::scan_raw`]); the pool
 //! decodes them and finds each triangle's piece or cell in fixed sub-chunks, then accumulates
 //! in `LANES` lanes by key ([`for_each_lane`]), so that every piece's centroid sum adds its
 //! triangles in file order whatever the number of threads. Pass A only counts object ids.
 //!
-//! Memory: O(objects + samples + pieces · `neighbours`), nothing per triangle.
+//! Memory: O(objects + samples + pieces · `neighbours`), nothing per triangle (pass D: one
+//! entry per block of a cut cell, about two per cell it makes).
 //!
 //! # Choices (where the papers leave room)
 //!
@@ -85,8 +95,10 @@
 //! or are larger than `s2`, and every cluster above `max_cell_triangles` (default 65 536), into
 //! halves of at least a quarter each. Cells under 1k triangles remain only where objects are
 //! isolated (nothing within `D`) or boxed in by `2 V`. Because plans come from samples, a cell
-//! can exceed `max_cell_triangles` by the sampling error; the report gives the smallest and
-//! the largest cell.
+//! can exceed `max_cell_triangles` by the sampling error, and no plane splits triangles whose
+//! centroids coincide (a part placed many times at one spot); the count split cuts those, so
+//! that no cell is above `max_cell_triangles`. The report gives the smallest and the largest
+//! cell and how many the count split cut.
 
 use rayon::prelude::*;
 
@@ -214,6 +226,8 @@ pub struct RedefineReport {
     pub cells: u64,
     pub min_cell_triangles: u64,
     pub max_cell_triangles: u64,
+    /// Cells above `max_cell_triangles` after partition-II, cut by count (`split_by_count`).
+    pub count_split_cells: u64,
 }
 
 /// One cell (a redefined object, a hierarchy leaf).
@@ -234,10 +248,11 @@ pub struct Redefined {
 }
 
 impl Redefined {
-    /// The cell of a working-file triangle: a function of its object and centroid only.
+    /// The cell of working-file triangle `index`, `t`: a function of its object and centroid,
+    /// and of `index` only in the cells that the count split cut (`split_by_count`).
     #[inline]
-    pub fn cell_of(&self, t: &WorkTri) -> u32 {
-        self.assign.cell(t)
+    pub fn cell_of(&self, t: &WorkTri, index: u64) -> u32 {
+        self.assign.final_cell(self.assign.cell(t), index)
     }
 
     /// Builds the AABB tree over the cells and renumbers the cells in its leaf order (so that
@@ -300,6 +315,8 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
         }
     }
     assign.remap_cells(&new_id);
+    let kept = split_by_count(ing, params, &pieces, &piece_object, &mut assign, kept, &mut report)?;
+    lap.step("pass D: count split");
     report.cells = kept.len() as u64;
     report.min_cell_triangles = kept.iter().map(|c| c.triangles).min().unwrap_or(0);
     report.max_cell_triangles = kept.iter().map(|c| c.triangles).max().unwrap_or(0);
@@ -477,6 +494,18 @@ struct Assigner {
     object_piece: Vec<Route>,
     /// Per piece.
     piece_cell: Vec<Route>,
+    /// Per cell (empty: none cut): the index in `splits` of the cell's count split, or
+    /// `u32::MAX`. Keyed by the cell the routes give, which is also the split's first part.
+    count_split: Vec<u32>,
+    splits: Vec<CountSplit>,
+}
+
+/// How the count split cut one cell: part `j` holds the cell's triangles of working-file index
+/// in `starts[j - 1]..starts[j]` (part 0 from 0, the last to the end), and is cell `cells[j]`.
+#[derive(Clone, Debug, Default)]
+struct CountSplit {
+    starts: Vec<u64>,
+    cells: Vec<u32>,
 }
 
 impl Assigner {
@@ -496,9 +525,37 @@ impl Assigner {
         }
     }
 
+    /// The final cell of working-file triangle `index` whose routes give cell `c`: one of the
+    /// parts of `c` if the count split cut it, else `c`.
+    #[inline]
+    fn final_cell(&self, c: u32, index: u64) -> u32 {
+        match self.count_split.get(c as usize) {
+            Some(&s) if s != u32::MAX => {
+                let split = &self.splits[s as usize];
+                split.cells[split.starts.partition_point(|&start| start <= index)]
+            }
+            _ => c,
+        }
+    }
+
     /// Cell `c` becomes `map[c]` (`u32::MAX` for cells that no triangle reaches).
     fn remap_cells(&mut self, map: &[u32]) {
         let m = |c: u32| map.get(c as usize).copied().unwrap_or(u32::MAX);
+        if !self.count_split.is_empty() {
+            // New ids are below the old count: re-key the splits by the new ids.
+            let mut keyed = vec![u32::MAX; map.len()];
+            for (c, &s) in self.count_split.iter().enumerate() {
+                if let Some(slot) = keyed.get_mut(m(c as u32) as usize) {
+                    *slot = s;
+                }
+            }
+            self.count_split = keyed;
+            for split in &mut self.splits {
+                for c in &mut split.cells {
+                    *c = m(*c);
+                }
+            }
+        }
         for r in &mut self.piece_cell {
             if let Route::Fixed(c) = r {
                 *c = m(*c);
@@ -1301,6 +1358,160 @@ fn cell_stats(
         .collect())
 }
 
+// ---------------------------------------------------------------------------------------------
+// Pass D: the count split
+
+/// Whether a leaf of the kd plan below `root` satisfies `f`.
+fn plan_has_leaf(kd: &[KdNode], root: u32, f: impl Fn(u32) -> bool) -> bool {
+    let mut stack = vec![root];
+    while let Some(n) = stack.pop() {
+        let k = kd[n as usize];
+        if k.axis == LEAF {
+            if f(k.a) {
+                return true;
+            }
+        } else {
+            stack.extend([k.a, k.b]);
+        }
+    }
+    false
+}
+
+/// One block of consecutive working-file triangles of a cell being cut: how many of them are
+/// the cell's, and their box.
+#[derive(Clone, Copy, Debug)]
+struct BlockStats {
+    block: u64,
+    count: u64,
+    bounds: FBox,
+}
+
+/// Pass D: cuts every cell above `max_cell_triangles` into parts of at most that many, by
+/// count rather than by space: its triangles in working-file order, in runs of whole blocks of
+/// `block` consecutive file positions (at most half the cap, so a part closes above half the
+/// cap and a cell of `n` makes at most about `2 n / max` parts; with the parts' target the
+/// cell's count over the fewest parts that fit, they come out nearly even). This is what is
+/// left when space cannot split a cell: triangles whose centroids coincide (a part inserted
+/// many times at one spot) have no plane between them, and for them the file order is as good
+/// an order as any; it also takes the overshoot of plans made from samples.
+///
+/// Deterministic: blocks are fixed by file position, counts and boxes (minima and maxima) do not
+/// depend on the order of accumulation. Only the file spans of objects that reach a cut cell
+/// are read; nothing is read when no cell is above the cap (the cells are then unchanged).
+/// Part 0 keeps the cell's id; the other parts get new ids after the last cell.
+fn split_by_count(
+    ing: &Ingested,
+    params: &RedefineParams,
+    pieces: &Pieces,
+    piece_object: &[u32],
+    assign: &mut Assigner,
+    mut cells: Vec<CellInfo>,
+    report: &mut RedefineReport,
+) -> Result<Vec<CellInfo>, BuildError> {
+    let max = params.max_cell_triangles;
+    // Slot of each cut cell in `blocks`, or u32::MAX.
+    let mut slot = vec![u32::MAX; cells.len()];
+    let mut cut = 0u32;
+    for (c, info) in cells.iter().enumerate() {
+        if info.triangles > max {
+            slot[c] = cut;
+            cut += 1;
+        }
+    }
+    if cut == 0 {
+        return Ok(cells);
+    }
+    report.count_split_cells = cut as u64;
+    let block = (max / 2).clamp(1, SUB_CHUNK as u64);
+    let reaches = |c: u32| slot.get(c as usize).is_some_and(|&s| s != u32::MAX);
+    let mut objects: Vec<u32> = (0..pieces.count.len())
+        .filter(|&q| pieces.count[q] > 0)
+        .filter(|&q| match assign.piece_cell[q] {
+            Route::Fixed(c) => reaches(c),
+            Route::Plan(root) => plan_has_leaf(&assign.plan2, root, reaches),
+        })
+        .map(|q| piece_object[q])
+        .collect();
+    objects.sort_unstable();
+    objects.dedup();
+    let joined = joined_spans(&objects, |o| ing.objects[o as usize].span.clone());
+    let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
+    tracing::debug!(cells = cut, spans = joined.len(), triangles = read, "pass D reads");
+    // Per cut cell, its blocks in file order (the spans are sorted and read in order).
+    let mut blocks: Vec<Vec<BlockStats>> = vec![Vec::new(); cut as usize];
+    let mut ids = Vec::new();
+    let a: &Assigner = assign;
+    ing.work.scan_ranges_raw(&joined, |first, bytes| {
+        map_records(bytes, &mut ids, |t| a.cell(t));
+        for (k, &c) in ids.iter().enumerate() {
+            let Some(&s) = slot.get(c as usize).filter(|&&s| s != u32::MAX) else { continue };
+            let b = (first + k as u64) / block;
+            let list = &mut blocks[s as usize];
+            if list.last().is_none_or(|e| e.block != b) {
+                list.push(BlockStats { block: b, count: 0, bounds: FBox::EMPTY });
+            }
+            if let Some(e) = list.last_mut() {
+                e.count += 1;
+                for v in WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]).p {
+                    e.bounds.grow(v);
+                }
+            }
+        }
+        Ok(())
+    })?;
+    let mut count_split = vec![u32::MAX; cells.len()];
+    let mut splits = Vec::with_capacity(cut as usize);
+    for c in 0..slot.len() {
+        let s = slot[c];
+        if s == u32::MAX {
+            continue;
+        }
+        let list = &blocks[s as usize];
+        let total: u64 = list.iter().map(|e| e.count).sum();
+        if total != cells[c].triangles {
+            return Err(BuildError::Corrupt {
+                path: ing.work.path().to_path_buf(),
+                message: format!("cell {c}: {total} triangles read again, {} counted", cells[c].triangles),
+            });
+        }
+        let target = total.div_ceil(total.div_ceil(max));
+        let mut split = CountSplit::default();
+        let (mut count, mut bounds) = (0u64, FBox::EMPTY);
+        for (j, e) in list.iter().enumerate() {
+            if count > 0 && count + e.count > target {
+                split.starts.push(e.block * block);
+                let info = CellInfo { triangles: count, bounds: bounds.to_grid(&ing.work, &ing.grid) };
+                split.cells.push(part_cell(&mut cells, c, split.cells.len(), info));
+                (count, bounds) = (0, FBox::EMPTY);
+            }
+            count += e.count;
+            bounds.union(&e.bounds);
+            if j + 1 == list.len() {
+                let info = CellInfo { triangles: count, bounds: bounds.to_grid(&ing.work, &ing.grid) };
+                split.cells.push(part_cell(&mut cells, c, split.cells.len(), info));
+            }
+        }
+        count_split[c] = splits.len() as u32;
+        splits.push(split);
+    }
+    count_split.resize(cells.len(), u32::MAX);
+    assign.count_split = count_split;
+    assign.splits = splits;
+    Ok(cells)
+}
+
+/// The cell id of part `j` of cut cell `c`, with its figures: part 0 replaces `c`, the others
+/// are appended.
+fn part_cell(cells: &mut Vec<CellInfo>, c: usize, j: usize, info: CellInfo) -> u32 {
+    if j == 0 {
+        cells[c] = info;
+        c as u32
+    } else {
+        cells.push(info);
+        cells.len() as u32 - 1
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1383,8 +1594,8 @@ mod tests {
     fn cells_of(ing: &Ingested, r: &Redefined) -> Vec<u32> {
         let mut v = Vec::new();
         ing.work
-            .scan(|_, tris| {
-                v.extend(tris.iter().map(|t| r.cell_of(t)));
+            .scan(|first, tris| {
+                v.extend(tris.iter().enumerate().map(|(k, t)| r.cell_of(t, first + k as u64)));
                 Ok(())
             })
             .unwrap();
@@ -1543,7 +1754,79 @@ mod tests {
         let params = RedefineParams { max_cell_triangles: 8192, ..Default::default() };
         let r = redefine(&ing, &params).unwrap();
         assert!(r.report.cells >= 5, "{:?}", r.report);
-        assert!(r.report.max_cell_triangles <= 8192 * 5 / 4, "{:?}", r.report);
+        assert!(r.report.max_cell_triangles <= 8192, "{:?}", r.report);
+    }
+
+    /// Every triangle's cell from a pass over the file agrees with the cells' counts and boxes.
+    fn check_cells(ing: &Ingested, r: &Redefined) {
+        let mut count = vec![0u64; r.cells.len()];
+        let mut boxes = vec![GridBox::EMPTY; r.cells.len()];
+        let mut next = 0u64;
+        ing.work
+            .scan(|first, tris| {
+                assert_eq!(first, next);
+                next += tris.len() as u64;
+                for (k, t) in tris.iter().enumerate() {
+                    let c = r.cell_of(t, first + k as u64) as usize;
+                    count[c] += 1;
+                    for v in t.p {
+                        boxes[c].grow(ing.work.quantize(&ing.grid, v));
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+        assert_eq!(count, r.cells.iter().map(|c| c.triangles).collect::<Vec<_>>());
+        assert_eq!(boxes, r.cells.iter().map(|c| c.bounds).collect::<Vec<_>>(), "exact boxes");
+    }
+
+    #[test]
+    fn coincident_triangles_are_cut_by_count_under_the_cap() {
+        let dir = tempfile::tempdir().unwrap();
+        let one = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let moved = |d: f64| one.map(|p| [p[0] + d, p[1], p[2]]);
+        // Copies of one triangle (no plane between them), a second pile nearby, and a strip
+        // that space splits as usual.
+        let objs = vec![
+            ("pile".into(), None, vec![one; 10_000]),
+            ("strip".into(), None, strip("strip", 3000, 0.0, 30.0, 2.0, 0.0).2),
+            ("pile2".into(), None, vec![moved(0.5); 2500]),
+        ];
+        let ing = ingest_list(dir.path(), objs);
+        let params = RedefineParams { max_cell_triangles: 1000, ..Default::default() };
+        let mut r = redefine(&ing, &params).unwrap();
+        assert!(r.report.count_split_cells >= 1, "{:?}", r.report);
+        assert!(r.report.max_cell_triangles <= 1000, "{:?}", r.report);
+        assert!(r.cells.iter().all(|c| c.triangles <= 1000));
+        assert!(r.report.cells >= 16, "{:?}", r.report);
+        check_cells(&ing, &r);
+        // The same again, and after the hierarchy renumbered the cells.
+        let again = redefine(&ing, &params).unwrap();
+        assert_eq!(again.cells, r.cells);
+        assert_eq!(cells_of(&ing, &again), cells_of(&ing, &r));
+        r.order_by_hierarchy();
+        check_cells(&ing, &r);
+    }
+
+    #[test]
+    fn a_cap_of_one_triangle_gives_a_cell_per_triangle() {
+        let dir = tempfile::tempdir().unwrap();
+        let one = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let ing = ingest_list(dir.path(), vec![("pile".into(), None, vec![one; 50])]);
+        let params = RedefineParams { max_cell_triangles: 1, ..Default::default() };
+        let r = redefine(&ing, &params).unwrap();
+        assert_eq!(r.cells.len(), 50, "{:?}", r.report);
+        check_cells(&ing, &r);
+    }
+
+    #[test]
+    fn the_plant_needs_no_count_split() {
+        // Inputs that space splits keep their cells (and their stores) as before.
+        let dir = tempfile::tempdir().unwrap();
+        let ing = ingest_plant(dir.path(), 200_000);
+        let r = redefine(&ing, &RedefineParams::default()).unwrap();
+        assert_eq!(r.report.count_split_cells, 0, "{:?}", r.report);
+        assert!(r.assign.count_split.is_empty());
     }
 
     #[test]

@@ -106,6 +106,9 @@ pub struct CellMesh {
     pub indices: Vec<u32>,
     /// The input object id of each triangle (`indices.len() / 3` entries).
     pub objects: Vec<u32>,
+    /// Exact duplicate triangles left out when the mesh was read (see
+    /// `crate::cells::Bucket::mesh`): counted so that the build can report them.
+    pub duplicates: u64,
 }
 
 impl CellMesh {

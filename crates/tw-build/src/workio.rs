@@ -42,6 +42,9 @@ pub struct SpillWriter {
     to_writer: Option<SyncSender<Job>>,
     recycled: Receiver<AlignedBuf>,
     thread: Option<JoinHandle<WriterResult>>,
+    /// The writer thread's error, once it stopped on one: every later call reports it again
+    /// (file index, kind, text), rather than a "stopped" that hides what happened.
+    failed: Option<(usize, std::io::ErrorKind, String)>,
 }
 
 impl SpillWriter {
@@ -87,6 +90,7 @@ impl SpillWriter {
             to_writer: Some(to_writer),
             recycled,
             thread: Some(thread),
+            failed: None,
         }
     }
 
@@ -140,11 +144,21 @@ impl SpillWriter {
     fn join(&mut self) -> Result<Vec<File>, BuildError> {
         self.to_writer = None;
         let Some(thread) = self.thread.take() else {
-            return Err(BuildError::io(&self.paths[0], std::io::Error::other("the writer thread stopped")));
+            let (i, kind, text) = self.failed.clone().unwrap_or_else(|| {
+                (
+                    0,
+                    std::io::ErrorKind::Other,
+                    "the writer thread ended before its files were finished".into(),
+                )
+            });
+            return Err(BuildError::io(&self.paths[i], std::io::Error::new(kind, text)));
         };
         match thread.join() {
             Ok(Ok(files)) => Ok(files),
-            Ok(Err((i, e))) => Err(BuildError::io(&self.paths[i], e)),
+            Ok(Err((i, e))) => {
+                self.failed = Some((i, e.kind(), e.to_string()));
+                Err(BuildError::io(&self.paths[i], e))
+            }
             Err(panic) => std::panic::resume_unwind(panic),
         }
     }
@@ -423,6 +437,22 @@ mod tests {
         }
         let e = failed.unwrap_or_else(|| w.finish().unwrap_err());
         assert!(e.to_string().contains("read-only"), "{e}");
+    }
+
+    /// After the writer stopped on an error, every later call repeats that error (a full disk
+    /// must read as a full disk, not as "the writer thread stopped").
+    #[test]
+    fn spill_writer_repeats_its_first_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("read-only");
+        std::fs::write(&path, b"").unwrap();
+        let file = File::open(&path).unwrap();
+        let mut w = SpillWriter::new(vec![file], vec![path.clone()], 4096);
+        let first = (0..100).find_map(|_| w.write(0, &[0u8; 1000]).err()).expect("a write fails");
+        let later = (0..10).find_map(|_| w.write(0, &[0u8; 5000]).err()).expect("still failing");
+        assert_eq!(later.to_string(), first.to_string());
+        assert!(!later.to_string().contains("stopped"), "{later}");
+        assert_eq!(w.finish().unwrap_err().to_string(), first.to_string());
     }
 
     #[test]

@@ -997,3 +997,85 @@ fn gltf_engine_builds() {
     assert_eq!(store.objects().len(), 113);
     assert_eq!(store.header().input_triangles, 110_336);
 }
+
+// ---------------------------------------------------------------------------------------------
+// Duplicated and coincident triangles (CAD exports repeat parts at one spot)
+
+/// `copies` copies of a 100-triangle part (a 10 × 5 torus), copy `i` moved by `i × offset`
+/// along x: one object each, as a CAD export places a part many times.
+fn coincident_parts(copies: u32, offset: f64) -> Vec<Mesh> {
+    let part = torus("part", 10, 5);
+    (0..copies)
+        .map(|i| Mesh {
+            name: format!("copy{i}"),
+            positions: part.positions.iter().map(|p| [p[0] + i as f64 * offset, p[1], p[2]]).collect(),
+            indices: part.indices.clone(),
+        })
+        .collect()
+}
+
+/// What every build of duplicated or coincident input must give: no cell above the cap, a
+/// store that verifies, the triangles kept and dropped adding up to the input, and a
+/// hierarchy above the cells whose top is resident (root pages).
+fn check_capped_build(out: &Path, report: &BuildReport, cap: u64) -> tw_store::VerifyReport {
+    let d = &report.redefine;
+    assert!(d.max_cell_triangles <= cap, "a cell above the cap of {cap}: {d:?}");
+    let store = Store::open(out).unwrap_or_else(|e| panic!("{e}"));
+    let v = store.verify(|_, _| {}).unwrap_or_else(|e| panic!("verify: {e}"));
+    assert_eq!(leaves(&store) as u64, d.cells);
+    assert_eq!(v.level0_triangles + report.duplicate_dropped, report.input_triangles, "{v:?}");
+    assert!(v.root_pages > 0 && report.root_pages > 0, "no root pages: {v:?}");
+    v
+}
+
+#[test]
+fn copies_of_one_triangle_are_removed_and_cells_stay_under_the_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("copies.ply");
+    let copies = 20_000u32;
+    let one = Mesh {
+        name: "copies".into(),
+        positions: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        // Every rotation of the corner order is the same triangle.
+        indices: (0..copies).flat_map(|i| [[0, 1, 2], [1, 2, 0], [2, 0, 1]][i as usize % 3]).collect(),
+    };
+    write_file(&ply, &[one]);
+    let out = dir.path().join("copies.tw");
+    let cap = 1000;
+    let report = run_build(open_scene(std::slice::from_ref(&ply)), &out, &options(small_cells(cap)));
+    assert_eq!(report.input_triangles, copies as u64);
+    let d = &report.redefine;
+    // Space cannot split one triangle's copies: the count split makes the cells.
+    assert_eq!(d.count_split_cells, 1, "{d:?}");
+    assert!(d.cells >= copies as u64 / cap, "{d:?}");
+    // Each cell keeps one copy.
+    let v = check_capped_build(&out, &report, cap);
+    assert_eq!(v.level0_triangles, d.cells);
+    assert_eq!(report.duplicate_dropped, copies as u64 - d.cells);
+}
+
+#[test]
+fn coincident_parts_are_cut_by_count_and_keep_lod() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = 4096;
+    // 1e-12: below the f32 working format's resolution, so every copy is the first one again
+    // (exact duplicates); 1e-5: about six grid steps apart, no two copies alike.
+    for (offset, all_duplicates) in [(1e-12, true), (1e-5, false)] {
+        let ply = dir.path().join("parts.ply");
+        write_file(&ply, &coincident_parts(2000, offset));
+        let out = dir.path().join("parts.tw");
+        let report = run_build(open_scene(std::slice::from_ref(&ply)), &out, &options(small_cells(cap)));
+        assert_eq!(report.input_triangles, 200_000);
+        let v = check_capped_build(&out, &report, cap);
+        if all_duplicates {
+            // A cell keeps one copy of each of the part's triangles at most.
+            let kept = 200_000 - report.duplicate_dropped;
+            assert!(kept <= 100 * report.redefine.cells, "offset {offset}: {kept} kept, {v:?}");
+        } else {
+            assert_eq!(report.duplicate_dropped, 0, "offset {offset}");
+            // The LOD simplifies: the levels above full resolution hold triangles too, and the
+            // root cut is far below the input.
+            assert!(v.triangles > v.level0_triangles + 20_000, "offset {offset}: {v:?}");
+        }
+    }
+}

@@ -427,6 +427,7 @@ impl DirectWriter {
     }
 
     fn transfer(&mut self, bytes: &[u8]) -> io::Result<()> {
+        crate::disk_space::check(&self.file, bytes.len() as u64)?;
         match write_all_at(&self.file, bytes, self.len) {
             Err(e) if self.direct && refused(&e) => {
                 stop_direct(&self.file)?;

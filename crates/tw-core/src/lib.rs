@@ -19,7 +19,11 @@
 pub mod bounds;
 pub mod color;
 pub mod direct_io;
+pub mod disk_space;
 pub mod mem;
+pub mod output;
+pub mod printable;
+pub mod regular_file;
 pub mod rng;
 
 pub use bounds::Aabb;

@@ -17,12 +17,13 @@ pub fn rss_bytes() -> Option<u64> {
 /// next allocations. A process whose threads take turns at large working sets (the build's
 /// phases and cell workers) then holds the sum of every arena's high-water mark: the 10^7
 /// plant's build at `--memory 128M` peaked at 242 MB while its live heap never exceeded
-/// ~100 MB, with 170–190 MB free inside the arenas (BENCHMARKS.md, session 16). With one arena
-/// the resident set follows the live heap (113 MB). The renderer's process is alike: Mesa's
-/// CPU drivers allocate a full-detail reference frame's batches from their own threads, and a
-/// 10^8 bench with reference frames at `--memory 512M` peaked at 2,510 MB with glibc's arenas,
-/// 2,025 MB with two, 1,730 MB with one, frame times unchanged within noise. Small allocations
-/// still go through each thread's lock-free cache. Does nothing on other C libraries.
+/// ~100 MB, with 170–190 MB free inside the arenas (docs/benchmarks-log.md, "Build memory,
+/// 2026-12-04"). With one arena the resident set follows the live heap (113 MB). The
+/// renderer's process is alike: Mesa's CPU drivers allocate a full-detail reference frame's
+/// batches from their own threads, and a 10^8 bench with reference frames at `--memory 512M`
+/// peaked at 2,510 MB with glibc's arenas, 2,025 MB with two, 1,730 MB with one, frame times
+/// unchanged within noise. Small allocations still go through each thread's lock-free cache.
+/// Does nothing on other C libraries.
 pub fn use_one_heap_arena() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     // SAFETY: mallopt only sets a parameter of the allocator; it is thread-safe.

@@ -4,7 +4,8 @@
 //! in clusters whose normal cone (axis = mean normal, half-angle = widest normal; apex-free test
 //! against the cluster's bounding sphere) proves every triangle back-facing (what cluster-level
 //! cone culling, as in meshoptimizer's `meshopt_computeClusterBounds`, could skip). Counted over
-//! the frame's whole cut (`none`) and over what `hzb` drew. An analysis tool for BENCHMARKS.md.
+//! the frame's whole cut (`none`) and over what `hzb` drew. An analysis tool for
+//! docs/benchmarks-log.md.
 //!
 //! `cargo run --release -p tw-frame --example backface_share -- STORE PATH.json [walk|fly]`
 

@@ -1,7 +1,7 @@
 //! Where a frame's time goes on this machine's rasterizer: times the fixed stages of a frame —
 //! clearing, drawing the frame's cut, the depth read-back and CPU HZB build that `hzb` needs,
 //! the colour read-back — separately, waiting for the GPU after each, on the walk frames of a
-//! camera path. A profiling tool for BENCHMARKS.md, not a benchmark of the pipeline itself
+//! camera path. A profiling tool for docs/benchmarks-log.md, not a benchmark of the pipeline itself
 //! (`terawalk bench` is that).
 //!
 //! `cargo run --release -p tw-frame --example stage_times -- STORE PATH.json [FRAMES] [WxH]`

@@ -1,4 +1,4 @@
-//! The `gpu-hzb` strategy ([`crate::Occlusion::GpuHzb`]; DESIGN decision 6): the two passes of
+//! The `gpu-hzb` strategy ([`crate::Occlusion::GpuHzb`]; docs/DESIGN.md, D6): the two passes of
 //! [`crate::occlude`] with the hierarchical Z-buffer (Greene et al. 1993) built, and the
 //! candidates tested, in compute shaders that write the second pass's indirect draws — the
 //! two-pass GPU culling of modern GPU-driven renderers. The GPU side is

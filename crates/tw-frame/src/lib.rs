@@ -1,7 +1,7 @@
-//! terawalk's frame pipeline (DESIGN "Data flow": camera → select → occlude → stream → draw),
-//! shared by `terawalk bench`, `terawalk render` and the viewer, so that every front end draws a
-//! frame the same way and measures it the same way (DESIGN "Measuring": frame time is from the
-//! camera update to the image complete, waiting for the GPU).
+//! terawalk's frame pipeline (docs/DESIGN.md "Data flow": camera → select → occlude → stream →
+//! draw), shared by `terawalk bench`, `terawalk render` and the viewer, so that every front end
+//! draws a frame the same way and measures it the same way (docs/DESIGN.md "Measuring": frame time
+//! is from the camera update to the image complete, waiting for the GPU).
 //!
 //! [`Walkthrough`] owns a store's [`Streamer`] (page cache, loader threads, selector) and a
 //! [`Renderer`]. One [`Walkthrough::frame`]:
@@ -18,7 +18,7 @@
 //! frustum, no occlusion), in chunks of pages so that memory stays within the budget whatever
 //! the scene size: the image every fidelity figure is measured against.
 //! [`Walkthrough::exact_visibility`] draws the same into the item buffer: the exact visible
-//! objects and triangles (DESIGN "Measuring").
+//! objects and triangles (docs/DESIGN.md "Measuring").
 
 mod gpu_hzb;
 pub mod occlude;
@@ -40,7 +40,7 @@ pub use occlude::{Occlusion, OcclusionStats};
 /// What a frame draws, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FrameSettings {
-    /// Pixel error threshold τ (DESIGN decision 3).
+    /// Pixel error threshold τ (docs/DESIGN.md, D3).
     pub tau: f32,
     pub frustum_culling: bool,
     pub occlusion: Occlusion,
@@ -322,7 +322,7 @@ impl Walkthrough {
         // Pages are read and decoded ahead on every core, a window at a time, into the cache;
         // the loop below then finds them there. One page at a time on this thread, a reference
         // frame of the 10^8 plant (whose decoded full detail is larger than the cache) took
-        // over 20 s on a 16-core host (BENCHMARKS.md, "On a real GPU").
+        // over 20 s on a 16-core host (docs/benchmarks-log.md, "On a real GPU").
         let window = 4 * rayon::current_num_threads();
         let mut warm_end = 0;
         let mut rest = all;
@@ -463,18 +463,16 @@ impl Walkthrough {
         let options =
             SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
         let store = self.streamer.store().clone();
-        let mut stream = StreamStats::default();
-        let mut stream_times = None;
-        let pages: Vec<(u32, Arc<ResidentPage>)> = if settings.wait_for_pages {
-            self.selection = self.streamer.select_blocking(camera, &options);
-            resident_pages(&self.streamer, &self.selection.clusters)
-        } else {
-            let frame = self.streamer.frame(camera, &options);
-            stream = frame.stats;
-            stream_times = Some(frame.times);
-            self.selection = frame.selection;
-            frame.pages
-        };
+        let (pages, stream, stream_times): (Vec<(u32, Arc<ResidentPage>)>, StreamStats, _) =
+            if settings.wait_for_pages {
+                let stream;
+                (self.selection, stream) = self.streamer.frame_blocking(camera, &options);
+                (resident_pages(&self.streamer, &self.selection.clusters), stream, None)
+            } else {
+                let frame = self.streamer.frame(camera, &options);
+                self.selection = frame.selection;
+                (frame.pages, frame.stats, Some(frame.times))
+            };
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
         let bounds = |c: &ClusterRef| {

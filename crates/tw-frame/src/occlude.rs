@@ -1,4 +1,4 @@
-//! Occlusion culling strategies behind one interface (DESIGN decision 6), applied to a frame's
+//! Occlusion culling strategies behind one interface (docs/DESIGN.md, D6), applied to a frame's
 //! LOD cut. All of them are two-pass and conservative:
 //!
 //! 1. **occluders**: the clusters of this frame's cut that were visible last frame
@@ -20,7 +20,7 @@
 //!      ([`tw_runtime::NodeTestSwitch`]);
 //!    - [`Occlusion::GpuHzb`] (Greene et al. 1993, two-pass as in GPU-driven renderers): the
 //!      pyramid is built and the boxes tested in compute shaders that write the second pass's
-//!      indirect draws, with no CPU round trip in between ([`crate::gpu_hzb`]);
+//!      indirect draws, with no CPU round trip in between (the crate's `gpu_hzb` module);
 //! 4. the visible candidates are drawn on top in the same frame (nothing is missing when
 //!    visibility changes: the papers' one-frame-late artefacts do not occur);
 //! 5. the history becomes the candidates drawn plus the occluders still visible (the HZB tests
@@ -32,7 +32,7 @@
 //! ([`tw_runtime::triangle_test`]), the second pass draws the visible candidates' triangles
 //! and the occluders' visible triangles their first pass left out, and the history keeps each
 //! cluster's visible triangles, which are all the next first pass draws. The triangles an
-//! occluder drew in its first pass are tested only every [`RETEST_PERIOD`]-th frame (they are
+//! occluder drew in its first pass are tested only every `RETEST_PERIOD`-th frame (they are
 //! in the image either way; only the history learns from their test).
 
 use std::time::{Duration, Instant};
@@ -85,14 +85,14 @@ impl Occlusion {
     }
 
     /// The fastest conservative strategy for a device (`--occlusion auto`, the default). All
-    /// four give the image of `none`; what differs is speed. Measured (BENCHMARKS.md) on Mesa's
-    /// CPU drivers, lavapipe and llvmpipe: `hzb` is the fastest (8.2–8.6× `none` over the
+    /// four give the image of `none`; what differs is speed. Measured (docs/benchmarks-log.md) on
+    /// Mesa's CPU drivers, lavapipe and llvmpipe: `hzb` is the fastest (8.2–8.6× `none` over the
     /// 10^8-triangle plant's walk and fly-over, `gpu-hzb` 4.2–4.3×: building the pyramid in
-    /// compute costs more than on the CPU there; session 17). On a real GPU, `gpu-hzb` (no
-    /// depth read-back, the culling feeding indirect draws on the GPU) where compute and
+    /// compute costs more than on the CPU there; "after the shader fix"). On a real GPU, `gpu-hzb`
+    /// (no depth read-back, the culling feeding indirect draws on the GPU) where compute and
     /// indirect draws exist, else `hzb`.
-    /// Measured once, on an NVIDIA H200 (BENCHMARKS.md, "On a real GPU"): the frames there are
-    /// CPU-bound and the strategies close — gpu-hzb 1.04× none at 10^7 (hzb 0.79×), 1.00× at
+    /// Measured once, on an NVIDIA H200 (docs/benchmarks-log.md, "On a real GPU"): the frames there
+    /// are CPU-bound and the strategies close — gpu-hzb 1.04× none at 10^7 (hzb 0.79×), 1.00× at
     /// 10^8 (hzb 1.27×) — while gpu-hzb draws 6–87× fewer triangles than none; so it stays.
     pub fn fastest_conservative(device: wgpu::DeviceType, gpu_cull_supported: bool) -> Occlusion {
         match device {
@@ -182,8 +182,9 @@ pub struct Culled {
     pub occluded: Vec<ClusterRef>,
 }
 
-/// [`draw`] without reading the image back: the frame stays in the renderer's own colour
-/// target ([`Renderer::color_texture`]), for a viewer that shows it without waiting (only the
+/// Draws a frame's cut with the strategy, without reading the image back (`Walkthrough::frame`
+/// reads it after): the frame stays in the renderer's own colour target
+/// ([`Renderer::color_texture`]), for a viewer that shows it without waiting (only the
 /// strategies' own read-backs wait: the depth for `hzb`, the query results for `queries`).
 /// Also returns the clusters drawn and those found occluded (the debug view's boxes).
 pub fn draw_culled(

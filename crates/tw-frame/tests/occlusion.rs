@@ -1,8 +1,8 @@
-//! Occlusion culling is conservative (DESIGN "Measuring"): with the same LOD cut, every strategy
-//! gives the image of `--occlusion none`, pixel for pixel, on a walk through a generated plant's
-//! interior (smooth camera motion) and on camera teleports (the two-pass scheme draws the newly
-//! visible clusters in the same frame). Each strategy must also cull something on the walk, so
-//! the comparison is not trivially true. The same with 4× multisampling (tw_gpu::msaa: the
+//! Occlusion culling is conservative (docs/DESIGN.md "Measuring"): with the same LOD cut, every
+//! strategy gives the image of `--occlusion none`, pixel for pixel, on a walk through a generated
+//! plant's interior (smooth camera motion) and on camera teleports (the two-pass scheme draws the
+//! newly visible clusters in the same frame). Each strategy must also cull something on the walk,
+//! so the comparison is not trivially true. The same with 4× multisampling (tw_gpu::msaa: the
 //! tests then treat a pixel as its four samples; Vulkan only, GL refuses it). On GL (llvmpipe)
 //! and Vulkan (lavapipe); without an
 //! adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.

@@ -1,6 +1,6 @@
-//! Depth readback for GigaWalk's `hzb` occlusion strategy (Baxter et al. 2002 §4; DESIGN
-//! decision 6): after the occluders are drawn, the reverse-Z `Depth32Float` buffer is read back
-//! as f32 in the layout [`tw_runtime::hzb::Hzb::build`] takes (`width × height`, rows from the
+//! Depth readback for GigaWalk's `hzb` occlusion strategy (Baxter et al. 2002 §5.1;
+//! docs/DESIGN.md, D6): after the occluders are drawn, the reverse-Z `Depth32Float` buffer is read
+//! back as f32 in the layout [`tw_runtime::hzb::Hzb::build`] takes (`width × height`, rows from the
 //! top, 1 at the near plane, 0 at the far plane and on the cleared background).
 //!
 //! Vulkan (and the other native backends) copy the depth aspect straight into the readback

@@ -1,4 +1,4 @@
-//! Drawing pooled clusters (DESIGN decision 5): the pipelines (shaded colour per target format,
+//! Drawing pooled clusters (docs/DESIGN.md, D5): the pipelines (shaded colour per target format,
 //! the item buffer), their bind group, and the encoding of one batch of resident clusters as a
 //! single `multi_draw_indexed_indirect` where the device supports indirect execution
 //! (`DownlevelFlags::INDIRECT_EXECUTION`: Vulkan, Metal, DX12, GL ≥ 4.3 / ES ≥ 3.1 — wgpu's GL

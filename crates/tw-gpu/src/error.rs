@@ -1,4 +1,5 @@
-//! The crate's error type (DESIGN "Conventions": `thiserror` in libraries, no panics on bad data).
+//! The crate's error type (docs/DESIGN.md "Conventions": `thiserror` in libraries, no panics on
+//! bad data).
 
 use std::path::PathBuf;
 

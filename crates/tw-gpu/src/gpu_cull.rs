@@ -1,4 +1,4 @@
-//! GPU hierarchical-Z occlusion culling, the `gpu-hzb` strategy of DESIGN decision 6: the
+//! GPU hierarchical-Z occlusion culling, the `gpu-hzb` strategy of docs/DESIGN.md, D6: the
 //! hierarchical Z pyramid of Greene, Kass and Miller 1993 ("Hierarchical Z-Buffer Visibility":
 //! the pyramid of farthest depths, a box culled when its nearest depth is behind the pyramid
 //! texels covering its screen rectangle, and last frame's visible geometry drawn first for
@@ -46,7 +46,8 @@ use tw_store::PageCluster;
 
 use crate::error::GpuError;
 use crate::pool::{DrawArgs, Ensure, PoolKey};
-use crate::{ClusterKey, Pass, Renderer, COLOR_FORMAT};
+use crate::renderer::{bind_group, Pass};
+use crate::{ClusterKey, Renderer, COLOR_FORMAT};
 
 /// Pixels the GPU test widens a rectangle by beyond [`RECT_SLACK_PX`], and the relative amount
 /// it moves a box's nearest depth towards the eye: the shader compiler may fuse or reorder the
@@ -640,13 +641,8 @@ impl Renderer {
         }
         // 4. Draw.
         if self.bind_generation != self.pool.generation {
-            self.bind_group = crate::bind_group(
-                &self.device,
-                &self.pipelines,
-                &self.uniforms,
-                &self.pool,
-                &self.object_colors,
-            );
+            self.bind_group =
+                bind_group(&self.device, &self.pipelines, &self.uniforms, &self.pool, &self.object_colors);
             self.bind_generation = self.pool.generation;
         }
         let color_view = self.color_view.clone();

@@ -1,4 +1,4 @@
-//! The item buffer (DESIGN "Measuring": exact visibility; the papers' "item buffer", e.g.
+//! The item buffer (docs/DESIGN.md "Measuring": exact visibility; the papers' "item buffer", e.g.
 //! GigaWalk §6 and Yoon 2003 §7 measure culling against it): the frame's clusters drawn at the
 //! caller's LOD cut, with depth test, into an `Rgba32Uint` target holding per pixel the object
 //! id, 1 + the cluster's position in the drawn list (0 = background) and the triangle's index in

@@ -1,5 +1,5 @@
-//! Images read back from the GPU and their comparison (DESIGN "Measuring": fidelity is PSNR and
-//! the share of differing pixels against the full-detail, no-culling reference; conservative
+//! Images read back from the GPU and their comparison (docs/DESIGN.md "Measuring": fidelity is PSNR
+//! and the share of differing pixels against the full-detail, no-culling reference; conservative
 //! culling means identical images).
 
 use std::path::Path;
@@ -139,6 +139,8 @@ impl Image {
     /// `path`, synced, renamed).
     pub fn save_png(&self, path: &Path) -> Result<(), GpuError> {
         let io = |source| GpuError::Io { path: path.to_path_buf(), source };
+        tw_core::output::check_replaceable(path)
+            .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string())))?;
         let bytes = self.png_bytes().map_err(|source| GpuError::Png { path: path.to_path_buf(), source })?;
         let mut tmp_name = path.file_name().unwrap_or_default().to_os_string();
         tmp_name.push(".tmp");

@@ -3,8 +3,8 @@
 //! once per frame, when it is read, not after every pass: ~6 ms a resolve at 1280×720 on
 //! lavapipe). The fidelity
 //! goal (PSNR against the full-detail reference) is limited by aliasing at one sample per
-//! pixel: a LOD cut moves sub-pixel edges, which flips whole pixels (BENCHMARKS.md, "Fidelity
-//! and anti-aliasing").
+//! pixel: a LOD cut moves sub-pixel edges, which flips whole pixels (docs/benchmarks-log.md,
+//! "Fidelity and anti-aliasing").
 //!
 //! The occlusion strategies read a single-sample depth: the CPU HZB's read-back
 //! ([`crate::Renderer::read_depth`]) and the GPU HZB's pyramid ([`crate::gpu_cull`]). For them

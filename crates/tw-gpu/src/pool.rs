@@ -1,6 +1,6 @@
 //! The resident GPU cluster pool: decoded store clusters ([`tw_store::PageCluster`]) uploaded
 //! once into one pooled GPU buffer and kept there across frames under a GPU-memory budget, with
-//! LRU eviction of clusters not drawn in the current frame. This is DESIGN decision 4
+//! LRU eviction of clusters not drawn in the current frame. This is docs/DESIGN.md's D4
 //! ("out-of-core by pages": a budget, LRU eviction) applied to the GPU copy of the clusters the
 //! runtime selected, the "streaming to the GPU" that the first renderer left for later.
 //!

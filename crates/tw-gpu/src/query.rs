@@ -2,14 +2,14 @@
 //! "conservative occlusion culling": the previous frame's visible set is drawn as occluders,
 //! then the bounding boxes of the remaining candidates are rasterized with depth test and no
 //! writes inside occlusion queries, batched so the CPU waits once) and of the occlusion switch
-//! (DESIGN decision 6, strategy `queries`).
+//! (docs/DESIGN.md, D6, strategy `queries`).
 //!
 //! Boxes are drawn into the renderer's own depth target as the frame left it (after
 //! [`crate::Renderer::draw`] to [`crate::Target::Own`]), with `GreaterEqual` (reverse-Z; a box
 //! face coplanar with an occluder counts as visible), both faces, no colour attachment. One
 //! query per box, up to 4096 per query set (wgpu's limit), all resolved and read back at once.
 //! Results are what the backend counts: samples passed on Vulkan, 0 or 1 on GL (boolean
-//! queries, DESIGN decision 5). A box the eye is inside (or within the near distance of) is
+//! queries, docs/DESIGN.md, D5). A box the eye is inside (or within the near distance of) is
 //! reported as [`EYE_INSIDE`] without a query: rasterization would clip it away.
 
 use bytemuck::{Pod, Zeroable};

@@ -1,13 +1,13 @@
 //! Opening an input file: transparent gzip (detected by its magic bytes, not its name), a large
 //! read buffer, and a count of the bytes read from disk for progress bars.
 
-use std::fs::File;
 use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
 use tw_core::direct_io::DirectReader;
+use tw_core::regular_file::open_regular;
 
 use crate::error::{ImportError, Position};
 
@@ -28,13 +28,17 @@ pub struct Input {
 
 impl Input {
     /// Opens `path`, detecting gzip by the magic bytes 1f 8b.
+    ///
+    /// Only a regular file is read: its length drives the progress bars and the readers' size
+    /// checks, the glTF reader reads it at offsets, and a FIFO would block the open. A pipe, a
+    /// device or a directory is refused with a message naming the path and what it is (there is
+    /// no standard-input mode: copy the stream to a file first).
     pub fn open(path: &Path) -> Result<Input, ImportError> {
         let io_err = |e| ImportError::io(path, Position::File, e);
-        let mut file = File::open(path).map_err(io_err)?;
-        let meta = file.metadata().map_err(io_err)?;
-        if meta.is_dir() {
-            return Err(ImportError::parse(path, Position::File, "is a directory, not a model file"));
-        }
+        let (mut file, meta) = open_regular(path).map_err(|e| match e.kind() {
+            io::ErrorKind::InvalidInput => ImportError::parse(path, Position::File, e.to_string()),
+            _ => io_err(e),
+        })?;
         let mut magic = [0u8; 2];
         let got = read_up_to(&mut file, &mut magic).map_err(io_err)?;
         let gzip = got == 2 && magic == [0x1f, 0x8b];
@@ -203,6 +207,31 @@ mod tests {
     fn missing_file_names_the_path() {
         let e = Input::open(Path::new("/nonexistent/x.obj")).err().unwrap();
         assert!(e.to_string().contains("/nonexistent/x.obj"), "{e}");
+    }
+
+    /// Regression: `stats` on a FIFO blocked forever in the open, and build/preview on a device
+    /// failed later with "Illegal seek". Both are refused at the open, naming the path.
+    #[test]
+    fn fifos_devices_and_directories_are_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let e = Input::open(dir.path()).err().unwrap().to_string();
+        assert!(e.contains("is a directory, not a regular file"), "{e}");
+        #[cfg(unix)]
+        {
+            let fifo = dir.path().join("model.ply");
+            assert!(std::process::Command::new("mkfifo").arg(&fifo).status().unwrap().success());
+            let (tx, rx) = std::sync::mpsc::channel();
+            std::thread::spawn(move || {
+                let _ = tx.send(Input::open(&fifo).err().map(|e| e.to_string()));
+            });
+            let e = rx.recv_timeout(std::time::Duration::from_secs(20)).expect("no hang").unwrap();
+            assert!(
+                e.contains("model.ply: is a FIFO (named pipe), not a regular file; copy it to a file first"),
+                "{e}"
+            );
+            let e = Input::open(Path::new("/dev/zero")).err().unwrap().to_string();
+            assert!(e.contains("/dev/zero: is a character device, not a regular file"), "{e}");
+        }
     }
 
     #[test]

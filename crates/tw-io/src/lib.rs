@@ -13,7 +13,7 @@
 //!   contents and extension) and returns a boxed [`TriangleSource`].
 //! - [`Scene`]: several inputs streamed as one scene, object ids kept distinct, degenerate
 //!   triangles dropped and counted.
-//! - [`generate`]: the procedural power plant; [`write`]: PLY/OBJ/STL/GLB writers.
+//! - [`generate`]: the procedural power plant; [`write`](mod@write): PLY/OBJ/STL/GLB writers.
 //!
 //! ```no_run
 //! use tw_io::{Scene, SceneOptions, SceneStats};

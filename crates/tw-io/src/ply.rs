@@ -1608,49 +1608,18 @@ impl Body<'_> {
                     rd.consume(n * rec.size);
                     index += n as u64;
                 }
-                match end {
+                let one_record = match end {
                     RunEnd::Window if index < el.count => {
-                        let got = rd
-                            .fill_more()
-                            .map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?;
-                        if got == 0 {
-                            return Err(truncated(path, rd, el, index));
-                        }
+                        // At the end of the file the bytes left are fewer than a triangle's
+                        // record, but may still hold a shorter record (a face of fewer than 3
+                        // vertices, skipped like in ASCII): the general way reads it, or says
+                        // the file is truncated.
+                        rd.fill_more().map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?
+                            == 0
                     }
-                    RunEnd::Window => {}
-                    RunEnd::Full if n > 0 => {}
-                    RunEnd::Full | RunEnd::NotTriangle => {
-                        // One record the general way.
-                        let at = rd.position();
-                        let len = loop {
-                            match measure(&el.props, rd.available(), big, MAX_LIST, &mut offsets) {
-                                Ok(Some(len)) => break len,
-                                Ok(None) => {
-                                    let got = rd.fill_more().map_err(|e| {
-                                        ImportError::io(path, Position::Byte(rd.position()), e)
-                                    })?;
-                                    if got == 0 {
-                                        return Err(truncated(path, rd, el, index));
-                                    }
-                                }
-                                Err(msg) => {
-                                    return Err(RecordError::Bad(msg).at(
-                                        path,
-                                        Position::Byte(at),
-                                        &el.name,
-                                        index,
-                                    ))
-                                }
-                            }
-                        };
-                        let record = &rd.available()[..len];
-                        let r = face_record(record, &offsets, layout, big, &mut faces, v, &mut objects, sink);
-                        if let Err(e) = r {
-                            return Err(e.at(path, Position::Byte(at), &el.name, index));
-                        }
-                        rd.consume(len);
-                        index += 1;
-                    }
+                    RunEnd::Window => false,
+                    RunEnd::Full if n > 0 => false,
+                    RunEnd::Full | RunEnd::NotTriangle => true,
                     RunEnd::Bad(e) => {
                         return Err(e.at(
                             path,
@@ -1659,6 +1628,38 @@ impl Body<'_> {
                             index,
                         ))
                     }
+                };
+                if one_record {
+                    // One record the general way.
+                    let at = rd.position();
+                    let len = loop {
+                        match measure(&el.props, rd.available(), big, MAX_LIST, &mut offsets) {
+                            Ok(Some(len)) => break len,
+                            Ok(None) => {
+                                let got = rd
+                                    .fill_more()
+                                    .map_err(|e| ImportError::io(path, Position::Byte(rd.position()), e))?;
+                                if got == 0 {
+                                    return Err(truncated(path, rd, el, index));
+                                }
+                            }
+                            Err(msg) => {
+                                return Err(RecordError::Bad(msg).at(
+                                    path,
+                                    Position::Byte(at),
+                                    &el.name,
+                                    index,
+                                ))
+                            }
+                        }
+                    };
+                    let record = &rd.available()[..len];
+                    let r = face_record(record, &offsets, layout, big, &mut faces, v, &mut objects, sink);
+                    if let Err(e) = r {
+                        return Err(e.at(path, Position::Byte(at), &el.name, index));
+                    }
+                    rd.consume(len);
+                    index += 1;
                 }
                 if rd.take_refilled() {
                     sink.progress(self.counter.get());
@@ -2295,6 +2296,51 @@ mod tests {
             [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 1.0, 0.0]][i]
         };
         assert_eq!(positions(&c), vec![[v(0), v(1), v(2)], [v(0), v(2), v(3)], [v(0), v(3), v(4)]]);
+    }
+
+    /// Regression: a binary file whose last face has fewer than 3 vertices was called truncated
+    /// (its record is shorter than a triangle's), while ASCII skips such a face. Every encoding
+    /// now gives the same triangles; a record that really is cut short is still an error.
+    #[test]
+    fn short_last_face_is_skipped_in_every_encoding() {
+        for k in 0..3u8 {
+            let header = |enc: &str| {
+                format!(
+                    "ply\nformat {enc} 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+                     property float z\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n"
+                )
+            };
+            let mut text = header("ascii");
+            for v in SQUARE {
+                text += &format!("{} {} {}\n", v[0], v[1], v[2]);
+            }
+            text += "3 0 1 2\n";
+            text += &format!("{k}{}\n", (0..k).map(|i| format!(" {i}")).collect::<String>());
+            let (ascii, _) = run("short.ply", text.as_bytes()).unwrap();
+            assert_eq!(ascii.tris.len(), 1);
+            for enc in ["binary_little_endian", "binary_big_endian"] {
+                let mut w = W::new(&header(enc), enc == "binary_big_endian");
+                for v in SQUARE {
+                    w.f32(v[0]).f32(v[1]).f32(v[2]);
+                }
+                w.u8(3).i32(0).i32(1).i32(2);
+                w.u8(k);
+                for i in 0..k {
+                    w.i32(i as i32);
+                }
+                let (c, _) = run("short.ply", &w.out).unwrap_or_else(|e| panic!("{enc}, {k} vertices: {e}"));
+                assert_eq!(positions(&c), positions(&ascii), "{enc}, {k} vertices");
+                // The same face cut short (its count says 3) is truncated.
+                let mut cut = W::new(&header(enc), enc == "binary_big_endian");
+                for v in SQUARE {
+                    cut.f32(v[0]).f32(v[1]).f32(v[2]);
+                }
+                cut.u8(3).i32(0).i32(1).i32(2);
+                cut.u8(3).i32(0).i32(1);
+                let e = run("cut.ply", &cut.out).err().unwrap().to_string();
+                assert!(e.contains("truncated"), "{enc}: {e}");
+            }
+        }
     }
 
     #[test]

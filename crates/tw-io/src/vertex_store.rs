@@ -233,7 +233,11 @@ impl<T: Record> VertexStore<T> {
             }
             let offset = (b * BLOCK_LEN * T::SIZE) as u64;
             let scratch = std::mem::take(&mut self.scratch);
-            let result = self.spill_file()?.write_all_at(&scratch, offset);
+            let file = self.spill_file()?;
+            // Spilled vertices count against the process's disk limits like the build's
+            // working files (a small .gz can hold billions of vertices).
+            let result = tw_core::disk_space::check(file, scratch.len() as u64)
+                .and_then(|()| file.write_all_at(&scratch, offset));
             self.scratch = scratch;
             result?;
             self.blocks[b].on_disk = true;

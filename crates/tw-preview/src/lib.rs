@@ -1,8 +1,9 @@
 //! terawalk preview images: a streaming CPU software rasterizer.
 //!
 //! [`Preview`] is a [`TriangleSink`]: each triangle is drawn into a z-buffer and a colour buffer
-//! the moment it arrives, so memory is the image (8 bytes a pixel) whatever the size of the
-//! scene, and a preview of a billion-triangle file costs one streaming pass. Meant for
+//! the moment it arrives, so memory is the image (8 bytes a pixel, plus a memo of at most
+//! 65,536 large triangles that skips exact repeats) whatever the size of the scene, and a
+//! preview of a billion-triangle file costs one streaming pass. Meant for
 //! thumbnails, documentation images and checking an import, not for walking (that is the GPU
 //! renderer's job).
 //!
@@ -42,6 +43,12 @@ use raster::{Class, Projector};
 
 /// The largest image side [`Preview::new`] accepts.
 pub const MAX_SIDE: u32 = 16384;
+
+/// Triangles whose projected bounding box covers at least this many pixels are remembered in
+/// the repeat memo ([`Preview`]'s `drawn`); smaller ones cost less to draw than to look up.
+const MEMO_MIN_AREA: f64 = 1024.0;
+/// The repeat memo holds at most this many triangles (about 6 MB); when full it starts over.
+const MEMO_CAP: usize = 1 << 16;
 
 /// Errors of this crate.
 #[derive(Debug, thiserror::Error)]
@@ -102,6 +109,13 @@ pub struct Preview {
     stats: PreviewStats,
     /// Camera-space positions of the current mesh chunk.
     scratch: Vec<[f64; 3]>,
+    /// The repeat memo: large triangles drawn so far (their camera-space vertices, bit for bit,
+    /// in order) and the fragments each covered. A triangle drawn again exactly changes no pixel
+    /// (see [`Preview::draw`]), so a repeat only adds its fragments to the statistics. Without
+    /// it, a model with many copies of one large triangle (duplicated parts of CAD exports) cost
+    /// a full scan conversion per copy: 100,000 copies of a triangle covering a third of the
+    /// image took over 40 s.
+    drawn: HashMap<[u64; 9], u64>,
 }
 
 impl Preview {
@@ -141,6 +155,7 @@ impl Preview {
             last_color: None,
             stats: PreviewStats::default(),
             scratch: Vec::new(),
+            drawn: HashMap::new(),
         };
         p.fill_sky(world_up);
         Ok(p)
@@ -267,12 +282,28 @@ impl Preview {
     }
 
     /// Draws a triangle given in camera space.
+    ///
+    /// Depths only grow (a pixel is written when the new 1/z is strictly larger) and scan
+    /// conversion is a deterministic function of the camera-space vertices, so a triangle equal
+    /// to one drawn before, vertex for vertex, finds every pixel it covers at its own depth or
+    /// nearer and writes none: such repeats of large triangles are skipped through the memo.
     #[inline]
     fn draw(&mut self, c: [[f64; 3]; 3], t: &Triangle) {
         self.stats.triangles += 1;
         let class = self.proj.classify(&c);
         if class == Class::Outside || !c.iter().flatten().all(|v| v.is_finite()) {
             self.stats.culled += 1;
+            return;
+        }
+        let projected = (class == Class::Inside)
+            .then(|| [self.proj.project(c[0]), self.proj.project(c[1]), self.proj.project(c[2])]);
+        // Clipped triangles reach past the image: treat them as large.
+        let key = projected.is_none_or(|s| bounding_area(&s) >= MEMO_MIN_AREA).then(|| memo_key(&c));
+        if let Some(fragments) = key.as_ref().and_then(|k| self.drawn.get(k)) {
+            self.stats.fragments += fragments;
+            if class == Class::Clip {
+                self.stats.clipped += 1;
+            }
             return;
         }
         let base = self.base_color(t);
@@ -291,8 +322,7 @@ impl Preview {
                 pixels += 1;
             }
         };
-        if class == Class::Inside {
-            let s = [self.proj.project(c[0]), self.proj.project(c[1]), self.proj.project(c[2])];
+        if let Some(s) = projected {
             raster::rasterize(s, w, h, &mut plot);
         } else {
             self.stats.clipped += 1;
@@ -307,7 +337,29 @@ impl Preview {
         }
         self.stats.pixels += pixels;
         self.stats.fragments += fragments;
+        if let Some(k) = key {
+            if self.drawn.len() >= MEMO_CAP {
+                self.drawn.clear();
+            }
+            self.drawn.insert(k, fragments);
+        }
     }
+}
+
+/// Area in pixels of the bounding box of a projected triangle.
+fn bounding_area(s: &[raster::ScreenVertex; 3]) -> f64 {
+    let (x0, x1) = (s[0].x.min(s[1].x).min(s[2].x), s[0].x.max(s[1].x).max(s[2].x));
+    let (y0, y1) = (s[0].y.min(s[1].y).min(s[2].y), s[0].y.max(s[1].y).max(s[2].y));
+    (x1 - x0) * (y1 - y0)
+}
+
+/// The repeat memo's key of a camera-space triangle: its coordinates, bit for bit, in order.
+fn memo_key(c: &[[f64; 3]; 3]) -> [u64; 9] {
+    let mut k = [0u64; 9];
+    for (slot, v) in k.iter_mut().zip(c.iter().flatten()) {
+        *slot = v.to_bits();
+    }
+    k
 }
 
 /// Flat shading of a camera-space triangle: ambient + headlight + sun (`sun`: unit, camera

@@ -11,6 +11,7 @@ use crate::{BenchReport, ReportImage};
 const STYLE: &str = "\
 :root{--fg:#1f2933;--muted:#616e7c;--line:#d9e2ec;--bg:#f5f7fa}\
 *{box-sizing:border-box}\
+.damaged{border-left:4px solid #c62828;background:#fdecea;padding:0 12px}\
 body{margin:0;font:14px/1.45 system-ui,-apple-system,'Segoe UI',Roboto,Helvetica,Arial,sans-serif;color:var(--fg);background:var(--bg)}\
 header{background:#102a43;color:#f0f4f8;padding:20px 32px}\
 header h1{margin:0 0 4px;font-size:22px;font-weight:600}\
@@ -59,6 +60,25 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         first.map(|r| r.frames.len()).unwrap_or(0),
         escape(&m.adapter)
     );
+
+    if !report.damaged_pages.is_empty() {
+        let pages: Vec<String> = report.damaged_pages.iter().take(20).map(|d| d.page.to_string()).collect();
+        let more = report.damaged_pages.len().saturating_sub(pages.len());
+        let _ = write!(
+            h,
+            "<section class=\"damaged\"><h2>Damaged store</h2><p>{} page(s) failed their checksum or \
+             decoding (pages {}{}): their geometry was drawn from coarser levels where the store has \
+             them and is missing otherwise. These frames are not the store's true images; \
+             <code>terawalk info STORE --verify</code> checks the whole store.</p><ul>",
+            report.damaged_pages.len(),
+            pages.join(", "),
+            if more > 0 { format!(" and {more} more") } else { String::new() }
+        );
+        for d in report.damaged_pages.iter().take(20) {
+            let _ = write!(h, "<li>page {}: {}</li>", d.page, escape(&d.error));
+        }
+        h.push_str("</ul></section>");
+    }
 
     // Metadata.
     h.push_str("<section><h2>Run</h2><table class=\"meta\">");

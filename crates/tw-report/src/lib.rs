@@ -1,5 +1,5 @@
-//! Benchmark reports (DESIGN "Conventions": reports are self-contained HTML with inline SVG plots,
-//! no network, plus JSON with every figure). Plain data in, files out:
+//! Benchmark reports (docs/DESIGN.md "Conventions": reports are self-contained HTML with inline SVG
+//! plots, no network, plus JSON with every figure). Plain data in, files out:
 //!
 //! - [`BenchReport`]: run metadata, and one or more [`Run`]s (the measured run and comparison
 //!   runs such as "reference", "none", "hzb", "queries"), each a named series of per-frame
@@ -76,6 +76,8 @@ pub struct FrameRecord {
     pub cut_ms: f64,
     #[serde(default)]
     pub prefetch_ms: f64,
+    /// The same as `culling_ms` (occlusion culling; frustum culling is part of `select_ms`):
+    /// kept so that reports of format version 1 still read. Not plotted.
     pub cull_ms: f64,
     pub upload_ms: f64,
     pub render_ms: f64,
@@ -102,6 +104,10 @@ pub struct FrameRecord {
     pub pages_evicted: u64,
     /// Groups drawn from a coarser resident ancestor instead of waiting for a page.
     pub stalls_avoided: u64,
+    /// Groups whose page failed (checksum, decoding): drawn from a coarser ancestor where the
+    /// store has one ([`BenchReport::damaged_pages`]).
+    #[serde(default)]
+    pub groups_failed: u64,
     /// `--compare`: PSNR against the reference image, dB (∞ for identical images is stored as
     /// `None` with `differing_pixels = 0`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -225,11 +231,30 @@ pub struct BenchReport {
     pub version: u32,
     pub meta: RunMeta,
     pub runs: Vec<Run>,
+    /// Pages of the store that failed their checksum or decoding during the runs: their
+    /// geometry was drawn from coarser levels where the store had them, and is missing
+    /// otherwise, so the frames are not the store's true images. Empty for a sound store.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub damaged_pages: Vec<DamagedPage>,
+}
+
+/// A page that could not be used ([`BenchReport::damaged_pages`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct DamagedPage {
+    pub page: u32,
+    /// What failed (the store's error: file, page, byte).
+    pub error: String,
 }
 
 impl BenchReport {
     pub fn new(meta: RunMeta, runs: Vec<Run>) -> BenchReport {
-        BenchReport { format: REPORT_FORMAT.into(), version: REPORT_VERSION, meta, runs }
+        BenchReport {
+            format: REPORT_FORMAT.into(),
+            version: REPORT_VERSION,
+            meta,
+            runs,
+            damaged_pages: Vec::new(),
+        }
     }
 
     /// Reads a `report.json`.

@@ -29,7 +29,6 @@ macro_rules! series {
 pub const SERIES: &[Series] = &[
     series!(frame_ms, "Frame time", "ms"),
     series!(select_ms, "LOD selection time", "ms"),
-    series!(cull_ms, "Frustum culling time", "ms"),
     series!(culling_ms, "Occlusion culling time", "ms"),
     series!(upload_ms, "Upload time", "ms"),
     series!(render_ms, "Render time (GPU + readback)", "ms"),

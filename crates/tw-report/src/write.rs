@@ -15,6 +15,18 @@ pub struct ReportFiles {
     pub html: PathBuf,
 }
 
+impl ReportFiles {
+    /// The files a report in folder `dir` consists of (for checking them before a run).
+    pub fn in_folder(dir: &Path) -> ReportFiles {
+        ReportFiles { json: dir.join("report.json"), html: dir.join("index.html") }
+    }
+
+    /// Every file, in the order they are written.
+    pub fn all(&self) -> [PathBuf; 2] {
+        [self.json.clone(), self.html.clone()]
+    }
+}
+
 const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a];
 
 /// Writes `dir/report.json` (every figure) and `dir/index.html` (the page, `images` embedded),
@@ -36,7 +48,7 @@ pub fn write_report(
     json.push('\n');
     let html = crate::html::page(report, images);
     std::fs::create_dir_all(dir).map_err(|e| io(dir, e))?;
-    let files = ReportFiles { json: dir.join("report.json"), html: dir.join("index.html") };
+    let files = ReportFiles::in_folder(dir);
     atomic_write(&files.json, json.as_bytes())?;
     atomic_write(&files.html, html.as_bytes())?;
     Ok(files)
@@ -48,14 +60,21 @@ fn io(path: &Path, e: impl std::fmt::Display) -> ReportError {
 
 /// Temporary file in the same folder, fsync, rename.
 fn atomic_write(path: &Path, bytes: &[u8]) -> Result<(), ReportError> {
+    tw_core::output::check_replaceable(path).map_err(|e| io(path, e))?;
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".tw-report-")
-        .tempfile_in(dir)
-        .map_err(|e| io(dir, format!("cannot create a temporary file: {e}")))?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".tw-report-");
+    // The usual permissions of a new file (0666 less the umask), not a temporary file's 0600.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp =
+        builder.tempfile_in(dir).map_err(|e| io(dir, format!("cannot create a temporary file: {e}")))?;
     tmp.write_all(bytes)
         .and_then(|_| tmp.as_file().sync_all())
         .map_err(|e| io(path, format!("cannot write: {e}")))?;

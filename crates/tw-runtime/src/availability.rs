@@ -1,6 +1,6 @@
-//! The availability rule of docs/FORMAT.md ("Availability: drawing with pages missing"; DESIGN
-//! decision 4: a frame never waits for the disk, it draws the best resident ancestor), and the
-//! pages a frame must request to make a wanted group available.
+//! The availability rule of docs/FORMAT.md ("Availability: drawing with pages missing";
+//! docs/DESIGN.md, D4: a frame never waits for the disk, it draws the best resident ancestor), and
+//! the pages a frame must request to make a wanted group available.
 //!
 //! Per frame, over a *snapshot* of the page cache:
 //!

@@ -1,4 +1,4 @@
-//! [`PageCache`]: decoded pages under a memory budget (DESIGN decision 4), LRU eviction, root
+//! [`PageCache`]: decoded pages under a memory budget (docs/DESIGN.md, D4), LRU eviction, root
 //! pages pinned.
 //!
 //! A page is decoded once ([`tw_store::Store::page`]: checksum, then every cluster) into a
@@ -485,6 +485,17 @@ impl PageCache {
 
     pub fn stats(&self) -> CacheStats {
         self.lock().stats
+    }
+
+    /// The pages that failed to load (checksum, decoding), ascending, each with its error: a
+    /// store's damage as far as this cache met it, for the commands' summaries and reports.
+    pub fn failed_pages(&self) -> Vec<(u32, String)> {
+        let inner = self.lock();
+        let failed = inner.slots.iter().enumerate().filter_map(|(i, slot)| match slot {
+            Slot::Failed(e) => Some((i as u32, e.clone())),
+            _ => None,
+        });
+        failed.collect()
     }
 }
 

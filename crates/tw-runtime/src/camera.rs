@@ -1,4 +1,4 @@
-//! The camera of one frame, in scene space (DESIGN "Conventions": runtime math is f32 in scene
+//! The camera of one frame, in scene space (docs/DESIGN.md, D10: runtime math is f32 in scene
 //! space, i.e. store grid coordinates × `grid_step`, relative to the grid origin).
 //!
 //! Conventions, as wgpu expects them:
@@ -145,7 +145,7 @@ impl Camera {
     }
 
     /// `H / (2 tan(fovy / 2))`: pixels per unit of size at unit distance, for a viewport
-    /// `viewport_height` pixels high (DESIGN decision 3).
+    /// `viewport_height` pixels high (docs/DESIGN.md, D3).
     pub fn pixel_scale(&self, viewport_height: f32) -> f64 {
         viewport_height as f64 / (2.0 * (self.fovy as f64 / 2.0).tan())
     }

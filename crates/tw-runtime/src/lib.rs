@@ -1,11 +1,12 @@
-//! The CPU side of terawalk's per-frame runtime (DESIGN "Data flow": camera → select → …):
+//! The CPU side of terawalk's per-frame runtime (docs/DESIGN.md "Data flow": camera → select → …):
 //!
 //! - [`camera`]: the scene-space camera, its matrices (right-handed, depth 0..1, optional
 //!   reverse-Z) and the command-line camera string in input coordinates;
 //! - [`frustum`]: frustum planes and box/sphere tests;
+//! - [`fuzz`]: entry points of the fuzz targets that reach the runtime (path files, stores);
 //! - [`hzb`]: the hierarchical Z-buffer and its conservative box test (GigaWalk's occlusion test);
 //! - [`occlusion`]: two-pass occlusion culling of a cut against an HZB of last frame's visible set;
-//! - [`lod_error`]: the pixel error of an object-space error (DESIGN decision 3);
+//! - [`lod_error`]: the pixel error of an object-space error (docs/DESIGN.md, D3);
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
 //! - [`availability`]: the availability rule (what may be drawn while pages are missing);
@@ -26,7 +27,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
-//! Streaming (a frame never waits for the disk; DESIGN decision 4):
+//! Streaming (a frame never waits for the disk; docs/DESIGN.md, D4):
 //!
 //! ```no_run
 //! use std::sync::Arc;
@@ -47,6 +48,7 @@ pub mod cache;
 pub mod camera;
 pub mod error;
 pub mod frustum;
+pub mod fuzz;
 pub mod hzb;
 pub mod lod_error;
 pub mod node_test;

@@ -1,4 +1,4 @@
-//! Screen-space (pixel) error of an object-space error, DESIGN decision 3: an error `e` (scene
+//! Screen-space (pixel) error of an object-space error, docs/DESIGN.md, D3: an error `e` (scene
 //! units) at a bounding sphere `(c, r)` seen from `eye` projects to
 //!
 //! ```text

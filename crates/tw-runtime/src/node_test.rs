@@ -150,7 +150,7 @@ pub fn parents(children: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
 /// A round of node tests costs a wait for its results (one GPU round trip); it saves one
 /// cluster query per candidate it culls. Deep in a plant (10^8 triangles, thousands of
 /// candidates behind walls) that is a large win; on a small scene or a fly-over, where few
-/// candidates are hidden, the round trips cost more than the queries saved (BENCHMARKS.md,
+/// candidates are hidden, the round trips cost more than the queries saved (docs/benchmarks-log.md,
 /// "Node tests for `queries`"). So a frame with node tests (a probe) compares their measured
 /// time with the candidates they culled times the measured cost of one cluster query; when
 /// they did not pay, the next [`NodeTestSwitch::PROBE_EVERY`]` − 1` frames go without them.

@@ -129,14 +129,21 @@ impl CameraPath {
         if len > MAX_FRAMES as u64 * 1024 {
             return Err(err(format!("{len} bytes is too large for a camera path")));
         }
-        let p: CameraPath = serde_json::from_reader(std::io::BufReader::new(file)).map_err(|e| {
-            err(if e.is_io() {
+        CameraPath::parse(std::io::BufReader::new(file)).map_err(err)
+    }
+
+    /// Reads and validates a path from `reader` (what [`CameraPath::load`] does after opening
+    /// the file; also the entry point of the `path` fuzz target). The message names the line
+    /// and column of a syntax error, or the first bad frame.
+    pub fn parse(reader: impl std::io::Read) -> Result<CameraPath, String> {
+        let p: CameraPath = serde_json::from_reader(reader).map_err(|e| {
+            if e.is_io() {
                 format!("cannot read: {e}")
             } else {
                 format!("line {}, column {}: {e}", e.line(), e.column())
-            })
+            }
         })?;
-        p.validate().map_err(err)?;
+        p.validate()?;
         Ok(p)
     }
 
@@ -144,11 +151,20 @@ impl CameraPath {
     pub fn save(&self, path: &Path) -> Result<(), RuntimeError> {
         let err = |msg: String| RuntimeError::Path { path: path.to_path_buf(), msg };
         self.validate().map_err(|m| err(format!("not written: {m}")))?;
+        tw_core::output::check_replaceable(path).map_err(|e| err(e.to_string()))?;
         let dir = match path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),
         };
-        let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        let mut builder = tempfile::Builder::new();
+        // The usual permissions of a new file (0666 less the umask), not a temporary file's 0600.
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            builder.permissions(std::fs::Permissions::from_mode(0o666));
+        }
+        let mut tmp = builder
+            .tempfile_in(dir)
             .map_err(|e| err(format!("cannot create a temporary file in {}: {e}", dir.display())))?;
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         serde_json::to_writer_pretty(&mut w, self).map_err(|e| err(format!("cannot write: {e}")))?;

@@ -1,4 +1,4 @@
-//! The LOD cut and view-frustum culling of one frame (DESIGN decisions 1–3; docs/FORMAT.md,
+//! The LOD cut and view-frustum culling of one frame (docs/DESIGN.md, D1–D3; docs/FORMAT.md,
 //! "Render rule").
 //!
 //! A depth-first traversal of the skeleton from node 0 (children in index order, so the output
@@ -35,7 +35,7 @@
 //! **Frame-to-frame state.** Once a group's page has been seen, the [`Selector`] keeps the
 //! group's steps (in order of first appearance; pages never change). In later frames a group
 //! whose every step is skipped (too coarse, and, when streaming, its finer sources available)
-//! is selected without reading its page at all ([`Selector::all_skip`]) — 63% of the selected
+//! is selected without reading its page at all (`Selector::all_skip`) — 63% of the selected
 //! groups on a path through the 10^8-triangle plant, the DAG's interior above the cut. The steps are
 //! evaluated in the order the cluster loop would meet them and the evaluation stops at the first
 //! step that is not skipped, so the residency snapshot is asked the same questions in the same
@@ -54,8 +54,12 @@
 //! the drawn set is a crack-free cut of the DAG; the frustum only removes clusters whose
 //! vertices are all outside the view.
 //!
-//! A page that cannot be loaded (checksum, decoding) is logged once (`tracing::error`) and its
-//! groups are skipped and counted in [`SelectStats::groups_failed`]; the frame goes on.
+//! A page that cannot be loaded (checksum, decoding) is logged once (`tracing::error`), its
+//! groups are counted in [`SelectStats::groups_failed`] and the frame goes on drawing the best
+//! ancestor it has, in both modes: the streaming mode treats a failed group as unavailable (the
+//! availability rule below), and the waiting mode, once a traversal met a failed page, selects
+//! again by that rule over the settled cache ([`Selector::select_into`]). Only a failed root
+//! page, which has no ancestor, leaves a hole; the commands report every failed page.
 //!
 //! **Two residency modes.** [`Selector::select`] waits: pages are loaded through
 //! [`PageCache::get`] on a miss, and the cut is exactly the render rule's. [`Selector::select_available`]
@@ -83,7 +87,7 @@ use crate::lod_error::LodMetric;
 /// What to select for one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SelectOptions {
-    /// Pixel error threshold τ (DESIGN decision 3; default 1).
+    /// Pixel error threshold τ (docs/DESIGN.md, D3; default 1).
     pub tau: f32,
     /// Viewport size in pixels (width, height): the height scales the pixel error, the aspect
     /// ratio shapes the frustum.
@@ -106,7 +110,7 @@ pub struct ClusterRef {
     pub group: u32,
 }
 
-/// What the selection did (per frame; DESIGN: "what was culled and why").
+/// What the selection did (per frame; docs/DESIGN.md "Measuring": "what was culled and why").
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SelectStats {
     /// Nodes reached by the traversal (including the culled ones).
@@ -343,6 +347,46 @@ impl Selector {
         out: &mut Selection,
     ) {
         self.traverse(store, &mut Mode::Wait(cache), camera, options, out);
+        if out.stats.groups_failed > 0 {
+            self.select_around_failures(store, cache, camera, options, out);
+        }
+    }
+
+    /// The waiting mode's answer to a failed page: the best resident ancestor is drawn in place
+    /// of the failed groups, as the streaming mode does. Selects by the availability rule, loads
+    /// (waiting) the pages that selection still wants, and repeats until it wants nothing more
+    /// (the wanted pages are resident or failed). A healthy store never comes here, so its cut
+    /// is the render rule's exactly; with a failed page the cut is the availability rule's
+    /// over a cache that holds every page it could load: crack-free, and complete but for the
+    /// failed pages' geometry that no loaded ancestor covers.
+    fn select_around_failures(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        options: &SelectOptions,
+        out: &mut Selection,
+    ) {
+        // Each round loads every page the last one wanted; a round wants more only where a
+        // newly loaded group exposes finer ones, so the rounds are bounded by the DAG's depth.
+        // The cap guards against a cache budget too small to hold a whole cut (loads evicting
+        // each other): the last selection is drawn, never a loop.
+        const MAX_ROUNDS: usize = 64;
+        let failed = out.stats.groups_failed;
+        let mut availability = Availability::default();
+        for _ in 0..MAX_ROUNDS {
+            availability.begin(store);
+            let mut requests = Requests::default();
+            self.select_available(store, cache, &mut availability, &mut requests, camera, options, out);
+            let mut loaded = false;
+            for (page, _) in requests.sorted() {
+                loaded |= cache.get(store, page).is_ok();
+            }
+            if !loaded {
+                break;
+            }
+        }
+        out.stats.groups_failed = out.stats.groups_failed.max(failed);
     }
 
     /// Selects without waiting for pages: the availability rule of docs/FORMAT.md over the

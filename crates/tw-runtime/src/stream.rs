@@ -1,4 +1,4 @@
-//! Streaming pages by priority (DESIGN decision 4; Manocha, "Interactive display of complex
+//! Streaming pages by priority (docs/DESIGN.md, D4; Manocha, "Interactive display of complex
 //! environments", §5.5 "Parallel rendering & I/O management"): the frame selects from what is
 //! resident and never waits, loader threads read and decode what it asked for, highest
 //! priority first, and then what the next frames will need (prefetch, [`crate::prefetch`]).
@@ -503,8 +503,17 @@ impl Streamer {
         pages.sort_by_key(|(p, _)| *p);
         pages.dedup_by_key(|(p, _)| *p);
         let (pending, in_flight) = self.submit(&demand, &prefetch);
+        let queues = (demand.len() as u64, prefetch.len() as u64, pending as u64, in_flight as u64);
+        let stats = self.frame_stats(&selection, queues);
+        StreamFrame { selection, times, pages, stats }
+    }
 
-        let now = cache.stats();
+    /// The statistics of the frame that selected `selection` (the cache's counters since the
+    /// last frame; `queues`: demand and prefetch requests, then pending and in-flight pages),
+    /// and the frame counter advanced.
+    fn frame_stats(&mut self, selection: &Selection, queues: (u64, u64, u64, u64)) -> StreamStats {
+        let (demand, prefetch, pending, in_flight) = queues;
+        let now = self.cache.stats();
         let last = std::mem::replace(&mut self.last_cache, now);
         let q = self.shared.lock();
         let (pl, pd) = (q.prefetch_loaded, q.prefetch_dropped);
@@ -513,8 +522,8 @@ impl Streamer {
         let s = &selection.stats;
         let stats = StreamStats {
             frame: self.frame,
-            pages_requested: demand.len() as u64,
-            prefetch_requested: prefetch.len() as u64,
+            pages_requested: demand,
+            prefetch_requested: prefetch,
             pages_loaded: (now.misses - last.misses).saturating_sub(now.failed_pages - last.failed_pages),
             prefetch_loaded: pl - lpl,
             prefetch_dropped: pd - lpd,
@@ -526,20 +535,29 @@ impl Streamer {
             stalls_avoided: s.groups_unavailable,
             clusters_fallback: s.clusters_fallback,
             groups_failed: s.groups_failed,
-            pending: pending as u64,
-            in_flight: in_flight as u64,
+            pending,
+            in_flight,
             failed_pages: now.failed_pages,
             clusters: selection.clusters.len() as u64,
             triangles: selection.triangles,
         };
         self.frame += 1;
-        StreamFrame { selection, times, pages, stats }
+        stats
     }
 
     /// The blocking cut of the render rule (pages loaded on the caller's thread through the
     /// same cache): the reference a streamed frame converges to.
     pub fn select_blocking(&self, camera: &Camera, options: &SelectOptions) -> Selection {
         self.selector.select(&self.store, &self.cache, camera, options)
+    }
+
+    /// [`select_blocking`](Self::select_blocking) as a frame of its own: the statistics of the
+    /// pages it loaded, read and holds, as [`frame`](Self::frame) gives them (`bench --wait`
+    /// reports memory and disk like a streamed run; no requests or prefetch).
+    pub fn frame_blocking(&mut self, camera: &Camera, options: &SelectOptions) -> (Selection, StreamStats) {
+        let selection = self.select_blocking(camera, options);
+        let stats = self.frame_stats(&selection, (0, 0, 0, 0));
+        (selection, stats)
     }
 
     /// Replaces the loaders' queues by `demand` (first) and `prefetch`, highest priority first;

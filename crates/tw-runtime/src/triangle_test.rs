@@ -5,7 +5,7 @@
 //! the graphics pipeline with compute"): a cluster is drawn whole once any part of its box is
 //! visible, and on the plant about two thirds of such a cluster's triangles are hidden behind
 //! nearer geometry, face away behind their own object's front, or cover no pixel centre
-//! (BENCHMARKS.md, "Triangle-level HZB culling").
+//! (docs/benchmarks-log.md, "Triangle-level HZB culling").
 //!
 //! A triangle whose corners all lie in front of the near plane is tested as the rasterizer
 //! will draw it, in up to three steps, each run only when the one before found it visible:

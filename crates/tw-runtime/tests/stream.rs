@@ -263,9 +263,10 @@ fn corrupt_page_while_streaming_falls_back_to_ancestors() {
     assert!(f.selection.clusters.iter().all(|k| k.page != victim));
     let (open_edges, _) = boundary_and_area(&store, &f.selection);
     assert_eq!(open_edges, 0, "the fallback closes the hole: {s:?}");
-    // The blocking cut has the hole (its groups skipped).
+    // The blocking cut draws the same ancestors: no hole either, the same clusters.
     let blocking = streamer.select_blocking(&cam, &o);
-    assert!(boundary_and_area(&store, &blocking).0 > 0);
+    assert_eq!(boundary_and_area(&store, &blocking).0, 0);
+    assert_eq!(blocking.clusters, f.selection.clusters);
     // Asked again, the failed page is not read again.
     let again = streamer.frame(&cam, &o);
     assert_eq!((again.stats.pages_loaded, again.stats.bytes_read), (0, 0));
@@ -351,4 +352,24 @@ fn drop_joins_the_loader_threads() {
     assert!(Arc::strong_count(&store) > 1, "the loaders hold the store");
     drop(streamer);
     assert_eq!(Arc::strong_count(&store), 1, "every loader thread ended and released the store");
+}
+
+/// `bench --wait`: a blocking frame reports the pages it read and holds, as a streamed frame
+/// does (it reported zero memory and disk for every frame).
+#[test]
+fn a_blocking_frame_reports_what_it_read_and_holds() {
+    let store = open(spheres_path());
+    let (c, _) = scene_sphere(&store);
+    let mut streamer = Streamer::new(store.clone(), manual(u64::MAX)).unwrap();
+    let cam = camera(Vec3::new(0.0, 0.0, 200.0), c);
+    let (selection, first) = streamer.frame_blocking(&cam, &opts(0.0, false));
+    assert_eq!(selection, streamer.select_blocking(&cam, &opts(0.0, false)));
+    assert!(first.pages_loaded > 0 && first.bytes_read > 0, "{first:?}");
+    assert!(first.resident_bytes > 0 && first.resident_pages > 0, "{first:?}");
+    assert_eq!(first.triangles, selection.triangles);
+    // The same view again: everything resident, nothing read, the same memory held.
+    let (_, again) = streamer.frame_blocking(&cam, &opts(0.0, false));
+    assert_eq!((again.pages_loaded, again.bytes_read), (0, 0), "{again:?}");
+    assert_eq!(again.resident_bytes, first.resident_bytes);
+    assert_eq!(again.frame, first.frame + 1);
 }

@@ -32,6 +32,15 @@ pub const SOURCE_LEN: usize = 4;
 /// Tables start at multiples of this (the gap is zero-filled).
 pub const SECTION_ALIGN: u64 = 8;
 
+/// Largest scene-space coordinate (grid coordinate × grid step) a store may hold. Scene space is
+/// f32 on the render side, which squares distances (sphere tests, projected errors): with
+/// coordinates up to 2^60 those squares stay far below `f32::MAX` (≈ 3.4e38). A store beyond
+/// it (say a grid step of 1e300) would render as infinities and NaNs, so it is refused.
+pub const MAX_SCENE_COORD: f64 = (1u64 << 60) as f64;
+/// Smallest grid step: below the smallest normal f32 every scene-space position of a unit grid
+/// coordinate rounds to a subnormal or to zero, and the scene collapses to a point.
+pub const MIN_GRID_STEP: f64 = f32::MIN_POSITIVE as f64;
+
 /// Page flag: the page holds the coarsest levels and should stay resident.
 pub const PAGE_ROOT: u8 = 1;
 /// Object flag: the object has a colour.
@@ -232,6 +241,29 @@ impl Header {
         }
         if !(grid_step.is_finite() && grid_step > 0.0) {
             return Err((96, format!("grid step {grid_step} is not positive")));
+        }
+        // The runtime frames cameras and paths by the scene bounds in scene space (relative to
+        // the grid origin, as f32): they must be representable there too.
+        for (i, v) in bounds_min.iter().chain(&bounds_max).enumerate() {
+            let scene = v - grid_origin[i % 3];
+            if scene.abs() > MAX_SCENE_COORD {
+                return Err((
+                    24 + 8 * i as u64,
+                    format!(
+                        "scene bound {v:e} lies {scene:e} from the grid origin: beyond the \
+                         {MAX_SCENE_COORD:e} that f32 rendering can hold"
+                    ),
+                ));
+            }
+        }
+        if !(MIN_GRID_STEP..=MAX_SCENE_COORD).contains(&grid_step) {
+            return Err((
+                96,
+                format!(
+                    "grid step {grid_step:e} cannot be rendered: scene space is f32, so the step must lie \
+                     within {MIN_GRID_STEP:e}..={MAX_SCENE_COORD:e}"
+                ),
+            ));
         }
         let units = StrRef { offset: r.u32()?, len: r.u32()? };
         let build_options = StrRef { offset: r.u32()?, len: r.u32()? };
@@ -597,6 +629,19 @@ pub fn validate_tables(t: &Tables) -> Result<GroupLinks, (u64, String)> {
     let n = t.nodes.len();
     if n == 0 {
         return Err((h.section(SectionKind::Nodes).offset, "the skeleton has no root node".into()));
+    }
+    // Every vertex lies in the root's box (children lie in their parents, vertices in their
+    // group's node: checked here and by verify), so this bounds every scene-space position.
+    let far = t.nodes[0].max.iter().map(|&g| g as f64 * h.grid_step).fold(0.0, f64::max);
+    if far > MAX_SCENE_COORD {
+        return Err((
+            h.section(SectionKind::Nodes).offset,
+            format!(
+                "the root box reaches grid coordinate {:?}, {far:e} in scene space with grid step {:e}: \
+                 beyond the {MAX_SCENE_COORD:e} that f32 rendering can hold",
+                t.nodes[0].max, h.grid_step
+            ),
+        ));
     }
     let mut parents = vec![0u8; n];
     let mut group_owner = vec![u32::MAX; t.groups.len()];

@@ -76,7 +76,7 @@ pub use codec::{ClusterParts, EncodedCluster, PageCluster, MAX_TRIANGLES, MAX_VE
 pub use error::{CodecError, StoreError};
 pub use format::{Group, GroupLinks, Header, Node, PageEntry, FORMAT_VERSION};
 pub use read::{Store, VerifyReport};
-pub use write::{Object, StoreInfo, StoreWriter, WriteSummary};
+pub use write::{temporary_prefix, Object, StoreInfo, StoreWriter, WriteSummary};
 
 /// Fuzzing entry point: opens `data` as a store and, when it opens, verifies it and decodes
 /// every page. Must never panic, whatever the bytes.

@@ -138,15 +138,23 @@ impl std::fmt::Debug for Store {
 impl Store {
     /// Opens and validates the store at `path` (header and tables are read now, pages on
     /// demand).
+    ///
+    /// Only a regular file is opened: a FIFO would block the open, and a device such as
+    /// `/dev/zero` reports length 0 and never ends. Every read is bounded by the file's length
+    /// as opened: the header's sizes are checked against it before anything they describe is
+    /// read or allocated.
     pub fn open(path: impl AsRef<Path>) -> Result<Store, StoreError> {
         let path = path.as_ref().to_path_buf();
         let io = |source| StoreError::Io { path: path.clone(), source };
-        let file = File::open(&path).map_err(io)?;
-        let len = file.metadata().map_err(io)?.len();
+        let (file, meta) = tw_core::regular_file::open_regular(&path).map_err(io)?;
+        let len = meta.len();
         if len < HEADER_LEN as u64 {
-            // Too small to be a store (and zero-length maps fail on some systems): read it for
-            // the error message.
-            return Store::from_vec(path.clone(), std::fs::read(&path).map_err(io)?);
+            // Too small to be a store (and zero-length maps fail on some systems): its bytes,
+            // at most a header's worth whatever the file does meanwhile, for the error message.
+            let mut bytes = Vec::with_capacity(HEADER_LEN);
+            std::io::Read::read_to_end(&mut std::io::Read::take(&file, HEADER_LEN as u64), &mut bytes)
+                .map_err(io)?;
+            return Store::from_vec(path.clone(), bytes);
         }
         let parsed = {
             // SAFETY: the map is read-only and every byte is read through checked accessors, so
@@ -239,8 +247,8 @@ impl Store {
                 ),
             )));
         }
-        // Every length is bounded by what the fixed sizes allow (≤ 2^32 · 48), so this cannot
-        // overflow unless the pages region is absurd; check that first.
+        // The lengths come from the file: each section must end within it before the next
+        // offset is computed from its end (which cannot overflow then).
         if pages.length > len {
             return Err(truncated("the pages region", pages.offset.saturating_add(pages.length)));
         }
@@ -255,9 +263,9 @@ impl Store {
                 )));
             }
             pos = s.end();
-        }
-        if pos > len {
-            return Err(truncated("the tables", pos));
+            if pos > len {
+                return Err(truncated("the tables", pos));
+            }
         }
         if pos < len {
             return Err(corrupt((pos, format!("{} unexpected bytes after the last table", len - pos))));

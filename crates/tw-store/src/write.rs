@@ -73,6 +73,12 @@ pub struct StoreWriter {
     _cleanup: crate::cleanup::TempGuard,
 }
 
+/// The name prefix of the temporary file a store named `name` is written to before it is
+/// renamed into place (hidden, beside the destination).
+pub fn temporary_prefix(name: &str) -> String {
+    format!(".{name}.tmp")
+}
+
 impl StoreWriter {
     /// Starts a store that will appear at `path` when [`finish`](Self::finish) succeeds.
     pub fn create(path: impl AsRef<Path>) -> Result<StoreWriter, StoreError> {
@@ -80,20 +86,14 @@ impl StoreWriter {
         let io = |source| StoreError::Io { path: path.clone(), source };
         // The finished file is renamed over `path`: refuse anything but a regular file there (a
         // rename over /dev/null or a directory would replace it).
-        if let Ok(meta) = std::fs::metadata(&path) {
-            if !meta.is_file() {
-                return Err(io(std::io::Error::new(
-                    std::io::ErrorKind::InvalidInput,
-                    "exists and is not a regular file; give the path of a store file to write",
-                )));
-            }
-        }
+        tw_core::output::check_replaceable(&path)
+            .map_err(|e| io(std::io::Error::new(std::io::ErrorKind::InvalidInput, e.to_string())))?;
         let dir = match path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
             _ => PathBuf::from("."),
         };
         let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        let prefix = format!(".{name}.tmp");
+        let prefix = temporary_prefix(&name);
         let mut builder = tempfile::Builder::new();
         builder.prefix(&prefix);
         // The usual permissions of a new file (0666 less the umask), not a temp file's 0600.
@@ -104,6 +104,7 @@ impl StoreWriter {
         }
         let tmp = builder.tempfile_in(&dir).map_err(io)?;
         let cleanup = crate::cleanup::register(tmp.path());
+        crate::cleanup::lock(tmp.as_file()).map_err(io)?;
         let mut out = AlignedWriter::open(tmp.path(), 1 << 20).map_err(io)?;
         out.write_all(&[0u8; HEADER_LEN]).map_err(io)?;
         Ok(StoreWriter {

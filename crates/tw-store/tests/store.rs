@@ -709,3 +709,144 @@ fn writer_refuses_an_output_that_is_not_a_regular_file() {
         assert!(err.to_string().contains("/dev/null"), "{err}");
     }
 }
+
+/// Runs `f` on a thread and fails the test if it takes more than 20 s (a reader that blocks on
+/// a FIFO or reads an endless device would otherwise hang the suite).
+fn within_seconds<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(f());
+    });
+    rx.recv_timeout(std::time::Duration::from_secs(20))
+        .expect("finished within 20 s (no hang, no endless read)")
+}
+
+/// Regression: `info /dev/zero` read the "file" (length 0) to its end until memory ran out, and a
+/// FIFO blocked the open. Only regular files are opened, with an error naming the path.
+#[test]
+fn open_refuses_fifos_devices_and_directories() {
+    let dir = tempfile::tempdir().unwrap();
+    let e = Store::open(dir.path()).unwrap_err();
+    assert!(e.to_string().contains("a directory, not a regular file"), "{e}");
+    #[cfg(unix)]
+    {
+        let e = within_seconds(|| Store::open("/dev/zero").unwrap_err().to_string());
+        assert!(e.contains("/dev/zero") && e.contains("character device, not a regular file"), "{e}");
+        let fifo = dir.path().join("pipe.tw");
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().unwrap();
+        assert!(made.success());
+        let f = fifo.clone();
+        let e = within_seconds(move || Store::open(&f).unwrap_err().to_string());
+        assert!(e.contains("pipe.tw") && e.contains("FIFO"), "{e}");
+    }
+}
+
+/// A store cut short whose header claims huge sections (pages region, tables) is refused quickly
+/// as truncated or corrupt, without reading or allocating what the header claims.
+#[test]
+fn truncated_store_claiming_huge_sizes_is_refused_quickly() {
+    let bytes = store_bytes(&scene());
+    let dir = tempfile::tempdir().unwrap();
+    let length_at = |kind: SectionKind| 160 + 24 * kind as usize + 8;
+    let huge = [u64::MAX, 1 << 62, 1 << 40];
+    for kind in SectionKind::ALL {
+        for claim in huge {
+            let mut b = bytes[..HEADER_LEN + 64].to_vec();
+            b[length_at(kind)..length_at(kind) + 8].copy_from_slice(&claim.to_le_bytes());
+            refresh_checksums(&mut b);
+            let path = dir.path().join("huge.tw");
+            std::fs::write(&path, &b).unwrap();
+            let p = path.clone();
+            let e = within_seconds(move || Store::open(&p).unwrap_err());
+            assert!(
+                matches!(e, StoreError::Truncated { .. } | StoreError::Corrupt { .. }),
+                "{kind:?} = {claim}: {e}"
+            );
+        }
+    }
+    // Counts that agree with huge table lengths: 2^32 - 1 pages of a 32-byte entry each.
+    let mut b = bytes[..HEADER_LEN + 64].to_vec();
+    b[132..136].copy_from_slice(&u32::MAX.to_le_bytes());
+    let len = u32::MAX as u64 * PAGE_ENTRY_LEN as u64;
+    let at = length_at(SectionKind::PageTable);
+    b[at..at + 8].copy_from_slice(&len.to_le_bytes());
+    refresh_checksums(&mut b);
+    let e = within_seconds(move || Store::from_bytes(b).unwrap_err());
+    assert!(matches!(e, StoreError::Truncated { .. } | StoreError::Corrupt { .. }), "{e}");
+}
+
+/// Regression: a store with a grid step of 1e300 opened and verified although every position
+/// of it is infinite in f32 scene space. Steps that cannot render are refused at open (so by
+/// `verify` too), as are non-finite, zero and negative ones.
+#[test]
+fn grid_steps_that_cannot_render_are_refused() {
+    let bytes = store_bytes(&scene());
+    // Only the header changes: its own checksum is the one to refresh (refresh_checksums
+    // leaves a header it cannot parse alone).
+    let refresh_checksums = |b: &mut Vec<u8>| {
+        let crc = checksum(&b[..HEADER_CRC_AT]);
+        b[HEADER_CRC_AT..HEADER_LEN].copy_from_slice(&crc.to_le_bytes());
+    };
+    for step in [1e300, 1e19, 1e-300, 1e-40, 0.0, -1.0, f64::NAN, f64::INFINITY] {
+        let mut b = bytes.clone();
+        b[96..104].copy_from_slice(&step.to_le_bytes());
+        refresh_checksums(&mut b);
+        let e = Store::from_bytes(b).unwrap_err();
+        assert!(matches!(e, StoreError::Corrupt { offset: 96, .. }), "step {step}: {e}");
+        assert!(e.to_string().contains("grid step"), "{e}");
+    }
+    // Scene bounds (relative to the grid origin) beyond f32 rendering: the camera is framed by
+    // them.
+    for (at, v) in [(48, 1e300), (24, -1e19), (72, 1e30)] {
+        let mut b = bytes.clone();
+        b[at..at + 8].copy_from_slice(&f64::to_le_bytes(v));
+        refresh_checksums(&mut b);
+        let e = Store::from_bytes(b).unwrap_err();
+        assert!(matches!(e, StoreError::Corrupt { .. }) && e.to_string().contains("scene bound"), "{e}");
+    }
+    // A step that is fine alone, with a root box whose far corner is beyond f32 rendering.
+    let mut b = bytes.clone();
+    b[96..104].copy_from_slice(&1e17f64.to_le_bytes());
+    refresh_checksums(&mut b);
+    let e = Store::from_bytes(b).unwrap_err();
+    assert!(e.to_string().contains("root box"), "{e}");
+    assert!(check(bytes).is_ok());
+}
+
+/// Regression (found by the `store` fuzz target): a table whose length reaches past the end of
+/// the u64 range made the next table's expected offset overflow (a panic with overflow checks)
+/// instead of an error.
+#[test]
+fn a_table_length_past_u64_is_an_error() {
+    let mut b = store_bytes(&scene());
+    // The group sources: their length is not bounded by an entry count in the header.
+    let at = 160 + 24 * SectionKind::GroupSources as usize + 8;
+    b[at..at + 8].copy_from_slice(&(u64::MAX - 7).to_le_bytes());
+    refresh_checksums(&mut b);
+    let e = Store::from_bytes(b).unwrap_err();
+    assert!(e.to_string().contains("truncated") || e.to_string().contains("tables"), "{e}");
+}
+
+/// Replays the `store` fuzz target's corpus and crashers (fuzz/corpus/store,
+/// fuzz/regressions/store) with their checksums recomputed: the fuzzer's build skips checksums,
+/// so without this the ordinary build would stop at the checksum before the code that failed.
+#[test]
+fn fuzz_inputs_with_valid_checksums_do_not_panic() {
+    let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let mut files = Vec::new();
+    for dir in ["corpus/store", "regressions/store"] {
+        if let Ok(entries) = std::fs::read_dir(fuzz.join(dir)) {
+            files.extend(entries.filter_map(|e| e.ok()).map(|e| e.path()));
+        }
+    }
+    assert!(!files.is_empty(), "no corpus for the store fuzz target");
+    let panicked: Vec<_> = files
+        .iter()
+        .filter(|f| {
+            let mut b = std::fs::read(f).unwrap();
+            refresh_checksums(&mut b);
+            std::panic::catch_unwind(|| tw_store::fuzz_bytes(&b)).is_err()
+        })
+        .collect();
+    assert!(panicked.is_empty(), "these inputs panic: {panicked:?}");
+}

@@ -9,7 +9,7 @@
 //! - **Walk**: as fly but horizontal; the eye is held at `eye_height` above the ground below it
 //!   (the caller finds it by casting a ray down, [`Input::ground`]; without one the floor is the
 //!   bottom of the model's bounds), falling under gravity along the up axis when the ground drops
-//!   away. Walls are not collided with (optional in the issue).
+//!   away. Walls are not collided with (collision is planned: docs/DESIGN.md, `tw-collide`).
 //! - **Orbit**: around a pivot (a clicked point): mouse drag turns, scroll and W/S change the
 //!   distance (smoothed), A/D turn.
 

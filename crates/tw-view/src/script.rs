@@ -277,12 +277,62 @@ impl ScriptRunner {
     }
 }
 
+/// Frames [`fuzz_bytes`] runs a script for at most (a script may ask for 10^6 per step).
+pub const FUZZ_MAX_FRAMES: u64 = 100_000;
+
+/// The entry point of the `script` fuzz target: parses `data` as [`Script::load`] reads a file
+/// (UTF-8 required), then steps a [`ScriptRunner`] through it frame by frame, up to
+/// [`FUZZ_MAX_FRAMES`]. Returns the frames run.
+pub fn fuzz_bytes(data: &[u8]) -> Result<u64, ScriptError> {
+    let path = Path::new("fuzz.txt");
+    let text = std::str::from_utf8(data).map_err(|e| ScriptError::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::new(std::io::ErrorKind::InvalidData, e),
+    })?;
+    let script = Script::parse(text, path)?;
+    let expected = script.frames();
+    let mut runner = ScriptRunner::new(script);
+    let mut frames = 0;
+    while frames < FUZZ_MAX_FRAMES.min(expected) {
+        frames += 1;
+        if runner.next_frame().last {
+            break;
+        }
+    }
+    Ok(frames)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<Script, ScriptError> {
         Script::parse(text, Path::new("s.txt"))
+    }
+
+    /// Replays the committed corpus and every crasher of the `script` fuzz target
+    /// (fuzz/corpus/script, fuzz/regressions/script) through [`fuzz_bytes`]: no panic.
+    #[test]
+    fn fuzz_corpus_replays() {
+        let fuzz = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+        let mut files = Vec::new();
+        for dir in ["corpus", "regressions"] {
+            if let Ok(entries) = std::fs::read_dir(fuzz.join(dir).join("script")) {
+                files.extend(entries.filter_map(|e| e.ok()).map(|e| e.path()));
+            }
+        }
+        assert!(!files.is_empty(), "no corpus for the script fuzz target");
+        let panicked: Vec<_> = files
+            .iter()
+            .filter(|f| {
+                let data = std::fs::read(f).unwrap();
+                std::panic::catch_unwind(|| fuzz_bytes(&data)).is_err()
+            })
+            .collect();
+        assert!(panicked.is_empty(), "these inputs panic: {panicked:?}");
+        // The seed is a valid script: 3 + 2 + 1 waiting frames, then the last one.
+        let seed = std::fs::read(fuzz.join("corpus/script/steps.txt")).unwrap();
+        assert_eq!(fuzz_bytes(&seed).unwrap(), 7);
     }
 
     #[test]

@@ -40,7 +40,7 @@ impl Coloring {
 /// Every control of the viewer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
-    /// Pixel error threshold τ (DESIGN decision 3).
+    /// Pixel error threshold τ (docs/DESIGN.md, D3).
     pub pixel_error: f32,
     /// The occlusion culling strategy (tw-frame's, as `terawalk bench` runs them).
     pub occlusion: Occlusion,

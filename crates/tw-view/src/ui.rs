@@ -118,6 +118,16 @@ pub fn draw(ctx: &egui::Context, settings: &mut Settings, view: &View) -> Vec<Ac
 }
 
 fn hud(ui: &mut egui::Ui, view: &View) {
+    if view.hud.pages_failed > 0 {
+        // Not one figure among many: the image lacks geometry, and the user must know.
+        ui.colored_label(
+            Color32::from_rgb(255, 90, 80),
+            format!(
+                "DAMAGED STORE: {} page(s) failed their checksum; their geometry is drawn coarser or missing",
+                view.hud.pages_failed
+            ),
+        );
+    }
     egui::Grid::new("hud").num_columns(2).show(ui, |ui| {
         for (k, v) in view.hud.lines() {
             ui.label(k);

@@ -20,10 +20,9 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use tw_frame::{ExactVisibility, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 use tw_gpu::{ColorMode, Image, Renderer};
-use tw_report::{BenchReport, FrameRecord, ReportImage, Run, RunMeta};
+use tw_report::{BenchReport, DamagedPage, FrameRecord, ReportImage, Run, RunMeta};
 use tw_runtime::pathgen::{generate_path, PathOptions};
 use tw_runtime::{Camera, CameraPath, StreamOptions};
-use tw_store::Store;
 
 use crate::cli::{BenchArgs, RenderColoring};
 use crate::units::fmt_count;
@@ -40,8 +39,12 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     if args.compare == Some(0) {
         bail!("--compare K needs K ≥ 1 (every K-th frame)");
     }
-    let store =
-        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    let inputs: Vec<&std::path::Path> =
+        [Some(args.store.as_path()), args.path.as_deref()].into_iter().flatten().collect();
+    for file in tw_report::ReportFiles::in_folder(&args.out).all() {
+        tw_core::output::check_output(&file, &inputs)?;
+    }
+    let store = crate::commands::open_store(&args.store)?;
     let path = match &args.path {
         Some(p) => CameraPath::load(p)?,
         None => {
@@ -225,10 +228,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             ("samples per pixel".into(), samples.to_string()),
         ],
     };
-    let report = BenchReport::new(meta, runs);
+    let mut report = BenchReport::new(meta, runs);
+    let failed = walk.streamer().cache().failed_pages();
+    report.damaged_pages =
+        failed.iter().map(|(page, error)| DamagedPage { page: *page, error: error.clone() }).collect();
     print_comparison(&report);
     let files = tw_report::write_report(&args.out, &report, &images)?;
     println!("report: {} (open it in a browser), figures in {}", files.html.display(), files.json.display());
+    crate::commands::damage::check(&args.store, &failed, args.allow_damaged)?;
     Ok(BenchOutcome { html: files.html })
 }
 
@@ -270,6 +277,7 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         pages_loaded: st.pages_loaded,
         pages_evicted: st.pages_evicted,
         stalls_avoided: st.stalls_avoided,
+        groups_failed: info.select.groups_failed,
         ..Default::default()
     }
 }

@@ -47,7 +47,8 @@ impl BuildProgress for Bars {
 }
 
 pub fn options(args: &BuildArgs) -> BuildOptions {
-    let mut o = BuildOptions { memory: args.memory, threads: args.threads, ..Default::default() };
+    let mut o =
+        BuildOptions { memory: args.memory, threads: worker_threads(args.threads), ..Default::default() };
     o.up = match args.up.as_str() {
         "x" => 0,
         "y" => 1,
@@ -60,6 +61,19 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     o.lod.max_triangles = cluster;
     o.hlod.max_triangles = cluster;
     o
+}
+
+/// `--threads`, capped at [`tw_build::max_worker_threads`] with a warning.
+fn worker_threads(asked: Option<u32>) -> Option<usize> {
+    let asked = asked? as usize;
+    let cap = tw_build::max_worker_threads();
+    if asked > cap {
+        tracing::warn!(
+            "--threads {asked} is more than 4 per core on this machine ({} cores): using {cap}",
+            cap / 4
+        );
+    }
+    Some(asked.min(cap))
 }
 
 /// The smallest `--memory` the build is known to keep (docs/BUILD.md, "Memory").
@@ -76,6 +90,7 @@ fn import_options(args: &BuildArgs) -> tw_io::format::ImportOptions {
 
 pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
+    tw_core::output::check_output(&args.output, &args.inputs)?;
     // (main has made every thread allocate from one heap arena: tw_core::mem::use_one_heap_arena.)
     if args.memory < MIN_HELD_BUDGET {
         tracing::warn!(
@@ -86,6 +101,10 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
             fmt_bytes(MIN_HELD_BUDGET)
         );
     }
+    tw_core::disk_space::set_limits(tw_core::disk_space::Limits {
+        max_written: args.temp_space.unwrap_or(u64::MAX),
+        ..Default::default()
+    });
     let scene = Scene::open(&args.inputs, SceneOptions { import: import_options(&args) })?;
     let opts = options(&args);
     let mut bars = Bars { bar: None, quiet };
@@ -94,20 +113,22 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let secs = start.elapsed().as_secs_f64();
     println!("wrote {} ({})", args.output.display(), fmt_bytes(r.file_bytes));
     println!(
-        "  input: {} triangles ({} degenerate dropped), {} objects",
+        "  input: {} triangles ({} degenerate dropped, {} duplicate dropped), {} objects",
         fmt_count(r.input_triangles),
         fmt_count(r.degenerate_dropped),
+        fmt_count(r.duplicate_dropped),
         fmt_count(r.objects)
     );
     let d = &r.redefine;
     println!(
-        "  objects: {} → partition I: {} pieces ({} split) → clustering: {} → partition II: {} cells ({} split)",
+        "  objects: {} → partition I: {} pieces ({} split) → clustering: {} → partition II: {} cells ({} split, {} by count)",
         fmt_count(d.objects),
         fmt_count(d.pieces),
         fmt_count(d.split_objects),
         fmt_count(d.clusters),
         fmt_count(d.cells),
-        fmt_count(d.split_clusters)
+        fmt_count(d.split_clusters),
+        fmt_count(d.count_split_cells)
     );
     println!(
         "  hierarchy: {} nodes, depth {}; LOD: {} groups, {} clusters, {} triangles over all levels ({:.2}x input)",

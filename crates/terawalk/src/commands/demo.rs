@@ -110,6 +110,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         warmup: 3,
         images: 4,
         color: crate::cli::RenderColoring::Material,
+        allow_damaged: false,
     };
     let outcome = crate::commands::bench::run(bench)?;
 

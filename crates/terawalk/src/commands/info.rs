@@ -1,14 +1,13 @@
 //! `terawalk info`: what a store holds, and with `--verify` whether every byte of it is sound.
 
 use anyhow::{Context, Result};
-use tw_store::Store;
 
 use crate::cli::InfoArgs;
 use crate::progress;
 use crate::units::{fmt_bytes, fmt_count};
 
 pub fn run(args: InfoArgs) -> Result<()> {
-    let store = Store::open(&args.store).with_context(|| format!("cannot open {}", args.store.display()))?;
+    let store = crate::commands::open_store(&args.store)?;
     let h = store.header();
     let input = h.input_triangles.max(1);
     println!("{}", args.store.display());

@@ -1,7 +1,8 @@
-//! One module per subcommand.
+//! One module per subcommand, and the policies several of them share.
 
 pub mod bench;
 pub mod build;
+pub mod damage;
 pub mod demo;
 pub mod generate;
 pub mod info;
@@ -10,3 +11,31 @@ pub mod preview;
 pub mod render;
 pub mod stats;
 pub mod view;
+
+use std::path::Path;
+
+/// Opens the store a command reads. The store's errors name the file; a model file given in
+/// its place (`terawalk view model.glb`) gets the command that makes a store of it.
+pub fn open_store(path: &Path) -> anyhow::Result<tw_store::Store> {
+    tw_store::Store::open(path).map_err(|e| {
+        let model = tw_io::format::Format::from_name(path).is_some();
+        match (&e, model) {
+            (tw_store::StoreError::NotAStore { .. }, true) => anyhow::anyhow!(
+                "{e}\n  {} is a model file: build a store from it first, then open that:\n    \
+                 terawalk build {} -o {}",
+                path.display(),
+                path.display(),
+                store_name_for(path).display()
+            ),
+            _ => anyhow::Error::new(e).context("cannot open the store"),
+        }
+    })
+}
+
+/// `model.ply.gz` → `model.tw`, beside the model.
+fn store_name_for(model: &Path) -> std::path::PathBuf {
+    let name = model.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let stem = name.trim_end_matches(".gz");
+    let stem = stem.rsplit_once('.').map_or(stem, |(s, _)| s);
+    model.with_file_name(format!("{stem}.tw"))
+}

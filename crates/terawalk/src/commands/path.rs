@@ -4,9 +4,8 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use tw_runtime::pathgen::{format_length as len, generate_path, PathOptions, PathPart, RegionKind};
-use tw_store::Store;
 
 use crate::cli::{PathArgs, PathPartArg};
 use crate::progress;
@@ -14,8 +13,8 @@ use crate::units::fmt_count;
 
 pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    let store =
-        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    tw_core::output::check_output(&args.output, &[&args.store])?;
+    let store = crate::commands::open_store(&args.store)?;
     let options = PathOptions {
         frames: args.frames,
         fps: args.fps,

@@ -100,6 +100,7 @@ pub fn render(
 
 pub fn run(args: PreviewArgs) -> Result<()> {
     let start = Instant::now();
+    tw_core::output::check_output(&args.output, &args.files)?;
     let options = SceneOptions { import: args.import.options() };
     let camera = match &args.camera {
         Some(c) => parse_camera(c)?,

@@ -3,11 +3,11 @@
 
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use tw_core::Aabb;
 use tw_gpu::{ColorMode, Renderer};
 use tw_runtime::{Camera, InputCamera, PageCache, SelectOptions, Selector};
-use tw_store::{Header, Store};
+use tw_store::Header;
 
 use crate::cli::{RenderArgs, RenderColoring, View};
 use crate::commands::preview::preset_direction;
@@ -25,8 +25,8 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if !(args.error.is_finite() && args.error >= 0.0) {
         anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
     }
-    let store =
-        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    tw_core::output::check_output(&args.output, &[&args.store])?;
+    let store = crate::commands::open_store(&args.store)?;
     let header = store.header();
     let camera = match &args.camera {
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
@@ -84,5 +84,5 @@ pub fn run(args: RenderArgs) -> Result<()> {
         renderer.draw_mode(),
     );
     println!("wrote {} ({}x{})", args.output.display(), args.size.0, args.size.1);
-    Ok(())
+    crate::commands::damage::check(&args.store, &cache.failed_pages(), args.allow_damaged)
 }

@@ -4,13 +4,20 @@
 
 use anyhow::{Context, Result};
 use tw_runtime::{CameraPath, InputCamera};
-use tw_store::Store;
 use tw_view::{Coloring, Occlusion, Scene, Settings, ViewOptions};
 
 use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, ViewArgs};
 use crate::commands::render::default_camera;
 
 pub fn run(args: ViewArgs) -> Result<()> {
+    let inputs: Vec<&std::path::Path> =
+        [Some(args.store.as_path()), args.path.as_deref(), args.script.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect();
+    for out in [&args.screenshot, &args.screenshot_window, &args.record].into_iter().flatten() {
+        tw_core::output::check_output(out, &inputs)?;
+    }
     if !(args.error.is_finite() && args.error >= 0.0) {
         anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
     }
@@ -34,8 +41,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         Some(p) => Some(tw_view::script::Script::load(p)?),
         None => None,
     };
-    let store =
-        Store::open(&args.store).with_context(|| format!("cannot open store {}", args.store.display()))?;
+    let store = crate::commands::open_store(&args.store)?;
     let path = match &args.path {
         Some(p) => Some(CameraPath::load(p)?),
         None => None,

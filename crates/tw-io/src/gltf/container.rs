@@ -129,11 +129,12 @@ pub(super) struct RandomFile {
 }
 
 impl RandomFile {
-    /// Opens `path` for positioned reads, logical offset 0 at file offset 0.
+    /// Opens `path` for positioned reads, logical offset 0 at file offset 0. Only a regular
+    /// file: a FIFO would block the open and cannot be read at offsets, a device has no length.
     pub fn open(path: &Path, message_path: &Path) -> Result<RandomFile, ImportError> {
         let io_err = |e| ImportError::io(message_path, Position::File, e);
-        let file = File::open(path).map_err(io_err)?;
-        let end = file.metadata().map_err(io_err)?.len();
+        let (file, meta) = tw_core::regular_file::open_regular(path).map_err(io_err)?;
+        let end = meta.len();
         Ok(RandomFile { file, base: 0, end, path: message_path.to_path_buf() })
     }
 

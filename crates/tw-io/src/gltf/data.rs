@@ -188,12 +188,24 @@ impl Store {
                     if let Some(scheme) = uri_scheme(&uri) {
                         return Err(ImportError::unsupported(
                             path,
-                            format!("buffers[{i}]: URI scheme \"{scheme}:\" (only relative file names and data URIs are read)"),
+                            format!(
+                                "buffers[{i}]: uri \"{uri}\": URI scheme \"{scheme}:\" (only relative file \
+                                 names inside the glTF file's folder and data URIs are read)"
+                            ),
                         ));
                     }
                     let rel = percent_decode(&uri).ok_or_else(|| {
                         json_err(path, format!("buffers[{i}]: bad percent-encoding in uri \"{uri}\""))
                     })?;
+                    if let Err(why) = check_inside_folder(&rel) {
+                        return Err(json_err(
+                            path,
+                            format!(
+                                "buffers[{i}]: uri \"{uri}\" {why}: only relative file names inside the glTF \
+                                 file's folder (and data URIs) are read"
+                            ),
+                        ));
+                    }
                     BufferData::External { path: dir.join(rel), file: None }
                 }
             };
@@ -538,6 +550,31 @@ fn uri_scheme(uri: &str) -> Option<&str> {
         && scheme.starts_with(|c: char| c.is_ascii_alphabetic())
         && scheme.chars().all(|c| c.is_ascii_alphanumeric() || "+-.".contains(c));
     ok.then_some(scheme)
+}
+
+/// Checks that a decoded relative URI names a file inside the glTF file's folder: not an
+/// absolute path (`/x`, `\\server\x`, `C:x`), and no `..` that climbs above the folder (`a/../b`
+/// stays inside and is accepted). A file may only read what lies beside it: a model from
+/// elsewhere must not make terawalk read `/etc/passwd` or `../../secret` as vertex data. The
+/// check is on the name, component by component, as both `/` and `\` separate them.
+fn check_inside_folder(rel: &str) -> Result<(), &'static str> {
+    if rel.starts_with(['/', '\\']) {
+        return Err("is an absolute path");
+    }
+    let b = rel.as_bytes();
+    if b.len() >= 2 && b[0].is_ascii_alphabetic() && b[1] == b':' {
+        return Err("is an absolute path (a drive letter)");
+    }
+    let mut depth = 0usize;
+    for part in rel.split(['/', '\\']) {
+        match part {
+            "" | "." => {}
+            ".." if depth == 0 => return Err("climbs out of the glTF file's folder"),
+            ".." => depth -= 1,
+            _ => depth += 1,
+        }
+    }
+    Ok(())
 }
 
 /// Decodes %XX escapes of a relative URI (RFC 3986); `None` for a bad escape or non-UTF-8.

@@ -5,20 +5,20 @@
 //!
 //! Stages (see [`open`] and [`GltfSource::stream`]):
 //! 1. Header: for a GLB, the 12-byte header and the JSON chunk are read from the input stream
-//!    ([`container::read_head`]); a `.gltf` is read whole (it is the JSON). The document is parsed
+//!    (`container::read_head`); a `.gltf` is read whole (it is the JSON). The document is parsed
 //!    with the `gltf` crate's JSON types (not `gltf::import`, which loads every buffer and image),
 //!    without its validation (which panics on some bad indices): every index is checked where it
-//!    is used, and errors name the JSON path ("meshes[2].primitives[0]: ...").
+//!    is used, and errors name the JSON path ("meshes\[2\].primitives\[0\]: ...").
 //! 2. Scene: the default scene (else scene 0, else every parentless node, else every mesh once;
 //!    a default scene index in a file without scenes is ignored with a warning) is
 //!    walked depth-first with an explicit stack, composing node transforms in f64
-//!    ([`scene::instances`]). A node reached twice (cycle, two parents) is an error.
+//!    (`scene::instances`). A node reached twice (cycle, two parents) is an error.
 //! 3. Binary access: a plain `.glb` on disk is read with positioned reads; a gzip'ed (or
 //!    in-memory) `.glb` is first decompressed into a temporary file in
-//!    [`ImportOptions::spill_dir`](crate::format::ImportOptions) ([`container::RandomFile`]).
+//!    [`ImportOptions::spill_dir`](crate::format::ImportOptions) (`container::RandomFile`).
 //!    External buffers are opened on first use, relative to the `.gltf`'s directory.
 //! 4. Per mesh instance, per primitive: the accessors it needs (POSITION, NORMAL, COLOR_0,
-//!    indices) are read, only their byte ranges ([`data::Store::read_accessor`]); positions go to
+//!    indices) are read, only their byte ranges (`data::Store::read_accessor`); positions go to
 //!    world space in f64, normals through the inverse transpose; triangle lists, strips and fans
 //!    become triangles; a mirroring transform (negative determinant) has its winding flipped so
 //!    faces stay front-facing. One primitive's data is in memory at a time (instanced meshes keep
@@ -28,7 +28,7 @@
 //! its primitives' material colour (`baseColorFactor`, or the `diffuseFactor` of
 //! `KHR_materials_pbrSpecularGlossiness`), converted from linear to sRGB. When the primitives of
 //! a mesh have different colours, the instance becomes one object per colour, named
-//! "name [material]". With `EXT_mesh_gpu_instancing` each instance of a node is an object.
+//! "name \[material\]". With `EXT_mesh_gpu_instancing` each instance of a node is an object.
 //! Per-vertex colours (`COLOR_0`) are converted to sRGB and sent with the triangles, as is.
 //!
 //! Not read: POINTS and LINES primitives (skipped with a warning), skins and morph targets (the
@@ -211,12 +211,24 @@ fn parse_json(bytes: &[u8], path: &Path, glb: bool) -> Result<json::Root, Import
 }
 
 /// Parses a document that the `gltf` crate's types reject for a reason the specification does
-/// not give: a scene without `nodes` (optional in glTF 2.0, required by gltf-json 1.4). Only
-/// tried after a failure, so valid files are parsed once.
+/// not give: a scene without `nodes` (optional in glTF 2.0, required by gltf-json 1.4), or
+/// `extras` that are not objects (glTF 2.0 allows any JSON value there; gltf-json, built without
+/// its `extras` feature, takes only objects). Only tried after a failure, so valid files are
+/// parsed once.
 fn lenient_parse(bytes: &[u8]) -> Option<json::Root> {
     let mut v: serde_json::Value = serde_json::from_slice(bytes).ok()?;
+    let fixed = add_missing_scene_nodes(&mut v) | drop_non_object_extras(&mut v);
+    if !fixed {
+        return None;
+    }
+    serde_json::from_value(v).ok()
+}
+
+/// Gives every scene without `nodes` an empty list; true if one was missing.
+fn add_missing_scene_nodes(doc: &mut serde_json::Value) -> bool {
     let mut fixed = false;
-    for scene in v.get_mut("scenes")?.as_array_mut()? {
+    let scenes = doc.get_mut("scenes").and_then(|s| s.as_array_mut());
+    for scene in scenes.into_iter().flatten() {
         if let Some(s) = scene.as_object_mut() {
             if !s.contains_key("nodes") {
                 s.insert("nodes".into(), serde_json::Value::Array(Vec::new()));
@@ -224,10 +236,29 @@ fn lenient_parse(bytes: &[u8]) -> Option<json::Root> {
             }
         }
     }
-    if !fixed {
-        return None;
+    fixed
+}
+
+/// Removes every `extras` member whose value is not an object (an array, a string, a number...),
+/// at any depth; true if one was removed. terawalk reads nothing from `extras` (names come from
+/// `name`), so nothing is lost; objects are left as they are. The depth is bounded by
+/// serde_json's recursion limit.
+fn drop_non_object_extras(v: &mut serde_json::Value) -> bool {
+    match v {
+        serde_json::Value::Object(map) => {
+            let mut fixed = false;
+            if map.get("extras").is_some_and(|e| !e.is_object()) {
+                map.remove("extras");
+                fixed = true;
+            }
+            for child in map.values_mut() {
+                fixed |= drop_non_object_extras(child);
+            }
+            fixed
+        }
+        serde_json::Value::Array(items) => items.iter_mut().fold(false, |f, c| drop_non_object_extras(c) | f),
+        _ => false,
     }
-    serde_json::from_value(v).ok()
 }
 
 /// `asset.version` of a document that the glTF 2.0 types could not parse.

@@ -1079,3 +1079,62 @@ fn every_corrupted_byte_is_an_error_or_a_result_never_a_panic() {
         }
     }
 }
+
+/// Regression: `"uri": "/etc/passwd"` was read as vertex data. A buffer URI must name a file
+/// inside the glTF file's folder; absolute paths, `..` that climbs out (also percent-encoded)
+/// and other schemes are refused with the file and the URI named.
+#[test]
+fn buffer_uris_outside_the_folder_are_refused() {
+    let (b, _) = square(USHORT);
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path().join("models");
+    std::fs::create_dir_all(root.join("sub")).unwrap();
+    std::fs::write(dir.path().join("x.bin"), &b.bytes).unwrap();
+    std::fs::write(root.join("sub/m.bin"), &b.bytes).unwrap();
+    let import = |uri: &str| {
+        let d = b.doc(one_mesh(json!({"attributes": {"POSITION": 0}, "indices": 1})), Some(uri));
+        let path = root.join("m.gltf");
+        std::fs::write(&path, serde_json::to_vec(&d).unwrap()).unwrap();
+        import_path(&path)
+    };
+    for (uri, why) in [
+        ("/etc/passwd", "is an absolute path"),
+        ("../x.bin", "climbs out of the glTF file's folder"),
+        ("a/../../x.bin", "climbs out of the glTF file's folder"),
+        ("sub/../../x.bin", "climbs out of the glTF file's folder"),
+        ("%2e%2e/x.bin", "climbs out of the glTF file's folder"),
+        ("..\\x.bin", "climbs out of the glTF file's folder"),
+        ("C:/Windows/x.bin", "is an absolute path"),
+    ] {
+        let e = import(uri).unwrap_err().to_string();
+        assert!(e.contains("m.gltf") && e.contains(&format!("uri \"{uri}\"")), "{uri}: {e}");
+        assert!(e.contains(why), "{uri}: {e}");
+    }
+    let e = import("file:///etc/passwd").unwrap_err();
+    assert!(matches!(e, ImportError::Unsupported { .. }), "{e}");
+    assert!(e.to_string().contains("m.gltf") && e.to_string().contains("file:///etc/passwd"), "{e}");
+    // Relative names inside the folder still work, also through a `..` that stays inside.
+    for uri in ["sub/m.bin", "./sub/m.bin", "sub/../sub/m.bin", "sub%2Fm.bin"] {
+        let c = import(uri).unwrap_or_else(|e| panic!("{uri}: {e}"));
+        assert_eq!(c.tris.len(), 2, "{uri}");
+    }
+}
+
+/// Regression: `extras` that were arrays or strings made the file unreadable ("invalid type");
+/// glTF 2.0 allows any JSON value there. Object extras keep working, and names are unchanged.
+#[test]
+fn extras_of_any_json_type_are_accepted() {
+    let (b, _) = square(USHORT);
+    let extras = [json!([1, 2, 3]), json!("a string"), json!(42), json!(null), json!(true), json!({"id": 7})];
+    for e in extras {
+        let mut d = b.doc(one_mesh(json!({"attributes": {"POSITION": 0}, "indices": 1, "extras": e})), None);
+        d["nodes"][0]["extras"] = e.clone();
+        d["meshes"][0]["extras"] = e.clone();
+        d["asset"]["extras"] = e.clone();
+        d["extras"] = e.clone();
+        d["buffers"][0]["extras"] = e.clone();
+        let c = import_glb(&d, &b.bytes).unwrap_or_else(|err| panic!("extras {e}: {err}"));
+        assert_eq!(c.tris.len(), 2, "extras {e}");
+        assert_eq!(c.objects[0].1.name, "n", "extras {e}");
+    }
+}

@@ -3,22 +3,22 @@
 //! Follows the polygonal part of the Wavefront OBJ specification (Appendix B, "Object Files
 //! (.obj)", of the Advanced Visualizer manual, version 3.0), with the common extension of vertex
 //! colours (`v x y z r g b`, floats in 0..=1, clamped). Materials come from `mtllib` files (see
-//! [`mtl`]).
+//! `obj::mtl`).
 //!
 //! Stages, all in one pass over the file:
-//! 1. Lines are cut straight out of the [`BufRead`] buffer (see [`ObjSource::stream`]); only a
+//! 1. Lines are cut straight out of the [`BufRead`] buffer (see `ObjSource::stream`); only a
 //!    line that straddles two buffer fills, or is continued with a trailing backslash, is copied.
 //!    Lines are bytes: non-UTF-8 text is fine wherever it is not part of a number or keyword.
-//! 2. Each statement is dispatched on its keyword ([`Parser::statement`]). Numbers use a decimal
+//! 2. Each statement is dispatched on its keyword (`Parser::statement`). Numbers use a decimal
 //!    fast path that is exact (Clinger's fast path: at most 19 digits, mantissa below 2^53, no
-//!    exponent) and falls back to `str::parse` otherwise ([`parse_f64`]).
+//!    exponent) and falls back to `str::parse` otherwise (`parse_f64`).
 //! 3. `v`, `vn` go into [`VertexStore`]s, which spill to disk beyond
 //!    [`ImportOptions::vertex_memory`], so files larger than memory work; `vt` are only counted,
 //!    so that face indices can be checked.
 //! 4. `f` (and the old `fo`) resolves every corner (`i`, `i/t`, `i//n`, `i/t/n`, negative indices
-//!    counting back from the latest element) and fan-triangulates polygons ([`Parser::face`]).
+//!    counting back from the latest element) and fan-triangulates polygons (`Parser::face`).
 //!    A face has normals when every corner names one.
-//! 5. Objects: see [`Parser::object_for_face`]. `o` and `g` both begin a new object, but an object
+//! 5. Objects: see `Parser::object_for_face`. `o` and `g` both begin a new object, but an object
 //!    is announced to the sink only with its first face, so consecutive `o`/`g` lines without faces
 //!    between them make one object, named by the last of them. Faces before any `o`/`g` belong to
 //!    an object named after the file stem, and so do faces after a bare `o` or `g` (no name). Each object has one colour: when `usemtl` changes the
@@ -35,7 +35,7 @@
 //! with fewer than 3 or more than [`MAX_FACE_VERTICES`] corners, a line longer than [`MAX_LINE`],
 //! and a keyword that is not printable ASCII (binary data).
 
-mod mtl;
+pub(crate) mod mtl;
 
 use std::collections::{HashMap, HashSet};
 use std::ffi::OsStr;

@@ -122,15 +122,14 @@ pub struct AtomicFile {
 
 impl AtomicFile {
     /// Creates the temporary file beside `target`. Fails now if the directory does not exist or
-    /// is not writable, or if `target` is a directory.
+    /// is not writable, or if `target` exists and is not a regular file (a directory, a device:
+    /// the rename would replace it; [`tw_core::output`]).
     pub fn create(target: &Path) -> Result<AtomicFile, ImportError> {
         let err = |e| ImportError::io(target, Position::File, e);
         let name = target
             .file_name()
             .ok_or_else(|| ImportError::Sink(format!("{}: not a file name to write to", target.display())))?;
-        if target.is_dir() {
-            return Err(ImportError::Sink(format!("{}: is a directory", target.display())));
-        }
+        tw_core::output::check_replaceable(target).map_err(|e| ImportError::Sink(e.to_string()))?;
         let dir = match target.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),

@@ -1,0 +1,659 @@
+//! The draw passes: a frame's clusters made resident in the pool and drawn in batches into
+//! the renderer's own target, a caller's view or the item buffer (shaded by [`crate::draw`]),
+//! and the whole-frame calls built on them.
+
+use std::time::{Duration, Instant};
+
+use glam::Vec3;
+use tw_runtime::{full_mask, Camera, PageCache, Selection, TriangleMask};
+use tw_store::{PageCluster, Store};
+
+use super::{bind_group, Attachments, Pass, Renderer, SelectionPages, Target};
+use crate::draw::{self, Uniforms, DEPTH_FORMAT};
+use crate::pool::{DrawArgs, Ensure, PoolKey};
+use crate::{
+    color, query, ClusterKey, DrawMode, FrameStats, GpuError, Image, ItemBuffer, COLOR_FORMAT, DEFAULT_COLOR,
+};
+
+/// A batch is submitted (and waited for before the next is prepared) once it has uploaded a
+/// `1 / UPLOADS_PER_BATCH` part of the GPU budget. Each upload is staged in host memory until
+/// its submission has run, so without this a frame drawn in chunks (a reference frame) staged
+/// up to a whole pool's worth per batch, with the previous batch's still held: on the 10^8
+/// plant with `--memory 512M --gpu-memory 512M` the peak RSS was 2.63 GB, against 1.73 GB for
+/// the cache, pool, skeleton and fixed parts. Ordinary frames upload far less and are not split.
+const UPLOADS_PER_BATCH: u64 = 4;
+
+/// The draws of one pass being gathered ([`Renderer::draw_pass`]), submitted in parts.
+struct PassBatch {
+    att: Attachments,
+    /// The colour format of a shaded pass; `None` for the item buffer.
+    format: Option<wgpu::TextureFormat>,
+    /// Whether the pass clears its target (only its first part does).
+    clear: bool,
+    /// Whether the pass records into a caller's encoder (then in one part).
+    external: bool,
+    /// Whether the pass draws the item buffer (each cluster's number goes to its slot).
+    items: bool,
+    draws: Vec<DrawArgs>,
+    /// The pool keys of the clusters in `draws`, released once the part is submitted.
+    keys: Vec<PoolKey>,
+    /// Whether no part was submitted yet.
+    first: bool,
+    /// Time spent making clusters resident.
+    upload: Duration,
+    /// The pool's uploaded bytes when the current part began.
+    uploads_from: u64,
+}
+
+impl Renderer {
+    /// Starts a frame: resets the stats; clusters drawn from now on are this frame's (the pool
+    /// evicts only clusters not drawn in the current frame).
+    pub fn begin_frame(&mut self) {
+        self.pool.begin_frame();
+        self.stats = FrameStats::default();
+    }
+
+    /// Draws `clusters` from `camera` into `target`: clusters not resident are uploaded first
+    /// (positions are grid coordinates × `grid_step`, scene space). With `clear` the colour and
+    /// depth targets are cleared first (colour to transparent black, depth to 0); without, the
+    /// clusters are drawn on top of what the frame drew before (depth-tested against it). When
+    /// the selection exceeds the GPU budget it is drawn in several batches (see [`pool`](crate::pool)).
+    /// Submits without waiting. Malformed triangles (an index beyond the vertices) are skipped.
+    pub fn draw(
+        &mut self,
+        target: Target<'_>,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        self.draw_masked(target, camera, grid_step, clusters, None, clear)
+    }
+
+    /// [`draw`](Self::draw) of only some triangles: with `masks`, cluster `i` draws the
+    /// triangles whose bits are set in `masks[i]` (bit `t` = triangle `t`; `u128::MAX` = all;
+    /// see [`tw_runtime::triangle_test`]). A partial cluster is drawn as runs of consecutive
+    /// triangles straight from its pooled index range (no copy), its smallest gaps bridged so that
+    /// it takes at most [`MAX_RUNS`] draws; the frame's triangle count counts what was drawn.
+    pub fn draw_masked(
+        &mut self,
+        target: Target<'_>,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        match target {
+            Target::Own => {
+                let view = self.color_view.clone();
+                self.last_own = true;
+                let size = (self.width, self.height);
+                let pass = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
+                self.depth_stale = self.samples > 1;
+                self.draw_pass(None, pass, size, camera, grid_step, clusters, masks, clear)
+            }
+            Target::View { view, format, size } => {
+                self.last_own = false;
+                self.draw_pass(
+                    None,
+                    Pass::Shade { view, format, own: false },
+                    size,
+                    camera,
+                    grid_step,
+                    clusters,
+                    masks,
+                    clear,
+                )
+            }
+        }
+    }
+
+    /// Hardware occlusion queries of `boxes` (scene-space min, max) against the own depth
+    /// target as the frame's draws left it, from `camera` (the camera of those draws): per box
+    /// the samples that passed on Vulkan, 0 or 1 on GL ([`Renderer::queries_count_samples`]),
+    /// [`query::EYE_INSIDE`] for a box around the eye; > 0 means visible. Waits for the GPU.
+    pub fn query_boxes(&mut self, camera: &Camera, boxes: &[(Vec3, Vec3)]) -> Result<Vec<u64>, GpuError> {
+        if !self.last_own {
+            return Err(GpuError::NotOwnTarget { what: "query_boxes" });
+        }
+        let start = Instant::now();
+        let aspect = self.width as f32 / self.height as f32;
+        let view_proj = camera.projection_reverse_z(aspect) * camera.view();
+        // With multisampling the boxes are rasterized at the same samples against the
+        // multisampled depth itself (no resolve); counts are given back in pixels (rounded up).
+        let samples = self.samples;
+        let depth_view = match &self.msaa_own {
+            Some(t) if samples > 1 => t.depth.clone(),
+            _ => self.depth_view.clone(),
+        };
+        let q = self
+            .box_queries
+            .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT, samples));
+        let mut r = q.run(
+            &self.device,
+            &self.queue,
+            &mut self.readback,
+            &depth_view,
+            view_proj,
+            camera.eye,
+            camera.near,
+            boxes,
+        )?;
+        if samples > 1 && self.queries_count_samples() {
+            for c in r.iter_mut().filter(|c| **c != query::EYE_INSIDE) {
+                *c = c.div_ceil(samples as u64);
+            }
+        }
+        self.stats.render += start.elapsed();
+        Ok(r)
+    }
+
+    /// A whole single-pass frame into the own target: [`begin_frame`](Self::begin_frame),
+    /// [`draw`](Self::draw) (clearing), [`read_color`](Self::read_color).
+    pub fn render_clusters(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+    ) -> Result<Image, GpuError> {
+        self.begin_frame();
+        self.draw(Target::Own, camera, grid_step, clusters, true)?;
+        self.read_color()
+    }
+
+    /// A whole frame into the caller's colour `view` (`format`, `size`): begins a frame,
+    /// draws (clearing) and submits, without waiting and without readback — the caller
+    /// presents the surface texture or shows the egui texture. Formats without sRGB encoding
+    /// (e.g. `Bgra8Unorm` surfaces) get it in the shader.
+    pub fn render_to_view(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        self.begin_frame();
+        self.draw(Target::View { view, format, size }, camera, grid_step, clusters, true)
+    }
+
+    /// Like [`render_to_view`](Self::render_to_view), but records the frame's one render pass
+    /// into the caller's `encoder` (submitted by the caller; uploads go through the queue and
+    /// land before that submit). The frame must fit the GPU budget in one batch, else
+    /// [`GpuError::OverBudget`] (and nothing is recorded; use `render_to_view` or a larger
+    /// budget).
+    #[allow(clippy::too_many_arguments)]
+    pub fn encode_to_view(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        view: &wgpu::TextureView,
+        format: wgpu::TextureFormat,
+        size: (u32, u32),
+    ) -> Result<(), GpuError> {
+        self.begin_frame();
+        self.last_own = false;
+        self.draw_pass(
+            Some(encoder),
+            Pass::Shade { view, format, own: false },
+            size,
+            camera,
+            grid_step,
+            clusters,
+            None,
+            true,
+        )
+    }
+
+    /// Renders a [`Selection`] over `store` into the own target, taking the decoded pages from
+    /// `cache` (clusters whose page cannot be loaded are skipped and logged).
+    pub fn render_selection(
+        &mut self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        selection: &Selection,
+    ) -> Result<Image, GpuError> {
+        let pages = SelectionPages::resolve(store, cache, &selection.clusters);
+        self.render_clusters(camera, store.header().grid_step, &pages.clusters())
+    }
+
+    /// Draws `clusters` with depth test into the item buffer (own size, cleared) and reads it
+    /// back: per pixel the object, the cluster (its position in `clusters`) and the triangle
+    /// (see [`ids`](crate::ids)). Begins a frame of its own.
+    pub fn item_buffer(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+    ) -> Result<ItemBuffer, GpuError> {
+        self.begin_frame();
+        self.draw_items(camera, grid_step, clusters, 0, true)?;
+        let keys: Vec<ClusterKey> = clusters.iter().map(|c| c.0).collect();
+        self.read_items(&keys)
+    }
+
+    /// Draws `clusters` into the item buffer (own size), the first of them numbered
+    /// `first_number` (cluster ids in the buffer are positions in the whole list the caller
+    /// later passes to [`read_items`](Self::read_items)); with `clear` the buffer and depth
+    /// are cleared first, else the clusters are depth-tested against what the frame drew
+    /// before — so a large set can be drawn in chunks.
+    pub fn draw_items(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        first_number: u32,
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let size = (self.width, self.height);
+        self.item_base = first_number;
+        self.depth_stale = false;
+        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, None, clear)
+    }
+
+    /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
+    /// keys of every cluster drawn into it, in the numbering of those calls. Waits for the GPU.
+    pub fn read_items(&mut self, clusters: &[ClusterKey]) -> Result<ItemBuffer, GpuError> {
+        let Some((texture, _)) = &self.items else { return Err(GpuError::Gpu("no item target".into())) };
+        let texture = texture.clone();
+        let bytes = self.read_texture(&texture, 16)?;
+        let raw = bytes
+            .chunks_exact(16)
+            .map(|p| {
+                let w = |i: usize| u32::from_le_bytes([p[i], p[i + 1], p[i + 2], p[i + 3]]);
+                [w(0), w(4), w(8), w(12)]
+            })
+            .collect();
+        Ok(ItemBuffer { width: self.width, height: self.height, raw, clusters: clusters.to_vec() })
+    }
+
+    /// [`item_buffer`](Self::item_buffer) of a [`Selection`] (pages from `cache`).
+    pub fn item_buffer_selection(
+        &mut self,
+        store: &Store,
+        cache: &PageCache,
+        camera: &Camera,
+        selection: &Selection,
+    ) -> Result<ItemBuffer, GpuError> {
+        let pages = SelectionPages::resolve(store, cache, &selection.clusters);
+        self.item_buffer(camera, store.header().grid_step, &pages.clusters())
+    }
+
+    /// The draw shaders' uniforms for `camera` on a target of `size`. Nothing a shader branches
+    /// on alone goes here (draw.wgsl: the colour mode and the sRGB encoding are pipeline
+    /// constants, [`draw::Pipelines::shaded`]).
+    pub(crate) fn write_uniforms(&self, camera: &Camera, (width, height): (u32, u32)) {
+        let aspect = width as f32 / height as f32;
+        let view_proj = camera.projection_reverse_z(aspect) * camera.view();
+        // The sun: from above (the camera's up), tilted towards a fixed scene direction.
+        let up = camera.up.normalize_or(Vec3::Z);
+        let tilt = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
+        let sun = (up * 0.8 + (tilt - up * tilt.dot(up)).normalize_or_zero() * 0.35).normalize_or(up);
+        let u = Uniforms {
+            view_proj: view_proj.to_cols_array_2d(),
+            eye: camera.eye.extend(1.0).to_array(),
+            sun: sun.extend(0.0).to_array(),
+            params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
+            headlight: (camera.eye - camera.target).normalize_or(Vec3::Z).extend(0.0).to_array(),
+        };
+        self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Draws `clusters` (with `masks`) from `camera` into `pass`'s target of `size`: makes each
+    /// resident in the pool and gathers its draws, submitting the gathered part when the pool
+    /// is full or the part's uploads reach the staging bound, and the rest at the end (into
+    /// `external` when given: then the whole pass must fit the pool at once).
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn draw_pass(
+        &mut self,
+        mut external: Option<&mut wgpu::CommandEncoder>,
+        pass: Pass<'_>,
+        size: (u32, u32),
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let max = self.device.limits().max_texture_dimension_2d;
+        if size.0 == 0 || size.1 == 0 || size.0 > max || size.1 > max {
+            return Err(GpuError::Size { width: size.0, height: size.1, max });
+        }
+        let mut b = self.begin_pass(pass, size, camera, clear, external.is_some())?;
+        for (i, (key, cluster)) in clusters.iter().enumerate() {
+            let mask = masks.and_then(|m| m.get(i).copied()).unwrap_or(u128::MAX);
+            self.add_cluster(&mut b, i, *key, cluster, grid_step, mask)?;
+        }
+        self.flush(external.take(), &b.att, b.format, &b.draws, b.clear && b.first)?;
+        // Submitted: a later draw of the same frame (the second pass of occlusion culling, the
+        // next chunk of a reference frame) may evict these if it needs the room.
+        self.pool.release_batch(&b.keys);
+        self.stats.upload += b.upload;
+        Ok(())
+    }
+
+    /// Sets a pass up: the uniforms for `camera`, the depth, item and multisampled targets it
+    /// draws into, and on GL a wait for earlier GPU work when the pool may evict.
+    fn begin_pass(
+        &mut self,
+        pass: Pass<'_>,
+        size: (u32, u32),
+        camera: &Camera,
+        clear: bool,
+        external: bool,
+    ) -> Result<PassBatch, GpuError> {
+        let items = matches!(pass, Pass::Items);
+        self.write_uniforms(camera, size);
+        let depth_view = self.depth_view_for(size);
+        if items {
+            self.make_item_target();
+        }
+        let att = self.attachments(&pass, size, depth_view);
+        let format = match pass {
+            Pass::Shade { format, .. } => Some(format),
+            Pass::Items => None,
+        };
+        // GL (llvmpipe) hazard, seen in tests: a queued write into an arena range that an
+        // earlier, still running submission draws from is not always ordered after it. On GL,
+        // wait for earlier work before any eviction can happen (the arena is full) and after
+        // each batch; other backends order it themselves.
+        let gl = self.info.backend == wgpu::Backend::Gl;
+        if gl && self.pool.stats().arena_bytes >= self.pool.budget() {
+            self.wait_idle()?;
+        }
+        Ok(PassBatch {
+            att,
+            format,
+            clear,
+            external,
+            items,
+            draws: Vec::new(),
+            keys: Vec::new(),
+            first: true,
+            upload: Duration::ZERO,
+            uploads_from: self.pool.stats().uploaded_bytes,
+        })
+    }
+
+    /// Makes cluster `i` of the pass (`key`) resident and adds the draws of its `mask` to `b`.
+    /// When the pool is full, the part gathered so far is submitted first (once: a cluster that
+    /// does not fit an emptied pool is an error); after adding, the part is submitted when its
+    /// uploads reach the staging bound (see [`UPLOADS_PER_BATCH`]).
+    fn add_cluster(
+        &mut self,
+        b: &mut PassBatch,
+        i: usize,
+        key: ClusterKey,
+        cluster: &PageCluster,
+        grid_step: f64,
+        mask: TriangleMask,
+    ) -> Result<(), GpuError> {
+        let pk = (key.page, key.index_in_page);
+        let mut retried = false;
+        loop {
+            let t = Instant::now();
+            let r = self.pool.ensure(&self.device, &self.queue, pk, grid_step, cluster);
+            b.upload += t.elapsed();
+            match r {
+                Ensure::Ready { args, slot } => {
+                    if b.items {
+                        self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
+                    }
+                    let before = b.draws.len();
+                    let (drawn, masked) = push_runs(&mut b.draws, args, cluster, mask);
+                    if b.draws.len() > before {
+                        self.stats.clusters += 1;
+                    }
+                    self.stats.triangles += drawn;
+                    self.stats.masked_triangles += masked;
+                    b.keys.push(pk);
+                    // Bound the staging memory of one batch (see `UPLOADS_PER_BATCH`).
+                    let uploaded = self.pool.stats().uploaded_bytes - b.uploads_from;
+                    // Multisampled, a batch is `samples` times smaller: lavapipe's binned
+                    // scene of a batch grows with the samples (a 10^7 reference frame at 64
+                    // MiB peaked 63 MB higher at 4 samples with the single-sample cap).
+                    let cap = self.pool.budget() / (UPLOADS_PER_BATCH * self.samples as u64);
+                    if !b.external && uploaded >= cap {
+                        self.flush_part(b)?;
+                    }
+                    return Ok(());
+                }
+                Ensure::Empty => return Ok(()),
+                Ensure::Full if b.external => {
+                    return Err(GpuError::OverBudget { budget: self.pool.budget() });
+                }
+                Ensure::Full if !retried && !b.draws.is_empty() => {
+                    self.flush_part(b)?;
+                    retried = true;
+                }
+                Ensure::Full => {
+                    return Err(GpuError::Gpu(format!(
+                        "cluster {key:?} does not fit the GPU budget of {} bytes",
+                        self.pool.budget()
+                    )))
+                }
+            }
+        }
+    }
+
+    /// Submits a part of a frame drawn in several batches and waits for it before the next is
+    /// prepared, on every backend (staging, see [`UPLOADS_PER_BATCH`]; on GL also the hazard
+    /// noted in `begin_pass`); its clusters may then be evicted. The next part's uploads are
+    /// counted from here, and it does not clear.
+    fn flush_part(&mut self, b: &mut PassBatch) -> Result<(), GpuError> {
+        self.flush(None, &b.att, b.format, &b.draws, b.clear && b.first)?;
+        self.wait_idle()?;
+        self.pool.release_batch(&b.keys);
+        b.draws.clear();
+        b.keys.clear();
+        b.uploads_from = self.pool.stats().uploaded_bytes;
+        b.first = false;
+        Ok(())
+    }
+
+    pub(crate) fn wait_idle(&self) -> Result<(), GpuError> {
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map(|_| ())
+            .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))
+    }
+
+    /// Encodes and submits one batch. `format` is `None` for the item buffer.
+    fn flush(
+        &mut self,
+        external: Option<&mut wgpu::CommandEncoder>,
+        att: &Attachments,
+        format: Option<wgpu::TextureFormat>,
+        batch: &[DrawArgs],
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let start = Instant::now();
+        if self.bind_generation != self.pool.generation {
+            self.bind_group =
+                bind_group(&self.device, &self.pipelines, &self.uniforms, &self.pool, &self.object_colors);
+            self.bind_generation = self.pool.generation;
+        }
+        let indirect = match self.draw_mode {
+            DrawMode::Indirect if !batch.is_empty() => {
+                Some(self.indirect.write(&self.device, &self.queue, batch).clone())
+            }
+            _ => None,
+        };
+        let pipeline = match format {
+            Some(f) => self.pipelines.shaded(&self.device, f, att.samples, self.mode).clone(),
+            None => self.pipelines.item(&self.device).clone(),
+        };
+        let mut own = None;
+        let encoder = match external {
+            Some(e) => e,
+            None => own.insert(
+                self.device
+                    .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") }),
+            ),
+        };
+        {
+            let load_color =
+                if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("clusters"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &att.color,
+                    depth_slice: None,
+                    resolve_target: att.resolve.as_ref(),
+                    ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
+                })],
+                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                    view: &att.depth,
+                    depth_ops: Some(wgpu::Operations {
+                        load: if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load },
+                        store: wgpu::StoreOp::Store,
+                    }),
+                    stencil_ops: None,
+                }),
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            if let Some(arena) = self.pool.arena() {
+                draw::encode_batch(&mut pass, arena, batch, indirect.as_ref());
+            }
+        }
+        if let Some(e) = own {
+            // At most two batches in flight: a CPU driver runs a submission long after it is
+            // made, and each holds the staging copies of its uploads (up to a quarter of the
+            // GPU budget, `UPLOADS_PER_BATCH`), so without this wait they piled up over
+            // frames. Waiting for the previous batch, not this one, keeps the CPU preparing
+            // the next batch while the GPU draws.
+            let index = self.queue.submit([e.finish()]);
+            if let Some(previous) = self.in_flight.replace(index) {
+                self.device
+                    .poll(wgpu::PollType::Wait { submission_index: Some(previous), timeout: None })
+                    .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
+            }
+        }
+        self.pool.note_batch();
+        self.stats.draw_calls += match (self.draw_mode, batch.is_empty()) {
+            (_, true) => 0,
+            (DrawMode::Indirect, false) => 1,
+            (DrawMode::Direct, false) => batch.len() as u64,
+        };
+        self.stats.render += start.elapsed();
+        Ok(())
+    }
+}
+
+/// At most this many draws per partially drawn cluster: beyond, the smallest gaps between its
+/// runs of visible triangles are drawn too. Each draw has a fixed cost on Mesa's CPU drivers
+/// that outweighs a few triangles' (docs/benchmarks-log.md, "Triangle-level HZB culling").
+pub const MAX_RUNS: usize = 4;
+
+/// Appends the draws of `mask`'s triangles of a resident cluster drawn whole by `args` and
+/// returns how many triangles they draw and how many of those are in the mask. A cluster with
+/// a malformed triangle (which the pool skipped, shifting the others) is drawn whole.
+fn push_runs(
+    batch: &mut Vec<DrawArgs>,
+    args: DrawArgs,
+    cluster: &PageCluster,
+    mask: TriangleMask,
+) -> (u64, u64) {
+    let triangles = args.index_count / 3;
+    let full = full_mask(triangles as usize);
+    let well_formed = || cluster.indices.iter().all(|&v| (v as usize) < cluster.positions.len());
+    if mask & full == full || triangles > 128 || !well_formed() {
+        batch.push(args);
+        return (triangles as u64, triangles as u64);
+    }
+    let mut runs = triangle_runs(mask & full);
+    while runs.len() > MAX_RUNS {
+        let i = (1..runs.len()).min_by_key(|&i| runs[i].0 - runs[i - 1].1).expect("two runs or more");
+        runs[i - 1].1 = runs[i].1;
+        runs.remove(i);
+    }
+    let mut drawn = 0u64;
+    for (start, end) in runs {
+        batch.push(DrawArgs {
+            index_count: 3 * (end - start),
+            first_index: args.first_index + 3 * start,
+            ..args
+        });
+        drawn += (end - start) as u64;
+    }
+    (drawn, (mask & full).count_ones() as u64)
+}
+
+/// The maximal runs `[start, end)` of set bits of `mask`, in order.
+fn triangle_runs(mut mask: TriangleMask) -> Vec<(u32, u32)> {
+    let mut runs = Vec::new();
+    let mut base = 0u32;
+    while mask != 0 {
+        let skip = mask.trailing_zeros();
+        mask >>= skip;
+        let len = mask.trailing_ones();
+        runs.push((base + skip, base + skip + len));
+        base += skip + len;
+        mask = if len >= 128 { 0 } else { mask >> len };
+    }
+    runs
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn strip(triangles: u8) -> PageCluster {
+        PageCluster {
+            positions: (0..triangles as u32 + 2).map(|i| [i, i % 2, 0]).collect(),
+            indices: (0..triangles).flat_map(|t| [t, t + 1, t + 2]).collect(),
+            objects: vec![0; triangles as usize],
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn masked_clusters_draw_runs_of_their_pooled_index_range() {
+        let c = strip(10);
+        let args = DrawArgs {
+            index_count: 30,
+            instance_count: 1,
+            first_index: 300,
+            base_vertex: 40,
+            first_instance: 0,
+        };
+        let ranges = |mask: TriangleMask| {
+            let mut batch = Vec::new();
+            let (drawn, masked) = push_runs(&mut batch, args, &c, mask);
+            for a in &batch {
+                assert_eq!((a.base_vertex, a.instance_count, a.first_instance), (40, 1, 0));
+            }
+            assert_eq!(masked, (mask & 0b11_1111_1111).count_ones() as u64);
+            (drawn, batch.iter().map(|a| (a.first_index, a.index_count)).collect::<Vec<_>>())
+        };
+        // Everything (and bits beyond the cluster): the whole range, one draw.
+        assert_eq!(ranges(u128::MAX), (10, vec![(300, 30)]));
+        assert_eq!(ranges(0b11_1111_1111), (10, vec![(300, 30)]));
+        assert_eq!(ranges(0), (0, vec![]));
+        assert_eq!(MAX_RUNS, 4);
+        // Triangles 0-2, 5, 9: three runs, three draws.
+        assert_eq!(ranges(0b10_0010_0111), (5, vec![(300, 9), (315, 3), (327, 3)]));
+        assert_eq!(ranges(0b10_0000_0000), (1, vec![(327, 3)]));
+        // Triangles 0, 2, 4, 6, 9: five runs; the first of the smallest gaps (triangle 1) is
+        // bridged.
+        assert_eq!(ranges(0b10_0101_0101), (6, vec![(300, 9), (312, 3), (318, 3), (327, 3)]));
+        assert_eq!(triangle_runs(u128::MAX), vec![(0, 128)]);
+        assert_eq!(triangle_runs(1 << 127 | 0b110), vec![(1, 3), (127, 128)]);
+        assert_eq!(triangle_runs(0), vec![]);
+        // A malformed triangle shifts the pooled ones: the cluster is drawn whole.
+        let mut bad = c.clone();
+        bad.indices[4] = 200;
+        let mut batch = Vec::new();
+        assert_eq!(push_runs(&mut batch, args, &bad, 0b1), (10, 10));
+        assert_eq!(batch.len(), 1);
+    }
+}
