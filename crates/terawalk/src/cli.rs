@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
-use crate::units::{parse_bytes, parse_count};
+use crate::units::{parse_bytes, parse_count, parse_page_budget};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -231,8 +231,9 @@ pub struct RenderArgs {
     /// How to colour triangles.
     #[arg(long, value_enum, default_value = "material")]
     pub color: RenderColoring,
-    /// Memory budget of the decoded page cache.
-    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    /// Memory budget of the decoded page cache (at least 1M; the
+    /// root pages are kept beyond it).
+    #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
     /// Write the image and exit 0 even when store pages fail their checksum (their geometry is
     /// drawn from coarser levels, or missing); without it such a frame fails the command.
@@ -293,8 +294,9 @@ pub struct ViewArgs {
     /// How to colour triangles.
     #[arg(long, value_enum, default_value = "material")]
     pub color: RenderColoring,
-    /// Memory budget of the decoded page cache.
-    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    /// Memory budget of the decoded page cache (at least 1M; the
+    /// root pages are kept beyond it).
+    #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
     /// Scene resolution as a fraction of the window (0.25..=1; CPU rasterizers like 0.5).
     #[arg(long, default_value_t = 1.0)]
@@ -343,8 +345,9 @@ pub struct BenchArgs {
     /// Pixel error threshold τ of the LOD cut.
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
-    /// Memory budget of the decoded page cache (RAM).
-    #[arg(long, default_value = "1G", value_parser = parse_bytes)]
+    /// Memory budget of the decoded page cache (RAM; at least 1M; the
+    /// root pages are kept beyond it).
+    #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
     /// Occlusion culling strategies, comma-separated (none, hzb, queries, gpu-hzb; auto = the
     /// fastest conservative one on this device); one run each, in this order.

@@ -18,10 +18,22 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
         u => return Err(format!("unknown size unit {u:?} in {s:?} (use K, M, G or T)")),
     };
     let bytes = value * mult as f64;
-    if !bytes.is_finite() || bytes < 0.0 || bytes > u64::MAX as f64 {
+    // 2^64 itself rounds to `u64::MAX as f64`: compare against the first value out of range.
+    if !bytes.is_finite() || bytes < 0.0 || bytes >= 18_446_744_073_709_551_616.0 {
         return Err(format!("size out of range: {s:?}"));
     }
     Ok(bytes as u64)
+}
+
+/// Parses the page cache's budget (`render`, `bench`, `view` `--memory`): a byte size of at
+/// least 1 MiB. Less holds no page beside the root pages, and the frames would draw the
+/// coarsest levels only while looking like an answer.
+pub fn parse_page_budget(s: &str) -> Result<u64, String> {
+    let bytes = parse_bytes(s)?;
+    if bytes < 1 << 20 {
+        return Err(format!("the page cache needs at least 1M, got {s:?}"));
+    }
+    Ok(bytes)
 }
 
 /// Parses a count: "100M", "2.5k", "1e8", "10^9", "1_000_000" (decimal units: k = 1000).
@@ -86,6 +98,12 @@ mod tests {
         assert_eq!(parse_bytes("4096"), Ok(4096));
         assert!(parse_bytes("lots").is_err());
         assert!(parse_bytes("3X").is_err());
+        // 2^64 bytes and beyond are out of range, not clamped to u64::MAX.
+        assert!(parse_bytes("18446744073709551616").is_err());
+        assert!(parse_page_budget("0").is_err() && parse_page_budget("1000K").is_err());
+        assert_eq!(parse_page_budget("1M"), Ok(1 << 20));
+        assert!(parse_bytes("16777216T").is_err());
+        assert_eq!(parse_bytes("18446744073709549568"), Ok(18446744073709549568));
     }
 
     #[test]

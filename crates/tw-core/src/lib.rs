@@ -17,6 +17,7 @@
 //! ```
 
 pub mod bounds;
+pub mod cleanup;
 pub mod color;
 pub mod direct_io;
 pub mod disk_space;

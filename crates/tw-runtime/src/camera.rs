@@ -234,6 +234,12 @@ impl InputCamera {
         if cam.up == [0.0; 3] {
             return Err(err("up must not be zero".into()));
         }
+        let [d, u] = [sub(cam.target, cam.eye), cam.up];
+        let cross = [d[1] * u[2] - d[2] * u[1], d[2] * u[0] - d[0] * u[2], d[0] * u[1] - d[1] * u[0]];
+        let norm = |v: [f64; 3]| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+        if norm(cross) <= 1e-9 * norm(d) * norm(u) {
+            return Err(err("up must not point along the view direction (eye to target)".into()));
+        }
         Ok(cam)
     }
 
@@ -241,6 +247,10 @@ impl InputCamera {
     pub fn to_scene(&self, header: &Header) -> Result<Camera, RuntimeError> {
         Camera::from_input_coordinates(self.eye, self.target, self.up, self.fovy_deg, header)
     }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 
 impl FromStr for InputCamera {

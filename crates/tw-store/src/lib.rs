@@ -65,7 +65,9 @@
 
 #![deny(unsafe_code)]
 
-pub mod cleanup;
+/// Temporary paths removed on a signal or by the next build (in tw-core: the importers' writers
+/// register theirs too).
+pub use tw_core::cleanup;
 pub mod codec;
 pub mod error;
 pub mod format;

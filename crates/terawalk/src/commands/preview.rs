@@ -14,35 +14,9 @@ use crate::units::fmt_count;
 
 /// Parses "x,y,z;x,y,z;x,y,z;fovy" (eye; target; up; vertical field of view in degrees).
 pub fn parse_camera(s: &str) -> Result<Camera> {
-    let parts: Vec<&str> = s.split(';').map(str::trim).collect();
-    if parts.len() != 4 {
-        bail!("camera must be \"eye;target;up;fovy\" with eye/target/up as x,y,z, got {s:?}");
-    }
-    let vec3 = |p: &str, what: &str| -> Result<[f64; 3]> {
-        let v: Vec<f64> = p
-            .split(',')
-            .map(|c| c.trim().parse::<f64>())
-            .collect::<Result<_, _>>()
-            .with_context(|| format!("bad {what} {p:?} in camera"))?;
-        match v.as_slice() {
-            [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok([*x, *y, *z]),
-            _ => bail!("{what} must be three finite numbers x,y,z, got {p:?}"),
-        }
-    };
-    let fovy: f64 = parts[3].parse().with_context(|| format!("bad fovy {:?} in camera", parts[3]))?;
-    if !(1.0..=179.0).contains(&fovy) {
-        bail!("fovy must be between 1 and 179 degrees, got {fovy}");
-    }
-    let cam = Camera {
-        eye: vec3(parts[0], "eye")?,
-        target: vec3(parts[1], "target")?,
-        up: vec3(parts[2], "up")?,
-        fovy_deg: fovy,
-    };
-    if cam.eye == cam.target {
-        bail!("camera eye and target are the same point");
-    }
-    Ok(cam)
+    // One parser of camera strings for every command (tw-runtime's), here into the preview's type.
+    let c = tw_runtime::InputCamera::parse(s)?;
+    Ok(Camera { eye: c.eye, target: c.target, up: c.up, fovy_deg: c.fovy_deg })
 }
 
 /// The view direction (from the model towards the eye) of a preset, for a model with `up` axis.

@@ -118,6 +118,9 @@ pub fn create_writer(path: &Path) -> Result<Box<dyn SceneWriter>, ImportError> {
 pub struct AtomicFile {
     target: PathBuf,
     file: BufWriter<NamedTempFile>,
+    /// The temporary file stays registered for removal on a signal until it is renamed or
+    /// dropped (`tw_core::cleanup`: Ctrl-C during `generate` leaves nothing behind).
+    _cleanup: tw_core::cleanup::TempGuard,
 }
 
 impl AtomicFile {
@@ -145,7 +148,8 @@ impl AtomicFile {
             builder.permissions(std::fs::Permissions::from_mode(0o666));
         }
         let tmp = builder.tempfile_in(dir).map_err(err)?;
-        Ok(AtomicFile { target: target.to_path_buf(), file: BufWriter::with_capacity(BUFFER, tmp) })
+        let _cleanup = tw_core::cleanup::register(tmp.path());
+        Ok(AtomicFile { target: target.to_path_buf(), file: BufWriter::with_capacity(BUFFER, tmp), _cleanup })
     }
 
     /// The file this will become.

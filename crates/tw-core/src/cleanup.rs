@@ -47,10 +47,26 @@ pub fn remove_registered() -> usize {
     let paths = std::mem::take(&mut *PATHS.lock().unwrap_or_else(|e| e.into_inner()));
     let mut removed = 0;
     for (_, p) in paths {
-        let r = if p.is_dir() { std::fs::remove_dir_all(&p) } else { std::fs::remove_file(&p) };
-        removed += r.is_ok() as usize;
+        removed += remove_path(&p) as usize;
     }
     removed
+}
+
+/// Removes a file or a directory tree. The program's other threads run on while a signal
+/// handler removes their working directory and may create a file in it meanwhile (the tree
+/// then is not empty when its last directory goes): a few more tries catch those.
+fn remove_path(p: &Path) -> bool {
+    for _ in 0..20 {
+        let r = if p.is_dir() { std::fs::remove_dir_all(p) } else { std::fs::remove_file(p) };
+        if r.is_ok() {
+            return true;
+        }
+        if std::fs::symlink_metadata(p).is_err() {
+            return false; // gone, or never there
+        }
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    false
 }
 
 /// The lock file inside a temporary directory ([`lock_dir`]).
