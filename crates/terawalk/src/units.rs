@@ -19,7 +19,7 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     };
     let bytes = value * mult as f64;
     // 2^64 itself rounds to `u64::MAX as f64`: compare against the first value out of range.
-    if !bytes.is_finite() || bytes < 0.0 || bytes >= 18_446_744_073_709_551_616.0 {
+    if !(0.0..18_446_744_073_709_551_616.0).contains(&bytes) {
         return Err(format!("size out of range: {s:?}"));
     }
     Ok(bytes as u64)

@@ -1,19 +1,10 @@
 //! The `terawalk` program end to end: help, stats, generate, preview, demo, and bad input.
 
-use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn terawalk(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_terawalk")).args(args).current_dir(dir).output().expect("runs")
-}
+mod common;
 
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{stderr, stdout, terawalk};
 
 #[test]
 fn help_lists_subcommands_and_each_has_an_example() {

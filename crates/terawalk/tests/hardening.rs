@@ -4,17 +4,9 @@
 use std::path::Path;
 use std::process::{Command, Output, Stdio};
 
-fn terawalk(args: &[&str], dir: &Path) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_terawalk")).args(args).current_dir(dir).output().expect("runs")
-}
+mod common;
 
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{stderr, stdout, terawalk};
 
 /// A small plant model and its store in a new folder.
 fn plant_and_store() -> tempfile::TempDir {

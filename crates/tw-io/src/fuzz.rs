@@ -72,33 +72,36 @@ impl TriangleSink for Limit {
     }
 }
 
-/// Replays the committed corpus and every crasher found so far through the entry points above,
-/// so that a fixed crash stays fixed without a fuzzer (scripts/fuzz.sh adds the crashers).
+/// Feeds every file of fuzz/corpus/TARGET and fuzz/regressions/TARGET to `run`, and fails
+/// naming the files that panic (errors are fine), or when the corpus is missing: a fixed crash
+/// stays fixed without a fuzzer (scripts/fuzz.sh adds the crashers). For the replay tests of
+/// every crate with fuzz targets.
+pub fn replay_corpus(target: &str, run: impl Fn(&[u8])) {
+    let fuzz = std::path::PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
+    let mut files = Vec::new();
+    for dir in ["corpus", "regressions"] {
+        if let Ok(entries) = std::fs::read_dir(fuzz.join(dir).join(target)) {
+            files.extend(entries.filter_map(|e| e.ok()).map(|e| e.path()));
+        }
+    }
+    files.sort();
+    assert!(!files.is_empty(), "no corpus for the {target} fuzz target in {}", fuzz.display());
+    let panicked: Vec<_> = files
+        .iter()
+        .filter(|f| {
+            let data = std::fs::read(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data))).is_err()
+        })
+        .collect();
+    assert!(panicked.is_empty(), "{target}: these inputs panic: {panicked:?}");
+}
+
+/// The committed corpus and every crasher found so far, through the entry points above.
 #[cfg(test)]
 mod tests {
     use std::path::PathBuf;
 
-    /// Feeds every file of fuzz/corpus/TARGET and fuzz/regressions/TARGET to `run`; fails naming
-    /// the files that panic (errors are fine), or when the corpus is missing.
-    fn replay(target: &str, run: impl Fn(&[u8])) {
-        let fuzz = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fuzz");
-        let mut files = Vec::new();
-        for dir in ["corpus", "regressions"] {
-            if let Ok(entries) = std::fs::read_dir(fuzz.join(dir).join(target)) {
-                files.extend(entries.filter_map(|e| e.ok()).map(|e| e.path()));
-            }
-        }
-        files.sort();
-        assert!(!files.is_empty(), "no corpus for the {target} fuzz target in {}", fuzz.display());
-        let panicked: Vec<_> = files
-            .iter()
-            .filter(|f| {
-                let data = std::fs::read(f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
-                std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| run(&data))).is_err()
-            })
-            .collect();
-        assert!(panicked.is_empty(), "{target}: these inputs panic: {panicked:?}");
-    }
+    use super::replay_corpus as replay;
 
     #[test]
     fn obj_corpus_replays() {
