@@ -265,25 +265,7 @@ mod tests {
     use super::*;
 
     fn header(origin: [f64; 3], step: f64, min: [f64; 3], max: [f64; 3]) -> Header {
-        Header {
-            version: tw_store::FORMAT_VERSION,
-            flags: 0,
-            up_axis: 2,
-            bounds_min: min,
-            bounds_max: max,
-            grid_origin: origin,
-            grid_step: step,
-            units: Default::default(),
-            build_options: Default::default(),
-            object_count: 0,
-            node_count: 1,
-            group_count: 0,
-            page_count: 0,
-            input_triangles: 0,
-            cluster_count: 0,
-            triangle_count: 0,
-            sections: Default::default(),
-        }
+        Header::empty(min, max, origin, step)
     }
 
     fn cam() -> Camera {

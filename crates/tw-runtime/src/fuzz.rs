@@ -22,25 +22,7 @@ use crate::select::{SelectOptions, Selector};
 /// bounds (as `bench` does before rendering).
 pub fn camera_path(data: &[u8]) -> Result<usize, String> {
     let path = CameraPath::parse(data)?;
-    let header = tw_store::Header {
-        version: tw_store::FORMAT_VERSION,
-        flags: 0,
-        up_axis: 2,
-        bounds_min: [0.0; 3],
-        bounds_max: [1.0; 3],
-        grid_origin: [0.0; 3],
-        grid_step: 1.0 / 16_777_215.0,
-        units: Default::default(),
-        build_options: Default::default(),
-        object_count: 0,
-        node_count: 1,
-        group_count: 0,
-        page_count: 0,
-        input_triangles: 0,
-        cluster_count: 0,
-        triangle_count: 0,
-        sections: Default::default(),
-    };
+    let header = tw_store::Header::empty([0.0; 3], [1.0; 3], [0.0; 3], 1.0 / 16_777_215.0);
     for frame in &path.frames {
         let _ = frame.to_scene(&header);
     }

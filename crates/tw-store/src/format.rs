@@ -147,6 +147,35 @@ pub struct Header {
 }
 
 impl Header {
+    /// The header of a store that holds nothing: a scene frame (bounds, grid origin and step,
+    /// z up) for code that needs one without a store file (tests, fuzz targets).
+    pub fn empty(
+        bounds_min: [f64; 3],
+        bounds_max: [f64; 3],
+        grid_origin: [f64; 3],
+        grid_step: f64,
+    ) -> Header {
+        Header {
+            version: FORMAT_VERSION,
+            flags: 0,
+            up_axis: 2,
+            bounds_min,
+            bounds_max,
+            grid_origin,
+            grid_step,
+            units: Default::default(),
+            build_options: Default::default(),
+            object_count: 0,
+            node_count: 1,
+            group_count: 0,
+            page_count: 0,
+            input_triangles: 0,
+            cluster_count: 0,
+            triangle_count: 0,
+            sections: Default::default(),
+        }
+    }
+
     pub fn section(&self, kind: SectionKind) -> &Section {
         &self.sections[kind as usize]
     }

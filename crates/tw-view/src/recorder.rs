@@ -124,25 +124,7 @@ mod tests {
     }
 
     fn base_header() -> Header {
-        Header {
-            version: tw_store::FORMAT_VERSION,
-            flags: 0,
-            up_axis: 2,
-            bounds_min: [100.0, 200.0, 300.0],
-            bounds_max: [110.0, 210.0, 310.0],
-            grid_origin: [0.0; 3],
-            grid_step: 0.01,
-            units: Default::default(),
-            build_options: Default::default(),
-            object_count: 0,
-            node_count: 1,
-            group_count: 0,
-            page_count: 0,
-            input_triangles: 0,
-            cluster_count: 0,
-            triangle_count: 0,
-            sections: Default::default(),
-        }
+        Header::empty([100.0, 200.0, 300.0], [110.0, 210.0, 310.0], [0.0; 3], 0.01)
     }
 
     #[test]
