@@ -41,10 +41,14 @@ pub enum Command {
     #[command(after_help = "Examples:\n  terawalk stats model.obj\n  \
                             terawalk stats part1.ply part2.stl.gz scene.glb --json")]
     Stats(StatsArgs),
-    /// Generate a procedural scene (a power plant) into a model file.
+    /// Generate a procedural scene (a power plant, or a CAD assembly in millimetres) into a
+    /// model file.
     #[command(after_help = "Examples:\n  terawalk generate plant --triangles 10M -o plant.ply\n  \
                             terawalk generate plant --triangles 1e9 --seed 7 -o big.ply\n  \
-                            terawalk generate plant --triangles 200k -o small.glb")]
+                            terawalk generate plant --triangles 200k -o small.glb\n  \
+                            terawalk generate assembly --triangles 24M -o asm.ply\n  \
+                            terawalk generate assembly --triangles 24M --one-object -o asm-one.ply\n  \
+                            terawalk build asm.ply -o asm.tw --units mm")]
     Generate(GenerateArgs),
     /// Render a quick preview image of model files on the CPU (streaming; any size).
     #[command(after_help = "Examples:\n  terawalk preview plant.ply -o plant.png\n  \
@@ -131,6 +135,9 @@ pub struct StatsArgs {
 pub enum SceneKind {
     /// A power plant: buildings with floors, steel frames, tanks, equipment, a piping network.
     Plant,
+    /// A CAD assembly in millimetres: cabinets of densely populated circuit boards, tens of
+    /// thousands of small closed parts (SMD chips, ICs, connectors, screws, nuts, valves).
+    Assembly,
 }
 
 #[derive(Args, Debug)]
@@ -147,6 +154,10 @@ pub struct GenerateArgs {
     /// Output file; the format follows the extension: .ply .obj .stl .glb (.ply/.obj/.stl may add .gz).
     #[arg(short, long)]
     pub output: PathBuf,
+    /// Assembly only: write everything as one object (like a whole-assembly export without
+    /// ids) instead of one object per part.
+    #[arg(long)]
+    pub one_object: bool,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -58,6 +58,7 @@
 //! for the piping pass. Every random choice comes from a [`tw_core::Rng`] stream of its own
 //! (block, what, which), so the plant depends only on `(triangles, seed)`.
 
+mod assembly;
 mod parts;
 mod pipes;
 mod plant;
@@ -67,6 +68,11 @@ mod shapes;
 mod preview;
 
 use tw_core::{Aabb, Rng};
+
+pub use assembly::{
+    assembly_bounds, AssemblyObjects, AssemblyParams, AssemblySource, MAX_ASSEMBLY_TRIANGLES,
+    MIN_ASSEMBLY_TRIANGLES,
+};
 
 use crate::{ImportError, SourceSummary, TriangleSink, TriangleSource};
 use parts::color;
