@@ -141,6 +141,63 @@ fn path_then_bench_with_exact_visibility_and_bad_arguments() {
 }
 
 #[test]
+fn bench_records_lod_efficiency_per_frame() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (w, h, error) = (320u64, 180u64, 2.0f64);
+    let bench = [
+        "bench",
+        "p.tw",
+        "--frames",
+        "6",
+        "--size",
+        "320x180",
+        "--error",
+        "2",
+        "--occlusion",
+        "none,hzb",
+        "--wait",
+        "--out",
+        "rep",
+    ];
+    let o = terawalk(&bench, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("cut ÷ needed median"), "{}", stdout(&o));
+    let json = std::fs::read_to_string(dir.path().join("rep/report.json")).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&json).unwrap();
+    for run in report["runs"].as_array().unwrap() {
+        let name = run["name"].as_str().unwrap();
+        let mut seen = 0;
+        for f in run["frames"].as_array().unwrap() {
+            let covered = f["covered_pixels"].as_u64().unwrap_or_else(|| panic!("{name}: {f}"));
+            let (cut, drawn) = (f["cut_triangles"].as_u64().unwrap(), f["triangles"].as_u64().unwrap());
+            assert!(covered <= w * h, "{name}: {covered} pixels covered of {}", w * h);
+            assert!(cut >= drawn, "{name}: cut {cut} < drawn {drawn}");
+            if name == "none" {
+                assert_eq!(cut, drawn, "{name}: without occlusion culling the whole cut is drawn");
+            }
+            if covered == 0 {
+                continue;
+            }
+            seen += 1;
+            // The model: 2 triangles per ε² covered pixels, rounded up.
+            let needed = f["needed_triangles"].as_u64().unwrap();
+            assert_eq!(needed, (2.0 * covered as f64 / (error * error)).ceil() as u64, "{name}");
+            assert!(needed > 0 && cut > 0, "{name}: {f}");
+            let ratio = f["lod_efficiency"].as_f64().unwrap();
+            assert!((ratio - cut as f64 / needed as f64).abs() < 1e-9, "{name}: {ratio}");
+        }
+        assert!(seen > 0, "{name}: no frame sees the model");
+        assert!(run["summary"]["median_lod_efficiency"].as_f64().unwrap() > 0.0, "{name}");
+    }
+    let html = std::fs::read_to_string(dir.path().join("rep/index.html")).unwrap();
+    assert!(html.contains("data-series=\"lod_efficiency\"") && html.contains("LOD efficiency"));
+}
+
+#[test]
 fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.obj"], dir.path());

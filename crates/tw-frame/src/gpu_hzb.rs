@@ -80,5 +80,5 @@ pub(crate) fn draw_gpu_hzb(
     let cull_time = result.gpu_time.unwrap_or(result.encode_time);
     let mut drawn = split.occluders;
     drawn.extend_from_slice(&visible);
-    Ok(Culled { stats, cull_time, drawn, occluded })
+    Ok(Culled { stats, cull_time, drawn, occluded, ..Default::default() })
 }

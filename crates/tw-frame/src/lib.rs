@@ -84,6 +84,13 @@ pub struct FrameTimes {
     pub select_prefetch: Duration,
     /// Occlusion culling: tests and the depth read-back or queries they need (drawing excluded).
     pub cull: Duration,
+    /// Of `cull`, `hzb` only: the boxes' tests (nodes, groups, clusters), without the depth
+    /// read-back, the pyramid and the triangle tests.
+    #[serde(default)]
+    pub cull_box_tests: Duration,
+    /// Of `cull`, `hzb` only: the triangle tests.
+    #[serde(default)]
+    pub cull_triangle_tests: Duration,
     /// Making clusters resident on the GPU.
     pub upload: Duration,
     /// Drawing, waiting for the GPU, reading the image back.
@@ -100,6 +107,10 @@ pub struct FrameInfo {
     pub select: SelectStats,
     /// Streaming: pages requested, loaded, evicted, bytes read, residency, stalls avoided.
     pub stream: StreamStats,
+    /// Triangles of the LOD cut within the frustum (the clusters handed to occlusion culling;
+    /// in a streamed frame, resident ancestors stand in for missing pages): what the LOD chose,
+    /// before occlusion culling removes any.
+    pub cut_triangles: u64,
     /// Triangles and clusters drawn (after occlusion culling).
     pub triangles: u64,
     /// Of `triangles`, those that passed the triangle tests (the rest are the gaps between
@@ -179,6 +190,16 @@ impl Walkthrough {
         self.renderer.set_color_mode(mode);
     }
 
+    /// Which boxes above the clusters `hzb` tests first (skeleton nodes and groups by default;
+    /// [`HierarchyOptions::FLAT`](tw_runtime::occlusion::HierarchyOptions::FLAT) tests each
+    /// candidate's own box), and whether in every frame (`forced`) or only while they pay (the
+    /// default: measured as the queries' node tests, [`tw_runtime::NodeTestSwitch`]): to
+    /// compare them; the image is the same.
+    pub fn set_hzb_hierarchy(&mut self, options: tw_runtime::occlusion::HierarchyOptions, forced: bool) {
+        self.occlusion.hierarchy = options;
+        self.occlusion.hierarchy_forced = forced;
+    }
+
     /// The clusters the last frame selected (its LOD cut within the frustum).
     pub fn selection(&self) -> &Selection {
         &self.selection
@@ -232,12 +253,15 @@ impl Walkthrough {
                 select_cut: select,
                 select_prefetch: Duration::ZERO,
                 cull: Duration::ZERO,
+                cull_box_tests: Duration::ZERO,
+                cull_triangle_tests: Duration::ZERO,
                 upload: gpu.upload,
                 render: gpu.render,
                 total: start.elapsed(),
             },
             select: selection.stats,
             stream: StreamStats::default(),
+            cut_triangles: gpu.triangles,
             triangles: gpu.triangles,
             masked_triangles: gpu.masked_triangles,
             clusters: gpu.clusters,
@@ -475,6 +499,7 @@ impl Walkthrough {
             };
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
+        let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
         let bounds = |c: &ClusterRef| {
             let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
             pages[i].1.bounds.get(c.index_in_page as usize).copied()
@@ -497,12 +522,15 @@ impl Walkthrough {
                 select_cut: stream_times.map_or(select, |t| t.cut),
                 select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
                 cull: culled.cull_time,
+                cull_box_tests: culled.box_test_time,
+                cull_triangle_tests: culled.triangle_test_time,
                 upload: gpu.upload,
                 render: gpu.render,
                 total: start.elapsed(),
             },
             select: self.selection.stats,
             stream,
+            cut_triangles,
             triangles: gpu.triangles,
             masked_triangles: gpu.masked_triangles,
             clusters: gpu.clusters,

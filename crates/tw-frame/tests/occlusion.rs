@@ -2,7 +2,10 @@
 //! strategy gives the image of `--occlusion none`, pixel for pixel, on a walk through a generated
 //! plant's interior (smooth camera motion) and on camera teleports (the two-pass scheme draws the
 //! newly visible clusters in the same frame). Each strategy must also cull something on the walk,
-//! so the comparison is not trivially true. The same with 4× multisampling (tw_gpu::msaa: the
+//! so the comparison is not trivially true. `hzb` runs with its hierarchical tests (skeleton
+//! nodes, then groups, then clusters) in every frame and with the flat test: the images are
+//! those of `none` and the triangles drawn the same, and its culling gives the same clusters
+//! and images on one thread as on several. The same with 4× multisampling (tw_gpu::msaa: the
 //! tests then treat a pixel as its four samples; Vulkan only, GL refuses it). On GL (llvmpipe)
 //! and Vulkan (lavapipe); without an
 //! adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.
@@ -11,8 +14,9 @@ use std::sync::{Arc, OnceLock};
 
 use tw_frame::{FrameSettings, Occlusion};
 use tw_gpu::wgpu;
+use tw_runtime::occlusion::HierarchyOptions;
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
-use tw_runtime::Camera;
+use tw_runtime::{Camera, ClusterRef};
 use tw_store::Store;
 
 mod common;
@@ -37,9 +41,12 @@ struct Run {
     /// `hzb`: triangles of visible clusters tested too (the default; in every other frame for
     /// the run that switches).
     triangle_culling: bool,
-    /// Clusters culled, skeleton nodes the queries found hidden (Alg. 3.4.1's node tests),
+    /// `hzb`: the boxes tested above the clusters (in every frame).
+    hierarchy: HierarchyOptions,
+    /// Clusters culled, skeleton node boxes tested and found hidden (Alg. 3.4.1's node tests),
     /// triangles drawn.
     culled: u64,
+    node_tests: u64,
     nodes_hidden: u64,
     triangles: u64,
 }
@@ -62,20 +69,26 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera], samples: u3
         baseline.push(w.frame(c, &s).unwrap().0);
     }
     let mut runs = Vec::new();
-    // The last hzb run turns its triangle tests on and off every frame, keeping the history.
+    // The last but one hzb run turns its triangle tests on and off every frame, keeping the
+    // history; the last one tests every candidate's box on its own.
+    let hierarchical = HierarchyOptions::default();
     let strategies = [
-        (Occlusion::Hzb, Some(true)),
-        (Occlusion::Hzb, Some(false)),
-        (Occlusion::Queries, Some(true)),
-        (Occlusion::GpuHzb, Some(true)),
-        (Occlusion::Hzb, None),
+        (Occlusion::Hzb, Some(true), hierarchical),
+        (Occlusion::Hzb, Some(false), hierarchical),
+        (Occlusion::Queries, Some(true), hierarchical),
+        (Occlusion::GpuHzb, Some(true), hierarchical),
+        (Occlusion::Hzb, None, hierarchical),
+        (Occlusion::Hzb, Some(true), HierarchyOptions::FLAT),
     ];
-    for (strategy, tests) in strategies {
+    for (strategy, tests, hierarchy) in strategies {
         w.reset();
+        w.set_hzb_hierarchy(hierarchy, true);
         let mut run = Run {
             strategy,
             triangle_culling: tests != Some(false),
+            hierarchy,
             culled: 0,
+            node_tests: 0,
             nodes_hidden: 0,
             triangles: 0,
         };
@@ -99,6 +112,7 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera], samples: u3
             );
             assert!(image.covered_pixels() > 0, "{what}: frame {i} is empty");
             run.culled += info.occlusion.culled;
+            run.node_tests += info.occlusion.node_tests;
             run.nodes_hidden += info.occlusion.nodes_hidden;
             run.triangles += info.triangles;
         }
@@ -112,20 +126,28 @@ fn conservative_on_a_walk(backends: wgpu::Backends, what: &str, samples: u32) {
     let Some(runs) = compare(backends, what, &cameras, samples) else { return };
     for r in &runs {
         eprintln!(
-            "{what}, {} (triangle tests {}): {} clusters culled over {} frames ({} by hidden nodes), {} \
-             triangles drawn",
+            "{what}, {} (triangle tests {}, {:?}): {} clusters culled over {} frames ({} of {} node boxes \
+             hidden), {} triangles drawn",
             r.strategy.name(),
             r.triangle_culling,
+            r.hierarchy,
             r.culled,
             cameras.len(),
             r.nodes_hidden,
+            r.node_tests,
             r.triangles
         );
         assert!(r.culled > 0, "{what}, {}: culled nothing inside the plant", r.strategy.name());
-        if r.strategy == Occlusion::Queries {
+        if matches!(r.strategy, Occlusion::Queries | Occlusion::Hzb) && r.hierarchy.nodes {
             assert!(r.nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
         }
     }
+    // The hierarchical tests cull what the flat test culls: the same triangles are drawn.
+    let (hierarchical, flat) = (runs[0].triangles, runs[5].triangles);
+    assert_eq!(
+        hierarchical, flat,
+        "{what}: hzb drew {hierarchical} triangles with node tests, {flat} without"
+    );
     // The triangle tests must cull triangles, or the identical images above prove nothing
     // about them.
     let (with, without) = (runs[0].triangles, runs[1].triangles);
@@ -170,6 +192,41 @@ fn occlusion_is_conservative_with_msaa_on_a_walk_vulkan() {
 #[test]
 fn occlusion_is_conservative_with_msaa_on_teleports_vulkan() {
     conservative_on_teleports(wgpu::Backends::VULKAN, "vulkan, 4 samples", 4);
+}
+
+/// `hzb`'s culling gives the same clusters drawn and hidden, and the same images, in a rayon
+/// pool of one thread as in one of several (its tests, look-ups and history run in parallel).
+fn parallel_equals_serial(backends: wgpu::Backends, what: &str) {
+    let _lock = gpu_lock();
+    let cameras = walk_cameras(&store());
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
+            w.set_hzb_hierarchy(HierarchyOptions::default(), true);
+            let s = FrameSettings { occlusion: Occlusion::Hzb, wait_for_pages: true, ..Default::default() };
+            let frames: Vec<(Vec<ClusterRef>, Vec<ClusterRef>, tw_gpu::Image)> = cameras
+                .iter()
+                .map(|c| {
+                    let drawn = w.draw_frame(c, &s).unwrap();
+                    (drawn.drawn, drawn.occluded, w.renderer_mut().read_color().unwrap())
+                })
+                .collect();
+            Some(frames)
+        })
+    };
+    let Some(serial) = run(1) else { return };
+    let parallel = run(4).unwrap();
+    assert!(serial.iter().any(|f| !f.1.is_empty()), "{what}: nothing culled");
+    for (i, (s, p)) in serial.iter().zip(&parallel).enumerate() {
+        assert_eq!((&s.0, &s.1), (&p.0, &p.1), "{what}: frame {i}: other clusters on 4 threads");
+        assert_eq!(s.2.differing_pixels(&p.2).unwrap(), 0, "{what}: frame {i}: another image on 4 threads");
+    }
+}
+
+#[test]
+fn hzb_culling_on_one_thread_equals_several_vulkan() {
+    parallel_equals_serial(wgpu::Backends::VULKAN, "vulkan");
 }
 
 /// The queries' visible-pixel cut-off: with sample counts (Vulkan) a cut-off culls at least

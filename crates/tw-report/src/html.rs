@@ -124,6 +124,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     let any_psnr = report.runs.iter().any(|r| r.summary.min_psnr_db.is_some());
     let any_eff = report.runs.iter().any(|r| r.summary.median_culling_efficiency.is_some());
     let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
+    let any_lod = report.runs.iter().any(|r| r.summary.median_lod_efficiency.is_some());
     h.push_str(
         "<section><h2>Summary</h2><table><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
                 <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>",
@@ -138,6 +139,9 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     }
     if any_eff {
         h.push_str("<th>Culling efficiency</th><th>Of the cut</th>");
+    }
+    if any_lod {
+        h.push_str("<th>Median cut triangles</th><th>Median needed at ε</th><th>LOD efficiency</th>");
     }
     h.push_str("</tr>");
     for (i, r) in report.runs.iter().enumerate() {
@@ -178,6 +182,15 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             let _ = write!(h, "<td>{}</td>", opt(s.median_culling_efficiency, 3));
             let _ = write!(h, "<td>{}</td>", opt(s.median_cut_efficiency, 3));
         }
+        if any_lod {
+            let _ = write!(
+                h,
+                "<td>{:.0}</td><td>{}</td><td>{}</td>",
+                s.median_cut_triangles,
+                opt(s.median_needed_triangles, 0),
+                opt(s.median_lod_efficiency, 2)
+            );
+        }
         h.push_str("</tr>");
     }
     h.push_str("</table>");
@@ -194,8 +207,18 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         "<p class=\"note\">Percentiles interpolate linearly between ranks. Speed-up is the first run's median \
          frame time divided by each run's, measured in the same session. Culling efficiency: triangles drawn ÷ \
          triangles visible at full detail (item buffer); of the cut: ÷ triangles of the frame's own LOD cut \
-         visible in its item buffer (the culling's excess alone).</p></section>",
+         visible in its item buffer (the culling's excess alone).</p>",
     );
+    if any_lod {
+        h.push_str(
+            "<p class=\"note\">LOD efficiency: triangles of the LOD cut (before occlusion culling) ÷ the \
+             triangles a screen can use at ε, modelled as 2 · covered pixels ÷ ε² (a triangle of ε-pixel \
+             legs covers ε²/2 pixels, and a cut at error ε need keep no smaller one). The model is an upper \
+             bound, so the ratio under-states the excess; it also counts triangles hidden behind the \
+             visible surface. Median of the per-frame ratios.</p>",
+        );
+    }
+    h.push_str("</section>");
 
     // Plots.
     let shown = plotted(&report.runs);

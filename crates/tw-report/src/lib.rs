@@ -5,7 +5,8 @@
 //!   runs such as "reference", "none", "hzb", "queries"), each a named series of per-frame
 //!   [`FrameRecord`]s with its [`Summary`];
 //! - [`write_report`] writes `report.json` and `index.html` into a folder, atomically;
-//! - [`stats`]: median and percentiles; [`svg`]: the line plots; [`html`]: the page.
+//! - [`stats`]: median and percentiles; [`svg`]: the line plots; [`html`]: the page;
+//! - [`lod`]: the LOD efficiency model (the cut's triangles against those a screen needs at ε).
 //!
 //! Memory figures come from [`tw_core::mem`] (VmHWM / VmRSS), re-exported here as
 //! [`peak_rss_bytes`] and [`rss_bytes`].
@@ -20,6 +21,7 @@
 //! ```
 
 pub mod html;
+pub mod lod;
 pub mod stats;
 pub mod svg;
 mod write;
@@ -86,12 +88,28 @@ pub struct FrameRecord {
     /// are gaps between runs of visible triangles that are drawn to save draw calls.
     #[serde(default)]
     pub masked_triangles: u64,
+    /// Triangles of the frame's LOD cut within the frustum, before occlusion culling (0 in
+    /// reports written before it was recorded).
+    #[serde(default)]
+    pub cut_triangles: u64,
     pub clusters: u64,
     pub nodes_visited: u64,
     pub nodes_culled_frustum: u64,
     pub nodes_culled_lod: u64,
     pub nodes_culled_occlusion: u64,
     pub occlusion_queries: u64,
+    /// Skeleton node boxes tested before the clusters (`queries`, `hzb`; a hidden one culls
+    /// the clusters under it), and of those found hidden.
+    #[serde(default)]
+    pub occlusion_node_tests: u64,
+    #[serde(default)]
+    pub occlusion_nodes_hidden: u64,
+    /// Of `culling_ms`, `hzb` only: the box tests (nodes, groups, clusters) and the triangle
+    /// tests.
+    #[serde(default)]
+    pub culling_box_tests_ms: f64,
+    #[serde(default)]
+    pub culling_triangle_tests_ms: f64,
     /// Time spent in occlusion culling (queries, HZB build and tests).
     pub culling_ms: f64,
     /// Decoded pages resident in memory.
@@ -134,6 +152,27 @@ pub struct FrameRecord {
     /// themselves, without the bridged gaps).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub test_efficiency: Option<f64>,
+    /// Pixels of the frame's image that show the model (not background).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub covered_pixels: Option<u64>,
+    /// Triangles a screen can use over `covered_pixels` at the run's ε ([`lod::needed_triangles`]);
+    /// `None` at ε = 0.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub needed_triangles: Option<u64>,
+    /// LOD efficiency: `cut_triangles ÷ needed_triangles` ([`lod::lod_efficiency`]); `None` where
+    /// nothing is needed (no pixel covered, or ε = 0).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub lod_efficiency: Option<f64>,
+}
+
+impl FrameRecord {
+    /// Sets the LOD efficiency figures of a frame whose image covers `covered_pixels` pixels,
+    /// its cut drawn at pixel error `error_px` ([`lod`]).
+    pub fn set_coverage(&mut self, covered_pixels: u64, error_px: f64) {
+        self.covered_pixels = Some(covered_pixels);
+        self.needed_triangles = lod::needed_triangles(covered_pixels, error_px);
+        self.lod_efficiency = self.needed_triangles.and_then(|n| lod::lod_efficiency(self.cut_triangles, n));
+    }
 }
 
 /// Summary statistics of one run's frames (percentiles interpolate linearly between ranks).
@@ -164,6 +203,15 @@ pub struct Summary {
     /// Median of the frames' `cut_efficiency` (drawn ÷ visible of the frame's own cut).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_cut_efficiency: Option<f64>,
+    /// Median of the frames' `cut_triangles`.
+    #[serde(default)]
+    pub median_cut_triangles: f64,
+    /// Median of the frames' `needed_triangles` (where the model has a value).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_needed_triangles: Option<f64>,
+    /// Median of the frames' `lod_efficiency` (cut ÷ needed, [`lod`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_lod_efficiency: Option<f64>,
 }
 
 impl Summary {
@@ -194,6 +242,13 @@ impl Summary {
             median_culling_efficiency: stats::median(&eff),
             median_cut_efficiency: stats::median(
                 &frames.iter().filter_map(|f| f.cut_efficiency).collect::<Vec<f64>>(),
+            ),
+            median_cut_triangles: med(frames.iter().map(|f| f.cut_triangles as f64).collect()),
+            median_needed_triangles: stats::median(
+                &frames.iter().filter_map(|f| f.needed_triangles.map(|n| n as f64)).collect::<Vec<f64>>(),
+            ),
+            median_lod_efficiency: stats::median(
+                &frames.iter().filter_map(|f| f.lod_efficiency).collect::<Vec<f64>>(),
             ),
         }
     }

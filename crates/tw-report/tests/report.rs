@@ -163,3 +163,66 @@ fn invalid_reports_are_refused() {
     let r = BenchReport::new(RunMeta::default(), vec![]);
     assert!(r.validate().unwrap_err().to_string().contains("no runs"));
 }
+
+#[test]
+fn lod_efficiency_is_recorded_summarised_and_shown() {
+    let frames: Vec<FrameRecord> = (0..5u64)
+        .map(|i| {
+            let mut f = FrameRecord {
+                frame: i as u32,
+                frame_ms: 10.0,
+                cut_triangles: 1000 * (i + 1),
+                ..Default::default()
+            };
+            // ε = 2: two triangles per 4 covered pixels; frame 0 sees nothing (no ratio).
+            f.set_coverage(if i == 0 { 0 } else { 2000 }, 2.0);
+            f
+        })
+        .collect();
+    assert_eq!(frames[0].needed_triangles, Some(0));
+    assert_eq!(frames[0].lod_efficiency, None);
+    assert_eq!((frames[1].covered_pixels, frames[1].needed_triangles), (Some(2000), Some(1000)));
+    assert_eq!(frames[3].lod_efficiency, Some(4.0));
+    let s = Summary::of(&frames, None);
+    assert_eq!(s.median_cut_triangles, 3000.0);
+    assert_eq!(s.median_needed_triangles, Some(1000.0));
+    // Median of the ratios 2, 3, 4, 5 of the frames that cover pixels.
+    assert_eq!(s.median_lod_efficiency, Some(3.5));
+
+    let report = BenchReport::new(
+        RunMeta { error_px: 2.0, ..Default::default() },
+        vec![Run::new("none", "", frames, None)],
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let files = write_report(dir.path(), &report, &[]).unwrap();
+    let html = std::fs::read_to_string(&files.html).unwrap();
+    assert!(html.contains("<th>LOD efficiency</th>") && html.contains("<td>3.50</td>"), "summary column");
+    for key in ["cut_triangles", "needed_triangles", "lod_efficiency", "covered_pixels"] {
+        assert!(html.contains(&format!("data-series=\"{key}\"")), "{key}");
+    }
+    let back = BenchReport::from_json(&std::fs::read_to_string(&files.json).unwrap()).unwrap();
+    assert_eq!(back, report);
+}
+
+#[test]
+fn reports_without_lod_figures_still_read() {
+    // A report written before the LOD figures: no cut_triangles, covered_pixels,
+    // needed_triangles, lod_efficiency in its frames, no LOD medians in its summaries.
+    let mut v = serde_json::to_value(report()).unwrap();
+    for run in v["runs"].as_array_mut().unwrap() {
+        for key in ["median_cut_triangles", "median_needed_triangles", "median_lod_efficiency"] {
+            run["summary"].as_object_mut().unwrap().remove(key);
+        }
+        for f in run["frames"].as_array_mut().unwrap() {
+            f.as_object_mut().unwrap().remove("cut_triangles");
+        }
+    }
+    let text = serde_json::to_string(&v).unwrap();
+    assert!(!text.contains("cut_triangles") && !text.contains("lod_efficiency"));
+    let back = BenchReport::from_json(&text).unwrap();
+    assert_eq!(back.runs[0].frames[0].cut_triangles, 0);
+    assert_eq!(back.runs[0].frames[0].lod_efficiency, None);
+    assert_eq!(back.runs[0].summary.median_lod_efficiency, None);
+    // Its page has no LOD column.
+    assert!(!tw_report::html::page(&back, &[]).contains("LOD efficiency</th>"));
+}

@@ -155,7 +155,9 @@ pub fn parents(children: impl Iterator<Item = (u32, u32)>) -> Vec<u32> {
 /// time with the candidates they culled times the measured cost of one cluster query; when
 /// they did not pay, the next [`NodeTestSwitch::PROBE_EVERY`]` − 1` frames go without them.
 /// A switch between strategies from measurements, in the spirit of Govindaraju's occlusion
-/// switch (thesis ch. 3), applied to the choice of testing nodes at all.
+/// switch (thesis ch. 3), applied to the choice of testing nodes at all. The CPU HZB's node
+/// tests ([`crate::occlusion::test_clusters_hierarchically`]) use it too, with box tests of
+/// the pyramid for queries and no round trip: their node tests cost their own time only.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct NodeTestSwitch {
     /// Frames left without node tests.

@@ -12,6 +12,11 @@
 //!   ratio of the same frames;
 //! - `--exact`: on the same frames, the item buffer at full detail gives the exact visible
 //!   objects and triangles, and every run's culling efficiency (drawn ÷ exact visible).
+//!
+//! Every frame also gets its LOD efficiency (tw_report::lod): the cut's triangles against the
+//! triangles a screen can use at ε over the pixels the model covers. The coverage is counted on
+//! the colour image the frame reads back anyway (alpha ≠ 0 where geometry was drawn), after the
+//! frame's clock has stopped: no extra readback, and the count is not in the frame time.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -151,6 +156,9 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         for (i, camera) in cameras.iter().enumerate() {
             let (image, info) = frame(&mut walk, camera, &settings, args.reference)?;
             let mut rec = record(i, &frames[i].segment, &info);
+            // The reference draws full detail (τ = 0): no model of what it needs.
+            let tau = if args.reference { 0.0 } else { settings.tau as f64 };
+            rec.set_coverage(image.covered_pixels() as u64, tau);
             if ri == 0 && image_frames.contains(&i) {
                 images.push(ReportImage {
                     caption: format!("{name}, frame {i} ({})", frames[i].segment),
@@ -263,12 +271,17 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         render_ms: ms(info.times.render),
         triangles: info.triangles,
         masked_triangles: info.masked_triangles,
+        cut_triangles: info.cut_triangles,
         clusters: info.clusters,
         nodes_visited: info.select.nodes_visited,
         nodes_culled_frustum: info.select.nodes_culled_frustum,
         nodes_culled_lod: info.select.nodes_culled_lod,
         nodes_culled_occlusion: info.occlusion.culled,
         occlusion_queries: info.occlusion.queries,
+        occlusion_node_tests: info.occlusion.node_tests,
+        occlusion_nodes_hidden: info.occlusion.nodes_hidden,
+        culling_box_tests_ms: ms(info.times.cull_box_tests),
+        culling_triangle_tests_ms: ms(info.times.cull_triangle_tests),
         culling_ms: ms(info.times.cull),
         resident_mb: st.resident_bytes as f64 / 1e6,
         gpu_resident_mb: info.gpu.resident_bytes as f64 / 1e6,
@@ -332,6 +345,18 @@ fn print_comparison(report: &BenchReport) {
                 "culling", run.name
             );
         }
+        let s = &run.summary;
+        if let (Some(ratio), Some(needed)) = (s.median_lod_efficiency, s.median_needed_triangles) {
+            println!(
+                "{:>10}: {}: LOD cut median {} triangles, a screen needs ~{} at ε = {} px \
+                 (2 · covered px ÷ ε²): cut ÷ needed median {ratio:.2}",
+                "lod",
+                run.name,
+                fmt_count(s.median_cut_triangles as u64),
+                fmt_count(needed as u64),
+                report.meta.error_px
+            );
+        }
     }
 }
 
@@ -347,6 +372,14 @@ fn print_run(run: &Run) {
         fmt_count(s.median_triangles as u64),
         s.peak_rss_mb.map(|m| format!("{m:.0} MB")).unwrap_or_else(|| "?".into())
     );
+    let node_tests: u64 = run.frames.iter().map(|f| f.occlusion_node_tests).sum();
+    if node_tests > 0 {
+        let hidden: u64 = run.frames.iter().map(|f| f.occlusion_nodes_hidden).sum();
+        println!(
+            "{:>10}: {}: {} node boxes tested before the clusters, {} of them hidden (each culls its subtree)",
+            "nodes", run.name, node_tests, hidden
+        );
+    }
 }
 
 /// Up to `n` frames spread evenly over `len`.
