@@ -401,6 +401,28 @@ pub(crate) mod fixtures {
         sink.0
     }
 
+    /// The generated CAD-like assembly (`tw_io::generate::AssemblySource`, one object) as a
+    /// triangle soup: thousands of small closed parts.
+    pub fn assembly(triangles: u64, seed: u64) -> Soup {
+        use tw_io::generate::{AssemblyObjects, AssemblyParams, AssemblySource};
+        use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink, TriangleSource};
+        struct Collect(Soup);
+        impl TriangleSink for Collect {
+            fn object(&mut self, _id: ObjectId, _info: &ObjectInfo) -> Result<(), ImportError> {
+                Ok(())
+            }
+            fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
+                self.0.push((t.positions, t.object));
+                Ok(())
+            }
+        }
+        let mut sink = Collect(Vec::new());
+        let params = AssemblyParams { triangles, seed, objects: AssemblyObjects::One };
+        let src = AssemblySource::new(params).expect("assembly params");
+        Box::new(src).stream(&mut sink).expect("assembly streams");
+        sink.0
+    }
+
     /// A mesh's non-degenerate triangles as grid positions with objects.
     pub fn mesh_triangles(m: &CellMesh) -> Vec<(super::GridTriangle, u32)> {
         m.indices

@@ -358,8 +358,10 @@ pub fn build_hlod(
         // Still above the target: the rest is many small disjoint parts (bolts, pipe pieces, each
         // already at the few triangles a closed part keeps). Drop whole parts, smallest first.
         if simplified.len() / 3 > target + target / 8 {
-            let pinned: Vec<bool> = positions.iter().map(|&p| external(p)).collect();
-            let (radius, removed) = prune_components(&mut simplified, &local, &pinned, target);
+            // Pinned: a part with an open edge on a seam with a cell outside the node (the
+            // locks). A seam position inside the node is closed in the merged mesh (both halves
+            // of the part are here), so it no longer pins the part.
+            let (radius, removed) = prune_components(&mut simplified, &local, &locks, target);
             if removed > 0 {
                 error_local = error_local.max(radius);
                 pruned = removed;

@@ -4,12 +4,13 @@
 //! 1. [`ingest`]: stream inputs into on-disk working files, compute the scene [`types::Grid`].
 //! 2. [`redefine`]: GigaWalk's partition → MST clustering → partition of objects into cells.
 //! 3. [`hierarchy`]: AABB tree over the cells.
-//! 4. [`lod`] and [`hlod`]: cluster DAG inside each cell, HLOD groups above the cells (built
+//! 4. [`lod`] (its build loop in `clusterlod`) and [`hlod`]: cluster DAG inside each cell, HLOD groups above the cells (built
 //!    off the consumer thread: `hlod_jobs`).
 //! 5. [`pages`]: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically; [`pipeline::build`] runs all phases.
 
 pub mod cells;
+mod clusterlod;
 pub mod cut;
 pub mod error;
 pub mod hierarchy;

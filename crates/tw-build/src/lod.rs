@@ -67,8 +67,9 @@
 //! Degenerate triangles (an index repeated; the mesh is deduplicated by grid position, so this
 //! is also a repeated position) and triangles with out-of-range indices are dropped.
 
+use crate::clusterlod::{build_dag, DagConfig};
 use crate::types::{CellMesh, Grid, GridBox, LodCluster, LodDag, LodGroup, Sphere};
-use meshopt::{ClodMesh, SimplifyVertex, VertexDataAdapter};
+use meshopt::{SimplifyVertex, VertexDataAdapter};
 
 /// The smallest finite group error (scene units): a lossless simplification still gets a
 /// positive error so that τ = 0 renders exactly the input clusters.
@@ -139,30 +140,11 @@ pub fn build_cell_lod_with_seams(
         .collect();
     let mut originals = OriginalTriangles::new(n, &indices, &objects);
 
-    let adapter = adapter(&local);
-    let mut config = meshopt::clod_default_config(params.max_triangles);
-    config.max_vertices = params.max_vertices;
-    config.optimize_bounds = false;
-    // The spatial (SAH) clusterizer: on plant-like scenes about half the cost of the default
-    // adjacency-driven one (which scans the meshlet's whole frontier for every triangle it adds),
-    // for ~5% more clusters and ~3% more page bytes. A fill weight of 1 keeps clusters full.
-    config.cluster_spatial = true;
-    config.cluster_fill_weight = 1.0;
-    // Level 0 of meshopt's in-cluster triangle reordering instead of clusterlod's 1 (which also
-    // ranks triangles by vertex valence): ~5% less build CPU on the 10^7 plant for ~1% more page
-    // bytes (BENCHMARKS.md, "Build throughput, 2026-12-05"). The order is HLOD's input order too;
-    // a different order once folded the spheres fixture's coarse HLOD levels, which HLOD's area
-    // check now rejects (crate::hlod, step 2).
-    config.optimize_clusters_level = 0;
-    // Each group's own simplification error alone; accumulated below (module comment).
-    config.simplify_error_merge_previous = 0.0;
-    config.simplify_error_merge_additive = 0.0;
-    // No sloppy fallback: its vertex clustering can open holes inside a group (cracks in a cut;
-    // see plant_cell_dag_is_valid_complete_and_crack_free). A stuck group becomes a root
-    // instead, which HLOD simplifies further.
-    config.simplify_fallback_sloppy = false;
-    let clod_mesh = ClodMesh { vertex_lock: Some(&locks), ..ClodMesh::new(&indices, &adapter) };
-
+    // The build loop (crate::clusterlod): clusterlod's, with small disconnected parts removed
+    // once the error allows it. No sloppy fallback: its vertex clustering can open holes inside a
+    // group (cracks in a cut; see plant_cell_dag_is_valid_complete_and_crack_free). A stuck group
+    // becomes a root instead, which HLOD simplifies further.
+    let config = DagConfig::new(params.max_triangles, params.max_vertices);
     // Raw output, in meshopt's local units; converted, accumulated and made monotone below.
     struct RawGroup {
         /// The error of this group's own simplification (against its clusters), scene units.
@@ -173,7 +155,7 @@ pub fn build_cell_lod_with_seams(
     let mut raw_groups: Vec<RawGroup> = Vec::new();
     let mut refined: Vec<i32> = Vec::new();
     let mut clusters: Vec<LodCluster> = Vec::new();
-    meshopt::clod_build(config, &clod_mesh, |group, out| {
+    let dag_stats = build_dag(&config, &local, &indices, &locks, |s, out| {
         let id = raw_groups.len() as u32;
         let mut members = Vec::with_capacity(out.len());
         for c in out {
@@ -204,7 +186,6 @@ pub fn build_cell_lod_with_seams(
                 ..LodCluster::default()
             });
         }
-        let s = group.simplified;
         raw_groups.push(RawGroup {
             error: if s.error >= f32::MAX { f32::INFINITY } else { s.error * frame.step as f32 },
             sphere: frame.sphere(s.center, s.radius),
@@ -252,6 +233,7 @@ pub fn build_cell_lod_with_seams(
         }
         groups.push(g);
     }
+    tracing::debug!(?dag_stats, "cell dag");
     debug_assert!(originals.all_taken());
     LodDag { clusters, groups }
 }
@@ -545,7 +527,7 @@ fn sorted3(t: [u32; 3]) -> [u32; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cut::fixtures::{cell, grid_for, icosphere, mesh_triangles, plant, torus};
+    use crate::cut::fixtures::{assembly, cell, grid_for, icosphere, mesh_triangles, plant, torus};
     use crate::cut::*;
 
     fn build(mesh: &CellMesh, grid: &Grid) -> LodDag {
@@ -762,6 +744,90 @@ mod tests {
         check_cell(&mesh, &grid, &dag);
         let objects: std::collections::BTreeSet<u32> = mesh.objects.iter().copied().collect();
         assert!(dag.clusters.iter().all(|c| c.objects.iter().all(|o| objects.contains(o))));
+    }
+
+    #[test]
+    fn assembly_cell_dag_is_valid_complete_and_crack_free_and_reduces() {
+        // Thousands of small closed parts in one object: the DAG must keep reducing (the
+        // simplifier collapses or prunes whole parts) without cracks at any τ.
+        let soup = assembly(20_000, 4);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build(&mesh, &grid);
+        check_cell(&mesh, &grid, &dag);
+        let roots: usize = dag
+            .groups
+            .iter()
+            .filter(|g| g.error.is_infinite())
+            .flat_map(|g| &g.clusters)
+            .map(|&c| dag.clusters[c as usize].indices.len() / 3)
+            .sum();
+        assert!(
+            roots * 20 < mesh.triangle_count(),
+            "roots hold {roots} of {} triangles",
+            mesh.triangle_count()
+        );
+    }
+
+    /// The connected parts of a mesh (triangles sharing a vertex), each as its vertex indices.
+    fn parts(mesh: &CellMesh) -> Vec<Vec<u32>> {
+        let n = mesh.positions.len();
+        let mut parent: Vec<usize> = (0..n).collect();
+        fn find(p: &mut [usize], mut v: usize) -> usize {
+            while p[v] != v {
+                p[v] = p[p[v]];
+                v = p[v];
+            }
+            v
+        }
+        for t in mesh.indices.chunks_exact(3) {
+            for &v in &t[1..] {
+                let (a, b) = (find(&mut parent, t[0] as usize), find(&mut parent, v as usize));
+                parent[a.max(b)] = a.min(b);
+            }
+        }
+        let mut by_root: std::collections::BTreeMap<usize, Vec<u32>> = Default::default();
+        for &v in &mesh.indices {
+            by_root.entry(find(&mut parent, v as usize)).or_default().push(v);
+        }
+        by_root.into_values().collect()
+    }
+
+    #[test]
+    fn parts_missing_from_a_cut_are_within_its_error() {
+        // A part that no triangle of the cut touches was removed (pruned or collapsed): its
+        // radius (half its box diagonal, the farthest any of its points is from the centre)
+        // must be within the error the cut was selected for.
+        let soup = assembly(20_000, 9);
+        let grid = grid_for(&[&soup]);
+        let mesh = cell(&soup, &grid);
+        let dag = build(&mesh, &grid);
+        let parts = parts(&mesh);
+        assert!(parts.len() > 500, "{} parts", parts.len());
+        let mut missing_somewhere = 0;
+        for tau in taus(&dag) {
+            let cut = extract_cut(&dag, tau);
+            let used: std::collections::HashSet<[u32; 3]> =
+                grid_tris(&dag, &cut).into_iter().flatten().collect();
+            for part in &parts {
+                if part.iter().any(|&v| used.contains(&mesh.positions[v as usize])) {
+                    continue;
+                }
+                missing_somewhere += 1;
+                let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
+                for &v in part {
+                    let p = mesh.positions[v as usize];
+                    for i in 0..3 {
+                        lo[i] = lo[i].min(p[i]);
+                        hi[i] = hi[i].max(p[i]);
+                    }
+                }
+                let d2: f64 = (0..3).map(|i| ((hi[i] - lo[i]) as f64 * grid.step).powi(2)).sum();
+                let radius = d2.sqrt() * 0.5;
+                assert!(radius <= tau as f64 * (1.0 + 1e-6), "τ {tau}: a part of radius {radius} is missing");
+            }
+        }
+        assert!(missing_somewhere > 0, "coarse cuts drop parts");
     }
 
     #[test]

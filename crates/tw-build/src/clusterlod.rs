@@ -1,0 +1,516 @@
+//! The build loop of a cell's cluster DAG: Nanite's (Karis 2021), as meshoptimizer's clusterlod
+//! (`demo/clusterlod.h`) runs it, with pruning of small disconnected parts so that the DAG keeps
+//! reducing on assemblies of many small parts.
+//!
+//! The loop, as in clusterlod: the mesh is split into clusters; while more than one cluster is
+//! left, the clusters are partitioned into groups of about [`DagConfig::partition_size`]
+//! (meshopt's partitioner: shared vertices, then spatial closeness), every vertex used by two
+//! groups is locked, and each group is simplified to [`DagConfig::ratio`] of its triangles and
+//! split into new clusters for the next round. A group that keeps more than
+//! [`DagConfig::threshold`] of its triangles is *terminal* (its error is `f32::MAX`; HLOD,
+//! `crate::hlod`, takes its clusters further).
+//!
+//! **Why a loop of our own.** clusterlod's simplification step is fixed inside its C++ loop, and
+//! assemblies of many small disconnected parts (pins, screws, SMD parts, in one object) need two
+//! things from it that it does not do:
+//!
+//! 1. *Removal of whole parts.* When a group's parts are closed and already at their few
+//!    triangles (a 12-triangle box cannot be simplified without collapsing it), the simplifier
+//!    stops above the target and the group becomes terminal. Here, whole *free* parts (no locked
+//!    vertex: the part is entirely inside the group) are then removed, smallest first, until the
+//!    group is at its target; free parts whose radius is within the error the simplifier reached
+//!    anyway are removed too (they cost nothing). meshopt's own `Prune` option ignores locks (a
+//!    part cut by a group border would lose one half: a crack), so it is not used.
+//! 2. *Errors that bound what vanished.* The error of a removed part is its radius: every one of
+//!    its input points lies within that distance of its centre, so a part whose radius projects
+//!    below τ pixels covers less than a τ-pixel disc, the deviation the cut allows anywhere
+//!    else. A part the simplifier collapsed to nothing counts the same way (meshopt's quadric
+//!    error is an estimate, and a collapsed box reads less than its size). The group's error is
+//!    the largest of the simplifier's and those radii.
+//!
+//! Parts with a locked vertex are never removed, so the group's border, and a cell's seams, stay
+//! as they were: the cut stays crack-free. A group whose output would be empty keeps its largest
+//! part whole (clusterlod keeps one triangle, whose edges would be open).
+//!
+//! **Locks.** As in clusterlod, a vertex used by two groups of a round is locked for that round.
+//! Unlike clusterlod, a vertex of a terminal group's clusters stays locked in every later round:
+//! those clusters are never replaced, so a later group that moved (or removed) a vertex it shares
+//! with them would open a crack between the two (clusterlod forgets such locks after the round;
+//! with pruning, the other half of a part cut by a terminal group would be removed whole).
+//!
+//! Deterministic: every step is (meshopt's simplifier, clusterizer and partitioner are), and ties
+//! among parts go to the first triangle.
+
+use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
+
+/// Parameters of [`build_dag`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct DagConfig {
+    /// Most triangles per cluster (≤ 256; the store's clusters take ≤ 128).
+    pub max_triangles: usize,
+    /// Most vertices per cluster.
+    pub max_vertices: usize,
+    /// Clusters per group (the partitioner's target; groups may be up to a third larger).
+    pub partition_size: usize,
+    /// Each group is simplified to this fraction of its triangles.
+    pub ratio: f32,
+    /// A group that keeps more than this fraction of its triangles is terminal.
+    pub threshold: f32,
+    /// Remove small disconnected parts (module comment); off, the loop is clusterlod's.
+    pub prune: bool,
+}
+
+impl DagConfig {
+    /// clusterlod's defaults (partition size 16, ratio ½, threshold 0.85) for clusters of
+    /// `max_triangles` and `max_vertices`, with pruning.
+    pub fn new(max_triangles: usize, max_vertices: usize) -> DagConfig {
+        DagConfig {
+            max_triangles,
+            max_vertices,
+            partition_size: 16,
+            ratio: 0.5,
+            threshold: 0.85,
+            prune: true,
+        }
+    }
+}
+
+/// Bounds in the units of the positions: a sphere and, for a group, its simplification error.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub(crate) struct DagBounds {
+    pub center: [f32; 3],
+    pub radius: f32,
+    /// For a group: the error of its own simplification against its clusters (`f32::MAX`:
+    /// terminal). For a cluster: the error of the group it was simplified from (0 at level 0).
+    pub error: f32,
+}
+
+/// One cluster as [`build_dag`] hands it out.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct DagCluster<'a> {
+    /// Triangles, as indices into the mesh's vertices.
+    pub indices: &'a [u32],
+    /// Exact bounds at level 0; the bounds of the group it was simplified from above.
+    pub bounds: DagBounds,
+    /// The id (as returned by the output callback) of the group it was simplified from; −1 for
+    /// the input's clusters.
+    pub refined: i32,
+}
+
+/// What [`build_dag`] did, for the build report.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub(crate) struct DagStats {
+    /// Groups simplified (not terminal).
+    pub groups: usize,
+    /// Terminal groups (stuck, or the last cluster).
+    pub terminal: usize,
+    /// Triangles removed as whole parts by rule 2 (module comment).
+    pub pruned_triangles: usize,
+}
+
+/// A cluster inside the loop: a range of `indices`, its bounds and its source group.
+#[derive(Clone, Copy, Debug)]
+struct Cluster {
+    offset: usize,
+    count: usize,
+    refined: i32,
+    bounds: DagBounds,
+}
+
+/// Builds the DAG of `indices` over `positions`. `vertex_lock` (one per vertex) marks vertices
+/// that must never move (seams with other cells, tangled edges). `output(group, clusters)` is
+/// called for every group, in an order where a cluster's source group always comes first, with
+/// the group's bounds and the clusters it replaces; it returns the group's id, which the
+/// clusters simplified from it carry in [`DagCluster::refined`].
+pub(crate) fn build_dag(
+    config: &DagConfig,
+    positions: &[[f32; 3]],
+    indices: &[u32],
+    vertex_lock: &[SimplifyVertex],
+    mut output: impl FnMut(DagBounds, &[DagCluster<'_>]) -> i32,
+) -> DagStats {
+    let vertices = crate::lod::adapter(positions);
+    let mut stats = DagStats::default();
+    let mut cluster_indices: Vec<u32> = Vec::new();
+    let mut clusters: Vec<Cluster> = Vec::new();
+    clusterize(&mut clusters, &mut cluster_indices, config, &vertices, indices, -1);
+    for c in &mut clusters {
+        let b = meshopt::compute_cluster_bounds(&cluster_indices[c.offset..c.offset + c.count], &vertices);
+        c.bounds = DagBounds { center: b.center, radius: b.radius, error: 0.0 };
+    }
+    let mut emit = |group: &[Cluster], all: &[u32], bounds: DagBounds| {
+        let members: Vec<DagCluster<'_>> = group
+            .iter()
+            .map(|c| DagCluster {
+                indices: &all[c.offset..c.offset + c.count],
+                bounds: c.bounds,
+                refined: c.refined,
+            })
+            .collect();
+        output(bounds, &members)
+    };
+
+    let mut locks = vec![SimplifyVertex::None; positions.len()];
+    let mut last_group = vec![u32::MAX; positions.len()];
+    // Vertices of terminal groups' clusters: those clusters stay in every cut above them, so
+    // their vertices stay where they are for good (module comment, "Locks").
+    let mut frozen = vec![false; positions.len()];
+    while clusters.len() > 1 {
+        let offsets = partition(&mut clusters, &cluster_indices, config, &vertices);
+        lock_group_borders(
+            &mut locks,
+            &mut last_group,
+            &clusters,
+            &offsets,
+            &cluster_indices,
+            vertex_lock,
+            &frozen,
+        );
+        let mut pending: Vec<Cluster> = Vec::new();
+        let mut pending_indices: Vec<u32> = Vec::new();
+        for range in offsets.windows(2) {
+            let group = &clusters[range[0]..range[1]];
+            let merged: Vec<u32> = group
+                .iter()
+                .flat_map(|c| cluster_indices[c.offset..c.offset + c.count].iter().copied())
+                .collect();
+            let target = ((merged.len() / 3) as f32 * config.ratio) as usize;
+            let mut bounds = merge_bounds(group);
+            let (simplified, error) =
+                simplify_group(config, positions, &vertices, &merged, &locks, target, &mut stats);
+            if simplified.len() as f32 > merged.len() as f32 * config.threshold {
+                bounds.error = f32::MAX;
+                stats.terminal += 1;
+                for &v in &merged {
+                    frozen[v as usize] = true;
+                }
+                emit(group, &cluster_indices, bounds);
+                continue;
+            }
+            stats.groups += 1;
+            bounds.error = error;
+            let refined = emit(group, &cluster_indices, bounds);
+            let first = pending.len();
+            clusterize(&mut pending, &mut pending_indices, config, &vertices, &simplified, refined);
+            for c in &mut pending[first..] {
+                c.bounds = bounds;
+            }
+        }
+        clusters = pending;
+        cluster_indices = pending_indices;
+    }
+    if let [last] = clusters[..] {
+        stats.terminal += 1;
+        emit(&[last], &cluster_indices, DagBounds { error: f32::MAX, ..last.bounds });
+    }
+    stats
+}
+
+/// Splits `indices` into clusters with meshopt's spatial clusterizer (fill weight 1: full
+/// clusters) and level-0 in-cluster reordering, appended to `clusters` (`refined` as given).
+fn clusterize(
+    clusters: &mut Vec<Cluster>,
+    cluster_indices: &mut Vec<u32>,
+    config: &DagConfig,
+    vertices: &VertexDataAdapter<'_>,
+    indices: &[u32],
+    refined: i32,
+) {
+    let min_triangles = (config.max_triangles / 3).max(1);
+    let mut meshlets = meshopt::build_meshlets_spatial(
+        indices,
+        vertices,
+        config.max_vertices,
+        min_triangles,
+        config.max_triangles,
+        1.0,
+    );
+    for m in &meshlets.meshlets {
+        let (v0, vn) = (m.vertex_offset as usize, m.vertex_count as usize);
+        let (t0, tn) = (m.triangle_offset as usize, m.triangle_count as usize * 3);
+        meshopt::optimize_meshlet_level(
+            &mut meshlets.vertices[v0..v0 + vn],
+            &mut meshlets.triangles[t0..t0 + tn],
+            0,
+        );
+        let offset = cluster_indices.len();
+        let (verts, tris) = (&meshlets.vertices[v0..v0 + vn], &meshlets.triangles[t0..t0 + tn]);
+        cluster_indices.extend(tris.iter().map(|&t| verts[t as usize]));
+        clusters.push(Cluster { offset, count: tn, refined, bounds: DagBounds::default() });
+    }
+}
+
+/// Partitions the clusters into groups (reordering `clusters` so that each group is contiguous)
+/// and returns the groups' offsets (one more than there are groups).
+fn partition(
+    clusters: &mut Vec<Cluster>,
+    cluster_indices: &[u32],
+    config: &DagConfig,
+    vertices: &VertexDataAdapter<'_>,
+) -> Vec<usize> {
+    if clusters.len() <= config.partition_size {
+        return vec![0, clusters.len()];
+    }
+    let counts: Vec<u32> = clusters.iter().map(|c| c.count as u32).collect();
+    let flat: Vec<u32> =
+        clusters.iter().flat_map(|c| cluster_indices[c.offset..c.offset + c.count].iter().copied()).collect();
+    let mut part = vec![0u32; clusters.len()];
+    let parts = meshopt::partition_clusters_with_positions(
+        &mut part,
+        &flat,
+        &counts,
+        vertices,
+        config.partition_size,
+    );
+    let mut offsets = vec![0usize; parts + 1];
+    for &p in &part {
+        offsets[p as usize + 1] += 1;
+    }
+    for i in 1..offsets.len() {
+        offsets[i] += offsets[i - 1];
+    }
+    let mut write = offsets.clone();
+    let mut sorted = clusters.clone();
+    for (c, &p) in clusters.iter().zip(&part) {
+        sorted[write[p as usize]] = *c;
+        write[p as usize] += 1;
+    }
+    *clusters = sorted;
+    offsets
+}
+
+/// Locks every vertex used by two groups, every `frozen` one, and every one `vertex_lock` locks.
+fn lock_group_borders(
+    locks: &mut [SimplifyVertex],
+    last_group: &mut [u32],
+    clusters: &[Cluster],
+    offsets: &[usize],
+    cluster_indices: &[u32],
+    vertex_lock: &[SimplifyVertex],
+    frozen: &[bool],
+) {
+    let mut shared = vec![false; locks.len()];
+    last_group.fill(u32::MAX);
+    for (g, range) in offsets.windows(2).enumerate() {
+        for c in &clusters[range[0]..range[1]] {
+            for &v in &cluster_indices[c.offset..c.offset + c.count] {
+                let last = &mut last_group[v as usize];
+                if *last != u32::MAX && *last != g as u32 {
+                    shared[v as usize] = true;
+                }
+                *last = g as u32;
+            }
+        }
+    }
+    for (v, lock) in locks.iter_mut().enumerate() {
+        let fixed = vertex_lock.get(v).copied().unwrap_or(SimplifyVertex::None);
+        *lock = if shared[v] || frozen[v] { SimplifyVertex::Lock } else { fixed };
+    }
+}
+
+/// The merged sphere of the clusters (centre of their boxes, radius reaching every sphere) and
+/// their largest error. Conservative, deterministic.
+fn merge_bounds(clusters: &[Cluster]) -> DagBounds {
+    let mut lo = [f32::MAX; 3];
+    let mut hi = [f32::MIN; 3];
+    for c in clusters {
+        for i in 0..3 {
+            lo[i] = lo[i].min(c.bounds.center[i] - c.bounds.radius);
+            hi[i] = hi[i].max(c.bounds.center[i] + c.bounds.radius);
+        }
+    }
+    let center: [f32; 3] = std::array::from_fn(|i| 0.5 * (lo[i] + hi[i]));
+    let radius = clusters
+        .iter()
+        .map(|c| {
+            let d2: f64 = (0..3).map(|i| (c.bounds.center[i] as f64 - center[i] as f64).powi(2)).sum();
+            (d2.sqrt() + c.bounds.radius as f64) as f32
+        })
+        .fold(0.0f32, f32::max);
+    let error = clusters.iter().map(|c| c.bounds.error).fold(0.0f32, f32::max);
+    DagBounds { center, radius: radius.next_up(), error }
+}
+
+/// Simplifies one group to about `target` triangles with its locks; returns the triangles and
+/// the error (module comment for the pruning rules).
+fn simplify_group(
+    config: &DagConfig,
+    positions: &[[f32; 3]],
+    vertices: &VertexDataAdapter<'_>,
+    merged: &[u32],
+    locks: &[SimplifyVertex],
+    target: usize,
+    stats: &mut DagStats,
+) -> (Vec<u32>, f32) {
+    let options = SimplifyOptions::Sparse | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Permissive;
+    let mut error = 0.0f32;
+    let mut out = meshopt::simplify_with_locks(
+        merged,
+        vertices,
+        locks,
+        target * 3,
+        f32::MAX,
+        options,
+        Some(&mut error),
+    );
+    let parts = Parts::new(positions, merged, locks);
+    if out.is_empty() {
+        // A group never vanishes (its DAG would lose a leaf): its largest part stays whole, so
+        // that no open edge appears (clusterlod keeps one triangle, whose edges would be open).
+        parts.restore_largest(merged, &mut out);
+    }
+    let count = parts.count(&out);
+    // A part the simplifier collapsed away is gone as if it had been removed: its radius bounds
+    // the error there (meshopt's quadric error is an estimate, lower on a collapsed part).
+    error = error.max(parts.vanished_radius(&count));
+    if config.prune {
+        let (removed, radius) = parts.prune_free(&mut out, &count, target, error);
+        stats.pruned_triangles += removed;
+        error = error.max(radius);
+    }
+    (out, error)
+}
+
+/// The connected parts of a group's input triangles: per part, its bounding radius and whether
+/// it has a locked vertex.
+struct Parts {
+    /// Per vertex of the mesh used by the group: its part.
+    part_of: rustc_hash::FxHashMap<u32, u32>,
+    /// Per part: half its box diagonal, whether a vertex is locked, its first input triangle.
+    radius: Vec<f32>,
+    locked: Vec<bool>,
+    first: Vec<usize>,
+}
+
+impl Parts {
+    fn new(positions: &[[f32; 3]], merged: &[u32], locks: &[SimplifyVertex]) -> Parts {
+        // Union-find over the group's vertices, numbered densely in order of first use.
+        let mut local: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
+        let mut ids: Vec<u32> = Vec::new();
+        for &v in merged {
+            local.entry(v).or_insert_with(|| {
+                ids.push(v);
+                ids.len() as u32 - 1
+            });
+        }
+        let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
+        fn find(parent: &mut [u32], mut v: u32) -> u32 {
+            while parent[v as usize] != v {
+                let g = parent[parent[v as usize] as usize];
+                parent[v as usize] = g;
+                v = g;
+            }
+            v
+        }
+        for t in merged.chunks_exact(3) {
+            let a = find(&mut parent, local[&t[0]]);
+            for v in &t[1..] {
+                let b = find(&mut parent, local[v]);
+                if a != b {
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    parent[hi as usize] = lo;
+                }
+            }
+        }
+        let mut number = vec![u32::MAX; ids.len()];
+        let mut lo: Vec<[f32; 3]> = Vec::new();
+        let mut hi: Vec<[f32; 3]> = Vec::new();
+        let mut locked: Vec<bool> = Vec::new();
+        let mut first: Vec<usize> = Vec::new();
+        let mut part_of = rustc_hash::FxHashMap::default();
+        for (ti, t) in merged.chunks_exact(3).enumerate() {
+            let root = find(&mut parent, local[&t[0]]) as usize;
+            if number[root] == u32::MAX {
+                number[root] = lo.len() as u32;
+                lo.push([f32::MAX; 3]);
+                hi.push([f32::MIN; 3]);
+                locked.push(false);
+                first.push(ti);
+            }
+            let p = number[root] as usize;
+            for &v in t {
+                let q = positions[v as usize];
+                for i in 0..3 {
+                    lo[p][i] = lo[p][i].min(q[i]);
+                    hi[p][i] = hi[p][i].max(q[i]);
+                }
+                locked[p] |= locks[v as usize] != SimplifyVertex::None;
+                part_of.insert(v, p as u32);
+            }
+        }
+        let radius = lo
+            .iter()
+            .zip(&hi)
+            .map(|(l, h)| {
+                let d2: f64 = (0..3).map(|i| (h[i] as f64 - l[i] as f64).powi(2)).sum();
+                crate::lod::round_up(d2.sqrt() * 0.5)
+            })
+            .collect();
+        Parts { part_of, radius, locked, first }
+    }
+
+    fn part(&self, v: u32) -> usize {
+        self.part_of.get(&v).map_or(usize::MAX, |&p| p as usize)
+    }
+
+    /// Triangles of `out` per part.
+    fn count(&self, out: &[u32]) -> Vec<usize> {
+        let mut count = vec![0usize; self.radius.len()];
+        for t in out.chunks_exact(3) {
+            if let Some(c) = count.get_mut(self.part(t[0])) {
+                *c += 1;
+            }
+        }
+        count
+    }
+
+    /// The largest radius of the parts with no triangle left (`count` from [`Parts::count`]).
+    fn vanished_radius(&self, count: &[usize]) -> f32 {
+        count.iter().zip(&self.radius).filter(|(&c, _)| c == 0).map(|(_, &r)| r).fold(0.0, f32::max)
+    }
+
+    /// Puts back the input triangles of the part with the largest radius (ties: the first).
+    fn restore_largest(&self, merged: &[u32], out: &mut Vec<u32>) {
+        let largest =
+            (0..self.radius.len()).reduce(|a, b| if self.radius[b] > self.radius[a] { b } else { a });
+        if let Some(largest) = largest {
+            out.extend(merged.chunks_exact(3).filter(|t| self.part(t[0]) == largest).flatten());
+        }
+    }
+
+    /// Removes whole free parts from `out`, smallest radius first (ties: first triangle), until
+    /// at most `target` triangles are left, never the last part (rule 2). Returns the triangles
+    /// removed and the largest removed radius.
+    fn prune_free(
+        &self,
+        out: &mut Vec<u32>,
+        count: &[usize],
+        target: usize,
+        free_below: f32,
+    ) -> (usize, f32) {
+        let mut order: Vec<usize> = (0..count.len()).filter(|&p| count[p] > 0 && !self.locked[p]).collect();
+        order.sort_by(|&a, &b| {
+            self.radius[a].total_cmp(&self.radius[b]).then(self.first[a].cmp(&self.first[b]))
+        });
+        let mut left = out.len() / 3;
+        let mut remove = vec![false; count.len()];
+        let mut radius = 0.0f32;
+        for p in order {
+            if (left <= target && self.radius[p] > free_below) || left == count[p] {
+                break;
+            }
+            left -= count[p];
+            remove[p] = true;
+            radius = radius.max(self.radius[p]);
+        }
+        let before = out.len() / 3;
+        let kept: Vec<u32> = out
+            .chunks_exact(3)
+            .filter(|t| !remove.get(self.part(t[0])).copied().unwrap_or(false))
+            .flatten()
+            .copied()
+            .collect();
+        *out = kept;
+        (before - out.len() / 3, radius)
+    }
+}
