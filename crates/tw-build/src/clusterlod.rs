@@ -177,7 +177,7 @@ pub(crate) fn build_dag(
             let target = ((merged.len() / 3) as f32 * config.ratio) as usize;
             let mut bounds = merge_bounds(group);
             let (simplified, error) =
-                simplify_group(config, positions, &vertices, &merged, &locks, target, &mut stats);
+                simplify_group(config, positions, &vertices, &merged, &mut locks, target, &mut stats);
             if simplified.len() as f32 > merged.len() as f32 * config.threshold {
                 bounds.error = f32::MAX;
                 stats.terminal += 1;
@@ -332,16 +332,26 @@ fn merge_bounds(clusters: &[Cluster]) -> DagBounds {
 }
 
 /// Simplifies one group to about `target` triangles with its locks; returns the triangles and
-/// the error (module comment for the pruning rules).
+/// the error (module comment for the rules on parts). `locks` is restored before returning.
 fn simplify_group(
     config: &DagConfig,
     positions: &[[f32; 3]],
     vertices: &VertexDataAdapter<'_>,
     merged: &[u32],
-    locks: &[SimplifyVertex],
+    locks: &mut [SimplifyVertex],
     target: usize,
     stats: &mut DagStats,
 ) -> (Vec<u32>, f32) {
+    let parts = Parts::new(positions, merged, locks);
+    // With pruning, the simplifier may reduce a free part but not make it vanish (one of its
+    // triangles is locked): parts go only by `prune_free`, smallest first, each charged its
+    // radius. Left to itself, the simplifier collapses whole parts wherever that is cheapest in
+    // its quadric measure, whatever their size.
+    let pinned: Vec<u32> = if config.prune { parts.first_triangles(merged) } else { Vec::new() };
+    let saved: Vec<SimplifyVertex> = pinned.iter().map(|&v| locks[v as usize]).collect();
+    for &v in &pinned {
+        locks[v as usize] = SimplifyVertex::Lock;
+    }
     let options = SimplifyOptions::Sparse | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Permissive;
     let mut error = 0.0f32;
     let mut out = meshopt::simplify_with_locks(
@@ -353,7 +363,9 @@ fn simplify_group(
         options,
         Some(&mut error),
     );
-    let parts = Parts::new(positions, merged, locks);
+    for (&v, &l) in pinned.iter().zip(&saved).rev() {
+        locks[v as usize] = l;
+    }
     if out.is_empty() {
         // A group never vanishes (its DAG would lose a leaf): its largest part stays whole, so
         // that no open edge appears (clusterlod keeps one triangle, whose edges would be open).
@@ -451,6 +463,14 @@ impl Parts {
 
     fn part(&self, v: u32) -> usize {
         self.part_of.get(&v).map_or(usize::MAX, |&p| p as usize)
+    }
+
+    /// The vertices of the first triangle of every free part (in part order; repeats possible).
+    fn first_triangles(&self, merged: &[u32]) -> Vec<u32> {
+        (0..self.first.len())
+            .filter(|&p| !self.locked[p])
+            .flat_map(|p| merged[self.first[p] * 3..self.first[p] * 3 + 3].iter().copied())
+            .collect()
     }
 
     /// Triangles of `out` per part.

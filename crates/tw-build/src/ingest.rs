@@ -47,6 +47,7 @@ use tw_io::{
 };
 
 use crate::error::BuildError;
+use crate::parts::ObjectParts;
 use crate::sampling::{CentroidSamples, OnlineSampler};
 use crate::types::{Grid, GridBox, ObjectRecord};
 use crate::workio::SpillWriter;
@@ -214,6 +215,7 @@ pub fn ingest_in(
         pending: Vec::new(),
         pending_count: 0,
         sampler,
+        parts: ObjectParts::default(),
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
     // The last batch's triangles; their errors come before any the stream stopped at later.
@@ -234,10 +236,13 @@ pub fn ingest_in(
     }
     let (min, max) = (work.position(sink.min), work.position(sink.max));
     let grid = Grid::for_bounds(min, max);
+    let mut part_starts = std::mem::take(&mut sink.parts).finish();
     let objects = sink
         .objects
         .into_iter()
-        .map(|o| ObjectRecord {
+        .enumerate()
+        .map(|(i, o)| ObjectRecord {
+            part_starts: part_starts.remove(&(i as u32)).unwrap_or_default(),
             name: o.name,
             color: o.color,
             triangles: o.triangles,
@@ -310,6 +315,8 @@ struct IngestSink<'p> {
     pending: Vec<Piece>,
     pending_count: usize,
     sampler: Option<OnlineSampler>,
+    /// Where big objects pass from one group of closed parts to the next.
+    parts: ObjectParts,
 }
 
 /// The stored offset of `p` from the origin `o`, or why it cannot be stored.
@@ -337,6 +344,7 @@ fn append(
     scene_min: &mut [f32; 3],
     scene_max: &mut [f32; 3],
     sampler: &mut Option<OnlineSampler>,
+    parts: &mut ObjectParts,
 ) -> Result<(), PieceError> {
     for p in pieces {
         if let Some(e) = p.error.take() {
@@ -345,6 +353,11 @@ fn append(
         let mut first = 0;
         for &(object, n, min, max) in &p.runs {
             let acc = &mut objects[object as usize];
+            let seen = acc.triangles > 0;
+            for k in first..first + n as usize {
+                let t = WorkTri::decode(&p.bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
+                parts.add(object, t.p, || seen);
+            }
             acc.triangles += n;
             acc.extend_span(*triangles, n);
             let centroids = &p.centroids[first..first + n as usize];
@@ -457,8 +470,8 @@ impl IngestSink<'_> {
         if n == 0 {
             return Ok(());
         }
-        let IngestSink { out, objects, triangles, min, max, pending, sampler, .. } = self;
-        append(&mut pending[..n], out, objects, triangles, min, max, sampler)
+        let IngestSink { out, objects, triangles, min, max, pending, sampler, parts, .. } = self;
+        append(&mut pending[..n], out, objects, triangles, min, max, sampler, parts)
             .map_err(|e| self.piece_failed(e))
     }
 
@@ -479,6 +492,7 @@ impl IngestSink<'_> {
         let Some(acc) = self.objects.get_mut(object as usize) else {
             return Err(ImportError::Sink(format!("triangle of unannounced object {object}")));
         };
+        self.parts.add(object, p, || acc.triangles > 0);
         acc.triangles += 1;
         for v in &p {
             for (i, &x) in v.iter().enumerate() {
@@ -560,13 +574,23 @@ impl TriangleSink for IngestSink<'_> {
         let objects = self.objects.len();
         let pending = std::mem::take(&mut self.pending_count);
         let IngestSink {
-            pool, out, objects: accs, triangles, min, max, pieces, pending: done, sampler, ..
+            pool,
+            out,
+            objects: accs,
+            triangles,
+            min,
+            max,
+            pieces,
+            pending: done,
+            sampler,
+            parts,
+            ..
         } = self;
         let (work, done) = (&mut pieces[..count], &mut done[..pending]);
         let mut both = || {
             rayon::join(
                 || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects)),
-                || append(done, out, accs, triangles, min, max, sampler),
+                || append(done, out, accs, triangles, min, max, sampler, parts),
             )
             .1
         };

@@ -19,6 +19,7 @@ mod hlod_jobs;
 pub mod ingest;
 pub mod lod;
 pub mod pages;
+mod parts;
 pub mod pipeline;
 pub mod redefine;
 pub mod sampling;

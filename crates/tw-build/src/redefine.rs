@@ -252,7 +252,7 @@ impl Redefined {
     /// and of `index` only in the cells that the count split cut (`split_by_count`).
     #[inline]
     pub fn cell_of(&self, t: &WorkTri, index: u64) -> u32 {
-        self.assign.final_cell(self.assign.cell(t), index)
+        self.assign.final_cell(self.assign.cell(t, index), index)
     }
 
     /// Builds the AABB tree over the cells and renumbers the cells in its leaf order (so that
@@ -482,6 +482,17 @@ fn walk(kd: &[KdNode], mut n: u32, c: [f32; 3]) -> u32 {
 enum Route {
     Fixed(u32),
     Plan(u32),
+    /// Split at its part groups (`crate::parts`): index into [`Assigner::parts`].
+    Parts(u32),
+}
+
+/// An object split at its part groups: group `g` (0 from its first triangle, then one more at
+/// each start) is piece `first_piece + g`.
+#[derive(Clone, Debug, Default)]
+struct PartRoute {
+    first_piece: u32,
+    span_start: u64,
+    starts: Vec<u64>,
 }
 
 #[derive(Clone, Debug, Default)]
@@ -492,6 +503,8 @@ struct Assigner {
     plan2: Vec<KdNode>,
     /// Per object.
     object_piece: Vec<Route>,
+    /// The objects split at their part groups (`Route::Parts`).
+    parts: Vec<PartRoute>,
     /// Per piece.
     piece_cell: Vec<Route>,
     /// Per cell (empty: none cut): the index in `splits` of the cell's count split, or
@@ -508,20 +521,32 @@ struct CountSplit {
     cells: Vec<u32>,
 }
 
-impl Assigner {
+impl PartRoute {
+    /// The piece of the object's working-file triangle `index`.
     #[inline]
-    fn piece(&self, t: &WorkTri) -> u32 {
+    fn piece(&self, index: u64) -> u32 {
+        let rel = index.saturating_sub(self.span_start);
+        self.first_piece + self.starts.partition_point(|&s| s <= rel) as u32
+    }
+}
+
+impl Assigner {
+    /// The piece of working-file triangle `index`, `t`.
+    #[inline]
+    fn piece(&self, t: &WorkTri, index: u64) -> u32 {
         match self.object_piece[t.object as usize] {
             Route::Fixed(p) => p,
             Route::Plan(root) => walk(&self.plan1, root, t.centroid()),
+            Route::Parts(k) => self.parts[k as usize].piece(index),
         }
     }
 
     #[inline]
-    fn cell(&self, t: &WorkTri) -> u32 {
-        match self.piece_cell[self.piece(t) as usize] {
+    fn cell(&self, t: &WorkTri, index: u64) -> u32 {
+        match self.piece_cell[self.piece(t, index) as usize] {
             Route::Fixed(c) => c,
             Route::Plan(root) => walk(&self.plan2, root, t.centroid()),
+            Route::Parts(_) => u32::MAX,
         }
     }
 
@@ -571,14 +596,17 @@ impl Assigner {
 
 /// Decodes and maps every triangle of a chunk of raw working-file records in parallel (fixed
 /// sub-chunks: the result does not depend on the number of threads).
-fn map_records(bytes: &[u8], out: &mut Vec<u32>, f: impl Fn(&WorkTri) -> u32 + Sync) {
+fn map_records(first: u64, bytes: &[u8], out: &mut Vec<u32>, f: impl Fn(&WorkTri, u64) -> u32 + Sync) {
     out.clear();
     out.resize(bytes.len() / RECORD_BYTES, 0);
-    out.par_chunks_mut(SUB_CHUNK).zip(bytes.par_chunks(SUB_CHUNK * RECORD_BYTES)).for_each(|(o, b)| {
-        for (o, t) in o.iter_mut().zip(records(b)) {
-            *o = f(&t);
-        }
-    });
+    out.par_chunks_mut(SUB_CHUNK).zip(bytes.par_chunks(SUB_CHUNK * RECORD_BYTES)).enumerate().for_each(
+        |(k, (o, b))| {
+            let base = first + (k * SUB_CHUNK) as u64;
+            for (j, (o, t)) in o.iter_mut().zip(records(b)).enumerate() {
+                *o = f(&t, base + j as u64);
+            }
+        },
+    );
 }
 
 /// Lanes of the per-piece and per-cell statistics ([`for_each_lane`]): fixed, so that the
@@ -824,6 +852,18 @@ fn partition_objects(
         let ext = scale.grid_ext(&rec.bounds);
         let needs = rec.triangles > p.t1 && (diag(ext) > scale.s1 || aspect(ext) > p.r1);
         let first = piece_object.len() as u32;
+        if needs && !rec.part_starts.is_empty() {
+            // Between its parts rather than through them (crate::parts).
+            assign.object_piece[o] = Route::Parts(assign.parts.len() as u32);
+            assign.parts.push(PartRoute {
+                first_piece: first,
+                span_start: rec.span.start,
+                starts: rec.part_starts.clone(),
+            });
+            piece_object.extend(std::iter::repeat_n(o as u32, rec.part_starts.len() + 1));
+            report.split_objects += 1;
+            continue;
+        }
         if needs && samples.stride[o] > 0 {
             let pts = &mut samples.points[samples.start[o]..samples.start[o + 1]];
             let mut ctx =
@@ -864,16 +904,16 @@ fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, Bu
     // A whole object is one piece, and ingest summed exactly what a scan of its triangles
     // would (count, box, centroids in file order): only the objects partition-I cut are read.
     let cut: Vec<u32> = (0..ing.objects.len() as u32)
-        .filter(|&o| matches!(assign.object_piece[o as usize], Route::Plan(_)))
+        .filter(|&o| !matches!(assign.object_piece[o as usize], Route::Fixed(_)))
         .collect();
     let joined = joined_spans(&cut, |o| ing.objects[o as usize].span.clone());
     let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
     tracing::debug!(spans = joined.len(), triangles = read, of = ing.work.triangles, "pass B reads");
     let mut ids = Vec::new();
-    ing.work.scan_ranges_raw(&joined, |_, bytes| {
-        map_records(bytes, &mut ids, |t| match assign.object_piece[t.object as usize] {
+    ing.work.scan_ranges_raw(&joined, |first, bytes| {
+        map_records(first, bytes, &mut ids, |t, i| match assign.object_piece[t.object as usize] {
             Route::Fixed(_) => u32::MAX,
-            Route::Plan(_) => assign.piece(t),
+            Route::Plan(_) | Route::Parts(_) => assign.piece(t, i),
         });
         for_each_lane(&mut lanes, &ids, |lane, k, p| {
             let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
@@ -1215,10 +1255,14 @@ fn partition_clusters(
     let mut sample_piece = vec![0u32; samples.points.len()];
     for o in 0..ing.objects.len() {
         let range = samples.start[o]..samples.start[o + 1];
-        for (&c, q_out) in samples.points[range.clone()].iter().zip(&mut sample_piece[range]) {
+        let (stride, span_start) = (samples.stride[o], ing.objects[o].span.start);
+        for (k, (&c, q_out)) in samples.points[range.clone()].iter().zip(&mut sample_piece[range]).enumerate()
+        {
             let q = match assign.object_piece[o] {
                 Route::Fixed(q) => q,
                 Route::Plan(root) => walk(&assign.plan1, root, c),
+                // Samples of an object split at its parts are in file order, one every `stride`.
+                Route::Parts(r) => assign.parts[r as usize].piece(span_start + k as u64 * stride),
             };
             *q_out = q;
             if (q as usize) < n_pieces {
@@ -1346,6 +1390,8 @@ fn cell_stats(
                 None => bad = Some(ing.objects[piece_object[q] as usize].span.start),
             },
             Route::Plan(_) => cut_objects.push(piece_object[q]),
+            // Only objects are split at their parts; a piece never is.
+            Route::Parts(_) => bad = Some(ing.objects[piece_object[q] as usize].span.start),
         }
     }
     cut_objects.dedup();
@@ -1357,8 +1403,8 @@ fn cell_stats(
     let mut lanes = LaneStats::lanes(n, false);
     let mut ids = Vec::new();
     ing.work.scan_ranges_raw(&joined, |first, bytes| {
-        map_records(bytes, &mut ids, |t| match assign.piece_cell[assign.piece(t) as usize] {
-            Route::Fixed(_) => u32::MAX,
+        map_records(first, bytes, &mut ids, |t, i| match assign.piece_cell[assign.piece(t, i) as usize] {
+            Route::Fixed(_) | Route::Parts(_) => u32::MAX,
             Route::Plan(root) => {
                 let c = walk(&assign.plan2, root, t.centroid());
                 if (c as usize) < n {
@@ -1477,6 +1523,7 @@ fn split_by_count(
         .filter(|&q| match assign.piece_cell[q] {
             Route::Fixed(c) => reaches(c),
             Route::Plan(root) => plan_has_leaf(&assign.plan2, root, reaches),
+            Route::Parts(_) => false,
         })
         .map(|q| piece_object[q])
         .collect();
@@ -1490,7 +1537,7 @@ fn split_by_count(
     let mut ids = Vec::new();
     let a: &Assigner = assign;
     ing.work.scan_ranges_raw(&joined, |first, bytes| {
-        map_records(bytes, &mut ids, |t| a.cell(t));
+        map_records(first, bytes, &mut ids, |t, i| a.cell(t, i));
         for (k, &c) in ids.iter().enumerate() {
             let Some(&s) = slot.get(c as usize).filter(|&&s| s != u32::MAX) else { continue };
             let b = (first + k as u64) / block;
@@ -2010,9 +2057,9 @@ mod tests {
                     vec![[f32::NEG_INFINITY; 3]; n],
                 );
                 ing.work
-                    .scan(|_, tris| {
-                        for t in tris {
-                            let q = assign.piece(t) as usize;
+                    .scan(|first, tris| {
+                        for (k, t) in tris.iter().enumerate() {
+                            let q = assign.piece(t, first + k as u64) as usize;
                             count[q] += 1;
                             let c = t.centroid();
                             for i in 0..3 {
@@ -2055,9 +2102,9 @@ mod tests {
                 let mut tris_of = vec![0u64; cells as usize];
                 let mut box_of = vec![FBox::EMPTY; cells as usize];
                 ing.work
-                    .scan(|_, tris| {
-                        for t in tris {
-                            let c = assign.cell(t) as usize;
+                    .scan(|first, tris| {
+                        for (k, t) in tris.iter().enumerate() {
+                            let c = assign.cell(t, first + k as u64) as usize;
                             tris_of[c] += 1;
                             for v in t.p {
                                 box_of[c].grow(v);

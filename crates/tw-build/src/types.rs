@@ -94,6 +94,9 @@ pub struct ObjectRecord {
     pub centroid_sum: [f64; 3],
     /// The working-file triangles from its first to its last (empty: no triangle).
     pub span: std::ops::Range<u64>,
+    /// Where its triangles pass from one group of whole closed parts to the next (indices from
+    /// its first triangle, ascending; empty: one group): `crate::parts`.
+    pub part_starts: Vec<u64>,
 }
 
 /// The indexed mesh of one cell (a redefined object: a hierarchy leaf), read back from the

@@ -28,7 +28,7 @@ use tw_build::cut::{
 use tw_build::redefine::RedefineParams;
 use tw_build::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
 use tw_build::{build, BuildError, BuildOptions, BuildReport, NoProgress};
-use tw_io::generate::{PlantParams, PlantSource};
+use tw_io::generate::{AssemblyObjects, AssemblyParams, AssemblySource, PlantParams, PlantSource};
 use tw_io::write::create_writer;
 use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneOptions, Triangle, TriangleSink};
 use tw_store::{Store, StoreError};
@@ -90,6 +90,11 @@ fn plant(triangles: u64, seed: u64) -> Scene {
 }
 
 /// Redefinition parameters that cut small inputs into several cells.
+fn assembly(triangles: u64, objects: AssemblyObjects) -> Scene {
+    let params = AssemblyParams { triangles, seed: 3, objects };
+    Scene::from_sources(vec![Box::new(AssemblySource::new(params).unwrap())])
+}
+
 fn small_cells(max_cell_triangles: u64) -> RedefineParams {
     RedefineParams {
         t1: max_cell_triangles / 4,
@@ -691,6 +696,35 @@ fn leaves(store: &Store) -> usize {
 
 // ---------------------------------------------------------------------------------------------
 // Tests
+
+#[test]
+fn one_object_assembly_is_split_between_its_parts() {
+    // Thousands of closed parts written as one object (a CAD export to PLY): redefinition splits
+    // it at its part groups, so no part is cut and the LOD is what one object per part gives.
+    let dir = tempfile::tempdir().unwrap();
+    let (one, per_part) = (dir.path().join("one.tw"), dir.path().join("per-part.tw"));
+    let a = run_build(assembly(200_000, AssemblyObjects::One), &one, &options(RedefineParams::gigawalk()));
+    let b = run_build(
+        assembly(200_000, AssemblyObjects::PerPart),
+        &per_part,
+        &options(RedefineParams::gigawalk()),
+    );
+    assert_eq!(a.redefine.objects, 1);
+    assert!(a.redefine.pieces > 100, "split at its parts: {:?}", a.redefine);
+    let ratio = a.stored_triangles as f64 / b.stored_triangles as f64;
+    assert!(
+        (0.9..1.1).contains(&ratio),
+        "LOD triangles {} vs {} per part",
+        a.stored_triangles,
+        b.stored_triangles
+    );
+    // Open at a few spots: tiny triangles collapse on the grid.
+    check_store(
+        &one,
+        &Reference::of(assembly(200_000, AssemblyObjects::One)),
+        Input::Open { cracks: Cracks::All },
+    );
+}
 
 #[test]
 fn one_sphere_in_one_cell() {
