@@ -90,11 +90,13 @@ pub enum Command {
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
     Demo(DemoArgs),
-    /// Generate a camera path: an interior walk at eye height and a fly-over (for bench and the viewer).
+    /// Generate a camera path: an interior walk at eye height and a fly-over, or an approach from
+    /// the overview to a close view (for bench and the viewer).
     #[command(after_help = "Examples:\n  terawalk path plant.tw -o path.json\n  \
                             terawalk path plant.tw -o walk.json --part walk --frames 900 --seed 7\n  \
                             terawalk path plant.tw -o tour.json --walk-share 0.8 --speed 2\n  \
                             terawalk path dragon.tw -o orbit.json   # no floors: a fly-around\n  \
+                            terawalk path engine.tw -o approach.json --part approach   # overview to close view\n  \
                             terawalk path ship_mm.tw -o p.json --eye-height 1700")]
     Path(PathArgs),
 }
@@ -569,6 +571,9 @@ pub enum PathPartArg {
     Fly,
     /// A walk, then a rise into the fly-over.
     Both,
+    /// From `render`'s overview of the whole model to a close oblique view of its top, the
+    /// distance shrinking to an eighth (level of detail benchmarks; nothing is voxelized).
+    Approach,
 }
 
 #[derive(Args, Debug)]
@@ -584,7 +589,7 @@ pub struct PathArgs {
     /// Frame rate the path is made for (sets the walking step per frame).
     #[arg(long, default_value_t = 30.0)]
     pub fps: f64,
-    /// Which parts: walk, fly or both.
+    /// Which parts: walk, fly, both, or approach (overview to close view).
     #[arg(long, value_enum, default_value = "both")]
     pub part: PathPartArg,
     /// Share of the frames that walk with `--part both`.
@@ -596,7 +601,8 @@ pub struct PathArgs {
     /// Walking speed, units per second (default: 1.4 m/s in the store's units).
     #[arg(long)]
     pub speed: Option<f64>,
-    /// Vertical field of view, degrees.
+    /// Vertical field of view, degrees (with `--part approach`, 40 makes the first frame exactly
+    /// the camera `render` uses without --camera).
     #[arg(long, default_value_t = 60.0)]
     pub fovy: f64,
     /// Random seed: the same seed gives the same path.

@@ -141,6 +141,55 @@ fn path_then_bench_with_exact_visibility_and_bad_arguments() {
 }
 
 #[test]
+fn approach_path_starts_at_the_render_overview_and_benches() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let path = ["path", "p.tw", "-o", "a.json", "--part", "approach", "--frames", "48", "--fovy", "40"];
+    let o = terawalk(&path, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("approach: 48 frames") && stdout(&o).contains("8.0x closer"),
+        "{}",
+        stdout(&o)
+    );
+    assert!(!stdout(&o).contains("walk:"), "{}", stdout(&o));
+    // Frame 0 is the camera `render` uses without --camera (the iso preset, Z up, framed for
+    // 1280x720); the last is an eighth as far from what it looks at.
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("a.json")).unwrap()).unwrap();
+    let frames = json["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 48);
+    let v3 = |f: &serde_json::Value, k: &str| -> [f64; 3] { [0, 1, 2].map(|i| f[k][i].as_f64().unwrap()) };
+    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let h = tw_store::Store::open(dir.path().join("p.tw")).unwrap().header().clone();
+    let bounds = tw_core::Aabb { min: h.bounds_min, max: h.bounds_max };
+    let render =
+        tw_preview::Camera::frame_bounds(&bounds, [-0.55, -0.75, 0.55], [0.0, 0.0, 1.0], 1280.0 / 720.0);
+    let (eye0, target0) = (v3(&frames[0], "eye"), v3(&frames[0], "target"));
+    let d0 = dist(eye0, target0);
+    assert!(
+        dist(eye0, render.eye) < 1e-9 * d0 && dist(target0, render.target) < 1e-9 * d0,
+        "{eye0:?} {render:?}"
+    );
+    assert_eq!(frames[0]["fovy"].as_f64(), Some(render.fovy_deg));
+    assert_eq!(frames[47]["segment"].as_str(), Some("approach"));
+    let d1 = dist(v3(&frames[47], "eye"), v3(&frames[47], "target"));
+    assert!((d1 / d0 - 0.125).abs() < 1e-9, "{d1} / {d0}");
+    // The path plays in bench.
+    let bench = ["bench", "p.tw", "--path", "a.json", "--frames", "4", "--size", "320x180", "--out", "rep"];
+    let o = terawalk(&bench, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(dir.path().join("rep/report.json")).unwrap();
+    assert!(report.contains("approach"), "{report}");
+    // --help shows how.
+    let o = terawalk(&["path", "--help"], dir.path());
+    assert!(stdout(&o).contains("--part approach"), "{}", stdout(&o));
+}
+
+#[test]
 fn bench_records_lod_efficiency_per_frame() {
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], dir.path());

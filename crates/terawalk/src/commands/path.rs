@@ -1,6 +1,6 @@
 //! `terawalk path`: generate a camera path through a store (tw-runtime's `pathgen`: an interior
-//! walk at eye height, a fly-over, or a fly-around when there is nothing to walk on) and write
-//! it as JSON for `bench` and the viewer.
+//! walk at eye height, a fly-over, or a fly-around when there is nothing to walk on; or an
+//! approach from the overview to a close view) and write it as JSON for `bench` and the viewer.
 
 use std::time::Instant;
 
@@ -22,6 +22,7 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
             PathPartArg::Walk => PathPart::Walk,
             PathPartArg::Fly => PathPart::Fly,
             PathPartArg::Both => PathPart::Both,
+            PathPartArg::Approach => PathPart::Approach,
         },
         walk_share: args.walk_share,
         eye_height: args.eye_height,
@@ -33,13 +34,16 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     };
     let units = store.units().to_string();
     let unit_name = if units.is_empty() { "units".to_string() } else { units.clone() };
-    if units.is_empty() && options.eye_height.is_none() && options.part != PathPart::Fly {
+    // Only the walk needs an eye height (the approach and the fly-over scale with the model).
+    let walks = matches!(options.part, PathPart::Walk | PathPart::Both);
+    if units.is_empty() && options.eye_height.is_none() && walks {
         tracing::info!("the store has no units: assuming metres (eye height 1.7)");
-    } else if tw_runtime::pathgen::metres_per_unit(&units).is_none() && options.eye_height.is_none() {
+    } else if walks && options.eye_height.is_none() && tw_runtime::pathgen::metres_per_unit(&units).is_none()
+    {
         eprintln!("note: unknown units {units:?}; assuming metres (give --eye-height in the model's units)");
     }
     let pb = progress::count(0, "voxelizing");
-    if quiet {
+    if quiet || options.part == PathPart::Approach {
         pb.set_draw_target(indicatif::ProgressDrawTarget::hidden());
     }
     pb.set_message("coarse pages");
@@ -90,15 +94,30 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     if r.fly_frames > 0 {
         println!("fly: {} frames, {} {unit_name}", r.fly_frames, len(r.fly_length));
     }
+    if r.approach_frames > 0 {
+        let (from, to) = r.approach_distances;
+        println!(
+            "approach: {} frames from the overview ({} {unit_name} from the model's centre) to a close \
+             view of its top ({} {unit_name} away, {:.1}x closer), {} {unit_name}",
+            r.approach_frames,
+            len(from),
+            len(to),
+            from / to,
+            len(r.approach_length)
+        );
+    }
+    let parts = if r.approach_frames > 0 {
+        format!("approach {}", r.approach_frames)
+    } else {
+        format!("walk {} / fly {}", r.walk_frames, r.fly_frames)
+    };
     println!(
-        "wrote {}: {} frames ({:.1} s at {} fps; walk {} / fly {}), {} {unit_name} in {:.2} s",
+        "wrote {}: {} frames ({:.1} s at {} fps; {parts}), {} {unit_name} in {:.2} s",
         args.output.display(),
         path.frames.len(),
         path.duration_s(),
         args.fps,
-        r.walk_frames,
-        r.fly_frames,
-        len(r.walk_length + r.fly_length),
+        len(r.walk_length + r.fly_length + r.approach_length),
         start.elapsed().as_secs_f64()
     );
     Ok(())

@@ -259,12 +259,13 @@ pub(super) fn walk_frames(
 }
 
 /// Yaw (about the up axis) and pitch of a direction.
-fn yaw_pitch(d: [f64; 3], up: usize) -> (f64, f64) {
+pub(super) fn yaw_pitch(d: [f64; 3], up: usize) -> (f64, f64) {
     let h = [(up + 1) % 3, (up + 2) % 3];
     (d[h[1]].atan2(d[h[0]]), d[up].atan2(d[h[0]].hypot(d[h[1]])))
 }
 
-fn from_yaw_pitch(yaw: f64, pitch: f64, up: usize) -> [f64; 3] {
+/// The unit direction of a yaw (about the up axis) and pitch.
+pub(super) fn from_yaw_pitch(yaw: f64, pitch: f64, up: usize) -> [f64; 3] {
     let h = [(up + 1) % 3, (up + 2) % 3];
     let mut d = [0.0; 3];
     d[h[0]] = yaw.cos() * pitch.cos();

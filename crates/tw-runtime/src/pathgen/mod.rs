@@ -48,10 +48,16 @@
 //! voxels is voxelized in a window around its centre (the walk stays in it) and, failing
 //! that, with coarser voxels, down to a third of the eye height, below which there is no walk.
 //!
+//! The approach part ([`PathPart::Approach`]) is separate: from `render`'s overview of the whole
+//! model to a close oblique view of its top, the distance shrinking geometrically to an eighth;
+//! it needs no walkable space, so nothing is voxelized (see `approach`).
+//!
 //! Files: `voxels` (steps 1–4: [`WalkGrid`]), `route` (steps 5–7: the region, the route and its
-//! smoothing) and `cameras` (the look direction, the fly-over, the rise between them and the
-//! frames); this file has the options, the report and [`generate_path`], which joins them.
+//! smoothing), `cameras` (the look direction, the fly-over, the rise between them and the
+//! frames) and `approach`; this file has the options, the report and [`generate_path`], which
+//! joins them.
 
+mod approach;
 mod cameras;
 mod route;
 mod voxels;
@@ -70,6 +76,8 @@ pub enum PathPart {
     Walk,
     Fly,
     Both,
+    /// From the overview of the whole model to a close oblique view (no walk, no fly-over).
+    Approach,
 }
 
 /// What to generate. Lengths are in scene (input) units; `None` picks a default from the
@@ -159,6 +167,10 @@ pub struct PathReport {
     pub triangles_voxelized: u64,
     /// Waypoints the route visited.
     pub waypoints: usize,
+    pub approach_frames: usize,
+    pub approach_length: f64,
+    /// Distance from the eye to the looked-at point in the approach's first and last frame.
+    pub approach_distances: (f64, f64),
 }
 
 /// The path and how it was made.
@@ -205,6 +217,9 @@ pub fn generate_path(
     let view = View { up: h.up_axis.min(2) as usize, origin: h.grid_origin, fovy: options.fovy_deg };
     let mut rng = Rng::with_stream(options.seed, 0x7061_7468);
     let mut report = PathReport::new(eye, speed);
+    if options.part == PathPart::Approach {
+        return approach_part(store, options, report);
+    }
 
     // The walk (steps 1–7 of the module documentation), or why there is none.
     let mut walk: Vec<PathFrame> = Vec::new();
@@ -233,6 +248,19 @@ pub fn generate_path(
     report.walk_frames = walk.len();
     walk.extend(fly);
     Ok(GeneratedPath { path: CameraPath::new(options.fps, walk), report })
+}
+
+/// The approach (see `approach`): all the frames, recorded in `report`.
+fn approach_part(
+    store: &Store,
+    options: &PathOptions,
+    mut report: PathReport,
+) -> Result<GeneratedPath, PathGenError> {
+    let a = approach::approach(store, options.frames, options.fovy_deg)?;
+    report.approach_frames = a.frames.len();
+    report.approach_length = a.frames.windows(2).map(|w| route::dist3(w[0].eye, w[1].eye)).sum();
+    report.approach_distances = (a.start_distance, a.end_distance);
+    Ok(GeneratedPath { path: CameraPath::new(options.fps, a.frames), report })
 }
 
 /// Refuses options that cannot make a path: the frame count, frame rate, walk share and field
@@ -286,7 +314,7 @@ fn eye_and_speed(store: &Store, options: &PathOptions) -> Result<(f64, f64), Pat
 fn walk_frame_count(options: &PathOptions) -> usize {
     match options.part {
         PathPart::Walk => options.frames,
-        PathPart::Fly => 0,
+        PathPart::Fly | PathPart::Approach => 0,
         PathPart::Both => {
             ((options.frames as f64 * options.walk_share).round() as usize).clamp(1, options.frames - 1)
         }
@@ -314,6 +342,9 @@ impl PathReport {
             pages_failed: 0,
             triangles_voxelized: 0,
             waypoints: 0,
+            approach_frames: 0,
+            approach_length: 0.0,
+            approach_distances: (0.0, 0.0),
         }
     }
 }
