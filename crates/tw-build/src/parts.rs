@@ -15,7 +15,11 @@
 //! together, are also close together in CAD exports, so a group is a compact piece.
 //!
 //! A surface that never closes (an open scan, pipes without caps, a triangle soup, inconsistent
-//! winding) gives no start, and the object is split by planes as before. Edges are keyed by a
+//! winding) gives no start, and the object is split by planes as before. The same holds from
+//! the first open part of an object on: its group never closes again, so the rest of the
+//! object is one group (split by partition-II's planes if large); and a group still open after
+//! [`GIVE_UP`] triangles stops the watch for the object, which bounds the hashing that big open
+//! objects cost (the 10^8 plant's pipe network). Edges are keyed by a
 //! 64-bit hash of their two positions (exact `f32` offsets, as the working file has them): a
 //! collision can only move a start, never make a store wrong. The first [`MIN_GROUP`]
 //! triangles of each group are only buffered and hashed once the group reaches that size, so
@@ -27,6 +31,11 @@ use rustc_hash::{FxHashMap, FxHashSet};
 /// are 1k–64k triangles), large enough that groups stay few (redefinition keeps O(groups)).
 pub const MIN_GROUP: u64 = 512;
 
+/// A group still open after this many triangles is not a run of small parts (a pipe network, a
+/// scan): the object's remaining triangles are not watched (its starts so far stay), so that big
+/// open objects cost a bounded amount of hashing.
+pub const GIVE_UP: u64 = 1 << 15;
+
 /// Finds the group starts of one object at a time (see the module comment).
 #[derive(Debug, Default)]
 pub struct PartSplitter {
@@ -36,6 +45,8 @@ pub struct PartSplitter {
     open: FxHashSet<u64>,
     group_len: u64,
     object_len: u64,
+    /// The current group passed [`GIVE_UP`] open: no more starts in this object.
+    given_up: bool,
     /// Object-relative indices of the triangles that start a new group (the first group starts
     /// at 0 and is not listed).
     starts: Vec<u64>,
@@ -48,12 +59,21 @@ impl PartSplitter {
         self.open.clear();
         self.group_len = 0;
         self.object_len = 0;
+        self.given_up = false;
         self.starts.clear();
     }
 
     /// The next triangle of the current object.
     #[inline]
     pub fn add(&mut self, p: [[f32; 3]; 3]) {
+        if self.given_up {
+            return;
+        }
+        if self.group_len >= GIVE_UP {
+            self.given_up = true;
+            self.open.clear();
+            return;
+        }
         if self.group_len >= MIN_GROUP && self.open.is_empty() {
             self.starts.push(self.object_len);
             self.group_len = 0;
@@ -182,6 +202,23 @@ mod tests {
         assert!(starts_of(&open).is_empty());
         let small: Vec<_> = (0..20).flat_map(|i| cube(i as f32 * 3.0)).collect();
         assert!(starts_of(&small).is_empty(), "{} triangles", small.len());
+    }
+
+    #[test]
+    fn a_long_open_group_stops_the_watch_and_keeps_earlier_starts() {
+        let mut tris: Vec<_> = (0..100).flat_map(|i| cube(i as f32 * 3.0)).collect();
+        let closed_starts = starts_of(&tris);
+        // Then a long open strip, then closed boxes again: no start after the strip.
+        let strip = (0..GIVE_UP + 10).map(|i| {
+            let x = 1000.0 + i as f32;
+            [[x, 0.0, 0.0], [x + 1.0, 0.0, 0.0], [x, 1.0, 0.0]]
+        });
+        tris.extend(strip);
+        tris.extend((0..100).flat_map(|i| cube(5000.0 + i as f32 * 3.0)));
+        // An open part keeps its group open: no start after it (the object's later parts stay
+        // in the last group; see the module comment), and the watch stops at GIVE_UP.
+        assert_eq!(starts_of(&tris), closed_starts);
+        assert!(!closed_starts.is_empty());
     }
 
     #[test]
