@@ -381,10 +381,9 @@ pub(crate) mod fixtures {
         m
     }
 
-    /// The generated plant as a triangle soup.
-    pub fn plant(triangles: u64, seed: u64) -> Soup {
-        use tw_io::generate::{PlantParams, PlantSource};
-        use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink, TriangleSource};
+    /// Everything a source streams, as a triangle soup.
+    fn soup_of(source: Box<dyn tw_io::TriangleSource>) -> Soup {
+        use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink};
         struct Collect(Soup);
         impl TriangleSink for Collect {
             fn object(&mut self, _id: ObjectId, _info: &ObjectInfo) -> Result<(), ImportError> {
@@ -396,31 +395,22 @@ pub(crate) mod fixtures {
             }
         }
         let mut sink = Collect(Vec::new());
-        let src = PlantSource::new(PlantParams { triangles, seed }).expect("plant params");
-        Box::new(src).stream(&mut sink).expect("plant streams");
+        source.stream(&mut sink).expect("the generator streams");
         sink.0
+    }
+
+    /// The generated plant as a triangle soup.
+    pub fn plant(triangles: u64, seed: u64) -> Soup {
+        use tw_io::generate::{PlantParams, PlantSource};
+        soup_of(Box::new(PlantSource::new(PlantParams { triangles, seed }).expect("plant params")))
     }
 
     /// The generated CAD-like assembly (`tw_io::generate::AssemblySource`, one object) as a
     /// triangle soup: thousands of small closed parts.
     pub fn assembly(triangles: u64, seed: u64) -> Soup {
         use tw_io::generate::{AssemblyObjects, AssemblyParams, AssemblySource};
-        use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink, TriangleSource};
-        struct Collect(Soup);
-        impl TriangleSink for Collect {
-            fn object(&mut self, _id: ObjectId, _info: &ObjectInfo) -> Result<(), ImportError> {
-                Ok(())
-            }
-            fn triangle(&mut self, t: &Triangle) -> Result<(), ImportError> {
-                self.0.push((t.positions, t.object));
-                Ok(())
-            }
-        }
-        let mut sink = Collect(Vec::new());
         let params = AssemblyParams { triangles, seed, objects: AssemblyObjects::One };
-        let src = AssemblySource::new(params).expect("assembly params");
-        Box::new(src).stream(&mut sink).expect("assembly streams");
-        sink.0
+        soup_of(Box::new(AssemblySource::new(params).expect("assembly params")))
     }
 
     /// A mesh's non-degenerate triangles as grid positions with objects.

@@ -67,6 +67,27 @@ mod shapes;
 #[cfg(test)]
 mod preview;
 
+/// A sink that counts triangles (`.0`) and objects (`.1`): the generators' speed reports.
+#[cfg(test)]
+#[derive(Default)]
+pub(crate) struct Count(pub u64, pub u64);
+
+#[cfg(test)]
+impl TriangleSink for Count {
+    fn object(&mut self, _: crate::ObjectId, _: &crate::ObjectInfo) -> Result<(), ImportError> {
+        self.1 += 1;
+        Ok(())
+    }
+    fn triangle(&mut self, _: &crate::Triangle) -> Result<(), ImportError> {
+        self.0 += 1;
+        Ok(())
+    }
+    fn mesh(&mut self, c: &crate::MeshChunk<'_>) -> Result<(), ImportError> {
+        self.0 += c.indices.len() as u64 / 3;
+        Ok(())
+    }
+}
+
 use tw_core::{Aabb, Rng};
 
 pub use assembly::{
@@ -415,22 +436,6 @@ mod tests {
     #[test]
     #[ignore]
     fn speed_100m_triangles() {
-        #[derive(Default)]
-        struct Count(u64, u64);
-        impl TriangleSink for Count {
-            fn object(&mut self, _: ObjectId, _: &ObjectInfo) -> Result<(), ImportError> {
-                self.1 += 1;
-                Ok(())
-            }
-            fn triangle(&mut self, _: &Triangle) -> Result<(), ImportError> {
-                self.0 += 1;
-                Ok(())
-            }
-            fn mesh(&mut self, c: &MeshChunk<'_>) -> Result<(), ImportError> {
-                self.0 += c.indices.len() as u64 / 3;
-                Ok(())
-            }
-        }
         for n in [10_000_000u64, 100_000_000, 1_000_000_000] {
             let mut c = Count::default();
             let t = std::time::Instant::now();

@@ -307,22 +307,7 @@ fn generation_streams_in_small_pieces_at_any_size() {
 #[test]
 #[ignore]
 fn speed_and_shape_report() {
-    #[derive(Default)]
-    struct Count(u64, u64);
-    impl TriangleSink for Count {
-        fn object(&mut self, _: ObjectId, _: &ObjectInfo) -> Result<(), ImportError> {
-            self.1 += 1;
-            Ok(())
-        }
-        fn triangle(&mut self, _: &Triangle) -> Result<(), ImportError> {
-            self.0 += 1;
-            Ok(())
-        }
-        fn mesh(&mut self, c: &MeshChunk<'_>) -> Result<(), ImportError> {
-            self.0 += c.indices.len() as u64 / 3;
-            Ok(())
-        }
-    }
+    use crate::generate::Count;
     for n in [10_000u64, 1_000_000, 10_000_000, 100_000_000, 1_000_000_000] {
         let plan = Plan::new(&params(n, 1));
         let board = Board::new(&plan, 0);
