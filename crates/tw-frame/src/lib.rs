@@ -91,6 +91,10 @@ pub struct FrameTimes {
     /// Of `cull`, `hzb` only: the triangle tests.
     #[serde(default)]
     pub cull_triangle_tests: Duration,
+    /// Of `cull`, `hzb` only: the depth read-back, which waits for the first pass to be drawn
+    /// (so on a CPU driver it is rasterization, not culling).
+    #[serde(default)]
+    pub cull_readback: Duration,
     /// Making clusters resident on the GPU.
     pub upload: Duration,
     /// Drawing, waiting for the GPU, reading the image back.
@@ -255,6 +259,7 @@ impl Walkthrough {
                 cull: Duration::ZERO,
                 cull_box_tests: Duration::ZERO,
                 cull_triangle_tests: Duration::ZERO,
+                cull_readback: Duration::ZERO,
                 upload: gpu.upload,
                 render: gpu.render,
                 total: start.elapsed(),
@@ -524,6 +529,7 @@ impl Walkthrough {
                 cull: culled.cull_time,
                 cull_box_tests: culled.box_test_time,
                 cull_triangle_tests: culled.triangle_test_time,
+                cull_readback: culled.readback_time,
                 upload: gpu.upload,
                 render: gpu.render,
                 total: start.elapsed(),

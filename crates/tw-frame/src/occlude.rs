@@ -202,6 +202,9 @@ pub struct Culled {
     pub box_test_time: Duration,
     /// Of `cull_time`, `hzb` with triangle tests only: the triangle tests.
     pub triangle_test_time: Duration,
+    /// Of `cull_time`, `hzb` only: reading the first pass's depth back, which waits for that
+    /// pass to be drawn (on a CPU driver, the first pass's rasterization).
+    pub readback_time: Duration,
     /// The clusters drawn (both passes; with [`Occlusion::None`] the whole cut).
     pub drawn: Vec<ClusterRef>,
     /// Tested clusters hidden behind the occluders (HZB: not those covering no pixel centre,
@@ -257,13 +260,16 @@ pub fn draw_culled(
     let (w, h) = renderer.size();
     let cull_start = Instant::now();
     let (mut box_test_time, mut triangle_test_time) = (Duration::ZERO, Duration::ZERO);
+    let mut readback_time = Duration::ZERO;
     // The visible candidates; what the second pass draws (cluster, triangles; `u128::MAX`:
     // all): the visible candidates and, with triangle tests, the occluders' visible triangles
     // their first pass left out; next frame's history (cluster, visible triangles).
     let (visible, second, history, occluded) = match strategy {
         Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
         Occlusion::Hzb => {
+            let readback_start = Instant::now();
             let depth = renderer.read_depth()?;
+            readback_time = readback_start.elapsed();
             // With multisampling the depth is each pixel's farthest sample, and a pixel is
             // its samples to the tests (tw_gpu::msaa).
             let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
@@ -413,7 +419,7 @@ pub fn draw_culled(
     cull_time += t.elapsed();
     let mut drawn = split.occluders;
     drawn.extend_from_slice(&visible);
-    Ok(Culled { stats, cull_time, box_test_time, triangle_test_time, drawn, occluded })
+    Ok(Culled { stats, cull_time, box_test_time, triangle_test_time, readback_time, drawn, occluded })
 }
 
 /// The decoded clusters of a frame by (page, index in page): sorted in parallel and searched,

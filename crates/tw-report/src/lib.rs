@@ -110,6 +110,11 @@ pub struct FrameRecord {
     pub culling_box_tests_ms: f64,
     #[serde(default)]
     pub culling_triangle_tests_ms: f64,
+    /// Of `culling_ms`, `hzb` only: the depth read-back, which waits for the first pass to be
+    /// drawn (on a CPU driver that is rasterization): `culling_ms` less this is the culling's
+    /// own CPU time.
+    #[serde(default)]
+    pub culling_readback_ms: f64,
     /// Time spent in occlusion culling (queries, HZB build and tests).
     pub culling_ms: f64,
     /// Decoded pages resident in memory.

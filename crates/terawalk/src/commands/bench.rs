@@ -282,6 +282,7 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         occlusion_nodes_hidden: info.occlusion.nodes_hidden,
         culling_box_tests_ms: ms(info.times.cull_box_tests),
         culling_triangle_tests_ms: ms(info.times.cull_triangle_tests),
+        culling_readback_ms: ms(info.times.cull_readback),
         culling_ms: ms(info.times.cull),
         resident_mb: st.resident_bytes as f64 / 1e6,
         gpu_resident_mb: info.gpu.resident_bytes as f64 / 1e6,
