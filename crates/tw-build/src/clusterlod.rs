@@ -46,6 +46,7 @@
 //! Deterministic: every step is (meshopt's simplifier, clusterizer and partitioner are), and ties
 //! among parts go to the first triangle.
 
+use crate::union_find::UnionFind;
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 
 /// Parameters of [`build_dag`].
@@ -410,25 +411,8 @@ impl Parts {
                 ids.len() as u32 - 1
             });
         }
-        let mut parent: Vec<u32> = (0..ids.len() as u32).collect();
-        fn find(parent: &mut [u32], mut v: u32) -> u32 {
-            while parent[v as usize] != v {
-                let g = parent[parent[v as usize] as usize];
-                parent[v as usize] = g;
-                v = g;
-            }
-            v
-        }
-        for t in merged.chunks_exact(3) {
-            let a = find(&mut parent, local[&t[0]]);
-            for v in &t[1..] {
-                let b = find(&mut parent, local[v]);
-                if a != b {
-                    let (lo, hi) = (a.min(b), a.max(b));
-                    parent[hi as usize] = lo;
-                }
-            }
-        }
+        let mut parts = UnionFind::new(ids.len());
+        parts.union_triangles(merged, |v| local[&v]);
         let mut number = vec![u32::MAX; ids.len()];
         let mut lo: Vec<[f32; 3]> = Vec::new();
         let mut hi: Vec<[f32; 3]> = Vec::new();
@@ -436,7 +420,7 @@ impl Parts {
         let mut first: Vec<usize> = Vec::new();
         let mut part_of = rustc_hash::FxHashMap::default();
         for (ti, t) in merged.chunks_exact(3).enumerate() {
-            let root = find(&mut parent, local[&t[0]]) as usize;
+            let root = parts.find(local[&t[0]]) as usize;
             if number[root] == u32::MAX {
                 number[root] = lo.len() as u32;
                 lo.push([f32::MAX; 3]);

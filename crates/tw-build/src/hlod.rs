@@ -457,25 +457,8 @@ fn prune_components(
     target: usize,
 ) -> (f32, usize) {
     let n = local.len();
-    let mut parent: Vec<u32> = (0..n as u32).collect();
-    fn find(parent: &mut [u32], mut v: u32) -> u32 {
-        while parent[v as usize] != v {
-            let g = parent[parent[v as usize] as usize];
-            parent[v as usize] = g;
-            v = g;
-        }
-        v
-    }
-    for t in indices.chunks_exact(3) {
-        let a = find(&mut parent, t[0]);
-        for &v in &t[1..] {
-            let b = find(&mut parent, v);
-            if a != b {
-                let (lo, hi) = (a.min(b), a.max(b));
-                parent[hi as usize] = lo;
-            }
-        }
-    }
+    let mut parts_of = crate::union_find::UnionFind::new(n);
+    parts_of.union_triangles(indices, |v| v);
     // Per part (by root): triangles, first triangle, box, pinned.
     struct Part {
         triangles: usize,
@@ -488,7 +471,7 @@ fn prune_components(
     let mut parts: Vec<Part> = Vec::new();
     let mut tri_part: Vec<u32> = Vec::with_capacity(indices.len() / 3);
     for (ti, t) in indices.chunks_exact(3).enumerate() {
-        let r = find(&mut parent, t[0]) as usize;
+        let r = parts_of.find(t[0]) as usize;
         if part_of[r] == u32::MAX {
             part_of[r] = parts.len() as u32;
             parts.push(Part {

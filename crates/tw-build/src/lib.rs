@@ -25,6 +25,7 @@ pub mod redefine;
 pub mod sampling;
 pub mod seams;
 pub mod types;
+mod union_find;
 pub mod workio;
 
 pub use error::BuildError;
