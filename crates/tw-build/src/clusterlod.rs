@@ -62,22 +62,13 @@ pub(crate) struct DagConfig {
     pub ratio: f32,
     /// A group that keeps more than this fraction of its triangles is terminal.
     pub threshold: f32,
-    /// Remove small disconnected parts (module comment); off, the loop is clusterlod's.
-    pub prune: bool,
 }
 
 impl DagConfig {
     /// clusterlod's defaults (partition size 16, ratio ½, threshold 0.85) for clusters of
-    /// `max_triangles` and `max_vertices`, with pruning.
+    /// `max_triangles` and `max_vertices`.
     pub fn new(max_triangles: usize, max_vertices: usize) -> DagConfig {
-        DagConfig {
-            max_triangles,
-            max_vertices,
-            partition_size: 16,
-            ratio: 0.5,
-            threshold: 0.85,
-            prune: true,
-        }
+        DagConfig { max_triangles, max_vertices, partition_size: 16, ratio: 0.5, threshold: 0.85 }
     }
 }
 
@@ -183,7 +174,7 @@ pub(crate) fn build_dag(
             let target = ((merged.len() / 3) as f32 * config.ratio) as usize;
             let mut bounds = merge_bounds(group);
             let (simplified, error) =
-                simplify_group(config, positions, &vertices, &merged, &mut locks, target, &mut stats);
+                simplify_group(positions, &vertices, &merged, &mut locks, target, &mut stats);
             if simplified.len() as f32 > merged.len() as f32 * config.threshold {
                 bounds.error = f32::MAX;
                 stats.terminal += 1;
@@ -340,7 +331,6 @@ fn merge_bounds(clusters: &[Cluster]) -> DagBounds {
 /// Simplifies one group to about `target` triangles with its locks; returns the triangles and
 /// the error (module comment for the rules on parts). `locks` is restored before returning.
 fn simplify_group(
-    config: &DagConfig,
     positions: &[[f32; 3]],
     vertices: &VertexDataAdapter<'_>,
     merged: &[u32],
@@ -349,11 +339,11 @@ fn simplify_group(
     stats: &mut DagStats,
 ) -> (Vec<u32>, f32) {
     let parts = Parts::new(positions, merged, locks);
-    // With pruning, the simplifier may reduce a free part but not make it vanish (one of its
-    // triangles is locked): parts go only by `prune_free`, smallest first, each charged its
-    // radius. Left to itself, the simplifier collapses whole parts wherever that is cheapest in
-    // its quadric measure, whatever their size.
-    let pinned: Vec<u32> = if config.prune { parts.first_triangles(merged) } else { Vec::new() };
+    // The simplifier may reduce a free part but not make it vanish (one of its triangles is
+    // locked): parts go only by `prune_free`, smallest first, each charged its radius. Left to
+    // itself, the simplifier collapses whole parts wherever that is cheapest in its quadric
+    // measure, whatever their size.
+    let pinned: Vec<u32> = parts.first_triangles(merged);
     let saved: Vec<SimplifyVertex> = pinned.iter().map(|&v| locks[v as usize]).collect();
     for &v in &pinned {
         locks[v as usize] = SimplifyVertex::Lock;
@@ -381,19 +371,18 @@ fn simplify_group(
     // A part the simplifier collapsed away is gone as if it had been removed: its radius bounds
     // the error there (meshopt's quadric error is an estimate, lower on a collapsed part).
     error = error.max(parts.vanished_radius(&count));
-    if config.prune {
-        let (removed, radius) = parts.prune_free(&mut out, &count, target, error);
-        stats.pruned_triangles += removed;
-        error = error.max(radius);
-    }
-    (out, error)
+    let (removed, radius) = parts.prune_free(&mut out, &count, target, error);
+    stats.pruned_triangles += removed;
+    (out, error.max(radius))
 }
 
 /// The connected parts of a group's input triangles: per part, its bounding radius and whether
 /// it has a locked vertex.
 struct Parts {
-    /// Per vertex of the mesh used by the group: its part.
-    part_of: rustc_hash::FxHashMap<u32, u32>,
+    /// The group's vertices, numbered densely in order of first use.
+    local: rustc_hash::FxHashMap<u32, u32>,
+    /// Per local vertex: its part.
+    part_of: Vec<u32>,
     /// Per part: half its box diagonal, whether a vertex is locked, its first input triangle.
     radius: Vec<f32>,
     locked: Vec<bool>,
@@ -404,21 +393,17 @@ impl Parts {
     fn new(positions: &[[f32; 3]], merged: &[u32], locks: &[SimplifyVertex]) -> Parts {
         // Union-find over the group's vertices, numbered densely in order of first use.
         let mut local: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
-        let mut ids: Vec<u32> = Vec::new();
         for &v in merged {
-            local.entry(v).or_insert_with(|| {
-                ids.push(v);
-                ids.len() as u32 - 1
-            });
+            let next = local.len() as u32;
+            local.entry(v).or_insert(next);
         }
-        let mut parts = UnionFind::new(ids.len());
+        let mut parts = UnionFind::new(local.len());
         parts.union_triangles(merged, |v| local[&v]);
-        let mut number = vec![u32::MAX; ids.len()];
+        let mut number = vec![u32::MAX; local.len()];
         let mut lo: Vec<[f32; 3]> = Vec::new();
         let mut hi: Vec<[f32; 3]> = Vec::new();
         let mut locked: Vec<bool> = Vec::new();
         let mut first: Vec<usize> = Vec::new();
-        let mut part_of = rustc_hash::FxHashMap::default();
         for (ti, t) in merged.chunks_exact(3).enumerate() {
             let root = parts.find(local[&t[0]]) as usize;
             if number[root] == u32::MAX {
@@ -436,7 +421,6 @@ impl Parts {
                     hi[p][i] = hi[p][i].max(q[i]);
                 }
                 locked[p] |= locks[v as usize] != SimplifyVertex::None;
-                part_of.insert(v, p as u32);
             }
         }
         let radius = lo
@@ -447,11 +431,13 @@ impl Parts {
                 crate::lod::round_up(d2.sqrt() * 0.5)
             })
             .collect();
-        Parts { part_of, radius, locked, first }
+        // Every vertex is on a triangle, so every root has its number.
+        let part_of = (0..local.len() as u32).map(|i| number[parts.find(i) as usize]).collect();
+        Parts { local, part_of, radius, locked, first }
     }
 
     fn part(&self, v: u32) -> usize {
-        self.part_of.get(&v).map_or(usize::MAX, |&p| p as usize)
+        self.local.get(&v).map_or(usize::MAX, |&i| self.part_of[i as usize] as usize)
     }
 
     /// The vertices of the first triangle of every free part (in part order; repeats possible).

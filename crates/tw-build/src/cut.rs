@@ -1,7 +1,8 @@
-//! Cut extraction and the checks of ISSUE3's "Cluster DAG model" (used by tests of the build
-//! and of the runtime): DAG validity (cluster limits, indices, monotone errors, nested spheres,
-//! `refined_from` consistency), completeness of a cut (every input cluster is represented exactly
-//! once) and cracks (boundary edges of the cut mesh must be boundary edges of the input).
+//! Cut extraction and the checks of the cluster DAG model (docs/FORMAT.md, "Model"), used by
+//! tests of the build and of the runtime: DAG validity (cluster limits, indices, monotone
+//! errors, nested spheres, `refined_from` consistency), completeness of a cut (every input
+//! cluster is represented exactly once) and cracks (boundary edges of the cut mesh must be
+//! boundary edges of the input).
 //!
 //! The render rule is [`crate::types::in_cut`] in object space (scene units).
 

@@ -1,7 +1,7 @@
 //! Phase 4b: HLOD above the cells — merging the coarsest clusters of sibling subtrees.
 //!
 //! Extends the cluster DAG of [`crate::lod`] across the hierarchy (Nanite-style cluster DAG,
-//! Erikson's HLOD; ISSUE3 "Cluster DAG model"). The hierarchy is processed bottom-up; each
+//! Erikson's HLOD; docs/FORMAT.md, "Model"). The hierarchy is processed bottom-up; each
 //! subtree is represented only by its current [`Roots`] (its root groups, error = ∞, and their
 //! clusters). At a node, [`build_hlod`]:
 //!

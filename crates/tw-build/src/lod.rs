@@ -6,7 +6,7 @@
 //! group's outer boundary locked, and the result is split into new clusters; repeat until one
 //! cluster is left or simplification is stuck (no sloppy fallback: it can open holes inside a
 //! group; stuck groups are left to HLOD). Clusters are built with meshopt's spatial clusterizer.
-//! The output is mapped onto the model of [`crate::types`] (see ISSUE3 "Cluster DAG model"):
+//! The output is mapped onto the model of [`crate::types`] (docs/FORMAT.md, "Model"):
 //!
 //! * every meshopt group becomes a [`LodGroup`]: `error` = the error of the clusters that replace
 //!   it, *accumulated* from the input (below) in scene units (`f32::INFINITY` for terminal

@@ -1,4 +1,4 @@
-//! End-to-end tests of `terawalk build` (ISSUE3, "Tests"): small inputs written with tw-io's
+//! End-to-end tests of `terawalk build` (docs/BUILD.md and docs/FORMAT.md): small inputs written with tw-io's
 //! writers (or generated), built with [`tw_build::build`], and every check made on the store
 //! file as read back through [`tw_store::Store`]:
 //!
@@ -213,8 +213,8 @@ fn key(error: f32, s: [f32; 4]) -> [u32; 5] {
 
 /// Every cluster of every page, with the group table, as a [`LodDag`] (cluster indices in page
 /// order). The store does not record which groups a simplified cluster was made from
-/// (`refined_from`); it is rebuilt from the two kinds of simplification step (ISSUE3, "Cluster
-/// DAG model"):
+/// (`refined_from`); it is rebuilt from the two kinds of simplification step (docs/FORMAT.md,
+/// "Model" and "Group sources"):
 /// - inside a cell (a leaf node), a cluster of level `l` was made from one group of the same
 ///   node, of level `l - 1`, whose error and sphere are exactly the cluster's self error and
 ///   sphere (the bits must match, and only one group may);
@@ -956,7 +956,7 @@ fn plant_root_cut_has_no_holes() {
     check_plant(50_000, Cracks::All);
 }
 
-/// ISSUE3's large case: 200k triangles build, verify, the τ = 0 cut is the input and the cuts
+/// The large case: 200k triangles build, verify, the τ = 0 cut is the input and the cuts
 /// shrink with τ (15 s in a debug build). Cracks: see the next test.
 #[test]
 fn plant_200k() {

@@ -122,15 +122,7 @@ impl PlantSource {
     /// Checks the parameters: `triangles` must be within
     /// [`MIN_TRIANGLES`]`..=`[`MAX_TRIANGLES`].
     pub fn new(params: PlantParams) -> Result<PlantSource, ImportError> {
-        if !(MIN_TRIANGLES..=MAX_TRIANGLES).contains(&params.triangles) {
-            return Err(ImportError::unsupported(
-                "generated plant",
-                format!(
-                    "{} triangles requested; the generator makes {MIN_TRIANGLES} to {MAX_TRIANGLES}",
-                    params.triangles
-                ),
-            ));
-        }
+        check_triangles("generated plant", params.triangles, MIN_TRIANGLES..=MAX_TRIANGLES)?;
         Ok(PlantSource { params })
     }
 
@@ -178,6 +170,22 @@ impl TriangleSource for PlantSource {
         debug_assert_eq!(e.triangles(), site.triangles);
         Ok(SourceSummary { objects: e.objects(), vertices: e.vertices(), bytes: 0 })
     }
+}
+
+/// A generator's size check: `triangles` within `range`, else an error naming the generator.
+pub(crate) fn check_triangles(
+    what: &str,
+    triangles: u64,
+    range: std::ops::RangeInclusive<u64>,
+) -> Result<(), ImportError> {
+    if range.contains(&triangles) {
+        return Ok(());
+    }
+    let (min, max) = range.into_inner();
+    Err(ImportError::unsupported(
+        what,
+        format!("{triangles} triangles requested; the generator makes {min} to {max}"),
+    ))
 }
 
 /// The site's bounds, computed without generating: every generated triangle lies inside.

@@ -114,16 +114,8 @@ impl AssemblySource {
     /// Checks the parameters: `triangles` must be within
     /// [`MIN_ASSEMBLY_TRIANGLES`]`..=`[`MAX_ASSEMBLY_TRIANGLES`].
     pub fn new(params: AssemblyParams) -> Result<AssemblySource, ImportError> {
-        if !(MIN_ASSEMBLY_TRIANGLES..=MAX_ASSEMBLY_TRIANGLES).contains(&params.triangles) {
-            return Err(ImportError::unsupported(
-                "generated assembly",
-                format!(
-                    "{} triangles requested; the generator makes {MIN_ASSEMBLY_TRIANGLES} to \
-                     {MAX_ASSEMBLY_TRIANGLES}",
-                    params.triangles
-                ),
-            ));
-        }
+        let range = MIN_ASSEMBLY_TRIANGLES..=MAX_ASSEMBLY_TRIANGLES;
+        super::check_triangles("generated assembly", params.triangles, range)?;
         Ok(AssemblySource { params })
     }
 
