@@ -299,8 +299,9 @@ pub fn redefine(ing: &Ingested, params: &RedefineParams) -> Result<Redefined, Bu
             .filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_)))
             .map(|q| pieces.count[q])
             .sum();
-        let cut_objects =
-            (0..ing.objects.len()).filter(|&o| matches!(assign.object_piece[o], Route::Plan(_))).count();
+        let cut_objects = (0..ing.objects.len())
+            .filter(|&o| matches!(assign.object_piece[o], ObjectRoute::Plan(_)))
+            .count();
         tracing::debug!(cut_piece_triangles = cut, split_objects = cut_objects, "partition-II routes");
     }
     let cells = cell_stats(ing, &assign, &pieces, &piece_object, cell_count)?;
@@ -482,7 +483,14 @@ fn walk(kd: &[KdNode], mut n: u32, c: [f32; 3]) -> u32 {
 enum Route {
     Fixed(u32),
     Plan(u32),
-    /// Split at its part groups (`crate::parts`): index into [`Assigner::parts`].
+}
+
+/// Where an object's triangle goes in partition-I: a [`Route`] to a piece, or, for an object
+/// split at its part groups (`crate::parts`), the group's piece (index into [`Assigner::parts`]).
+#[derive(Clone, Copy, Debug)]
+enum ObjectRoute {
+    Fixed(u32),
+    Plan(u32),
     Parts(u32),
 }
 
@@ -502,8 +510,8 @@ struct Assigner {
     /// Partition-II plans; leaves are cell ids.
     plan2: Vec<KdNode>,
     /// Per object.
-    object_piece: Vec<Route>,
-    /// The objects split at their part groups (`Route::Parts`).
+    object_piece: Vec<ObjectRoute>,
+    /// The objects split at their part groups (`ObjectRoute::Parts`).
     parts: Vec<PartRoute>,
     /// Per piece.
     piece_cell: Vec<Route>,
@@ -535,9 +543,9 @@ impl Assigner {
     #[inline]
     fn piece(&self, t: &WorkTri, index: u64) -> u32 {
         match self.object_piece[t.object as usize] {
-            Route::Fixed(p) => p,
-            Route::Plan(root) => walk(&self.plan1, root, t.centroid()),
-            Route::Parts(k) => self.parts[k as usize].piece(index),
+            ObjectRoute::Fixed(p) => p,
+            ObjectRoute::Plan(root) => walk(&self.plan1, root, t.centroid()),
+            ObjectRoute::Parts(k) => self.parts[k as usize].piece(index),
         }
     }
 
@@ -546,7 +554,6 @@ impl Assigner {
         match self.piece_cell[self.piece(t, index) as usize] {
             Route::Fixed(c) => c,
             Route::Plan(root) => walk(&self.plan2, root, t.centroid()),
-            Route::Parts(_) => u32::MAX,
         }
     }
 
@@ -844,7 +851,7 @@ fn partition_objects(
     report: &mut RedefineReport,
 ) -> Vec<u32> {
     let mut piece_object = Vec::with_capacity(ing.objects.len());
-    assign.object_piece = vec![Route::Fixed(u32::MAX); ing.objects.len()];
+    assign.object_piece = vec![ObjectRoute::Fixed(u32::MAX); ing.objects.len()];
     for (o, rec) in ing.objects.iter().enumerate() {
         if rec.triangles == 0 {
             continue;
@@ -854,7 +861,7 @@ fn partition_objects(
         let first = piece_object.len() as u32;
         if needs && !rec.part_starts.is_empty() {
             // Between its parts rather than through them (crate::parts).
-            assign.object_piece[o] = Route::Parts(assign.parts.len() as u32);
+            assign.object_piece[o] = ObjectRoute::Parts(assign.parts.len() as u32);
             assign.parts.push(PartRoute {
                 first_piece: first,
                 span_start: rec.span.start,
@@ -870,7 +877,7 @@ fn partition_objects(
                 P1 { p, scale, kd: &mut assign.plan1, piece_object: &mut piece_object, object: o as u32 };
             let root = ctx.split(pts, rec.triangles as f64, ext);
             if piece_object.len() as u32 > first + 1 {
-                assign.object_piece[o] = Route::Plan(root);
+                assign.object_piece[o] = ObjectRoute::Plan(root);
                 report.split_objects += 1;
                 continue;
             }
@@ -878,7 +885,7 @@ fn partition_objects(
             assign.plan1.truncate(root as usize);
             piece_object.truncate(first as usize);
         }
-        assign.object_piece[o] = Route::Fixed(first);
+        assign.object_piece[o] = ObjectRoute::Fixed(first);
         piece_object.push(o as u32);
     }
     piece_object
@@ -904,7 +911,7 @@ fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, Bu
     // A whole object is one piece, and ingest summed exactly what a scan of its triangles
     // would (count, box, centroids in file order): only the objects partition-I cut are read.
     let cut: Vec<u32> = (0..ing.objects.len() as u32)
-        .filter(|&o| !matches!(assign.object_piece[o as usize], Route::Fixed(_)))
+        .filter(|&o| !matches!(assign.object_piece[o as usize], ObjectRoute::Fixed(_)))
         .collect();
     let joined = joined_spans(&cut, |o| ing.objects[o as usize].span.clone());
     let read: u64 = joined.iter().map(|r| r.end - r.start).sum();
@@ -912,8 +919,8 @@ fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, Bu
     let mut ids = Vec::new();
     ing.work.scan_ranges_raw(&joined, |first, bytes| {
         map_records(first, bytes, &mut ids, |t, i| match assign.object_piece[t.object as usize] {
-            Route::Fixed(_) => u32::MAX,
-            Route::Plan(_) | Route::Parts(_) => assign.piece(t, i),
+            ObjectRoute::Fixed(_) => u32::MAX,
+            ObjectRoute::Plan(_) | ObjectRoute::Parts(_) => assign.piece(t, i),
         });
         for_each_lane(&mut lanes, &ids, |lane, k, p| {
             let t = WorkTri::decode(&bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
@@ -932,7 +939,7 @@ fn piece_stats(ing: &Ingested, assign: &Assigner, n: usize) -> Result<Pieces, Bu
         Ok(())
     })?;
     for (o, route) in assign.object_piece.iter().enumerate() {
-        if let (Route::Fixed(p), Some(rec)) = (route, ing.objects.get(o)) {
+        if let (ObjectRoute::Fixed(p), Some(rec)) = (route, ing.objects.get(o)) {
             let (l, j) = (&mut lanes[*p as usize % LANES], *p as usize / LANES);
             l.count[j] = rec.triangles;
             l.bounds[j] = FBox { min: rec.offset_min, max: rec.offset_max };
@@ -1259,10 +1266,10 @@ fn partition_clusters(
         for (k, (&c, q_out)) in samples.points[range.clone()].iter().zip(&mut sample_piece[range]).enumerate()
         {
             let q = match assign.object_piece[o] {
-                Route::Fixed(q) => q,
-                Route::Plan(root) => walk(&assign.plan1, root, c),
+                ObjectRoute::Fixed(q) => q,
+                ObjectRoute::Plan(root) => walk(&assign.plan1, root, c),
                 // Samples of an object split at its parts are in file order, one every `stride`.
-                Route::Parts(r) => assign.parts[r as usize].piece(span_start + k as u64 * stride),
+                ObjectRoute::Parts(r) => assign.parts[r as usize].piece(span_start + k as u64 * stride),
             };
             *q_out = q;
             if (q as usize) < n_pieces {
@@ -1390,8 +1397,6 @@ fn cell_stats(
                 None => bad = Some(ing.objects[piece_object[q] as usize].span.start),
             },
             Route::Plan(_) => cut_objects.push(piece_object[q]),
-            // Only objects are split at their parts; a piece never is.
-            Route::Parts(_) => bad = Some(ing.objects[piece_object[q] as usize].span.start),
         }
     }
     cut_objects.dedup();
@@ -1404,7 +1409,7 @@ fn cell_stats(
     let mut ids = Vec::new();
     ing.work.scan_ranges_raw(&joined, |first, bytes| {
         map_records(first, bytes, &mut ids, |t, i| match assign.piece_cell[assign.piece(t, i) as usize] {
-            Route::Fixed(_) | Route::Parts(_) => u32::MAX,
+            Route::Fixed(_) => u32::MAX,
             Route::Plan(root) => {
                 let c = walk(&assign.plan2, root, t.centroid());
                 if (c as usize) < n {
@@ -1523,7 +1528,6 @@ fn split_by_count(
         .filter(|&q| match assign.piece_cell[q] {
             Route::Fixed(c) => reaches(c),
             Route::Plan(root) => plan_has_leaf(&assign.plan2, root, reaches),
-            Route::Parts(_) => false,
         })
         .map(|q| piece_object[q])
         .collect();
