@@ -21,21 +21,40 @@
 //!    group is at its target; free parts whose radius is within the error the simplifier reached
 //!    anyway are removed too (they cost nothing). meshopt's own `Prune` option ignores locks (a
 //!    part cut by a group border would lose one half: a crack), so it is not used.
-//! 2. *Errors that bound what vanished.* The error of a removed part is its radius: every one of
-//!    its input points lies within that distance of its centre, so a part whose radius projects
-//!    below τ pixels covers less than a τ-pixel disc, the deviation the cut allows anywhere
-//!    else. A part the simplifier collapsed to nothing counts the same way (meshopt's quadric
-//!    error is an estimate, and a collapsed box reads less than its size). The group's error is
-//!    the largest of the simplifier's and those radii. To keep parts from vanishing at a
-//!    collapse's error in the first place, one triangle of every free part is locked while the
-//!    group is simplified, so that parts go only by removal, smallest first. The price of the
-//!    bound, measured on the 10^7 plant's 90-frame path: 534 k triangles in the median cut and
-//!    39.3 dB worst PSNR, against 351 k and 38.4 dB when collapsed parts keep meshopt's estimate
+//! 2. *Errors that bound what vanished.* The error of a removed part is the radius of the input
+//!    part it is made of (half its box diagonal at level 0): every one of that part's input
+//!    points lies within that distance of its centre, so a part whose radius projects below τ
+//!    pixels covers less than a τ-pixel disc, the deviation the cut allows anywhere else. The
+//!    input part's, not the current one's: the simplifier may have shrunk it at a quadric error
+//!    that reads less than the shrinking. A part the simplifier collapsed to nothing counts the
+//!    same way (a collapsed box reads less than its size). The group's error is the largest of
+//!    the simplifier's and those radii. To keep parts from vanishing at a collapse's error in
+//!    the first place, one triangle of every free part is locked while the group is
+//!    simplified, so that parts go only by removal, smallest first. The price of the bound,
+//!    measured on the 10^7 plant's 90-frame path: 534 k triangles in the median cut and 39.3 dB
+//!    worst PSNR, against 351 k and 38.4 dB when collapsed parts keep meshopt's estimate
 //!    (docs/benchmarks-log.md, "Assemblies", 2026-12-06).
+//! 3. *Errors that grow step by step.* Reaching the target at any error made a group's error
+//!    jump: to halve a group of small parts, parts up to the median size had to go, and the
+//!    largest of them set the error of the whole group, ten times its clusters' (the overview
+//!    of the 24 M assembly drew 3.4 M triangles from groups whose next step was 8–16 times
+//!    coarser). So a group is first simplified within a limit of 2, then 4, then 8 times its
+//!    clusters' largest error, removing free parts up to the limit, and the first try that
+//!    keeps at most 60 % of the triangles ([`DagConfig::accept`]) is kept; only a group that no
+//!    try reduces enough is simplified to its target at any error, as before. With this rule and
+//!    the two below, the 24 M assembly's overview cut fell from 3.98 M to 1.44 M triangles, at
+//!    1.85× the input over all levels instead of 1.83×. Keeping tries that remove only a fifth
+//!    gave 1.34 M, but 2.29× on the KiCad boards, whose levels then shrink too slowly
+//!    (docs/benchmarks-log.md, "Assemblies", session 26).
 //!
-//! Parts with a locked vertex are never removed, so the group's border, and a cell's seams, stay
-//! as they were: the cut stays crack-free. A group whose output would be empty keeps its largest
-//! part whole (clusterlod keeps one triangle, whose edges would be open).
+//! Parts with an *anchored* vertex (shared with another group of the round, frozen, or on a
+//! seam with another cell) are never removed, so the group's border, and a cell's seams, stay as
+//! they were: the cut stays crack-free. A vertex on a tangled edge (non-manifold, inconsistently
+//! wound) is locked for the simplifier but anchors nothing: a part whose only locks are its own
+//! tangled edges lies wholly inside the group and is removed whole like any other (on the 24 M
+//! assembly, where touching boxes weld into non-manifold edges, 2.6 M kept triangles were such
+//! parts). A group whose output would be empty keeps its largest part whole (clusterlod keeps
+//! one triangle, whose edges would be open).
 //!
 //! **Locks.** As in clusterlod, a vertex used by two groups of a round is locked for that round.
 //! Unlike clusterlod, a vertex of a terminal group's clusters stays locked in every later round:
@@ -62,13 +81,27 @@ pub(crate) struct DagConfig {
     pub ratio: f32,
     /// A group that keeps more than this fraction of its triangles is terminal.
     pub threshold: f32,
+    /// Error limits tried first, as multiples of the group's largest cluster error.
+    pub growth: [f32; 3],
+    /// A try within a limit is kept when it keeps at most this fraction of the triangles.
+    pub accept: f32,
 }
 
 impl DagConfig {
     /// clusterlod's defaults (partition size 16, ratio ½, threshold 0.85) for clusters of
-    /// `max_triangles` and `max_vertices`.
+    /// `max_triangles` and `max_vertices`, and the error ladder of rule 3 (module comment):
+    /// limits of 2, 4 and 8 times the group's cluster error, a try kept when it keeps at most 60 %
+    /// of the triangles.
     pub fn new(max_triangles: usize, max_vertices: usize) -> DagConfig {
-        DagConfig { max_triangles, max_vertices, partition_size: 16, ratio: 0.5, threshold: 0.85 }
+        DagConfig {
+            max_triangles,
+            max_vertices,
+            partition_size: 16,
+            ratio: 0.5,
+            threshold: 0.85,
+            growth: [2.0, 4.0, 8.0],
+            accept: 0.6,
+        }
     }
 }
 
@@ -115,7 +148,10 @@ struct Cluster {
 }
 
 /// Builds the DAG of `indices` over `positions`. `vertex_lock` (one per vertex) marks vertices
-/// that must never move (seams with other cells, tangled edges). `output(group, clusters)` is
+/// that must never move (seams with other cells, tangled edges); `anchor` (one per vertex) marks
+/// those of them where the surface goes on outside the mesh (the seams): a part with one is
+/// never removed, while a part that is only tangled is still removed whole (module comment,
+/// "Locks"). `output(group, clusters)` is
 /// called for every group, in an order where a cluster's source group always comes first, with
 /// the group's bounds and the clusters it replaces; it returns the group's id, which the
 /// clusters simplified from it carry in [`DagCluster::refined`].
@@ -124,9 +160,11 @@ pub(crate) fn build_dag(
     positions: &[[f32; 3]],
     indices: &[u32],
     vertex_lock: &[SimplifyVertex],
+    anchor: &[bool],
     mut output: impl FnMut(DagBounds, &[DagCluster<'_>]) -> i32,
 ) -> DagStats {
     let vertices = crate::lod::adapter(positions);
+    let input_radius = input_part_radius(positions, indices);
     let mut stats = DagStats::default();
     let mut cluster_indices: Vec<u32> = Vec::new();
     let mut clusters: Vec<Cluster> = Vec::new();
@@ -148,6 +186,7 @@ pub(crate) fn build_dag(
     };
 
     let mut locks = vec![SimplifyVertex::None; positions.len()];
+    let mut anchored = vec![false; positions.len()];
     let mut last_group = vec![u32::MAX; positions.len()];
     // Vertices of terminal groups' clusters: those clusters stay in every cut above them, so
     // their vertices stay where they are for good (module comment, "Locks").
@@ -156,11 +195,12 @@ pub(crate) fn build_dag(
         let offsets = partition(&mut clusters, &cluster_indices, config, &vertices);
         lock_group_borders(
             &mut locks,
+            &mut anchored,
             &mut last_group,
             &clusters,
             &offsets,
             &cluster_indices,
-            vertex_lock,
+            (vertex_lock, anchor),
             &frozen,
         );
         let mut pending: Vec<Cluster> = Vec::new();
@@ -173,8 +213,16 @@ pub(crate) fn build_dag(
                 .collect();
             let target = ((merged.len() / 3) as f32 * config.ratio) as usize;
             let mut bounds = merge_bounds(group);
-            let (simplified, error) =
-                simplify_group(positions, &vertices, &merged, &mut locks, target, &mut stats);
+            let (simplified, error) = simplify_group(
+                &vertices,
+                &merged,
+                &mut locks,
+                (&anchored, &input_radius),
+                target,
+                bounds.error,
+                config,
+                &mut stats,
+            );
             if simplified.len() as f32 > merged.len() as f32 * config.threshold {
                 bounds.error = f32::MAX;
                 stats.terminal += 1;
@@ -276,14 +324,18 @@ fn partition(
     offsets
 }
 
-/// Locks every vertex used by two groups, every `frozen` one, and every one `vertex_lock` locks.
+/// Locks every vertex used by two groups, every `frozen` one, and every one the caller's
+/// `vertex_lock` locks; marks in `anchored` those of them that tie a part to something outside
+/// its group (all but the caller's locks that are not `anchor`s: tangled edges).
+#[allow(clippy::too_many_arguments)]
 fn lock_group_borders(
     locks: &mut [SimplifyVertex],
+    anchored: &mut [bool],
     last_group: &mut [u32],
     clusters: &[Cluster],
     offsets: &[usize],
     cluster_indices: &[u32],
-    vertex_lock: &[SimplifyVertex],
+    (vertex_lock, anchor): (&[SimplifyVertex], &[bool]),
     frozen: &[bool],
 ) {
     let mut shared = vec![false; locks.len()];
@@ -299,8 +351,9 @@ fn lock_group_borders(
             }
         }
     }
-    for (v, lock) in locks.iter_mut().enumerate() {
+    for (v, (lock, anchored)) in locks.iter_mut().zip(anchored.iter_mut()).enumerate() {
         let fixed = vertex_lock.get(v).copied().unwrap_or(SimplifyVertex::None);
+        *anchored = shared[v] || frozen[v] || anchor.get(v).copied().unwrap_or(false);
         *lock = if shared[v] || frozen[v] { SimplifyVertex::Lock } else { fixed };
     }
 }
@@ -330,15 +383,44 @@ fn merge_bounds(clusters: &[Cluster]) -> DagBounds {
 
 /// Simplifies one group to about `target` triangles with its locks; returns the triangles and
 /// the error (module comment for the rules on parts). `locks` is restored before returning.
+#[allow(clippy::too_many_arguments)]
 fn simplify_group(
-    positions: &[[f32; 3]],
+    vertices: &VertexDataAdapter<'_>,
+    merged: &[u32],
+    locks: &mut [SimplifyVertex],
+    (anchored, input_radius): (&[bool], &[f32]),
+    target: usize,
+    child_error: f32,
+    config: &DagConfig,
+    stats: &mut DagStats,
+) -> (Vec<u32>, f32) {
+    let parts = Parts::new(merged, anchored, input_radius);
+    let accept = (merged.len() / 3) as f32 * config.accept;
+    if child_error > 0.0 {
+        for growth in config.growth {
+            let limit = child_error * growth;
+            let (out, error, removed) = simplify_parts(&parts, vertices, merged, locks, target, limit);
+            if (out.len() / 3) as f32 <= accept {
+                stats.pruned_triangles += removed;
+                return (out, error);
+            }
+        }
+    }
+    let (out, error, removed) = simplify_parts(&parts, vertices, merged, locks, target, f32::MAX);
+    stats.pruned_triangles += removed;
+    (out, error)
+}
+
+/// One try of [`simplify_group`]: simplification within `limit` and removal of free parts of
+/// radius ≤ `limit`. Returns the triangles, the error and the triangles removed as parts.
+fn simplify_parts(
+    parts: &Parts,
     vertices: &VertexDataAdapter<'_>,
     merged: &[u32],
     locks: &mut [SimplifyVertex],
     target: usize,
-    stats: &mut DagStats,
-) -> (Vec<u32>, f32) {
-    let parts = Parts::new(positions, merged, locks);
+    limit: f32,
+) -> (Vec<u32>, f32, usize) {
     // The simplifier may reduce a free part but not make it vanish (one of its triangles is
     // locked): parts go only by `prune_free`, smallest first, each charged its radius. Left to
     // itself, the simplifier collapses whole parts wherever that is cheapest in its quadric
@@ -350,15 +432,8 @@ fn simplify_group(
     }
     let options = SimplifyOptions::Sparse | SimplifyOptions::ErrorAbsolute | SimplifyOptions::Permissive;
     let mut error = 0.0f32;
-    let mut out = meshopt::simplify_with_locks(
-        merged,
-        vertices,
-        locks,
-        target * 3,
-        f32::MAX,
-        options,
-        Some(&mut error),
-    );
+    let mut out =
+        meshopt::simplify_with_locks(merged, vertices, locks, target * 3, limit, options, Some(&mut error));
     for (&v, &l) in pinned.iter().zip(&saved).rev() {
         locks[v as usize] = l;
     }
@@ -371,9 +446,36 @@ fn simplify_group(
     // A part the simplifier collapsed away is gone as if it had been removed: its radius bounds
     // the error there (meshopt's quadric error is an estimate, lower on a collapsed part).
     error = error.max(parts.vanished_radius(&count));
-    let (removed, radius) = parts.prune_free(&mut out, &count, target, error);
-    stats.pruned_triangles += removed;
-    (out, error.max(radius))
+    let (removed, radius) = parts.prune_free(&mut out, &count, target, error, limit);
+    (out, error.max(radius), removed)
+}
+
+/// Per vertex: the radius (half the box diagonal) of the connected part of the input triangles
+/// it belongs to; 0 for a vertex on no triangle. Simplification only moves vertices onto
+/// others of their part, so a part of any level is made of one input part, and that part's
+/// radius bounds the distance of each of its input points from its centre, however the part
+/// was simplified before (the simplifier's error is a quadric estimate: a part it shrank would
+/// read smaller than what it stands for).
+fn input_part_radius(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
+    let mut parts = UnionFind::new(positions.len());
+    parts.union_triangles(indices, |v| v);
+    let mut lo = vec![[f32::MAX; 3]; positions.len()];
+    let mut hi = vec![[f32::MIN; 3]; positions.len()];
+    for &v in indices {
+        let root = parts.find(v) as usize;
+        let q = positions[v as usize];
+        for i in 0..3 {
+            lo[root][i] = lo[root][i].min(q[i]);
+            hi[root][i] = hi[root][i].max(q[i]);
+        }
+    }
+    let mut radius = vec![0.0f32; positions.len()];
+    for &v in indices {
+        let root = parts.find(v) as usize;
+        let d2: f64 = (0..3).map(|i| (hi[root][i] as f64 - lo[root][i] as f64).powi(2)).sum();
+        radius[v as usize] = crate::lod::round_up(d2.sqrt() * 0.5);
+    }
+    radius
 }
 
 /// The connected parts of a group's input triangles: per part, its bounding radius and whether
@@ -383,14 +485,15 @@ struct Parts {
     local: rustc_hash::FxHashMap<u32, u32>,
     /// Per local vertex: its part.
     part_of: Vec<u32>,
-    /// Per part: half its box diagonal, whether a vertex is locked, its first input triangle.
+    /// Per part: the radius of the input part it is made of ([`input_part_radius`]), whether a
+    /// vertex is anchored, its first triangle.
     radius: Vec<f32>,
     locked: Vec<bool>,
     first: Vec<usize>,
 }
 
 impl Parts {
-    fn new(positions: &[[f32; 3]], merged: &[u32], locks: &[SimplifyVertex]) -> Parts {
+    fn new(merged: &[u32], anchored: &[bool], input_radius: &[f32]) -> Parts {
         // Union-find over the group's vertices, numbered densely in order of first use.
         let mut local: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
         for &v in merged {
@@ -400,37 +503,23 @@ impl Parts {
         let mut parts = UnionFind::new(local.len());
         parts.union_triangles(merged, |v| local[&v]);
         let mut number = vec![u32::MAX; local.len()];
-        let mut lo: Vec<[f32; 3]> = Vec::new();
-        let mut hi: Vec<[f32; 3]> = Vec::new();
+        let mut radius: Vec<f32> = Vec::new();
         let mut locked: Vec<bool> = Vec::new();
         let mut first: Vec<usize> = Vec::new();
         for (ti, t) in merged.chunks_exact(3).enumerate() {
             let root = parts.find(local[&t[0]]) as usize;
             if number[root] == u32::MAX {
-                number[root] = lo.len() as u32;
-                lo.push([f32::MAX; 3]);
-                hi.push([f32::MIN; 3]);
+                number[root] = radius.len() as u32;
+                radius.push(0.0);
                 locked.push(false);
                 first.push(ti);
             }
             let p = number[root] as usize;
             for &v in t {
-                let q = positions[v as usize];
-                for i in 0..3 {
-                    lo[p][i] = lo[p][i].min(q[i]);
-                    hi[p][i] = hi[p][i].max(q[i]);
-                }
-                locked[p] |= locks[v as usize] != SimplifyVertex::None;
+                radius[p] = radius[p].max(input_radius[v as usize]);
+                locked[p] |= anchored[v as usize];
             }
         }
-        let radius = lo
-            .iter()
-            .zip(&hi)
-            .map(|(l, h)| {
-                let d2: f64 = (0..3).map(|i| (h[i] as f64 - l[i] as f64).powi(2)).sum();
-                crate::lod::round_up(d2.sqrt() * 0.5)
-            })
-            .collect();
         // Every vertex is on a triangle, so every root has its number.
         let part_of = (0..local.len() as u32).map(|i| number[parts.find(i) as usize]).collect();
         Parts { local, part_of, radius, locked, first }
@@ -482,6 +571,7 @@ impl Parts {
         count: &[usize],
         target: usize,
         free_below: f32,
+        limit: f32,
     ) -> (usize, f32) {
         let mut order: Vec<usize> = (0..count.len()).filter(|&p| count[p] > 0 && !self.locked[p]).collect();
         order.sort_by(|&a, &b| {
@@ -491,7 +581,7 @@ impl Parts {
         let mut remove = vec![false; count.len()];
         let mut radius = 0.0f32;
         for p in order {
-            if (left <= target && self.radius[p] > free_below) || left == count[p] {
+            if (left <= target && self.radius[p] > free_below) || left == count[p] || self.radius[p] > limit {
                 break;
             }
             left -= count[p];

@@ -128,15 +128,9 @@ pub fn build_cell_lod_with_seams(
     let local = frame.local_positions(&mesh.positions);
     let vertex_object = vertex_objects(n, &indices, &objects);
     let (open, tangled) = boundary_kinds(n, &indices);
+    let anchors: Vec<bool> = (0..n).map(|v| open[v] && seam(mesh.positions[v])).collect();
     let locks: Vec<SimplifyVertex> = (0..n)
-        .map(|v| {
-            let lock = tangled[v] || (open[v] && seam(mesh.positions[v]));
-            if lock {
-                SimplifyVertex::Lock
-            } else {
-                SimplifyVertex::None
-            }
-        })
+        .map(|v| if tangled[v] || anchors[v] { SimplifyVertex::Lock } else { SimplifyVertex::None })
         .collect();
     let mut originals = OriginalTriangles::new(n, &indices, &objects);
 
@@ -155,7 +149,7 @@ pub fn build_cell_lod_with_seams(
     let mut raw_groups: Vec<RawGroup> = Vec::new();
     let mut refined: Vec<i32> = Vec::new();
     let mut clusters: Vec<LodCluster> = Vec::new();
-    let dag_stats = build_dag(&config, &local, &indices, &locks, |s, out| {
+    let dag_stats = build_dag(&config, &local, &indices, &locks, &anchors, |s, out| {
         let id = raw_groups.len() as u32;
         let mut members = Vec::with_capacity(out.len());
         for c in out {

@@ -172,7 +172,10 @@ pub(crate) fn emit(
             None => Frame::at(add(origin, [1.0, 1.0, RACK_TOP])),
         };
         let r = runs.last().map_or(0.1, |r| r.r);
-        e.disc(&f, r, 0.0, rest as u32, true);
+        // Set a little into the pipe: at its very end the cap would lie in the plane of the
+        // nozzle flange's face there, and two coplanar faces show whichever is drawn first.
+        let z = if runs.is_empty() { 0.0 } else { -0.05 * r };
+        e.disc(&f, r, z, rest as u32, true);
     }
 }
 
