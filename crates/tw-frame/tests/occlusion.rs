@@ -1,14 +1,16 @@
 //! Occlusion culling is conservative (docs/DESIGN.md "Measuring"): with the same LOD cut, every
 //! strategy gives the image of `--occlusion none`, pixel for pixel, on a walk through a generated
-//! plant's interior (smooth camera motion) and on camera teleports (the two-pass scheme draws the
-//! newly visible clusters in the same frame). Each strategy must also cull something on the walk,
-//! so the comparison is not trivially true. `hzb` runs with its hierarchical tests (skeleton
-//! nodes, then groups, then clusters) in every frame and with the flat test: the images are
-//! those of `none` and the triangles drawn the same, and its culling gives the same clusters
-//! and images on one thread as on several. The same with 4× multisampling (tw_gpu::msaa: the
-//! tests then treat a pixel as its four samples; Vulkan only, GL refuses it). On GL (llvmpipe)
-//! and Vulkan (lavapipe); without an
-//! adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.
+//! plant's interior (smooth camera motion), on camera teleports (the two-pass scheme draws the
+//! newly visible clusters in the same frame) and on the approach to a generated CAD assembly in one
+//! object (thousands of small closed parts in millimetres behind thin cabinet panels: other
+//! occluders and other LOD than the plant's). Each strategy must also cull something on the walk
+//! and on the approach, so the comparison is not trivially true. `hzb` runs with its hierarchical
+//! tests (skeleton nodes, then groups, then clusters) in every frame and with the flat test: the
+//! images are those of `none` and the triangles drawn the same, and its culling gives the same
+//! clusters and images on one thread as on several. The same with 4× multisampling (tw_gpu::msaa:
+//! the tests then treat a pixel as its four samples; Vulkan only, GL refuses it). On GL (llvmpipe)
+//! and Vulkan (lavapipe); without an adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1`
+//! (CI), where they fail.
 
 use std::sync::{Arc, OnceLock};
 
@@ -23,9 +25,17 @@ mod common;
 
 use common::{gpu_lock, Built};
 
-fn store() -> Arc<Store> {
+/// The plant of the walk and the teleports.
+fn plant() -> Arc<Store> {
     static STORE: OnceLock<Built> = OnceLock::new();
     STORE.get_or_init(|| common::build_plant(200_000, 3)).store.clone()
+}
+
+/// The assembly of the approach: 300 k triangles, a few boards in one cabinet, small enough for
+/// a debug test build.
+fn assembly() -> Arc<Store> {
+    static STORE: OnceLock<Built> = OnceLock::new();
+    STORE.get_or_init(|| common::build_assembly(300_000, 1)).store.clone()
 }
 
 /// A walk at eye height inside the plant (smooth), every third frame of 72.
@@ -33,6 +43,14 @@ fn walk_cameras(store: &Store) -> Vec<Camera> {
     let options = PathOptions { frames: 72, part: PathPart::Walk, seed: 2, ..Default::default() };
     let path = generate_path(store, &options, &mut |_, _, _| {}).unwrap().path;
     path.frames.iter().step_by(3).map(|f| f.to_scene(store.header()).unwrap()).collect()
+}
+
+/// The approach to an assembly (crates/tw-runtime/src/pathgen/approach.rs): from the overview
+/// of the whole model to a close oblique view, spiralling in, in 16 frames.
+fn approach_cameras(store: &Store) -> Vec<Camera> {
+    let options = PathOptions { frames: 16, part: PathPart::Approach, ..Default::default() };
+    let path = generate_path(store, &options, &mut |_, _, _| {}).unwrap().path;
+    path.frames.iter().map(|f| f.to_scene(store.header()).unwrap()).collect()
 }
 
 /// What one strategy did over a camera list.
@@ -51,13 +69,19 @@ struct Run {
     triangles: u64,
 }
 
-/// Renders `cameras` with each strategy (the same cut: pages loaded before drawing; `hzb` with
-/// triangle tests, without, and switching between the two every frame) and checks every image
-/// against `none`, at `samples` per pixel.
-fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera], samples: u32) -> Option<Vec<Run>> {
+/// Renders `cameras` of `store` with each strategy (the same cut: pages loaded before drawing;
+/// `hzb` with triangle tests, without, and switching between the two every frame) and checks
+/// every image against `none`, at `samples` per pixel.
+fn compare(
+    store: Arc<Store>,
+    cameras: &[Camera],
+    backends: wgpu::Backends,
+    what: &str,
+    samples: u32,
+) -> Option<Vec<Run>> {
     let _lock = gpu_lock();
     let mut baseline = Vec::new();
-    let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
+    let mut w = common::walkthrough(store, backends, what, 256 << 20)?;
     w.renderer_mut().set_samples(samples).unwrap();
     for c in cameras {
         let s = FrameSettings {
@@ -122,9 +146,24 @@ fn compare(backends: wgpu::Backends, what: &str, cameras: &[Camera], samples: u3
 }
 
 fn conservative_on_a_walk(backends: wgpu::Backends, what: &str, samples: u32) {
-    let cameras = walk_cameras(&store());
-    let Some(runs) = compare(backends, what, &cameras, samples) else { return };
+    let cameras = walk_cameras(&plant());
+    let Some(runs) = compare(plant(), &cameras, backends, what, samples) else { return };
+    check_culling(&runs, cameras.len(), what, "inside the plant");
+    // The plant's halls and tanks hide whole cells of its spatial hierarchy from a walker, so
+    // the node tests must have culled some: else the hierarchy went untested.
     for r in &runs {
+        if matches!(r.strategy, Occlusion::Queries | Occlusion::Hzb) && r.hierarchy.nodes {
+            assert!(r.nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
+        }
+    }
+}
+
+/// What every run of smooth camera motion (`runs` over `frames` frames, `where_` for the
+/// messages) must show besides identical images: each strategy culled clusters, the
+/// hierarchical and flat tests drew the same triangles, and the triangle tests culled
+/// triangles.
+fn check_culling(runs: &[Run], frames: usize, what: &str, where_: &str) {
+    for r in runs {
         eprintln!(
             "{what}, {} (triangle tests {}, {:?}): {} clusters culled over {} frames ({} of {} node boxes \
              hidden), {} triangles drawn",
@@ -132,36 +171,51 @@ fn conservative_on_a_walk(backends: wgpu::Backends, what: &str, samples: u32) {
             r.triangle_culling,
             r.hierarchy,
             r.culled,
-            cameras.len(),
+            frames,
             r.nodes_hidden,
             r.node_tests,
             r.triangles
         );
-        assert!(r.culled > 0, "{what}, {}: culled nothing inside the plant", r.strategy.name());
-        if matches!(r.strategy, Occlusion::Queries | Occlusion::Hzb) && r.hierarchy.nodes {
-            assert!(r.nodes_hidden > 0, "{what}: no node test culled anything: the hierarchy went untested");
-        }
+        assert!(r.culled > 0, "{what}, {}: culled nothing {where_}", r.strategy.name());
     }
     // The hierarchical tests cull what the flat test culls: the same triangles are drawn.
     let (hierarchical, flat) = (runs[0].triangles, runs[5].triangles);
     assert_eq!(
         hierarchical, flat,
-        "{what}: hzb drew {hierarchical} triangles with node tests, {flat} without"
+        "{what}: hzb drew {hierarchical} triangles with node tests, {flat} without {where_}"
     );
     // The triangle tests must cull triangles, or the identical images above prove nothing
     // about them.
     let (with, without) = (runs[0].triangles, runs[1].triangles);
     assert!(
         with < without * 3 / 4,
-        "{what}: hzb's triangle tests drew {with} triangles, whole clusters {without}"
+        "{what}: hzb's triangle tests drew {with} triangles, whole clusters {without} {where_}"
     );
 }
 
 fn conservative_on_teleports(backends: wgpu::Backends, what: &str, samples: u32) {
     // Jumps between far-apart walk cameras: last frame's visible set is useless as occluders.
-    let walk = walk_cameras(&store());
+    let walk = walk_cameras(&plant());
     let cameras: Vec<Camera> = (0..8).map(|i| walk[(i * 7) % walk.len()]).collect();
-    compare(backends, what, &cameras, samples);
+    compare(plant(), &cameras, backends, what, samples);
+}
+
+/// Conservative on the approach to the assembly. No node box need be hidden there: the cells
+/// of its card cage are slices of boards standing on edge, each box reaching from the board's
+/// front panel, which the camera in front of the cabinet sees, to its rear connector; what
+/// hzb culls are clusters behind the front panels (components, the backplane).
+fn conservative_on_an_approach(backends: wgpu::Backends, what: &str, samples: u32) {
+    let cameras = approach_cameras(&assembly());
+    let Some(runs) = compare(assembly(), &cameras, backends, what, samples) else { return };
+    check_culling(&runs, cameras.len(), what, "on the approach to the assembly");
+}
+
+fn conservative_on_assembly_teleports(backends: wgpu::Backends, what: &str) {
+    // Jumps between the close view of the cabinet's roof and views of its front: last frame's
+    // visible set hides nothing of the next.
+    let approach = approach_cameras(&assembly());
+    let cameras: Vec<Camera> = [15, 0, 12, 3, 9, 5, 14, 1].iter().map(|&i| approach[i]).collect();
+    compare(assembly(), &cameras, backends, what, 1);
 }
 
 #[test]
@@ -185,6 +239,41 @@ fn occlusion_is_conservative_on_teleports_gl() {
 }
 
 #[test]
+fn occlusion_is_conservative_on_an_assembly_approach_vulkan() {
+    conservative_on_an_approach(wgpu::Backends::VULKAN, "vulkan, assembly", 1);
+}
+
+#[test]
+fn occlusion_is_conservative_on_an_assembly_approach_gl() {
+    conservative_on_an_approach(wgpu::Backends::GL, "gl, assembly", 1);
+}
+
+#[test]
+fn occlusion_is_conservative_on_assembly_teleports_vulkan() {
+    conservative_on_assembly_teleports(wgpu::Backends::VULKAN, "vulkan, assembly");
+}
+
+/// Fails on llvmpipe GL, by draw order and not by culling: in frame 5 (approach frame 5,
+/// after the close view of the roof) pixels (253, 260) and (256, 265) show, in `none`, a back
+/// face of a 4.6 × 6 × 222 mm bar (x = 293.1 mm, page 69 cluster 63 triangle 21) and, in
+/// `hzb` with triangle tests, the bar's top face (z = 416 mm, cluster 64 triangle 116), which
+/// shares an edge with it. Both cover the pixel centres; the top face is nearer by 1.4·10⁻⁸ in
+/// reverse-Z depth (6.131 against 6.117·10⁻⁶, about 4 mm at 1.8 m), far below GL's depth
+/// rounding (`tw_gpu::GL_DEPTH_ROUNDING`, 4.8·10⁻⁷), so both are stored as 6.1186265·10⁻⁶ and
+/// the `Greater` depth test keeps the first drawn. Drawing `none`'s clusters with only those
+/// two swapped gives `hzb`'s image exactly. Vulkan stores the depths apart and passes.
+#[test]
+#[ignore = "GL depth rounding makes two faces of one small part tie; the winner is draw order"]
+fn occlusion_is_conservative_on_assembly_teleports_gl() {
+    conservative_on_assembly_teleports(wgpu::Backends::GL, "gl, assembly");
+}
+
+#[test]
+fn occlusion_is_conservative_with_msaa_on_an_assembly_approach_vulkan() {
+    conservative_on_an_approach(wgpu::Backends::VULKAN, "vulkan, 4 samples, assembly", 4);
+}
+
+#[test]
 fn occlusion_is_conservative_with_msaa_on_a_walk_vulkan() {
     conservative_on_a_walk(wgpu::Backends::VULKAN, "vulkan, 4 samples", 4);
 }
@@ -196,13 +285,12 @@ fn occlusion_is_conservative_with_msaa_on_teleports_vulkan() {
 
 /// `hzb`'s culling gives the same clusters drawn and hidden, and the same images, in a rayon
 /// pool of one thread as in one of several (its tests, look-ups and history run in parallel).
-fn parallel_equals_serial(backends: wgpu::Backends, what: &str) {
+fn parallel_equals_serial(store: Arc<Store>, cameras: &[Camera], backends: wgpu::Backends, what: &str) {
     let _lock = gpu_lock();
-    let cameras = walk_cameras(&store());
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
         pool.install(|| {
-            let mut w = common::walkthrough(store(), backends, what, 256 << 20)?;
+            let mut w = common::walkthrough(store.clone(), backends, what, 256 << 20)?;
             w.set_hzb_hierarchy(HierarchyOptions::default(), true);
             let s = FrameSettings { occlusion: Occlusion::Hzb, wait_for_pages: true, ..Default::default() };
             let frames: Vec<(Vec<ClusterRef>, Vec<ClusterRef>, tw_gpu::Image)> = cameras
@@ -226,7 +314,13 @@ fn parallel_equals_serial(backends: wgpu::Backends, what: &str) {
 
 #[test]
 fn hzb_culling_on_one_thread_equals_several_vulkan() {
-    parallel_equals_serial(wgpu::Backends::VULKAN, "vulkan");
+    parallel_equals_serial(plant(), &walk_cameras(&plant()), wgpu::Backends::VULKAN, "vulkan");
+}
+
+#[test]
+fn hzb_culling_on_one_thread_equals_several_on_an_assembly_vulkan() {
+    let cameras = approach_cameras(&assembly());
+    parallel_equals_serial(assembly(), &cameras, wgpu::Backends::VULKAN, "vulkan, assembly");
 }
 
 /// The queries' visible-pixel cut-off: with sample counts (Vulkan) a cut-off culls at least
@@ -234,8 +328,8 @@ fn hzb_culling_on_one_thread_equals_several_vulkan() {
 /// with booleans (GL) it is ignored, so the images stay those of the conservative run.
 fn visible_pixel_cutoff(backends: wgpu::Backends, what: &str, counts_samples: bool) {
     let _lock = gpu_lock();
-    let cameras = walk_cameras(&store());
-    let Some(mut w) = common::walkthrough(store(), backends, what, 256 << 20) else { return };
+    let cameras = walk_cameras(&plant());
+    let Some(mut w) = common::walkthrough(plant(), backends, what, 256 << 20) else { return };
     let mut run = |cutoff: u32| {
         w.reset();
         let s = FrameSettings {
