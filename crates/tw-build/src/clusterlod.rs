@@ -191,6 +191,7 @@ pub(crate) fn build_dag(
     // Vertices of terminal groups' clusters: those clusters stay in every cut above them, so
     // their vertices stay where they are for good (module comment, "Locks").
     let mut frozen = vec![false; positions.len()];
+    let mut part_table = PartTable::new(positions.len());
     while clusters.len() > 1 {
         let offsets = partition(&mut clusters, &cluster_indices, config, &vertices);
         lock_group_borders(
@@ -217,6 +218,7 @@ pub(crate) fn build_dag(
                 &vertices,
                 &merged,
                 &mut locks,
+                &mut part_table,
                 (&anchored, &input_radius),
                 target,
                 bounds.error,
@@ -253,6 +255,11 @@ pub(crate) fn build_dag(
 
 /// Splits `indices` into clusters with meshopt's spatial clusterizer (fill weight 1: full
 /// clusters) and level-0 in-cluster reordering, appended to `clusters` (`refined` as given).
+///
+/// The reordering is the one `meshopt::build_meshlets_spatial` already applies to every meshlet
+/// (`meshopt_optimizeMeshlet`, which is level 0); running `optimize_meshlet_level(.., 0)` on its
+/// output again changed nothing (level 0 is idempotent) and was 4–5 % of a build's time.
+/// `spatial_clusters_come_reordered_at_level_0` checks that the wrapper keeps doing it.
 fn clusterize(
     clusters: &mut Vec<Cluster>,
     cluster_indices: &mut Vec<u32>,
@@ -262,7 +269,7 @@ fn clusterize(
     refined: i32,
 ) {
     let min_triangles = (config.max_triangles / 3).max(1);
-    let mut meshlets = meshopt::build_meshlets_spatial(
+    let meshlets = meshopt::build_meshlets_spatial(
         indices,
         vertices,
         config.max_vertices,
@@ -273,11 +280,6 @@ fn clusterize(
     for m in &meshlets.meshlets {
         let (v0, vn) = (m.vertex_offset as usize, m.vertex_count as usize);
         let (t0, tn) = (m.triangle_offset as usize, m.triangle_count as usize * 3);
-        meshopt::optimize_meshlet_level(
-            &mut meshlets.vertices[v0..v0 + vn],
-            &mut meshlets.triangles[t0..t0 + tn],
-            0,
-        );
         let offset = cluster_indices.len();
         let (verts, tris) = (&meshlets.vertices[v0..v0 + vn], &meshlets.triangles[t0..t0 + tn]);
         cluster_indices.extend(tris.iter().map(|&t| verts[t as usize]));
@@ -388,13 +390,14 @@ fn simplify_group(
     vertices: &VertexDataAdapter<'_>,
     merged: &[u32],
     locks: &mut [SimplifyVertex],
+    part_table: &mut PartTable,
     (anchored, input_radius): (&[bool], &[f32]),
     target: usize,
     child_error: f32,
     config: &DagConfig,
     stats: &mut DagStats,
 ) -> (Vec<u32>, f32) {
-    let parts = Parts::new(merged, anchored, input_radius);
+    let parts = Parts::new(part_table, merged, anchored, input_radius);
     let accept = (merged.len() / 3) as f32 * config.accept;
     if child_error > 0.0 {
         for growth in config.growth {
@@ -414,7 +417,7 @@ fn simplify_group(
 /// One try of [`simplify_group`]: simplification within `limit` and removal of free parts of
 /// radius ≤ `limit`. Returns the triangles, the error and the triangles removed as parts.
 fn simplify_parts(
-    parts: &Parts,
+    parts: &Parts<'_>,
     vertices: &VertexDataAdapter<'_>,
     merged: &[u32],
     locks: &mut [SimplifyVertex],
@@ -456,35 +459,61 @@ fn simplify_parts(
 /// radius bounds the distance of each of its input points from its centre, however the part
 /// was simplified before (the simplifier's error is a quadric estimate: a part it shrank would
 /// read smaller than what it stands for).
+///
+/// Walks the used vertices, not the indices (a vertex is on about six triangles), and takes the
+/// square root once per part, at its root (a root is its part's smallest vertex, so it comes
+/// first in the last sweep).
 fn input_part_radius(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
     let mut parts = UnionFind::new(positions.len());
     parts.union_triangles(indices, |v| v);
+    let mut used = vec![false; positions.len()];
+    for &v in indices {
+        used[v as usize] = true;
+    }
     let mut lo = vec![[f32::MAX; 3]; positions.len()];
     let mut hi = vec![[f32::MIN; 3]; positions.len()];
-    for &v in indices {
-        let root = parts.find(v) as usize;
-        let q = positions[v as usize];
+    for v in (0..positions.len()).filter(|&v| used[v]) {
+        let root = parts.find(v as u32) as usize;
+        let q = positions[v];
         for i in 0..3 {
             lo[root][i] = lo[root][i].min(q[i]);
             hi[root][i] = hi[root][i].max(q[i]);
         }
     }
     let mut radius = vec![0.0f32; positions.len()];
-    for &v in indices {
-        let root = parts.find(v) as usize;
-        let d2: f64 = (0..3).map(|i| (hi[root][i] as f64 - lo[root][i] as f64).powi(2)).sum();
-        radius[v as usize] = crate::lod::round_up(d2.sqrt() * 0.5);
+    for v in (0..positions.len()).filter(|&v| used[v]) {
+        let root = parts.find(v as u32) as usize;
+        radius[v] = if root == v {
+            let d2: f64 = (0..3).map(|i| (hi[v][i] as f64 - lo[v][i] as f64).powi(2)).sum();
+            crate::lod::round_up(d2.sqrt() * 0.5)
+        } else {
+            radius[root]
+        };
     }
     radius
 }
 
+/// Per vertex of the mesh: its part in the group being simplified (`u32::MAX`: not in the
+/// group). One table for the whole DAG, filled for a group's vertices by [`Parts::new`] and
+/// cleared for them when the [`Parts`] is dropped, so a group costs its own size: a hash map
+/// per group (vertex → dense id) was 6 % of a build's time on the 10 M assembly.
+struct PartTable {
+    part: Vec<u32>,
+}
+
+impl PartTable {
+    fn new(vertices: usize) -> PartTable {
+        PartTable { part: vec![u32::MAX; vertices] }
+    }
+}
+
 /// The connected parts of a group's input triangles: per part, its bounding radius and whether
-/// it has a locked vertex.
-struct Parts {
-    /// The group's vertices, numbered densely in order of first use.
-    local: rustc_hash::FxHashMap<u32, u32>,
-    /// Per local vertex: its part.
-    part_of: Vec<u32>,
+/// it has a locked vertex. Parts are numbered in order of their first triangle.
+struct Parts<'a> {
+    /// Per vertex of the mesh: its part (the group's vertices), `u32::MAX` (the others).
+    table: &'a mut PartTable,
+    /// The group's vertices, in order of first use (the entries of `table` to clear).
+    vertices: Vec<u32>,
     /// Per part: the radius of the input part it is made of ([`input_part_radius`]), whether a
     /// vertex is anchored, its first triangle.
     radius: Vec<f32>,
@@ -492,41 +521,52 @@ struct Parts {
     first: Vec<usize>,
 }
 
-impl Parts {
-    fn new(merged: &[u32], anchored: &[bool], input_radius: &[f32]) -> Parts {
-        // Union-find over the group's vertices, numbered densely in order of first use.
-        let mut local: rustc_hash::FxHashMap<u32, u32> = rustc_hash::FxHashMap::default();
+impl<'a> Parts<'a> {
+    /// `table` must be clear (all `u32::MAX`) for the vertices of `merged`; it is again once
+    /// the returned value is dropped.
+    fn new(table: &'a mut PartTable, merged: &[u32], anchored: &[bool], input_radius: &[f32]) -> Parts<'a> {
+        // Union-find over the group's vertices, numbered densely in order of first use (the
+        // table holds the dense number until the parts are known).
+        let mut vertices: Vec<u32> = Vec::new();
         for &v in merged {
-            let next = local.len() as u32;
-            local.entry(v).or_insert(next);
+            let slot = &mut table.part[v as usize];
+            if *slot == u32::MAX {
+                *slot = vertices.len() as u32;
+                vertices.push(v);
+            }
         }
-        let mut parts = UnionFind::new(local.len());
-        parts.union_triangles(merged, |v| local[&v]);
-        let mut number = vec![u32::MAX; local.len()];
+        let local = &table.part;
+        let mut parts = UnionFind::new(vertices.len());
+        parts.union_triangles(merged, |v| local[v as usize]);
+        let mut number = vec![u32::MAX; vertices.len()];
         let mut radius: Vec<f32> = Vec::new();
         let mut locked: Vec<bool> = Vec::new();
         let mut first: Vec<usize> = Vec::new();
         for (ti, t) in merged.chunks_exact(3).enumerate() {
-            let root = parts.find(local[&t[0]]) as usize;
+            let root = parts.find(local[t[0] as usize]) as usize;
             if number[root] == u32::MAX {
                 number[root] = radius.len() as u32;
                 radius.push(0.0);
                 locked.push(false);
                 first.push(ti);
             }
-            let p = number[root] as usize;
-            for &v in t {
-                radius[p] = radius[p].max(input_radius[v as usize]);
-                locked[p] |= anchored[v as usize];
-            }
         }
-        // Every vertex is on a triangle, so every root has its number.
-        let part_of = (0..local.len() as u32).map(|i| number[parts.find(i) as usize]).collect();
-        Parts { local, part_of, radius, locked, first }
+        // Every vertex is on a triangle, so every root has its number. A part's radius and
+        // lock are those of its vertices, each looked at once (not once per corner).
+        for (i, &v) in vertices.iter().enumerate() {
+            let p = number[parts.find(i as u32) as usize];
+            table.part[v as usize] = p;
+            radius[p as usize] = radius[p as usize].max(input_radius[v as usize]);
+            locked[p as usize] |= anchored[v as usize];
+        }
+        Parts { table, vertices, radius, locked, first }
     }
 
     fn part(&self, v: u32) -> usize {
-        self.local.get(&v).map_or(usize::MAX, |&i| self.part_of[i as usize] as usize)
+        match self.table.part.get(v as usize) {
+            Some(&p) if p != u32::MAX => p as usize,
+            _ => usize::MAX,
+        }
     }
 
     /// The vertices of the first triangle of every free part (in part order; repeats possible).
@@ -597,5 +637,91 @@ impl Parts {
             .collect();
         *out = kept;
         (before - out.len() / 3, radius)
+    }
+}
+
+impl Drop for Parts<'_> {
+    /// Clears the group's entries of the table for the next group.
+    fn drop(&mut self) {
+        for &v in &self.vertices {
+            self.table.part[v as usize] = u32::MAX;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An `n`×`n` grid of unit quads in the plane z = 0, two triangles each.
+    fn grid_mesh(n: u32) -> (Vec<[f32; 3]>, Vec<u32>) {
+        let positions = (0..=n).flat_map(|y| (0..=n).map(move |x| [x as f32, y as f32, 0.0])).collect();
+        let v = move |x: u32, y: u32| y * (n + 1) + x;
+        let indices = (0..n)
+            .flat_map(|y| {
+                (0..n).flat_map(move |x| {
+                    [v(x, y), v(x + 1, y), v(x + 1, y + 1), v(x, y), v(x + 1, y + 1), v(x, y + 1)]
+                })
+            })
+            .collect();
+        (positions, indices)
+    }
+
+    #[test]
+    fn spatial_clusters_come_reordered_at_level_0() {
+        // `clusterize` takes the clusters in the order meshopt's wrapper leaves them: reordered
+        // at level 0. Reordering them again must change nothing.
+        let (positions, indices) = grid_mesh(64);
+        let vertices = crate::lod::adapter(&positions);
+        let config = DagConfig::new(crate::lod::MAX_CLUSTER_TRIANGLES, crate::lod::MAX_CLUSTER_VERTICES);
+        let meshlets = meshopt::build_meshlets_spatial(
+            &indices,
+            &vertices,
+            config.max_vertices,
+            (config.max_triangles / 3).max(1),
+            config.max_triangles,
+            1.0,
+        );
+        assert!(meshlets.meshlets.len() >= 16, "{} clusters", meshlets.meshlets.len());
+        let mut shuffled_moved = false;
+        for m in &meshlets.meshlets {
+            let (v0, vn) = (m.vertex_offset as usize, m.vertex_count as usize);
+            let (t0, tn) = (m.triangle_offset as usize, m.triangle_count as usize * 3);
+            let (verts, tris) = (&meshlets.vertices[v0..v0 + vn], &meshlets.triangles[t0..t0 + tn]);
+            let (mut again_verts, mut again_tris) = (verts.to_vec(), tris.to_vec());
+            meshopt::optimize_meshlet_level(&mut again_verts, &mut again_tris, 0);
+            assert_eq!((&again_verts[..], &again_tris[..]), (verts, tris));
+            // The check has teeth: the reordering does move triangles that are not in its order
+            // (the even ones first, then the odd ones).
+            let mut shuffled: Vec<u8> = tris.chunks_exact(3).step_by(2).flatten().copied().collect();
+            shuffled.extend(tris.chunks_exact(3).skip(1).step_by(2).flatten());
+            let (mut moved_verts, mut moved_tris) = (verts.to_vec(), shuffled.clone());
+            meshopt::optimize_meshlet_level(&mut moved_verts, &mut moved_tris, 0);
+            shuffled_moved |= moved_tris != shuffled;
+        }
+        assert!(shuffled_moved);
+    }
+
+    #[test]
+    fn parts_are_numbered_by_first_triangle_and_leave_the_table_clear() {
+        // Part A (vertices 10–13) has triangles 0 and 2, part B (20–22, 21 anchored) triangle 1.
+        let merged = [10, 11, 12, 20, 21, 22, 12, 11, 13];
+        let mut anchored = vec![false; 30];
+        anchored[21] = true;
+        let radius: Vec<f32> = (0..30).map(|v| if v >= 20 { 2.0 } else { 1.0 }).collect();
+        let mut table = PartTable::new(30);
+        {
+            let parts = Parts::new(&mut table, &merged, &anchored, &radius);
+            assert_eq!((parts.part(13), parts.part(22), parts.part(5)), (0, 1, usize::MAX));
+            assert_eq!(parts.radius, [1.0, 2.0]);
+            assert_eq!(parts.locked, [false, true]);
+            assert_eq!(parts.first, [0, 1]);
+            assert_eq!(parts.count(&[13, 12, 11, 20, 21, 22, 10, 11, 12]), [2, 1]);
+            assert_eq!(parts.first_triangles(&merged), [10, 11, 12], "the free part's first triangle");
+        }
+        assert!(table.part.iter().all(|&p| p == u32::MAX), "cleared for the next group");
+        // The next group sees only its own vertices.
+        let parts = Parts::new(&mut table, &[20, 21, 22], &anchored, &radius);
+        assert_eq!((parts.part(20), parts.part(10)), (0, usize::MAX));
     }
 }

@@ -190,7 +190,7 @@ pub fn build_cell_lod_with_seams(
 
     // Map onto the model, in group order (a cluster's source group precedes its own group).
     let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
-    let mut steps: std::collections::HashSet<(u32, [u32; 4])> = std::collections::HashSet::new();
+    let mut steps: rustc_hash::FxHashSet<(u32, [u32; 4])> = rustc_hash::FxHashSet::default();
     for raw in raw_groups {
         let mut g = LodGroup { error: 0.0, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
         for &ci in &g.clusters {
