@@ -384,7 +384,10 @@ fn merge_bounds(clusters: &[Cluster]) -> DagBounds {
 }
 
 /// Simplifies one group to about `target` triangles with its locks; returns the triangles and
-/// the error (module comment for the rules on parts). `locks` is restored before returning.
+/// the error (module comment for the rules on parts). The tries within `config.growth` times
+/// `child_error` come first (none for the input's clusters, whose error is 0); the first that
+/// keeps at most `config.accept` of the triangles is taken, else a try at any error (rule 3).
+/// `locks` is restored before returning.
 #[allow(clippy::too_many_arguments)]
 fn simplify_group(
     vertices: &VertexDataAdapter<'_>,
@@ -399,17 +402,17 @@ fn simplify_group(
 ) -> (Vec<u32>, f32) {
     let parts = Parts::new(part_table, merged, anchored, input_radius);
     let accept = (merged.len() / 3) as f32 * config.accept;
-    if child_error > 0.0 {
-        for growth in config.growth {
-            let limit = child_error * growth;
-            let (out, error, removed) = simplify_parts(&parts, vertices, merged, locks, target, limit);
-            if (out.len() / 3) as f32 <= accept {
-                stats.pruned_triangles += removed;
-                return (out, error);
-            }
+    let limits = config.growth.iter().filter(|_| child_error > 0.0).map(|g| child_error * g);
+    let mut kept = None;
+    for limit in limits {
+        let tried = simplify_parts(&parts, vertices, merged, locks, target, limit);
+        if (tried.0.len() / 3) as f32 <= accept {
+            kept = Some(tried);
+            break;
         }
     }
-    let (out, error, removed) = simplify_parts(&parts, vertices, merged, locks, target, f32::MAX);
+    let (out, error, removed) =
+        kept.unwrap_or_else(|| simplify_parts(&parts, vertices, merged, locks, target, f32::MAX));
     stats.pruned_triangles += removed;
     (out, error)
 }
