@@ -56,7 +56,7 @@ pub enum Command {
                             terawalk preview plant.ply -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"")]
     Preview(PreviewArgs),
     /// Preprocess inputs into a store file for walkthroughs (out of core, bounded memory).
-    #[command(after_help = "Examples:\n  terawalk build plant.ply -o plant.tw\n  \
+    #[command(after_help = "Examples:\n  terawalk build plant.ply              # writes plant.tw\n  \
                             terawalk build part1.obj part2.glb -o site.tw --memory 1G --threads 2\n  \
                             terawalk build scan.ply.gz -o scan.tw --up y\n  \
                             terawalk build plant.ply -o fine.tw --cluster-triangles 64")]
@@ -200,9 +200,10 @@ pub struct PreviewArgs {
     /// How to colour objects.
     #[arg(long, value_enum, default_value = "material")]
     pub color: Coloring,
-    /// Up axis of the model, for the presets.
-    #[arg(long, default_value = "z", value_parser = ["x", "y", "z"])]
-    pub up: String,
+    /// Up axis of the model, for the presets: x, y or z (default: the format's convention, y
+    /// for glTF/GLB, z for PLY, OBJ and STL, as `build`).
+    #[arg(long, value_parser = parse_up_axis)]
+    pub up: Option<u8>,
     #[command(flatten)]
     pub import: ImportArgs,
 }
@@ -252,6 +253,10 @@ pub struct RenderArgs {
     /// drawn from coarser levels, or missing); without it such a frame fails the command.
     #[arg(long)]
     pub allow_damaged: bool,
+    /// Up axis of the default camera (x, y or z) instead of the one the store records, without
+    /// a rebuild (--camera gives its own up vector).
+    #[arg(long, value_parser = parse_up_axis)]
+    pub up: Option<u8>,
 }
 
 #[derive(Args, Debug)]
@@ -321,6 +326,10 @@ pub struct ViewArgs {
     /// second camera behind it, with its frustum and the boxes of the visible nodes.
     #[arg(long)]
     pub debug_view: bool,
+    /// Up axis for the camera and walk mode's gravity (x, y or z), overriding the one the store
+    /// records, without a rebuild.
+    #[arg(long, value_parser = parse_up_axis)]
+    pub up: Option<u8>,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
@@ -480,6 +489,19 @@ pub fn parse_samples(s: &str) -> Result<SamplesChoice, String> {
     }
 }
 
+fn parse_up_request(s: &str) -> Result<tw_io::up::UpRequest, String> {
+    tw_io::up::UpRequest::parse(s)
+}
+
+/// `render`/`view --up`: an axis name as `build --up` takes it (not `auto`, which needs the
+/// triangles: rebuild with `build --up auto`).
+fn parse_up_axis(s: &str) -> Result<u8, String> {
+    if s.trim().eq_ignore_ascii_case("auto") {
+        return Err("auto is a build option (it needs the triangles): use x, y or z here".into());
+    }
+    tw_io::up::parse_axis(s)
+}
+
 fn parse_size(s: &str) -> Result<(u32, u32), String> {
     let (w, h) = s.split_once(['x', 'X']).ok_or_else(|| format!("size must be WIDTHxHEIGHT, got {s:?}"))?;
     let w: u32 = w.trim().parse().map_err(|_| format!("bad width in {s:?}"))?;
@@ -516,6 +538,33 @@ mod tests {
         assert!(parse_size("0x10").is_err());
         assert!(parse_size("big").is_err());
     }
+
+    /// `render`/`view --up` take build's axis names; `auto` (which needs the triangles) and
+    /// unknown names are usage errors; without it the store's axis stands.
+    #[test]
+    fn up_overrides_parse_like_build() {
+        let up_of = |args: &[&str]| match Cli::try_parse_from(args).map(|c| c.command) {
+            Ok(Command::Render(r)) => Ok(r.up),
+            Ok(Command::View(v)) => Ok(v.up),
+            Ok(other) => panic!("{other:?}"),
+            Err(e) => Err(e.to_string()),
+        };
+        assert_eq!(up_of(&["terawalk", "render", "s.tw", "-o", "a.png", "--up", "y"]), Ok(Some(1)));
+        assert_eq!(up_of(&["terawalk", "render", "s.tw", "-o", "a.png", "--up", "X"]), Ok(Some(0)));
+        assert_eq!(up_of(&["terawalk", "render", "s.tw", "-o", "a.png"]), Ok(None));
+        assert_eq!(up_of(&["terawalk", "view", "s.tw", "--up", "z"]), Ok(Some(2)));
+        let e = up_of(&["terawalk", "render", "s.tw", "-o", "a.png", "--up", "auto"]).unwrap_err();
+        assert!(e.contains("build option"), "{e}");
+        let e = up_of(&["terawalk", "view", "s.tw", "--up", "w"]).unwrap_err();
+        assert!(e.contains("expected x, y or z"), "{e}");
+        match Cli::try_parse_from(["terawalk", "build", "a.glb", "-o", "a.tw", "--up", "auto"])
+            .unwrap()
+            .command
+        {
+            Command::Build(b) => assert_eq!(b.up, Some(tw_io::up::UpRequest::Auto)),
+            other => panic!("{other:?}"),
+        }
+    }
 }
 
 #[derive(Args, Debug)]
@@ -523,9 +572,10 @@ pub struct BuildArgs {
     /// Model files (.obj .ply .stl .gltf .glb, each optionally .gz); several form one scene.
     #[arg(required = true)]
     pub inputs: Vec<PathBuf>,
-    /// The store file to write (conventionally .tw).
+    /// The store file to write (conventionally .tw). Default: the input's name with the
+    /// extension .tw, beside it (`scan.ply.gz` → `scan.tw`); several inputs need it.
     #[arg(short, long)]
-    pub output: PathBuf,
+    pub output: Option<PathBuf>,
     /// Memory budget for the whole build (peak resident memory).
     #[arg(long, default_value = "2G", value_parser = parse_bytes)]
     pub memory: u64,
@@ -533,9 +583,11 @@ pub struct BuildArgs {
     /// count.
     #[arg(long, value_parser = clap::value_parser!(u32).range(1..=65_536))]
     pub threads: Option<u32>,
-    /// Up axis of the model.
-    #[arg(long, default_value = "z", value_parser = ["x", "y", "z"])]
-    pub up: String,
+    /// Up axis of the model: x, y, z, or auto (estimated from the triangles: the axis most
+    /// floor-like area faces, confirmed by the thinnest extent; the format default when
+    /// unsure). Default: the format's convention, y for glTF/GLB, z for PLY, OBJ and STL.
+    #[arg(long, value_parser = parse_up_request)]
+    pub up: Option<tw_io::up::UpRequest>,
     /// Units of the input coordinates, recorded in the store (e.g. m, mm).
     #[arg(long, default_value = "")]
     pub units: String,

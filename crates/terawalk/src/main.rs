@@ -2,6 +2,8 @@
 //! crates together (tw-io for input and generation, tw-preview for images, tw-runtime and tw-gpu
 //! for GPU frames). Exit codes: 0 success, 1 failure (bad input, I/O), 2 bad usage (clap).
 
+#[macro_use]
+mod out;
 mod cli;
 mod commands;
 mod progress;
@@ -15,7 +17,7 @@ fn main() {
     // resident in an arena of its own (the 10^8 build at --memory 256M: 445-514 -> 245-251 MB;
     // a 10^8 bench with reference frames at --memory 512M: 2,510 -> 1,730 MB).
     tw_core::mem::use_one_heap_arena();
-    exit_quietly_on_closed_pipe();
+    out::end_quietly_when_println_hits_a_closed_pipe();
     // Before any thread starts: it may set an environment variable (see the module).
     tw_gpu::headless::quiet_device_select();
     let cli = cli::Cli::parse();
@@ -34,6 +36,10 @@ fn main() {
         cli::Command::Path(a) => commands::path::run(a, cli.quiet),
     };
     if let Err(e) = result {
+        if out::is_closed_pipe(&e) {
+            // The reader of our output has gone: not a failure (see the `out` module).
+            std::process::exit(0);
+        }
         eprintln!("error: {}", error_text(&e));
         std::process::exit(1);
     }
@@ -45,26 +51,30 @@ fn error_text(e: &anyhow::Error) -> String {
     let mut text = String::new();
     for cause in e.chain() {
         let s = cause.to_string();
-        if s.is_empty() || text.contains(&s) {
-            continue;
-        }
+        let Some(new) = unsaid_part(&text, &s) else { continue };
         if !text.is_empty() {
             text.push_str(": ");
         }
-        text.push_str(&s);
+        text.push_str(new);
     }
     text
 }
 
-/// `terawalk info s.tw | head -1`: when the reader of standard output goes away, end as Unix
-/// tools do (killed by SIGPIPE, which the shell does not report) instead of panicking in
-/// `println!` (Rust ignores SIGPIPE, so the write fails with EPIPE).
-fn exit_quietly_on_closed_pipe() {
-    #[cfg(unix)]
-    // SAFETY: resetting a signal's disposition to the default before any thread starts.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+/// What `cause` adds to `said`: nothing when `said` holds all of it, else `cause` less the
+/// leading "NAME: " parts that `said` has already named ("cannot write a/x.ply" followed by
+/// "a/x.ply: No such file or directory" adds only "No such file or directory"). A name counts
+/// as said when it is one of `said`'s words or ends it (a path with spaces).
+fn unsaid_part<'a>(said: &str, cause: &'a str) -> Option<&'a str> {
+    let mut rest = cause.trim();
+    while let Some((head, tail)) = rest.split_once(": ") {
+        let named = !head.is_empty()
+            && (said.split_whitespace().any(|w| w.trim_end_matches(':') == head) || said.ends_with(head));
+        if !named {
+            break;
+        }
+        rest = tail.trim_start();
     }
+    (!rest.is_empty() && !said.contains(rest)).then_some(rest)
 }
 
 /// Ctrl-C, SIGTERM or SIGHUP: remove the temporary store file and working directory of a build
@@ -94,4 +104,22 @@ fn init_logging(verbose: u8, quiet: bool) {
     let filter = tracing_subscriber::EnvFilter::try_from_env("TERAWALK_LOG")
         .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
     tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).with_target(false).init();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_cause_and_each_path_is_said_once() {
+        let io = std::io::Error::from(std::io::ErrorKind::NotFound);
+        let io_text = io.to_string();
+        let e = anyhow::Error::new(io).context(format!("m.obj: {io_text}")).context("cannot read m.obj");
+        assert_eq!(error_text(&e), format!("cannot read m.obj: {io_text}"));
+        let e = anyhow::anyhow!("a dir/x.ply: disk full").context("cannot write a dir/x.ply");
+        assert_eq!(error_text(&e), "cannot write a dir/x.ply: disk full");
+        // A name the outer text does not hold stays: it says which path failed.
+        let e = anyhow::anyhow!("/nonexist: not found").context("building /nonexist/x.tw");
+        assert_eq!(error_text(&e), "building /nonexist/x.tw: /nonexist: not found");
+    }
 }

@@ -129,6 +129,25 @@ fn path_then_bench_with_exact_visibility_and_bad_arguments() {
     assert!(o.status.success(), "{}", stderr(&o));
     let report = std::fs::read_to_string(dir.path().join("rep/report.json")).unwrap();
     assert!(report.contains("exact_visible_triangles") && report.contains("culling_efficiency"), "{report}");
+    // The header names what was measured and with which build; the reference renderings of
+    // the compared frames are summarised, not plotted as walkthrough frames.
+    let parsed = tw_report::BenchReport::from_json(&report).unwrap();
+    let meta = &parsed.meta;
+    assert_eq!(meta.store_bytes, std::fs::metadata(dir.path().join("p.tw")).unwrap().len());
+    let input = tw_store::Store::open(dir.path().join("p.tw")).unwrap().header().input_triangles;
+    assert!(input > 0 && meta.input_triangles == input, "{meta:?}");
+    assert_eq!(meta.version, env!("CARGO_PKG_VERSION"));
+    assert!(!meta.commit.is_empty() && meta.machine.contains("cores"), "{meta:?}");
+    let reference = parsed.runs.iter().find(|r| r.name == "reference").expect("a reference run");
+    assert_eq!(reference.kind, tw_report::RunKind::Reference);
+    assert!(reference.frames.iter().all(|f| f.frame.is_multiple_of(10)), "frame numbers, not indices");
+    let html = std::fs::read_to_string(dir.path().join("rep/index.html")).unwrap();
+    let header = &html[html.find("<header>").unwrap()..html.find("</header>").unwrap()];
+    assert!(
+        header.contains(&format!("commit {}", meta.commit)) && header.contains("input triangles"),
+        "{header}"
+    );
+    assert!(html.contains("Not plotted: <b>reference</b>"));
     // Bad input: a clear error and a non-zero exit, no report written.
     let o = terawalk(&["bench", "p.tw", "--path", "missing.json", "--out", "rep2"], dir.path());
     assert!(!o.status.success() && stderr(&o).contains("missing.json"), "{}", stderr(&o));

@@ -200,7 +200,6 @@ fn an_error_says_its_cause_once() {
 #[cfg(unix)]
 #[test]
 fn a_closed_pipe_ends_quietly() {
-    use std::os::unix::process::ExitStatusExt;
     let dir = tempfile::tempdir().unwrap();
     let o = terawalk(&["generate", "plant", "--triangles", "10k", "-o", "p.obj"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
@@ -214,8 +213,7 @@ fn a_closed_pipe_ends_quietly() {
         .output()
         .unwrap();
     assert!(!stderr(&o).contains("panicked"), "{}", stderr(&o));
-    assert_ne!(o.status.code(), Some(101));
-    assert_eq!(o.status.signal(), Some(13), "ended by SIGPIPE, as Unix tools do: {:?}", o.status);
+    assert!(o.status.success(), "a reader gone is a clean exit, as in ripgrep: {:?}", o.status);
 }
 
 /// Site coordinates are negative somewhere: `--camera "-105,249,155;…"` is a camera, not an

@@ -41,6 +41,7 @@ use std::path::Path;
 use rayon::prelude::*;
 use tempfile::TempPath;
 use tw_io::scene::SceneProgress;
+use tw_io::up::UpVotes;
 use tw_io::{
     ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneSummary, Triangle, TriangleBatch, TriangleSink,
     BATCH_STEP,
@@ -177,6 +178,9 @@ pub struct Ingested {
     /// when ingest was given no rule or the sampler gave up; taken by the first
     /// [`crate::redefine::redefine`] whose rule they follow.
     pub samples: std::sync::Mutex<Option<CentroidSamples>>,
+    /// The `--up auto` statistic ([`tw_io::up::UpVotes`]) over every triangle in input order,
+    /// when asked for ([`ingest_voting`]).
+    pub up_votes: Option<UpVotes>,
 }
 
 /// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
@@ -200,6 +204,19 @@ pub fn ingest_in(
     sampler: Option<OnlineSampler>,
     progress: &mut dyn FnMut(SceneProgress),
 ) -> Result<Ingested, BuildError> {
+    ingest_voting(scene, work_dir, pool, sampler, false, progress)
+}
+
+/// [`ingest_in`], also taking the `--up auto` statistic when `up_votes` (one cross product
+/// per triangle, in the in-order append step, so the votes are the same whatever the pool).
+pub fn ingest_voting(
+    scene: Scene,
+    work_dir: &Path,
+    pool: Option<&rayon::ThreadPool>,
+    sampler: Option<OnlineSampler>,
+    up_votes: bool,
+    progress: &mut dyn FnMut(SceneProgress),
+) -> Result<Ingested, BuildError> {
     let path = crate::workio::temp_path(work_dir, "tw-triangles-")?;
     let mut sink = IngestSink {
         pool,
@@ -216,6 +233,7 @@ pub fn ingest_in(
         pending_count: 0,
         sampler,
         parts: ObjectParts::default(),
+        votes: up_votes.then(UpVotes::default),
     };
     let streamed = scene.stream_with_progress(&mut sink, progress);
     // The last batch's triangles; their errors come before any the stream stopped at later.
@@ -266,6 +284,7 @@ pub fn ingest_in(
         objects,
         summary,
         samples: std::sync::Mutex::new(samples),
+        up_votes: sink.votes,
     })
 }
 
@@ -317,6 +336,8 @@ struct IngestSink<'p> {
     sampler: Option<OnlineSampler>,
     /// Where big objects pass from one group of closed parts to the next.
     parts: ObjectParts,
+    /// The `--up auto` statistic, when asked for.
+    votes: Option<UpVotes>,
 }
 
 /// The stored offset of `p` from the origin `o`, or why it cannot be stored.
@@ -345,6 +366,7 @@ fn append(
     scene_max: &mut [f32; 3],
     sampler: &mut Option<OnlineSampler>,
     parts: &mut ObjectParts,
+    votes: &mut Option<UpVotes>,
 ) -> Result<(), PieceError> {
     for p in pieces {
         if let Some(e) = p.error.take() {
@@ -357,6 +379,9 @@ fn append(
             for k in first..first + n as usize {
                 let t = WorkTri::decode(&p.bytes[k * RECORD_BYTES..(k + 1) * RECORD_BYTES]);
                 parts.add(object, t.p, || seen);
+                if let Some(v) = votes.as_mut() {
+                    v.add(widen(t.p));
+                }
             }
             acc.triangles += n;
             acc.extend_span(*triangles, n);
@@ -379,6 +404,12 @@ fn append(
         out.write(0, &p.bytes).map_err(PieceError::Build)?;
     }
     Ok(())
+}
+
+/// A triangle of stored offsets in f64 (the up statistic needs only its edges).
+#[inline]
+fn widen(p: [[f32; 3]; 3]) -> [[f64; 3]; 3] {
+    p.map(|v| v.map(f64::from))
 }
 
 /// Why a piece stopped: the source's error, or ours.
@@ -470,8 +501,8 @@ impl IngestSink<'_> {
         if n == 0 {
             return Ok(());
         }
-        let IngestSink { out, objects, triangles, min, max, pending, sampler, parts, .. } = self;
-        append(&mut pending[..n], out, objects, triangles, min, max, sampler, parts)
+        let IngestSink { out, objects, triangles, min, max, pending, sampler, parts, votes, .. } = self;
+        append(&mut pending[..n], out, objects, triangles, min, max, sampler, parts, votes)
             .map_err(|e| self.piece_failed(e))
     }
 
@@ -493,6 +524,9 @@ impl IngestSink<'_> {
             return Err(ImportError::Sink(format!("triangle of unannounced object {object}")));
         };
         self.parts.add(object, p, || acc.triangles > 0);
+        if let Some(v) = self.votes.as_mut() {
+            v.add(widen(p));
+        }
         acc.triangles += 1;
         for v in &p {
             for (i, &x) in v.iter().enumerate() {
@@ -584,13 +618,14 @@ impl TriangleSink for IngestSink<'_> {
             pending: done,
             sampler,
             parts,
+            votes,
             ..
         } = self;
         let (work, done) = (&mut pieces[..count], &mut done[..pending]);
         let mut both = || {
             rayon::join(
                 || work.par_iter_mut().for_each(|p| p.fill(batch, origin, objects)),
-                || append(done, out, accs, triangles, min, max, sampler, parts),
+                || append(done, out, accs, triangles, min, max, sampler, parts, votes),
             )
             .1
         };
@@ -898,5 +933,32 @@ pub(crate) mod tests {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
         let r = ingest_in(scene, dir.path(), Some(&pool), None, &mut |_| {});
         assert!(matches!(r, Err(BuildError::Limit(_))), "{r:?}");
+    }
+
+    /// The `--up auto` votes are taken only when asked, and are the same on the one-by-one
+    /// path and the batch path whatever the threads (they are summed in the in-order append).
+    #[test]
+    fn up_votes_are_the_same_on_every_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let ply = dir.path().join("plant.ply");
+        let mut w = tw_io::write::create_writer(&ply).unwrap();
+        let plant =
+            tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: 60_000, seed: 5 })
+                .unwrap();
+        Box::new(plant).stream(&mut *w).unwrap();
+        w.finish().unwrap();
+        let open = || tw_io::open_source(&ply, &Default::default()).unwrap();
+        let not_asked = ingest_in(Scene::from_sources(vec![open()]), dir.path(), None, None, &mut |_| {});
+        assert!(not_asked.unwrap().up_votes.is_none());
+        let one_by_one = Scene::from_sources(vec![Box::new(OneByOne(open()))]);
+        let expected = ingest_voting(one_by_one, dir.path(), None, None, true, &mut |_| {}).unwrap().up_votes;
+        let expected = expected.expect("asked for");
+        assert!(expected.total > 0.0 && expected.facing.iter().all(|&a| a > 0.0), "{expected:?}");
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            let scene = Scene::from_sources(vec![open()]);
+            let got = ingest_voting(scene, dir.path(), Some(&pool), None, true, &mut |_| {}).unwrap();
+            assert_eq!(got.up_votes, Some(expected), "{threads} threads");
+        }
     }
 }

@@ -27,6 +27,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use tw_io::scene::SceneProgress;
+use tw_io::up::{UpChoice, UpRequest};
 use tw_io::Scene;
 use tw_store::{EncodedCluster, StoreInfo, StoreWriter};
 
@@ -55,8 +56,8 @@ pub struct BuildOptions {
     pub memory: u64,
     /// Worker threads (None: all cores; at most [`max_worker_threads`]).
     pub threads: Option<usize>,
-    /// Up axis: 0 x, 1 y, 2 z.
-    pub up: u8,
+    /// Up axis: given, the inputs' format convention, or estimated ([`tw_io::up`]).
+    pub up: UpRequest,
     pub units: String,
     /// Where working files go (None: next to the output).
     pub work_dir: Option<PathBuf>,
@@ -73,7 +74,7 @@ impl Default for BuildOptions {
         BuildOptions {
             memory: 2 << 30,
             threads: None,
-            up: 2,
+            up: UpRequest::FormatDefault,
             units: String::new(),
             work_dir: None,
             redefine: RedefineParams::gigawalk(),
@@ -146,6 +147,8 @@ pub struct BuildReport {
     pub peak_rss: Option<u64>,
     /// HLOD counters by hierarchy depth (index = depth of the node; leaves have none).
     pub hlod: Vec<HlodDepthStats>,
+    /// The up axis recorded in the store, and why (`terawalk build` prints it).
+    pub up: UpChoice,
 }
 
 /// What HLOD did at the nodes of one hierarchy depth (logged at info level, `-v`).
@@ -248,10 +251,20 @@ fn build_with_pool(
     // Redefinition's samples are taken on the way (no pass over the working file for them), in
     // an eighth of the budget (the importers' vertices take a quarter).
     let sampler = crate::sampling::OnlineSampler::new(options.redefine.sample_rule(), options.memory / 8);
-    let ing =
-        crate::ingest::ingest_in(scene, work.path(), Some(pool), Some(sampler), &mut |p: SceneProgress| {
+    let formats = scene.formats().to_vec();
+    let auto_up = options.up == UpRequest::Auto;
+    let ing = crate::ingest::ingest_voting(
+        scene,
+        work.path(),
+        Some(pool),
+        Some(sampler),
+        auto_up,
+        &mut |p: SceneProgress| {
             progress.advance(p.done);
-        })?;
+        },
+    )?;
+    let votes = ing.up_votes.unwrap_or_default();
+    let up = tw_io::up::resolve(options.up, &formats, &votes, ing.min, ing.max);
     progress.end_phase();
     t.lap("ingest");
 
@@ -430,7 +443,7 @@ fn build_with_pool(
         grid_origin: grid.origin,
         grid_step: grid.step,
         units: options.units.clone(),
-        up_axis: options.up,
+        up_axis: up.axis,
         build_options: options.describe(),
         input_triangles: ing.triangles,
     };
@@ -439,6 +452,7 @@ fn build_with_pool(
     t.lap("write");
 
     report.input_triangles = ing.triangles;
+    report.up = up;
     report.degenerate_dropped = ing.summary.degenerate;
     report.duplicate_dropped = duplicates.into_inner();
     report.objects = ing.objects.len() as u64;

@@ -111,14 +111,24 @@ pub fn open_source(path: &Path, options: &ImportOptions) -> Result<Box<dyn Trian
 }
 
 /// Detects the format of an opened input and returns its source.
-pub fn open_input(mut input: Input, options: &ImportOptions) -> Result<Box<dyn TriangleSource>, ImportError> {
+pub fn open_input(input: Input, options: &ImportOptions) -> Result<Box<dyn TriangleSource>, ImportError> {
+    open_detected(input, options).map(|(_, source)| source)
+}
+
+/// [`open_input`], also returning the format detected (its conventions, such as glTF's up
+/// axis, matter beyond the importer).
+pub fn open_detected(
+    mut input: Input,
+    options: &ImportOptions,
+) -> Result<(Format, Box<dyn TriangleSource>), ImportError> {
     let format = detect(&mut input)?;
-    match format {
+    let source = match format {
         Format::Obj => crate::obj::open(input, options),
         Format::Ply => crate::ply::open(input, options),
         Format::Stl => crate::stl::open(input, options),
         Format::Gltf | Format::Glb => crate::gltf::open(input, format, options),
-    }
+    }?;
+    Ok((format, source))
 }
 
 #[cfg(test)]

@@ -33,6 +33,7 @@ pub mod obj;
 pub mod ply;
 pub mod scene;
 pub mod stl;
+pub mod up;
 pub mod vertex_store;
 pub mod write;
 

@@ -11,7 +11,8 @@ use std::path::{Path, PathBuf};
 use tw_core::Aabb;
 
 use crate::error::{ImportError, Position};
-use crate::format::{open_source, ImportOptions};
+use crate::format::{open_detected, Format, ImportOptions};
+use crate::input::Input;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 use crate::{
@@ -27,6 +28,8 @@ pub struct SceneOptions {
 /// Inputs opened (headers read, formats detected) and ready to stream.
 pub struct Scene {
     sources: Vec<(PathBuf, Box<dyn TriangleSource>)>,
+    /// Each source's detected format (`None`: made in memory), for its up-axis convention.
+    formats: Vec<Option<Format>>,
 }
 
 /// Progress across all files of a scene.
@@ -57,16 +60,26 @@ impl Scene {
     /// Opens every input, so that a missing or unreadable file fails before any work is done.
     pub fn open<P: AsRef<Path>>(paths: &[P], options: SceneOptions) -> Result<Scene, ImportError> {
         let mut sources = Vec::with_capacity(paths.len());
+        let mut formats = Vec::with_capacity(paths.len());
         for p in paths {
             let p = p.as_ref();
-            sources.push((p.to_path_buf(), open_source(p, &options.import)?));
+            let (format, source) = open_detected(Input::open(p)?, &options.import)?;
+            sources.push((p.to_path_buf(), source));
+            formats.push(Some(format));
         }
-        Ok(Scene { sources })
+        Ok(Scene { sources, formats })
     }
 
     /// A scene of already-made sources (a generator, tests).
     pub fn from_sources(sources: Vec<Box<dyn TriangleSource>>) -> Scene {
-        Scene { sources: sources.into_iter().map(|s| (PathBuf::from(s.name()), s)).collect() }
+        let formats = vec![None; sources.len()];
+        Scene { sources: sources.into_iter().map(|s| (PathBuf::from(s.name()), s)).collect(), formats }
+    }
+
+    /// Each input's format, in order (`None` for sources made in memory): what the default up
+    /// axis follows ([`crate::up::format_default`]).
+    pub fn formats(&self) -> &[Option<Format>] {
+        &self.formats
     }
 
     pub fn len(&self) -> usize {

@@ -51,6 +51,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         date: tw_report::utc_now(),
         machine: "sample data".into(),
         path: "path.json".into(),
+        store_bytes: 412_000_000,
+        input_triangles: 10_000_000,
+        version: env!("CARGO_PKG_VERSION").into(),
+        commit: "sample".into(),
         extra: vec![],
     };
     let report = BenchReport::new(

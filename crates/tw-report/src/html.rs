@@ -5,8 +5,8 @@
 
 use std::fmt::Write;
 
-use crate::svg::{escape, plot, plotted, PALETTE, SERIES};
-use crate::{BenchReport, ReportImage};
+use crate::svg::{escape, plot, plotted, plotted_runs, PALETTE, SERIES};
+use crate::{BenchReport, ReportImage, RunKind, RunMeta};
 
 const STYLE: &str = "\
 :root{--fg:#1f2933;--muted:#616e7c;--line:#d9e2ec;--bg:#f5f7fa}\
@@ -20,6 +20,9 @@ main{max-width:1620px;margin:0 auto;padding:20px 32px 40px}\
 section{background:#fff;border:1px solid var(--line);border-radius:6px;padding:16px 20px;margin:0 0 20px}\
 h2{font-size:16px;margin:0 0 12px;font-weight:600}\
 table{border-collapse:collapse;width:100%;font-variant-numeric:tabular-nums}\
+.wide{overflow-x:auto;max-width:100%}\
+table.summary th{white-space:normal;min-width:64px;max-width:110px;vertical-align:bottom}\
+table.summary td:first-child,table.summary th:first-child{position:sticky;left:0;background:#fff}\
 th,td{padding:5px 10px;border-bottom:1px solid var(--line);text-align:right;white-space:nowrap}\
 th{font-weight:600;color:var(--muted);font-size:12px;text-transform:uppercase;letter-spacing:.03em}\
 td:first-child,th:first-child{text-align:left}\
@@ -53,12 +56,10 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     let first = report.runs.first();
     let _ = write!(
         h,
-        "<header><h1>{}</h1><p>{} · {} runs · {} frames · {}</p></header><main>",
+        "<header><h1>{}</h1><p>{}</p><p>{}</p></header><main>",
         escape(&title),
-        escape(&m.date),
-        report.runs.len(),
-        first.map(|r| r.frames.len()).unwrap_or(0),
-        escape(&m.adapter)
+        escape(&header_input(m)),
+        escape(&header_run(report))
     );
 
     if !report.damaged_pages.is_empty() {
@@ -88,6 +89,9 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         }
     };
     row("Store", escape(&m.store));
+    row("Store size", if m.store_bytes == 0 { String::new() } else { bytes(m.store_bytes) });
+    row("Input triangles", if m.input_triangles == 0 { String::new() } else { thousands(m.input_triangles) });
+    row("terawalk", escape(&build(m)));
     row("Camera path", escape(&m.path));
     row(
         "Command",
@@ -126,7 +130,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
     let any_lod = report.runs.iter().any(|r| r.summary.median_lod_efficiency.is_some());
     h.push_str(
-        "<section><h2>Summary</h2><table><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
+        "<section><h2>Summary</h2><div class=\"wide\"><table class=\"summary\"><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
                 <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>",
     );
     let _ = write!(h, "<th>Speed-up vs {}</th>", escape(base_name));
@@ -193,7 +197,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         }
         h.push_str("</tr>");
     }
-    h.push_str("</table>");
+    h.push_str("</table></div>");
     let described: Vec<String> = report
         .runs
         .iter()
@@ -227,10 +231,24 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         h.push_str(&plot(s, &report.runs));
     }
     h.push_str("</div>");
+    let references: Vec<String> = report
+        .runs
+        .iter()
+        .filter(|r| r.kind == RunKind::Reference)
+        .map(|r| format!("<b>{}</b>", escape(&r.name)))
+        .collect();
+    if !references.is_empty() {
+        let _ = write!(
+            h,
+            "<p class=\"note\">Not plotted: {} (full-detail reference renderings of the compared \
+             frames, not walkthrough frames; their figures are in the summary table).</p>",
+            references.join(", ")
+        );
+    }
     let zero: Vec<&str> = SERIES
         .iter()
         .filter(|s| !shown.iter().any(|p| p.key == s.key))
-        .filter(|s| report.runs.iter().any(|r| r.frames.iter().any(|f| (s.value)(f).is_some())))
+        .filter(|s| plotted_runs(&report.runs).any(|(_, r)| r.frames.iter().any(|f| (s.value)(f).is_some())))
         .map(|s| s.title)
         .collect();
     if !zero.is_empty() {
@@ -263,6 +281,75 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     h
 }
 
+/// The header's first line, under the store's path in the title: the store's size and the
+/// input's triangles ("size not recorded" for a report without them).
+fn header_input(m: &RunMeta) -> String {
+    let mut parts = Vec::new();
+    if m.store_bytes > 0 {
+        parts.push(format!("store {}", bytes(m.store_bytes)));
+    }
+    if m.input_triangles > 0 {
+        parts.push(format!("{} input triangles", thousands(m.input_triangles)));
+    }
+    if parts.is_empty() {
+        return "store size and input not recorded".into();
+    }
+    parts.join(" · ")
+}
+
+/// The header's second line: when, with what and where (date, runs and frames, terawalk's
+/// version and commit, the machine, the adapter), the fields a report lacks left out.
+fn header_run(report: &BenchReport) -> String {
+    let m = &report.meta;
+    let frames = report.runs.first().map(|r| r.frames.len()).unwrap_or(0);
+    [
+        m.date.clone(),
+        format!("{} runs · {frames} frames", report.runs.len()),
+        build(m),
+        m.machine.clone(),
+        m.adapter.clone(),
+    ]
+    .into_iter()
+    .filter(|p| !p.is_empty())
+    .collect::<Vec<_>>()
+    .join(" · ")
+}
+
+/// "terawalk 0.1.0, commit 1a2b3c4" from what the report recorded ("" if nothing).
+fn build(m: &RunMeta) -> String {
+    match (m.version.is_empty(), m.commit.is_empty()) {
+        (true, true) => String::new(),
+        (false, true) => format!("terawalk {}", m.version),
+        (true, false) => format!("terawalk, commit {}", m.commit),
+        (false, false) => format!("terawalk {}, commit {}", m.version, m.commit),
+    }
+}
+
+/// A file size in decimal units, as the rest of the report counts MB (10^6 bytes).
+fn bytes(b: u64) -> String {
+    let b = b as f64;
+    match b {
+        _ if b >= 1e12 => format!("{:.2} TB", b / 1e12),
+        _ if b >= 1e9 => format!("{:.2} GB", b / 1e9),
+        _ if b >= 1e6 => format!("{:.1} MB", b / 1e6),
+        _ if b >= 1e3 => format!("{:.1} kB", b / 1e3),
+        _ => format!("{b} bytes"),
+    }
+}
+
+/// `n` with thousands separated by commas ("12,345,678"): a count read at a glance.
+fn thousands(n: u64) -> String {
+    let digits = n.to_string();
+    let mut o = String::with_capacity(digits.len() + digits.len() / 3);
+    for (i, c) in digits.chars().enumerate() {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
+            o.push(',');
+        }
+        o.push(c);
+    }
+    o
+}
+
 /// Standard base64 with padding (RFC 4648).
 pub fn base64(data: &[u8]) -> String {
     const A: &[u8; 64] = b"ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
@@ -280,6 +367,95 @@ pub fn base64(data: &[u8]) -> String {
 
 #[cfg(test)]
 mod tests {
+    use crate::{BenchReport, FrameRecord, Run, RunKind, RunMeta};
+
+    fn report() -> BenchReport {
+        let frames = |ms: f64| -> Vec<FrameRecord> {
+            (0..4).map(|i| FrameRecord { frame: i, frame_ms: ms, ..Default::default() }).collect()
+        };
+        let meta = RunMeta {
+            store: "plant.tw".into(),
+            adapter: "llvmpipe (LLVM 19), Vulkan".into(),
+            date: "2026-12-06T10:00:00Z".into(),
+            machine: "AMD EPYC 7B13, 2 cores, 7.8 GiB RAM, linux".into(),
+            store_bytes: 1_234_567_890,
+            input_triangles: 12_345_678,
+            version: "0.1.0".into(),
+            commit: "15a11bb".into(),
+            ..Default::default()
+        };
+        BenchReport::new(
+            meta,
+            vec![
+                Run::new("hzb", "", frames(12.0), None),
+                Run::new("reference", "", frames(10_000.0), None).with_kind(RunKind::Reference),
+            ],
+        )
+    }
+
+    /// The page's `<header>` element.
+    fn header(page: &str) -> &str {
+        let start = page.find("<header>").unwrap();
+        &page[start..start + page[start..].find("</header>").unwrap()]
+    }
+
+    #[test]
+    fn header_names_store_size_input_build_date_machine_and_adapter() {
+        let page = super::page(&report(), &[]);
+        let h = header(&page);
+        for want in [
+            "plant.tw",
+            "store 1.23 GB",
+            "12,345,678 input triangles",
+            "terawalk 0.1.0, commit 15a11bb",
+            "2026-12-06T10:00:00Z",
+            "2 cores, 7.8 GiB RAM",
+            "llvmpipe (LLVM 19), Vulkan",
+        ] {
+            assert!(h.contains(want), "header lacks {want:?}: {h}");
+        }
+        // A report written before these were recorded says so instead of showing zeros.
+        let mut old = report();
+        old.meta.store_bytes = 0;
+        old.meta.input_triangles = 0;
+        old.meta.commit.clear();
+        let page = super::page(&old, &[]);
+        let h = header(&page);
+        assert!(h.contains("not recorded") && !h.contains("commit") && !h.contains(" 0 bytes"), "{h}");
+    }
+
+    #[test]
+    fn sizes_and_counts_read_at_a_glance() {
+        assert_eq!(super::bytes(512), "512 bytes");
+        assert_eq!(super::bytes(2_500_000), "2.5 MB");
+        assert_eq!(super::bytes(1_234_567_890), "1.23 GB");
+        assert_eq!(super::thousands(0), "0");
+        assert_eq!(super::thousands(999), "999");
+        assert_eq!(super::thousands(1000), "1,000");
+        assert_eq!(super::thousands(12_345_678), "12,345,678");
+    }
+
+    #[test]
+    fn the_summary_table_scrolls_inside_its_section() {
+        let page = super::page(&report(), &[]);
+        assert!(page.contains("<div class=\"wide\"><table class=\"summary\">"), "{page}");
+        assert!(super::STYLE.contains(".wide{overflow-x:auto"));
+        // Long headings wrap instead of widening their columns; numbers do not.
+        assert!(super::STYLE.contains("table.summary th{white-space:normal"));
+        let table = &page[page.find("<table class=\"summary\">").unwrap()..];
+        assert!(table.find("</table></div>").is_some());
+    }
+
+    #[test]
+    fn reference_renderings_are_summarised_but_not_plotted() {
+        let page = super::page(&report(), &[]);
+        let summary =
+            &page[page.find("<table class=\"summary\">").unwrap()..page.find("</table></div>").unwrap()];
+        assert!(summary.contains("reference</td>"), "in the summary");
+        assert!(page.contains("Not plotted: <b>reference</b>"));
+        assert!(!page.contains("class=\"legend\">reference<"), "no plot shows it");
+    }
+
     #[test]
     fn base64_matches_rfc4648() {
         for (i, o) in [("", ""), ("f", "Zg=="), ("fo", "Zm8="), ("foo", "Zm9v"), ("foobar", "Zm9vYmFy")] {

@@ -58,6 +58,20 @@ pub struct RunMeta {
     /// The camera path file, if any.
     #[serde(default)]
     pub path: String,
+    /// Size of the store file, bytes (0: not recorded, as in reports written before it was).
+    #[serde(default)]
+    pub store_bytes: u64,
+    /// Triangles of the model the store was built from (the store header's input count; 0: not
+    /// recorded).
+    #[serde(default)]
+    pub input_triangles: u64,
+    /// The terawalk version that measured the run ("" in older reports).
+    #[serde(default)]
+    pub version: String,
+    /// The git commit terawalk was built from (short hash, "unknown" for a build outside a git
+    /// checkout; "" in older reports): with the version, what a figure can be traced back to.
+    #[serde(default)]
+    pub commit: String,
     /// Anything else worth keeping (key → value), shown in the page's header table.
     #[serde(default)]
     pub extra: Vec<(String, String)>,
@@ -259,6 +273,27 @@ impl Summary {
     }
 }
 
+/// What a run's frames are.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RunKind {
+    /// Frames of a walkthrough along the camera path: plotted per frame.
+    #[default]
+    Walkthrough,
+    /// Full-detail reference renderings of some frames, made to compare the walkthroughs with
+    /// (PSNR, speed-up): in the summary table, but not in the per-frame plots. They are no
+    /// walkthrough frames, and one of them can take 100 to 1000 times a walkthrough frame (and
+    /// draw as many times its triangles), which would flatten every plot it shares (see
+    /// [`svg::plotted_runs`]).
+    Reference,
+}
+
+impl RunKind {
+    fn is_walkthrough(&self) -> bool {
+        *self == RunKind::Walkthrough
+    }
+}
+
 /// One measured run: a named series of frames (e.g. the occlusion strategy).
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct Run {
@@ -267,6 +302,9 @@ pub struct Run {
     /// What the run is ("occlusion culling with a CPU hierarchical Z-buffer").
     #[serde(default)]
     pub description: String,
+    /// Walkthrough frames or reference renderings (older reports: walkthrough).
+    #[serde(default, skip_serializing_if = "RunKind::is_walkthrough")]
+    pub kind: RunKind,
     pub summary: Summary,
     pub frames: Vec<FrameRecord>,
 }
@@ -280,7 +318,19 @@ impl Run {
         peak_rss_bytes: Option<u64>,
     ) -> Run {
         let summary = Summary::of(&frames, peak_rss_bytes);
-        Run { name: name.into(), description: description.into(), summary, frames }
+        Run {
+            name: name.into(),
+            description: description.into(),
+            kind: RunKind::Walkthrough,
+            summary,
+            frames,
+        }
+    }
+
+    /// The run, marked as `kind` (a walkthrough unless marked).
+    pub fn with_kind(mut self, kind: RunKind) -> Run {
+        self.kind = kind;
+        self
     }
 }
 

@@ -1,7 +1,7 @@
 //! Report writing end to end: JSON round trip, the page's plots and images, summary statistics
 //! on known inputs, atomic writes.
 
-use tw_report::{svg, write_report, BenchReport, FrameRecord, ReportImage, Run, RunMeta, Summary};
+use tw_report::{svg, write_report, BenchReport, FrameRecord, ReportImage, Run, RunKind, RunMeta, Summary};
 
 /// A 1×1 PNG.
 const PNG: [u8; 70] = [
@@ -44,6 +44,10 @@ fn report() -> BenchReport {
         date: "2026-12-01T18:00:00Z".into(),
         machine: "2 cores, 8 GB".into(),
         path: "walk.json".into(),
+        store_bytes: 52_000_000,
+        input_triangles: 10_000_000,
+        version: "0.1.0".into(),
+        commit: "15a11bb".into(),
         extra: vec![("seed".into(), "1".into())],
     };
     BenchReport::new(
@@ -51,6 +55,9 @@ fn report() -> BenchReport {
         vec![
             Run::new("none", "no occlusion culling", frames(120, 1.0, false), Some(300_000_000)),
             Run::new("hzb", "CPU hierarchical Z-buffer", frames(120, 0.5, true), Some(310_000_000)),
+            // The full-detail renderings of every 10th frame (`--compare 10`).
+            Run::new("reference", "full detail", frames(120, 400.0, false), None)
+                .with_kind(RunKind::Reference),
         ],
     )
 }
@@ -225,4 +232,22 @@ fn reports_without_lod_figures_still_read() {
     assert_eq!(back.runs[0].summary.median_lod_efficiency, None);
     // Its page has no LOD column.
     assert!(!tw_report::html::page(&back, &[]).contains("LOD efficiency</th>"));
+}
+
+#[test]
+fn reports_without_run_kinds_or_build_figures_still_read() {
+    // A report written before runs had a kind and the header its store size, input, version
+    // and commit: every run is a walkthrough, the figures are empty.
+    let mut v = serde_json::to_value(report()).unwrap();
+    assert_eq!(v["runs"][2]["kind"], "reference");
+    assert!(v["runs"][0].get("kind").is_none(), "walkthroughs are not marked");
+    for key in ["store_bytes", "input_triangles", "version", "commit"] {
+        v["meta"].as_object_mut().unwrap().remove(key);
+    }
+    v["runs"][2].as_object_mut().unwrap().remove("kind");
+    let back = BenchReport::from_json(&serde_json::to_string(&v).unwrap()).unwrap();
+    assert!(back.runs.iter().all(|r| r.kind == RunKind::Walkthrough));
+    assert_eq!((back.meta.store_bytes, back.meta.input_triangles), (0, 0));
+    assert!(back.meta.commit.is_empty());
+    tw_report::html::page(&back, &[]);
 }

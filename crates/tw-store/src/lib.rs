@@ -72,6 +72,7 @@ pub mod codec;
 pub mod error;
 pub mod format;
 mod read;
+pub mod units;
 mod write;
 
 pub use codec::{ClusterParts, EncodedCluster, PageCluster, MAX_TRIANGLES, MAX_VERTICES};

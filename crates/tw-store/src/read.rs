@@ -358,6 +358,12 @@ impl Store {
         &self.t.units
     }
 
+    /// Metres per unit of the recorded units ([`crate::units::metres_per_unit`]); `None` for
+    /// units it does not know.
+    pub fn metres_per_unit(&self) -> Option<f64> {
+        crate::units::metres_per_unit(&self.t.units)
+    }
+
     pub fn build_options(&self) -> &str {
         &self.t.build_options
     }

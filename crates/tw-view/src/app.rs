@@ -83,7 +83,7 @@ impl App {
             Some(p) => Some(Player::new(p, scene.header())?),
             None => None,
         };
-        let mut controller = Controller::new(&options.camera, scene.bounds(), scene.up());
+        let mut controller = Controller::new(&options.camera, &scene.scene_frame());
         controller.set_mode(options.mode, None);
         let mut settings = options.settings.clone();
         settings.memory_budget = scene.memory_budget();
@@ -251,14 +251,14 @@ impl App {
             Action::ToggleDebugView => {
                 if let Some(f) = self.frozen.take() {
                     self.settings.debug_view = false;
-                    self.controller = Controller::new(&f, self.scene.bounds(), self.scene.up());
+                    self.controller = Controller::new(&f, &self.scene.scene_frame());
                 } else {
                     let f = self.controller.camera();
                     self.frozen = Some(f);
                     self.settings.debug_view = true;
                     let mode = self.controller.mode;
                     let third = debug_view::third_person(&f, self.controller.scene_size);
-                    self.controller = Controller::new(&third, self.scene.bounds(), self.scene.up());
+                    self.controller = Controller::new(&third, &self.scene.scene_frame());
                     if mode == Mode::Orbit {
                         self.controller.set_mode(Mode::Orbit, Some(f.eye));
                     }
@@ -267,7 +267,7 @@ impl App {
             Action::ResetView => {
                 self.frozen = None;
                 self.settings.debug_view = false;
-                self.controller = Controller::new(&self.start_camera, self.scene.bounds(), self.scene.up());
+                self.controller = Controller::new(&self.start_camera, &self.scene.scene_frame());
             }
         }
     }
@@ -479,9 +479,10 @@ impl App {
         let draw = match camera {
             Some(c) => {
                 self.controller = {
-                    let mut k = Controller::new(&c, self.scene.bounds(), self.scene.up());
+                    let mut k = Controller::new(&c, &self.scene.scene_frame());
                     k.mode = self.controller.mode;
                     k.speed = self.controller.speed;
+                    k.walk_speed = self.controller.walk_speed;
                     k
                 };
                 c
@@ -594,6 +595,9 @@ impl App {
             pages_loading: self.scene.pages_loading(),
             pages_failed: ss.failed_pages,
             disk_bytes_per_s: self.disk.per_second(),
+            position: self.scene.input_position(self.controller.eye),
+            speed: self.controller.active_speed() as f64,
+            units: self.scene.units().to_string(),
             mode: format!(
                 "{}{}{}",
                 self.controller.mode.name(),

@@ -6,15 +6,20 @@
 //!   pitch clamped short of the poles), speed scaled by the scroll wheel, starting at a fraction
 //!   of the model's size; velocity is smoothed (exponential approach), so motion starts and stops
 //!   softly.
-//! - **Walk**: as fly but horizontal; the eye is held at `eye_height` above the ground below it
-//!   (the caller finds it by casting a ray down, [`Input::ground`]; without one the floor is the
-//!   bottom of the model's bounds), falling under gravity along the up axis when the ground drops
-//!   away. Walls are not collided with (collision is planned: docs/DESIGN.md, `tw-collide`).
+//! - **Walk**: as fly but horizontal, at walking speed; the eye is held at `eye_height` above
+//!   the ground below it (the caller finds it by casting a ray down, [`Input::ground`]; without
+//!   one the floor is the bottom of the model's bounds), falling under gravity along the up axis
+//!   when the ground drops away. Walls are not collided with (collision is planned:
+//!   docs/DESIGN.md, `tw-collide`). Eye height (1.7 m), walking speed (1.4 m/s) and gravity
+//!   (9.81 m/s²) are human-scale lengths converted with the store's units
+//!   ([`tw_store::units`], the definitions `terawalk path` uses too): a millimetre model is
+//!   walked 1700 units above its deck.
 //! - **Orbit**: around a pivot (a clicked point): mouse drag turns, scroll and W/S change the
 //!   distance (smoothed), A/D turn.
 
 use glam::Vec3;
 use tw_runtime::Camera;
+use tw_store::units::{EYE_HEIGHT_M, GRAVITY_M_S2, WALK_SPEED_M_S};
 
 /// Camera mode.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -61,6 +66,17 @@ pub const MAX_PITCH: f32 = 1.54;
 /// Velocity smoothing rate (1/s): higher is snappier.
 pub const SMOOTHING: f32 = 10.0;
 
+/// What a controller needs of the scene: its bounds and up axis (scene space) and the size of
+/// its unit.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneFrame {
+    pub bounds: (Vec3, Vec3),
+    /// The up axis (need not be unit length).
+    pub up: Vec3,
+    /// Metres per scene unit (the store's units; 1 when it records none).
+    pub metres_per_unit: f32,
+}
+
 /// The camera state and its controller; see the module documentation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Controller {
@@ -75,14 +91,19 @@ pub struct Controller {
     e1: Vec3,
     e2: Vec3,
     pub fovy: f32,
-    /// Fly/walk speed, scene units per second.
+    /// Fly speed, scene units per second (a fraction of the model's size).
     pub speed: f32,
+    /// Walk speed, scene units per second (1.4 m/s in the store's units).
+    pub walk_speed: f32,
     /// Diagonal of the model's bounds (scales speeds and limits).
     pub scene_size: f32,
     /// Scene bounds (for clip planes and the default floor).
     pub bounds: (Vec3, Vec3),
     velocity: Vec3,
+    /// Walk mode's eye height above the ground, scene units (1.7 m in the store's units).
     pub eye_height: f32,
+    /// Walk mode's gravity, scene units per second squared (9.81 m/s²).
+    pub gravity: f32,
     vertical_speed: f32,
     pub pivot: Vec3,
     pub distance: f32,
@@ -90,14 +111,15 @@ pub struct Controller {
 }
 
 impl Controller {
-    /// A controller at `camera` for a scene with `bounds` and `up` axis.
-    pub fn new(camera: &Camera, bounds: (Vec3, Vec3), up: Vec3) -> Controller {
+    /// A controller at `camera` for the scene `frame`.
+    pub fn new(camera: &Camera, frame: &SceneFrame) -> Controller {
+        let SceneFrame { bounds, up, metres_per_unit } = *frame;
+        let unit = if metres_per_unit.is_finite() && metres_per_unit > 0.0 { metres_per_unit } else { 1.0 };
         let up = up.normalize_or(Vec3::Z);
         let e1 = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
         let e1 = (e1 - up * e1.dot(up)).normalize();
         let e2 = up.cross(e1);
         let scene_size = (bounds.1 - bounds.0).length().max(1e-6);
-        let eye_height = (scene_size * 0.01).min(1.7);
         let mut c = Controller {
             mode: Mode::Fly,
             eye: camera.eye,
@@ -108,10 +130,12 @@ impl Controller {
             e2,
             fovy: camera.fovy,
             speed: scene_size * 0.05,
+            walk_speed: (WALK_SPEED_M_S / unit as f64) as f32,
             scene_size,
             bounds,
             velocity: Vec3::ZERO,
-            eye_height,
+            eye_height: (EYE_HEIGHT_M / unit as f64) as f32,
+            gravity: (GRAVITY_M_S2 / unit as f64) as f32,
             vertical_speed: 0.0,
             pivot: camera.target,
             distance: (camera.target - camera.eye).length(),
@@ -178,10 +202,14 @@ impl Controller {
         let boost = if input.fast { 4.0 } else { 1.0 };
         match self.mode {
             Mode::Fly | Mode::Walk => {
+                let (lo, hi) = (self.scene_size * 1e-5, self.scene_size * 10.0);
+                let speed = if self.mode == Mode::Walk { &mut self.walk_speed } else { &mut self.speed };
                 if input.scroll != 0.0 {
-                    self.speed = (self.speed * 1.2f32.powf(input.scroll))
-                        .clamp(self.scene_size * 1e-5, self.scene_size * 10.0);
+                    // Within a range scaled to the model; a walking speed already outside it (a
+                    // model far smaller or larger than a person) may only move back towards it.
+                    *speed = (*speed * 1.2f32.powf(input.scroll)).clamp(lo.min(*speed), hi.max(*speed));
                 }
+                let speed = *speed;
                 let (fwd, vert) = if self.mode == Mode::Fly {
                     (self.forward(), input.up)
                 } else {
@@ -189,7 +217,7 @@ impl Controller {
                 };
                 let wish = (fwd * input.forward + self.right() * input.right + self.up * vert)
                     .clamp_length_max(1.0)
-                    * self.speed
+                    * speed
                     * boost;
                 self.velocity += (wish - self.velocity) * blend;
                 self.eye += self.velocity * dt;
@@ -216,9 +244,7 @@ impl Controller {
         let want = floor + self.eye_height;
         let h = self.eye.dot(self.up);
         if h > want {
-            // g = 9.81 m/s² for an eye height of 1.7 m, scaled with the eye height.
-            let g = 9.81 * self.eye_height / 1.7;
-            self.vertical_speed -= g * dt;
+            self.vertical_speed -= self.gravity * dt;
             let new_h = (h + self.vertical_speed * dt).max(want);
             self.eye += self.up * (new_h - h);
             if new_h <= want {
@@ -231,9 +257,18 @@ impl Controller {
         }
     }
 
+    /// The speed of the current mode (walk or fly), scene units per second.
+    pub fn active_speed(&self) -> f32 {
+        if self.mode == Mode::Walk {
+            self.walk_speed
+        } else {
+            self.speed
+        }
+    }
+
     /// Whether the camera is still moving (smoothing or falling): the viewer keeps redrawing.
     pub fn is_moving(&self) -> bool {
-        self.velocity.length() > self.speed * 1e-3
+        self.velocity.length() > self.active_speed() * 1e-3
             || self.vertical_speed != 0.0
             || (self.mode == Mode::Orbit
                 && (self.distance - self.target_distance).abs() > self.distance * 1e-4)
@@ -259,11 +294,53 @@ pub fn clip_planes(eye: Vec3, bounds: (Vec3, Vec3)) -> (f32, f32) {
 mod tests {
     use super::*;
 
-    fn ctl() -> Controller {
+    /// A controller in a 20-unit cube of a store in `metres_per_unit`.
+    fn ctl_in(metres_per_unit: f32) -> Controller {
         let cam =
             Camera::new(Vec3::new(0.0, -10.0, 2.0), Vec3::new(0.0, 0.0, 2.0), Vec3::Z, 1.0, 0.01, 100.0)
                 .unwrap();
-        Controller::new(&cam, (Vec3::splat(-10.0), Vec3::splat(10.0)), Vec3::Z)
+        let frame =
+            SceneFrame { bounds: (Vec3::splat(-10.0), Vec3::splat(10.0)), up: Vec3::Z, metres_per_unit };
+        Controller::new(&cam, &frame)
+    }
+
+    fn ctl() -> Controller {
+        ctl_in(1.0)
+    }
+
+    #[test]
+    fn walk_scale_follows_the_store_units() {
+        // A millimetre store: 1.7 m above the deck is 1700 units, 9.81 m/s² is 9810 units/s².
+        let mm = ctl_in(1e-3);
+        assert!((mm.eye_height - 1700.0).abs() < 1e-2, "{}", mm.eye_height);
+        assert!((mm.gravity - 9810.0).abs() < 1e-1, "{}", mm.gravity);
+        assert!((mm.walk_speed - 1400.0).abs() < 1e-2, "{}", mm.walk_speed);
+        let m = ctl_in(1.0);
+        assert!((m.eye_height - 1.7).abs() < 1e-6 && (m.walk_speed - 1.4).abs() < 1e-6);
+        // Fly speed stays a fraction of the model, whatever the units.
+        assert_eq!(mm.speed, m.speed);
+        // Nonsense units fall back to metres rather than a zero or infinite eye height.
+        assert_eq!(ctl_in(0.0).eye_height, m.eye_height);
+        assert_eq!(ctl_in(f32::NAN).eye_height, m.eye_height);
+    }
+
+    #[test]
+    fn walking_uses_the_walk_speed_and_falls_at_g() {
+        let mut c = ctl_in(1e-3);
+        c.set_mode(Mode::Walk, None);
+        let start = c.eye;
+        let w = Input { forward: 1.0, ground: Some(-1e6), ..Default::default() };
+        for _ in 0..200 {
+            c.update(0.01, &w);
+        }
+        // Falling from rest for 2 s under 9810 units/s² drops ½ g t² ≈ 19 620 units.
+        let fell = start.z - c.eye.z;
+        assert!((fell - 0.5 * 9810.0 * 2.0 * 2.0).abs() < 0.02 * fell, "{fell}");
+        // Settled at walking speed: the last frame moved 1400 units/s horizontally.
+        let before = c.eye;
+        c.update(0.01, &w);
+        let step = (c.eye - before) * Vec3::new(1.0, 1.0, 0.0);
+        assert!((step.length() / 0.01 - 1400.0).abs() < 5.0, "{step:?}");
     }
 
     #[test]

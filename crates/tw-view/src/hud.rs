@@ -4,6 +4,9 @@
 
 use std::collections::VecDeque;
 
+use tw_runtime::pathgen::format_length;
+use tw_store::units::unit_suffix;
+
 /// Frame times kept for the graph.
 pub const HISTORY: usize = 240;
 
@@ -123,6 +126,11 @@ pub struct HudFrame {
     pub pages_loading: u64,
     pub pages_failed: u64,
     pub disk_bytes_per_s: f64,
+    /// The eye in input coordinates, and the current mode's speed (units per second), in
+    /// `units` (the store's; empty when it records none).
+    pub position: [f64; 3],
+    pub speed: f64,
+    pub units: String,
     pub mode: String,
     pub adapter: String,
 }
@@ -166,8 +174,17 @@ impl HudFrame {
             ("pages loading", format!("{} ({} failed)", self.pages_loading, self.pages_failed)),
             ("disk", format!("{}/s", bytes(self.disk_bytes_per_s as u64))),
             ("camera", self.mode.clone()),
+            ("position", self.position_text()),
+            ("speed", format!("{} {}/s", format_length(self.speed), unit_suffix(&self.units))),
             ("adapter", self.adapter.clone()),
         ]
+    }
+
+    /// The eye's input coordinates with the store's unit (`"12.5, -3.20, 1.70 m"`), to three
+    /// significant digits at any scale.
+    fn position_text(&self) -> String {
+        let [x, y, z] = self.position.map(format_length);
+        format!("{x}, {y}, {z} {}", unit_suffix(&self.units))
     }
 }
 
@@ -253,6 +270,17 @@ mod tests {
         assert_eq!(get("resident memory"), "3.0 MiB / 1.0 GiB");
         assert_eq!(get("GPU memory"), "0 B (no renderer yet)");
         assert_eq!(get("occlusion-culled"), "off");
+        assert_eq!(get("position"), "0, 0, 0 units");
+        let h = HudFrame {
+            position: [1250.0, -3.2, 1700.0],
+            speed: 1400.0,
+            units: "mm".into(),
+            ..Default::default()
+        };
+        let lines = h.lines();
+        let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
+        assert_eq!(get("position"), "1250, -3.20, 1700 mm");
+        assert_eq!(get("speed"), "1400 mm/s");
         let h = HudFrame {
             occlusion: "hzb".into(),
             occlusion_tested: 120,

@@ -30,6 +30,7 @@ use tw_gpu::{Image, PoolStats, Renderer, Target};
 use tw_runtime::{Camera, ClusterRef, ResidentPage, SelectStats, Selection, StreamOptions, StreamStats};
 use tw_store::{Header, Store};
 
+use crate::controller::SceneFrame;
 use crate::error::ViewError;
 use crate::pick::{pick_clusters, Ray};
 use crate::settings::Settings;
@@ -146,12 +147,15 @@ pub struct Scene {
     /// The GPU budget last asked for (the pool may clamp it to the device's limits).
     gpu_request: u64,
     last: FrameInfo,
+    /// The up axis the camera follows: the store's, or `view --up`'s override.
+    up_axis: u8,
 }
 
 impl Scene {
     /// A scene over an opened store whose decoded pages stay within `memory_budget` bytes
     /// (the streamer starts with the first frame).
     pub fn new(store: Store, memory_budget: u64) -> Scene {
+        let up_axis = store.header().up_axis.min(2);
         Scene {
             store: Arc::new(store),
             memory_budget,
@@ -165,7 +169,14 @@ impl Scene {
             gpu_request: 0,
             prev_cut: Vec::new(),
             last: FrameInfo::default(),
+            up_axis,
         }
+    }
+
+    /// Overrides the store's up axis (0 x, 1 y, 2 z) for the camera and walk mode's gravity
+    /// (`view --up`): the store is not changed.
+    pub fn set_up_axis(&mut self, axis: u8) {
+        self.up_axis = axis.min(2);
     }
 
     pub fn store(&self) -> &Store {
@@ -186,12 +197,34 @@ impl Scene {
         )
     }
 
-    /// The store's up axis as a unit vector.
+    /// The up axis as a unit vector: the store's, unless overridden ([`Scene::set_up_axis`]).
     pub fn up(&self) -> Vec3 {
-        match self.header().up_axis {
+        match self.up_axis {
             0 => Vec3::X,
             1 => Vec3::Y,
             _ => Vec3::Z,
+        }
+    }
+
+    /// A scene-space point in input coordinates (the store's grid origin added back, in f64).
+    pub fn input_position(&self, p: Vec3) -> [f64; 3] {
+        let o = self.header().grid_origin;
+        [o[0] + p.x as f64, o[1] + p.y as f64, o[2] + p.z as f64]
+    }
+
+    /// The store's units string (empty when it records none).
+    pub fn units(&self) -> &str {
+        self.store.units()
+    }
+
+    /// What the camera controllers need: bounds, up axis and metres per unit (the store's
+    /// units; metres when it records none or ones [`tw_store::units`] does not know, as
+    /// `terawalk path` assumes).
+    pub fn scene_frame(&self) -> SceneFrame {
+        SceneFrame {
+            bounds: self.bounds(),
+            up: self.up(),
+            metres_per_unit: self.store.metres_per_unit().unwrap_or(1.0) as f32,
         }
     }
 

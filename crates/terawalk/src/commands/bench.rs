@@ -25,7 +25,7 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 use tw_frame::{ExactVisibility, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 use tw_gpu::{ColorMode, Image, Renderer};
-use tw_report::{BenchReport, DamagedPage, FrameRecord, ReportImage, Run, RunMeta};
+use tw_report::{BenchReport, DamagedPage, FrameRecord, ReportImage, Run, RunKind, RunMeta};
 use tw_runtime::pathgen::{generate_path, PathOptions};
 use tw_runtime::{Camera, CameraPath, StreamOptions};
 
@@ -50,6 +50,8 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         tw_core::output::check_output(&file, &inputs)?;
     }
     let store = crate::commands::open_store(&args.store)?;
+    let store_bytes = std::fs::metadata(&args.store).map(|m| m.len()).unwrap_or(0);
+    let input_triangles = store.header().input_triangles;
     let path = match &args.path {
         Some(p) => CameraPath::load(p)?,
         None => {
@@ -57,7 +59,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             let generated = generate_path(&store, &options, &mut |_, _, _| {})
                 .with_context(|| format!("cannot generate a camera path for {}", args.store.display()))?;
             let r = &generated.report;
-            println!(
+            outln!(
                 "path: generated {} frames ({} walking, {} flying){}",
                 generated.path.frames.len(),
                 r.walk_frames,
@@ -83,14 +85,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
     renderer.set_gpu_budget(args.gpu_memory);
     if renderer.gpu_budget() + (64 << 10) < args.gpu_memory {
-        println!(
+        outln!(
             "note: GPU budget {} MiB, the most one buffer can hold on this device (asked for {} MiB)",
             renderer.gpu_budget() >> 20,
             args.gpu_memory >> 20
         );
     }
     let adapter = renderer.adapter_summary();
-    println!("adapter: {adapter}");
+    outln!("adapter: {adapter}");
     let samples = args.samples.resolve(&renderer);
     renderer.set_samples(samples)?;
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
@@ -209,12 +211,16 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         runs.push(run);
     }
     if !reference_frames.is_empty() {
+        // Reference renderings, not walkthrough frames: in the summary (the speed-up against
+        // the reference is a ratio of the same frames), out of the per-frame plots, where one
+        // full-detail frame of seconds would flatten the walkthroughs' milliseconds.
         let run = Run::new(
             "reference",
             "full detail, no culling, on the compared frames",
             reference_frames,
             tw_report::peak_rss_bytes(),
-        );
+        )
+        .with_kind(RunKind::Reference);
         print_run(&run);
         runs.push(run);
     }
@@ -230,6 +236,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         date: tw_report::utc_now(),
         machine: machine(),
         path: args.path.as_ref().map(|p| p.display().to_string()).unwrap_or_else(|| "generated".into()),
+        store_bytes,
+        input_triangles,
+        version: env!("CARGO_PKG_VERSION").into(),
+        // Set by build.rs: the short hash of the commit built, or "unknown".
+        commit: env!("TERAWALK_COMMIT").into(),
         extra: vec![
             ("frames".into(), cameras.len().to_string()),
             ("warmup".into(), args.warmup.to_string()),
@@ -242,7 +253,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         failed.iter().map(|(page, error)| DamagedPage { page: *page, error: error.clone() }).collect();
     print_comparison(&report);
     let files = tw_report::write_report(&args.out, &report, &images)?;
-    println!("report: {} (open it in a browser), figures in {}", files.html.display(), files.json.display());
+    outln!("report: {} (open it in a browser), figures in {}", files.html.display(), files.json.display());
     crate::commands::damage::check(&args.store, &failed, args.allow_damaged)?;
     Ok(BenchOutcome { html: files.html })
 }
@@ -266,6 +277,8 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         select_ms: ms(info.times.select),
         cut_ms: ms(info.times.select_cut),
         prefetch_ms: ms(info.times.select_prefetch),
+        // The version-1 name of `culling_ms` (occlusion culling), kept equal to it. Frustum
+        // culling has no time of its own: it is part of the selection (`select_ms`).
         cull_ms: ms(info.times.cull),
         upload_ms: ms(info.times.upload),
         render_ms: ms(info.times.render),
@@ -307,7 +320,7 @@ fn print_comparison(report: &BenchReport) {
             let same: Vec<f64> =
                 first.frames.iter().filter(|f| frames.contains(&f.frame)).map(|f| f.frame_ms).collect();
             if let Some(m) = tw_report::stats::median(&same) {
-                println!(
+                outln!(
                     "{:>10}: {} is {:.1}x faster than the reference on the same {} frames",
                     "speed-up",
                     first.name,
@@ -316,7 +329,7 @@ fn print_comparison(report: &BenchReport) {
                 );
             }
         } else {
-            println!(
+            outln!(
                 "{:>10}: {} is {:.2}x the speed of {} (median frame time)",
                 "ratio",
                 run.name,
@@ -330,7 +343,7 @@ fn print_comparison(report: &BenchReport) {
         if let (Some(med), Some(min)) =
             (tw_report::stats::median(&psnr), psnr.iter().cloned().reduce(f64::min))
         {
-            println!(
+            outln!(
                 "{:>10}: {}: PSNR against the reference: median {med:.1} dB, worst {min:.1} dB ({} frames)",
                 "fidelity",
                 run.name,
@@ -341,14 +354,14 @@ fn print_comparison(report: &BenchReport) {
             let of_cut = run.summary.median_cut_efficiency.map_or(String::new(), |c| {
                 format!(" (/ visible triangles of the frame's own LOD cut: median {c:.1})")
             });
-            println!(
+            outln!(
                 "{:>10}: {}: triangles drawn / exact visible triangles: median {e:.1}{of_cut}",
                 "culling", run.name
             );
         }
         let s = &run.summary;
         if let (Some(ratio), Some(needed)) = (s.median_lod_efficiency, s.median_needed_triangles) {
-            println!(
+            outln!(
                 "{:>10}: {}: LOD cut median {} triangles, a screen needs ~{} at ε = {} px \
                  (2 · covered px ÷ ε²): cut ÷ needed median {ratio:.2}",
                 "lod",
@@ -363,7 +376,7 @@ fn print_comparison(report: &BenchReport) {
 
 fn print_run(run: &Run) {
     let s = &run.summary;
-    println!(
+    outln!(
         "{:>10}: {} frames, median {:.1} ms ({:.1} fps), p99 {:.1} ms, median {} triangles, peak RSS {}",
         run.name,
         s.frames,
@@ -371,12 +384,12 @@ fn print_run(run: &Run) {
         s.median_fps,
         s.p99_ms,
         fmt_count(s.median_triangles as u64),
-        s.peak_rss_mb.map(|m| format!("{m:.0} MB")).unwrap_or_else(|| "?".into())
+        s.peak_rss_mb.map(|m| crate::units::fmt_bytes((m * 1e6) as u64)).unwrap_or_else(|| "?".into())
     );
     let node_tests: u64 = run.frames.iter().map(|f| f.occlusion_node_tests).sum();
     if node_tests > 0 {
         let hidden: u64 = run.frames.iter().map(|f| f.occlusion_nodes_hidden).sum();
-        println!(
+        outln!(
             "{:>10}: {}: {} node boxes tested before the clusters, {} of them hidden (each culls its subtree)",
             "nodes", run.name, node_tests, hidden
         );
@@ -394,7 +407,7 @@ fn image_frames(len: usize, n: usize) -> Vec<usize> {
 
 /// The resident set now and its peak so far (VmRSS, VmHWM), for the memory traces.
 fn memory_now() -> String {
-    let mb = |b: Option<u64>| b.map_or("?".to_string(), |b| format!("{:.0} MB", b as f64 / 1e6));
+    let mb = |b: Option<u64>| b.map_or("?".to_string(), crate::units::fmt_bytes);
     format!("RSS {}, peak {}", mb(tw_report::rss_bytes()), mb(tw_report::peak_rss_bytes()))
 }
 
@@ -407,13 +420,19 @@ fn color_mode(c: RenderColoring) -> ColorMode {
     }
 }
 
+/// The machine, for the report's header: CPU model (where /proc/cpuinfo names it), cores this
+/// process may use, memory (MemTotal, GiB as the kernel counts it), OS.
 fn machine() -> String {
     let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
-    let mem = std::fs::read_to_string("/proc/meminfo")
-        .ok()
-        .and_then(|s| s.lines().next().map(|l| l.split_whitespace().nth(1).unwrap_or("0").to_string()))
-        .and_then(|kb| kb.parse::<u64>().ok())
-        .map(|kb| format!(", {:.0} GB RAM", kb as f64 / 1048576.0))
+    let field = |file: &str, key: &str| -> Option<String> {
+        let text = std::fs::read_to_string(file).ok()?;
+        let line = text.lines().find(|l| l.split(':').next().is_some_and(|k| k.trim() == key))?;
+        Some(line.split_once(':')?.1.trim().to_string())
+    };
+    let cpu = field("/proc/cpuinfo", "model name").map(|m| format!("{m}, ")).unwrap_or_default();
+    let mem = field("/proc/meminfo", "MemTotal")
+        .and_then(|v| v.split_whitespace().next()?.parse::<u64>().ok())
+        .map(|kb| format!(", {:.1} GiB RAM", kb as f64 / 1048576.0))
         .unwrap_or_default();
-    format!("{cores} cores{mem}, {}", std::env::consts::OS)
+    format!("{cpu}{cores} cores{mem}, {}", std::env::consts::OS)
 }

@@ -1,5 +1,6 @@
 //! `terawalk build`: inputs → store file (tw-build), with a progress bar per phase and a summary.
 
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -9,7 +10,7 @@ use tw_io::{Scene, SceneOptions};
 
 use crate::cli::BuildArgs;
 use crate::progress;
-use crate::units::{fmt_bytes, fmt_count};
+use crate::units::{fmt_bytes, fmt_count, fmt_count_rate};
 
 /// Progress bars for the build's phases.
 struct Bars {
@@ -22,18 +23,18 @@ impl BuildProgress for Bars {
         if self.quiet {
             return;
         }
-        let pb = match unit {
+        // A phase of unknown size (total 0) gets a spinner, one that counts nothing (no unit)
+        // the elapsed time only.
+        self.bar = Some(match unit {
             "bytes" => progress::bytes(total, name),
+            "" if total == 0 => progress::elapsed(name),
             _ => progress::count(total, name),
-        };
-        if total == 0 {
-            pb.set_length(0);
-        }
-        self.bar = Some(pb);
+        });
     }
     fn advance(&mut self, done: u64) {
         if let Some(b) = &self.bar {
-            if b.length() == Some(0) || b.length().is_some_and(|l| done > l) {
+            // A count past its announced total stretches the bar rather than overflowing it.
+            if b.length().is_some_and(|l| done > l) {
                 b.set_length(done);
             }
             b.set_position(done);
@@ -49,11 +50,7 @@ impl BuildProgress for Bars {
 pub fn options(args: &BuildArgs) -> BuildOptions {
     let mut o =
         BuildOptions { memory: args.memory, threads: worker_threads(args.threads), ..Default::default() };
-    o.up = match args.up.as_str() {
-        "x" => 0,
-        "y" => 1,
-        _ => 2,
-    };
+    o.up = args.up.unwrap_or_default();
     o.units = args.units.clone();
     o.work_dir = args.work_dir.clone();
     // A multiple of 4 (meshopt's clusterizer works in groups of 4 triangles).
@@ -88,9 +85,21 @@ fn import_options(args: &BuildArgs) -> tw_io::format::ImportOptions {
     import
 }
 
+/// The store to write: `-o`, else the one input's name with the extension `.tw`, beside it.
+fn output_path(args: &BuildArgs) -> Result<PathBuf> {
+    match (&args.output, args.inputs.as_slice()) {
+        (Some(o), _) => Ok(o.clone()),
+        (None, [input]) => Ok(crate::commands::store_name_for(input)),
+        (None, _) => {
+            anyhow::bail!("{} inputs make one store: name it with -o (e.g. -o scene.tw)", args.inputs.len())
+        }
+    }
+}
+
 pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
-    tw_core::output::check_output(&args.output, &args.inputs)?;
+    let output = output_path(&args)?;
+    tw_core::output::check_output(&output, &args.inputs)?;
     // (main has made every thread allocate from one heap arena: tw_core::mem::use_one_heap_arena.)
     if args.memory < MIN_HELD_BUDGET {
         tracing::warn!(
@@ -108,11 +117,12 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let scene = Scene::open(&args.inputs, SceneOptions { import: import_options(&args) })?;
     let opts = options(&args);
     let mut bars = Bars { bar: None, quiet };
-    let r = tw_build::build(scene, &args.output, &opts, &mut bars)
-        .with_context(|| format!("building {}", args.output.display()))?;
+    let r = tw_build::build(scene, &output, &opts, &mut bars)
+        .with_context(|| format!("building {}", output.display()))?;
     let secs = start.elapsed().as_secs_f64();
-    println!("wrote {} ({})", args.output.display(), fmt_bytes(r.file_bytes));
-    println!(
+    outln!("wrote {} ({})", output.display(), fmt_bytes(r.file_bytes));
+    outln!("  up: {}", r.up);
+    outln!(
         "  input: {} triangles ({} degenerate dropped, {} duplicate dropped), {} objects",
         fmt_count(r.input_triangles),
         fmt_count(r.degenerate_dropped),
@@ -120,7 +130,7 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         fmt_count(r.objects)
     );
     let d = &r.redefine;
-    println!(
+    outln!(
         "  objects: {} → partition I: {} pieces ({} split) → clustering: {} → partition II: {} cells ({} split, {} by count)",
         fmt_count(d.objects),
         fmt_count(d.pieces),
@@ -130,7 +140,7 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         fmt_count(d.split_clusters),
         fmt_count(d.count_split_cells)
     );
-    println!(
+    outln!(
         "  hierarchy: {} nodes, depth {}; LOD: {} groups, {} clusters, {} triangles over all levels ({:.2}x input)",
         fmt_count(r.nodes),
         r.depth,
@@ -139,18 +149,18 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         fmt_count(r.stored_triangles),
         r.stored_triangles as f64 / r.input_triangles.max(1) as f64
     );
-    println!(
+    outln!(
         "  pages: {} ({} root), {:.2} bytes per input triangle",
         fmt_count(r.pages as u64),
         r.root_pages,
         r.file_bytes as f64 / r.input_triangles.max(1) as f64
     );
     let phases: Vec<String> = r.phases.iter().map(|(n, s)| format!("{n} {s:.1} s")).collect();
-    println!("  phases: {}", phases.join(", "));
-    println!(
-        "done in {:.1} s: {:.2} M input triangles/s, peak memory {} (budget {})",
+    outln!("  phases: {}", phases.join(", "));
+    outln!(
+        "done in {:.1} s: {}, peak memory {} (budget {})",
         secs,
-        r.input_triangles as f64 / 1e6 / secs.max(1e-9),
+        fmt_count_rate(r.input_triangles, secs, "input triangles"),
         r.peak_rss.map(fmt_bytes).unwrap_or_else(|| "unknown".into()),
         fmt_bytes(args.memory)
     );

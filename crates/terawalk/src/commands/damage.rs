@@ -19,7 +19,7 @@ pub fn check(store: &Path, failed: &[(u32, String)], allow: bool) -> Result<()> 
     let listed: Vec<String> = failed.iter().take(LISTED).map(|(p, _)| p.to_string()).collect();
     let more = failed.len() - listed.len();
     let more = if more > 0 { format!(" and {more} more") } else { String::new() };
-    println!(
+    outln!(
         "damaged store: {} page(s) failed their checksum or decoding (pages {}{more}); their \
          geometry was drawn from coarser levels where the store has them, and is missing \
          otherwise. First error: {}",

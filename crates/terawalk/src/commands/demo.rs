@@ -10,45 +10,45 @@ use tw_io::SceneOptions;
 
 use crate::cli::DemoArgs;
 use crate::commands::{generate, stats};
-use crate::units::{fmt_bytes, fmt_count};
+use crate::units::{fmt_byte_rate, fmt_bytes, fmt_count, fmt_count_rate};
 
 pub fn run(args: DemoArgs) -> Result<()> {
     let start = Instant::now();
     std::fs::create_dir_all(&args.dir).with_context(|| format!("cannot create {}", args.dir.display()))?;
     let model = args.dir.join(format!("plant-{}-s{}.ply", args.triangles, args.seed));
-    println!("terawalk demo: a generated power plant of {} triangles", fmt_count(args.triangles));
+    outln!("terawalk demo: a generated power plant of {} triangles", fmt_count(args.triangles));
 
     if model.exists() {
-        println!("1. plant: cached at {}", model.display());
+        outln!("1. plant: cached at {}", model.display());
     } else {
         let g = generate::generate_plant(args.triangles, args.seed, &model)?;
-        println!(
-            "1. plant: generated {} ({} in {:.1} s, {:.2} M triangles/s)",
+        outln!(
+            "1. plant: generated {} ({} in {:.1} s, {})",
             model.display(),
             fmt_bytes(g.file_bytes),
             g.seconds,
-            g.summary.triangles as f64 / 1e6 / g.seconds.max(1e-9)
+            fmt_count_rate(g.summary.triangles, g.seconds, "triangles")
         );
     }
 
     let options = SceneOptions::default();
     let read = stats::stream_file(&model, &options)?;
-    println!(
-        "2. read back: {} triangles, {} objects in {:.2} s ({:.0} MB/s)",
+    outln!(
+        "2. read back: {} triangles, {} objects in {:.2} s ({})",
         fmt_count(read.summary.triangles),
         fmt_count(read.summary.objects as u64),
         read.seconds,
-        read.summary.bytes as f64 / 1e6 / read.seconds.max(1e-9)
+        fmt_byte_rate(read.summary.bytes, read.seconds)
     );
 
     let store = args.dir.join(format!("plant-{}-s{}.tw", args.triangles, args.seed));
     if store.exists() && tw_store::Store::open(&store).is_ok() {
-        println!("3. store: cached at {}", store.display());
+        outln!("3. store: cached at {}", store.display());
     } else {
         let scene = tw_io::Scene::open(&[&model], options.clone())?;
         let opts = tw_build::BuildOptions { memory: 1 << 30, ..Default::default() };
         let r = tw_build::build(scene, &store, &opts, &mut tw_build::NoProgress)?;
-        println!(
+        outln!(
             "3. store: built {} in {:.1} s ({} cells, {} clusters, {:.2}x triangles over all LOD levels, {:.1} bytes per triangle)",
             store.display(),
             r.seconds(),
@@ -60,22 +60,24 @@ pub fn run(args: DemoArgs) -> Result<()> {
     }
     let opened = tw_store::Store::open(&store)?;
     let v = opened.verify(|_, _| {})?;
-    println!(
+    outln!(
         "   verified: {} pages, {} groups, {} nodes, every checksum and invariant OK",
-        v.pages, v.groups, v.nodes
+        v.pages,
+        v.groups,
+        v.nodes
     );
 
     // An automatic walkthrough path (cached): a walk at eye height inside, then a fly-over.
     let path_file =
         args.dir.join(format!("plant-{}-s{}-path{}.json", args.triangles, args.seed, args.frames));
     if path_file.exists() && tw_runtime::CameraPath::load(&path_file).is_ok() {
-        println!("4. path: cached at {}", path_file.display());
+        outln!("4. path: cached at {}", path_file.display());
     } else {
         let t = Instant::now();
         let options = tw_runtime::pathgen::PathOptions { frames: args.frames, ..Default::default() };
         let g = tw_runtime::pathgen::generate_path(&opened, &options, &mut |_, _, _| {})?;
         g.path.save(&path_file)?;
-        println!(
+        outln!(
             "4. path: {} frames ({} walking inside at eye height, {} flying over) in {:.1} s -> {}",
             g.path.frames.len(),
             g.report.walk_frames,
@@ -89,7 +91,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
     // The benchmark walkthrough on the GPU (Mesa's CPU drivers where there is no GPU): each
     // occlusion strategy, and the full-detail reference every 30th frame for PSNR.
     let out = args.dir.join("bench-report");
-    println!("5. bench: rendering the path headless at 1280x720, 1 px error:");
+    outln!("5. bench: rendering the path headless at 1280x720, 1 px error:");
     let bench = crate::cli::BenchArgs {
         store: store.clone(),
         path: Some(path_file.clone()),
@@ -114,13 +116,13 @@ pub fn run(args: DemoArgs) -> Result<()> {
     };
     let outcome = crate::commands::bench::run(bench)?;
 
-    println!(
+    outln!(
         "done in {:.1} s, peak memory {}",
         start.elapsed().as_secs_f64(),
         tw_core::mem::peak_rss_bytes().map(fmt_bytes).unwrap_or_else(|| "unknown".into())
     );
-    println!("report: open {} in a browser", outcome.html.display());
-    println!(
+    outln!("report: open {} in a browser", outcome.html.display());
+    outln!(
         "next: `terawalk view {}` (a window; fly with WASD and the mouse), `terawalk bench {} --path {} --exact`",
         store.display(),
         store.display(),

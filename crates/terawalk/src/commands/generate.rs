@@ -9,7 +9,7 @@ use tw_io::{Scene, SceneSummary, TriangleSource};
 
 use crate::cli::{GenerateArgs, SceneKind};
 use crate::progress;
-use crate::units::{fmt_bytes, fmt_count};
+use crate::units::{fmt_bytes, fmt_count, fmt_count_rate};
 
 /// What one generation wrote.
 pub struct Generated {
@@ -51,14 +51,14 @@ fn write_scene(source: Box<dyn TriangleSource>, output: &Path) -> Result<Generat
 
 /// Prints what one generation wrote.
 fn report(output: &Path, g: &Generated) {
-    println!(
-        "wrote {}: {} triangles in {} objects, {} in {:.1} s ({:.2} M triangles/s)",
+    outln!(
+        "wrote {}: {} triangles in {} objects, {} in {:.1} s ({})",
         output.display(),
         fmt_count(g.summary.triangles),
         fmt_count(g.summary.objects as u64),
         fmt_bytes(g.file_bytes),
         g.seconds,
-        g.summary.triangles as f64 / 1e6 / g.seconds.max(1e-9)
+        fmt_count_rate(g.summary.triangles, g.seconds, "triangles")
     );
 }
 
@@ -75,7 +75,7 @@ pub fn run(args: GenerateArgs) -> Result<()> {
             let g = generate_assembly(args.triangles, args.seed, args.one_object, &args.output)?;
             report(&args.output, &g);
             // Model files carry no units; the store records them at build time.
-            println!("units: millimetres (build with --units mm)");
+            outln!("units: millimetres (build with --units mm)");
         }
     }
     Ok(())

@@ -10,9 +10,9 @@ pub fn run(args: InfoArgs) -> Result<()> {
     let store = crate::commands::open_store(&args.store)?;
     let h = store.header();
     let input = h.input_triangles.max(1);
-    println!("{}", args.store.display());
-    println!("  format version {}, {}", h.version, fmt_bytes(store.file_len()));
-    println!(
+    outln!("{}", args.store.display());
+    outln!("  format version {}, {}", h.version, fmt_bytes(store.file_len()));
+    outln!(
         "  bounds: ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4}), up axis {}, units {:?}",
         h.bounds_min[0],
         h.bounds_min[1],
@@ -23,8 +23,8 @@ pub fn run(args: InfoArgs) -> Result<()> {
         ["x", "y", "z"].get(h.up_axis as usize).unwrap_or(&"?"),
         store.units()
     );
-    println!("  grid: step {:.3e}", h.grid_step);
-    println!(
+    outln!("  grid: step {:.3e}", h.grid_step);
+    outln!(
         "  {} input triangles, {} objects, {} nodes, {} groups ({} links to the groups they were \
          simplified from), {} pages",
         fmt_count(h.input_triangles),
@@ -46,14 +46,14 @@ pub fn run(args: InfoArgs) -> Result<()> {
         levels[l].2 += g.triangles as u64;
     }
     let total: u64 = levels.iter().map(|l| l.2).sum();
-    println!("  level     groups   clusters      triangles");
+    outln!("  level     groups   clusters      triangles");
     for (l, (g, c, t)) in levels.iter().enumerate() {
-        println!("  {l:>5} {:>10} {:>10} {:>14}", fmt_count(*g), fmt_count(*c), fmt_count(*t));
+        outln!("  {l:>5} {:>10} {:>10} {:>14}", fmt_count(*g), fmt_count(*c), fmt_count(*t));
     }
-    println!("  all levels: {} triangles ({:.2}x input)", fmt_count(total), total as f64 / input as f64);
+    outln!("  all levels: {} triangles ({:.2}x input)", fmt_count(total), total as f64 / input as f64);
     let page_bytes: u64 = store.pages().iter().map(|p| p.compressed_len as u64).sum();
     let root_bytes: u64 = store.pages().iter().filter(|p| p.is_root()).map(|p| p.compressed_len as u64).sum();
-    println!(
+    outln!(
         "  pages: {} ({} resident root pages, {}); {:.2} bytes per input triangle in all",
         fmt_bytes(page_bytes),
         store.pages().iter().filter(|p| p.is_root()).count(),
@@ -61,14 +61,14 @@ pub fn run(args: InfoArgs) -> Result<()> {
         store.file_len() as f64 / input as f64
     );
     if !store.build_options().is_empty() {
-        println!("  build options: {}", store.build_options().trim().replace('\n', ", "));
+        outln!("  build options: {}", store.build_options().trim().replace('\n', ", "));
     }
     if args.verify {
         let pb = progress::count(store.pages().len() as u64, "verifying");
         let report = store.verify(|done, _| pb.set_position(done as u64));
         pb.finish_and_clear();
         let report = report.with_context(|| format!("{} failed verification", args.store.display()))?;
-        println!("verify: OK ({report:?})");
+        outln!("verify: OK ({report:?})");
     }
     Ok(())
 }

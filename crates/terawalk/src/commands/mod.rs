@@ -32,8 +32,8 @@ pub fn open_store(path: &Path) -> anyhow::Result<tw_store::Store> {
     })
 }
 
-/// `model.ply.gz` → `model.tw`, beside the model.
-fn store_name_for(model: &Path) -> std::path::PathBuf {
+/// `model.ply.gz` → `model.tw`, beside the model: the store `build` writes without `-o`.
+pub fn store_name_for(model: &Path) -> std::path::PathBuf {
     let name = model.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let stem = name.trim_end_matches(".gz");
     let stem = stem.rsplit_once('.').map_or(stem, |(s, _)| s);

@@ -38,8 +38,7 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     let walks = matches!(options.part, PathPart::Walk | PathPart::Both);
     if units.is_empty() && options.eye_height.is_none() && walks {
         tracing::info!("the store has no units: assuming metres (eye height 1.7)");
-    } else if walks && options.eye_height.is_none() && tw_runtime::pathgen::metres_per_unit(&units).is_none()
-    {
+    } else if walks && options.eye_height.is_none() && store.metres_per_unit().is_none() {
         eprintln!("note: unknown units {units:?}; assuming metres (give --eye-height in the model's units)");
     }
     let pb = progress::count(0, "voxelizing");
@@ -56,10 +55,10 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     path.save(&args.output)?;
     let r = &generated.report;
     if let Some(why) = &r.fallback {
-        println!("no walk: {why}; the path is a fly-around instead");
+        outln!("no walk: {why}; the path is a fly-around instead");
     }
     if r.walk_frames > 0 {
-        println!(
+        outln!(
             "walk: {} frames, {} {unit_name} at {} {unit_name}/s, eye height {} {unit_name}, {} region of {} \
              walkable spans ({} in all), {} waypoints",
             r.walk_frames,
@@ -75,7 +74,7 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
             fmt_count(r.walkable_spans as u64),
             r.waypoints
         );
-        println!(
+        outln!(
             "  voxels: {} {unit_name}, grid {} x {} x {}{}; {} coarse triangles from {} pages{}",
             len(r.voxel_size),
             r.grid[0],
@@ -92,11 +91,11 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
         );
     }
     if r.fly_frames > 0 {
-        println!("fly: {} frames, {} {unit_name}", r.fly_frames, len(r.fly_length));
+        outln!("fly: {} frames, {} {unit_name}", r.fly_frames, len(r.fly_length));
     }
     if r.approach_frames > 0 {
         let (from, to) = r.approach_distances;
-        println!(
+        outln!(
             "approach: {} frames from the overview ({} {unit_name} from the model's centre) to a close \
              view of its top ({} {unit_name} away, {:.1}x closer), {} {unit_name}",
             r.approach_frames,
@@ -111,7 +110,7 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     } else {
         format!("walk {} / fly {}", r.walk_frames, r.fly_frames)
     };
-    println!(
+    outln!(
         "wrote {}: {} frames ({:.1} s at {} fps; {parts}), {} {unit_name} in {:.2} s",
         args.output.display(),
         path.frames.len(),

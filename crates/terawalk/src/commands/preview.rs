@@ -35,14 +35,17 @@ pub(crate) fn preset_direction(view: View, up: usize) -> ([f64; 3], [f64; 3]) {
     (permute(dir), permute(upv))
 }
 
-/// Streams `files` once to find their bounds (needed to frame a preset view).
-pub fn scene_bounds(files: &[PathBuf], options: &SceneOptions) -> Result<Aabb> {
+/// Streams `files` once to find their bounds (needed to frame a preset view), and the up axis
+/// of their formats' convention (glTF: y; otherwise z; `tw_io::up::format_default`).
+pub fn scene_bounds(files: &[PathBuf], options: &SceneOptions) -> Result<(Aabb, u8)> {
     let mut stats = SceneStats::default();
-    Scene::open(files, options.clone())?.stream(&mut stats)?;
+    let scene = Scene::open(files, options.clone())?;
+    let up = tw_io::up::format_default(scene.formats()).axis;
+    scene.stream(&mut stats)?;
     if stats.bounds.is_empty() {
         bail!("the input holds no triangles");
     }
-    Ok(stats.bounds)
+    Ok((stats.bounds, up))
 }
 
 /// Renders `files` from `camera` into `output`; returns the triangles streamed.
@@ -79,18 +82,14 @@ pub fn run(args: PreviewArgs) -> Result<()> {
     let camera = match &args.camera {
         Some(c) => parse_camera(c)?,
         None => {
-            let bounds = scene_bounds(&args.files, &options)?;
-            let up = match args.up.as_str() {
-                "x" => 0,
-                "y" => 1,
-                _ => 2,
-            };
+            let (bounds, format_up) = scene_bounds(&args.files, &options)?;
+            let up = args.up.unwrap_or(format_up) as usize;
             let (dir, upv) = preset_direction(args.view, up);
             Camera::frame_bounds(&bounds, dir, upv, args.size.0 as f64 / args.size.1 as f64)
         }
     };
     let n = render(&args.files, &options, camera, args.size, args.color, &args.output)?;
-    println!(
+    outln!(
         "wrote {} ({}x{}): {} triangles in {:.1} s",
         args.output.display(),
         args.size.0,
@@ -116,5 +115,23 @@ mod tests {
         assert!(parse_camera("1,2,3;4,5,6;0,0,1;0").is_err());
         assert!(parse_camera("1,2,3;1,2,3;0,0,1;60").is_err());
         assert!(parse_camera("nan,2,3;4,5,6;0,0,1;60").is_err());
+    }
+
+    /// The presets frame a glTF input y-up and a PLY input z-up, as `build` records them.
+    #[test]
+    fn preset_up_follows_the_format() {
+        let dir = tempfile::tempdir().unwrap();
+        for (name, up) in [("t.glb", 1), ("t.ply", 2)] {
+            let path = dir.path().join(name);
+            let mut w = tw_io::write::create_writer(&path).unwrap();
+            w.object(0, &tw_io::ObjectInfo::default()).unwrap();
+            let tri = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 3.0]];
+            w.triangle(&tw_io::Triangle::new(tri, 0)).unwrap();
+            w.finish().unwrap();
+            let (bounds, got) = scene_bounds(&[path], &SceneOptions::default()).unwrap();
+            assert_eq!(got, up, "{name}");
+            // Upright either way: the triangle's height (3 along z as written) is along `up`.
+            assert_eq!(bounds.max[up as usize] - bounds.min[up as usize], 3.0, "{name}");
+        }
     }
 }

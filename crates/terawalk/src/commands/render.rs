@@ -13,10 +13,17 @@ use crate::cli::{RenderArgs, RenderColoring, View};
 use crate::commands::preview::preset_direction;
 use crate::units::{fmt_bytes, fmt_count};
 
-/// The default camera: the store's bounds framed from the `--view iso` direction of `preview`.
-pub fn default_camera(header: &Header, size: (u32, u32)) -> Result<Camera> {
+/// The up axis the camera uses: `--up` when given (overriding the store's at run time, no
+/// rebuild), else the one the store records.
+pub fn up_axis(header: &Header, over: Option<u8>) -> usize {
+    over.unwrap_or(header.up_axis).min(2) as usize
+}
+
+/// The default camera: the store's bounds framed from the `--view iso` direction of `preview`,
+/// upright along `up` (see [`up_axis`]).
+pub fn default_camera(header: &Header, size: (u32, u32), up: usize) -> Result<Camera> {
     let bounds = Aabb { min: header.bounds_min, max: header.bounds_max };
-    let (dir, up) = preset_direction(View::Iso, header.up_axis.min(2) as usize);
+    let (dir, up) = preset_direction(View::Iso, up);
     let c = tw_preview::Camera::frame_bounds(&bounds, dir, up, size.0 as f64 / size.1 as f64);
     Ok(Camera::from_input_coordinates(c.eye, c.target, c.up, c.fovy_deg, header)?)
 }
@@ -30,10 +37,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let header = store.header();
     let camera = match &args.camera {
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
-        None => default_camera(header, args.size)?,
+        None => default_camera(header, args.size, up_axis(header, args.up))?,
     };
     let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
-    println!("adapter: {}", renderer.adapter_summary());
+    outln!("adapter: {}", renderer.adapter_summary());
     renderer.set_samples(args.samples.resolve(&renderer))?;
     renderer.set_store_colors(&store);
     renderer.set_color_mode(match args.color {
@@ -55,7 +62,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     let stats = renderer.stats();
     image.save_png(&args.output)?;
     let cs = cache.stats();
-    println!(
+    outln!(
         "selection: {} clusters, {} triangles (τ = {} px) in {:.1} ms; {} pages touched, {} resident \
          ({}), {} culled by frustum",
         fmt_count(selection.stats.clusters_selected),
@@ -67,14 +74,14 @@ pub fn run(args: RenderArgs) -> Result<()> {
         fmt_bytes(cs.resident_bytes),
         fmt_count(selection.stats.nodes_culled_frustum + selection.stats.groups_culled_frustum),
     );
-    println!(
+    outln!(
         "render: {} triangles drawn, {} clusters; upload {:.1} ms, GPU + readback {:.1} ms",
         fmt_count(stats.triangles),
         fmt_count(stats.clusters),
         stats.upload.as_secs_f64() * 1e3,
         stats.render.as_secs_f64() * 1e3,
     );
-    println!(
+    outln!(
         "GPU pool: {} clusters uploaded ({}), {} resident, {} batch(es), {} draw call(s) ({:?})",
         fmt_count(stats.pool.uploaded_clusters),
         fmt_bytes(stats.pool.uploaded_bytes),
@@ -83,6 +90,6 @@ pub fn run(args: RenderArgs) -> Result<()> {
         fmt_count(stats.draw_calls),
         renderer.draw_mode(),
     );
-    println!("wrote {} ({}x{})", args.output.display(), args.size.0, args.size.1);
+    outln!("wrote {} ({}x{})", args.output.display(), args.size.0, args.size.1);
     crate::commands::damage::check(&args.store, &cache.failed_pages(), args.allow_damaged)
 }

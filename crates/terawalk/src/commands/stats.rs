@@ -9,7 +9,7 @@ use tw_io::{Scene, SceneOptions, SceneStats, SceneSummary};
 
 use crate::cli::StatsArgs;
 use crate::progress;
-use crate::units::{fmt_bytes, fmt_count};
+use crate::units::{fmt_byte_rate, fmt_bytes, fmt_count, fmt_count_rate};
 
 /// Figures for one file (or for the whole scene).
 pub struct FileStats {
@@ -80,14 +80,14 @@ pub fn run(args: StatsArgs) -> Result<()> {
                 "peak_rss_bytes": peak,
             }
         });
-        println!("{}", serde_json::to_string_pretty(&out)?);
+        outln!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
 
     for (path, r) in &rows {
         let s = &r.summary;
-        println!("{}", path.display());
-        println!(
+        outln!("{}", path.display());
+        outln!(
             "  {} triangles, {} vertices, {} objects, {} degenerate triangles dropped",
             fmt_count(s.triangles),
             fmt_count(s.vertices),
@@ -100,19 +100,19 @@ pub fn run(args: StatsArgs) -> Result<()> {
             (false, true) => "colours",
             (false, false) => "positions only",
         };
-        println!("  attributes: {attrs}");
+        outln!("  attributes: {attrs}");
         print_bounds(&r.stats.bounds);
-        println!(
-            "  read {} in {:.2} s: {:.1} MB/s, {:.2} M triangles/s",
+        outln!(
+            "  read {} in {:.2} s: {}, {}",
             fmt_bytes(s.bytes),
             r.seconds,
-            s.bytes as f64 / 1e6 / r.seconds.max(1e-9),
-            s.triangles as f64 / 1e6 / r.seconds.max(1e-9)
+            fmt_byte_rate(s.bytes, r.seconds),
+            fmt_count_rate(s.triangles, r.seconds, "triangles")
         );
     }
     if rows.len() > 1 {
-        println!("total: {} files", rows.len());
-        println!(
+        outln!("total: {} files", rows.len());
+        outln!(
             "  {} triangles, {} objects, {} read in {:.2} s",
             fmt_count(total_tris),
             fmt_count(total_objects),
@@ -122,19 +122,27 @@ pub fn run(args: StatsArgs) -> Result<()> {
         print_bounds(&bounds);
     }
     if let Some(p) = peak {
-        println!("peak memory: {}", fmt_bytes(p));
+        outln!("peak memory: {}", fmt_bytes(p));
     }
     Ok(())
 }
 
 fn print_bounds(b: &tw_core::Aabb) {
     if b.is_empty() {
-        println!("  bounds: empty");
+        outln!("  bounds: empty");
         return;
     }
     let e = b.extent();
-    println!(
+    outln!(
         "  bounds: ({:.4}, {:.4}, {:.4}) .. ({:.4}, {:.4}, {:.4}), size {:.4} x {:.4} x {:.4}",
-        b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2], e[0], e[1], e[2]
+        b.min[0],
+        b.min[1],
+        b.min[2],
+        b.max[0],
+        b.max[1],
+        b.max[2],
+        e[0],
+        e[1],
+        e[2]
     );
 }

@@ -7,7 +7,7 @@ use tw_runtime::{CameraPath, InputCamera};
 use tw_view::{Coloring, Occlusion, Scene, Settings, ViewOptions};
 
 use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, ViewArgs};
-use crate::commands::render::default_camera;
+use crate::commands::render::{default_camera, up_axis};
 
 pub fn run(args: ViewArgs) -> Result<()> {
     let inputs: Vec<&std::path::Path> =
@@ -55,7 +55,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         (None, Some(p)) => p.frames[0]
             .to_scene(header)
             .with_context(|| format!("first frame of {}", args.path.as_ref().expect("path").display()))?,
-        (None, None) => default_camera(header, args.size)?,
+        (None, None) => default_camera(header, args.size, up_axis(header, args.up))?,
     };
     if let Some(p) = &path {
         // Check every frame now: a bad one is an error before the window opens.
@@ -79,7 +79,10 @@ pub fn run(args: ViewArgs) -> Result<()> {
         ..Settings::default()
     };
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-    let scene = Scene::new(store, args.memory);
+    let mut scene = Scene::new(store, args.memory);
+    if let Some(axis) = args.up {
+        scene.set_up_axis(axis);
+    }
     let options = ViewOptions {
         camera,
         path,
@@ -102,10 +105,10 @@ pub fn run(args: ViewArgs) -> Result<()> {
     };
     let report = tw_view::run(scene, options)?;
     if let Some(s) = &report.screenshot {
-        println!("wrote {}", s.display());
+        outln!("wrote {}", s.display());
     }
     if scripted {
-        println!(
+        outln!(
             "{} frames ({} minimised), {} triangles in the last, window {}x{}",
             report.frames,
             report.minimized_frames,

@@ -9,6 +9,13 @@
 //! as glTF requires, metallic 0, double-sided (models are not consistently wound); objects
 //! without a colour share a grey default.
 //!
+//! Up axis: the scenes written here are z-up (terawalk's generators; PLY, OBJ and STL have no
+//! convention and terawalk takes z for them), while glTF 2.0 says +Y is up (section
+//! "Coordinate System and Units"). So the object nodes hang under one root node whose `matrix`
+//! turns +Z into +Y (a −90° turn about X: (x, y, z) → (x, z, −y)), and the positions stay as
+//! given: glTF viewers, and terawalk's own importer with its glTF default `--up y`, show the
+//! model upright.
+//!
 //! Layout of the file, assembled in [`SceneWriter::finish`]:
 //! ```text
 //! header (12)  | JSON chunk: length, "JSON", text padded with spaces to 4 bytes
@@ -39,6 +46,10 @@ const OVERHEAD: u64 = 12 + 8 + 8;
 /// More runs than this means the objects' triangles are interleaved almost one by one; the JSON
 /// (and the per-run records in memory) would grow without bound.
 const MAX_RUNS: usize = 1 << 22;
+
+/// The root node's matrix (column-major, as glTF stores it): a −90° turn about X taking the
+/// written z-up scene to glTF's +Y up, (x, y, z) → (x, z, −y).
+const Z_UP_TO_Y_UP: &str = "[1,0,0,0,0,0,-1,0,0,1,0,0,0,0,0,1]";
 
 /// A maximal sequence of consecutive triangles of one object: one primitive.
 #[derive(Clone, Debug)]
@@ -176,13 +187,10 @@ impl Layout<'_> {
         }
 
         w.write_all(br#"{"asset":{"version":"2.0","generator":"terawalk"}"#)?;
-        // Arrays must not be empty in glTF: without objects there is no scene at all.
+        // Arrays must not be empty in glTF: without objects there is no scene at all. The
+        // scene's one root node, after the objects' nodes, holds them upright (module docs).
         if !infos.is_empty() {
-            w.write_all(br#","scene":0,"scenes":[{"nodes":["#)?;
-            for o in 0..infos.len() {
-                write!(w, "{}{o}", if o > 0 { "," } else { "" })?;
-            }
-            w.write_all(b"]}]")?;
+            write!(w, r#","scene":0,"scenes":[{{"nodes":[{}]}}]"#, infos.len())?;
         }
 
         if !infos.is_empty() {
@@ -202,7 +210,11 @@ impl Layout<'_> {
                 }
                 w.write_all(b"}")?;
             }
-            w.write_all(b"]")?;
+            write!(w, r#",{{"name":"z-up to y-up","matrix":{Z_UP_TO_Y_UP},"children":["#)?;
+            for o in 0..infos.len() {
+                write!(w, "{}{o}", if o > 0 { "," } else { "" })?;
+            }
+            w.write_all(b"]}]")?;
         }
 
         if !self.runs.is_empty() {
@@ -485,7 +497,7 @@ mod tests {
     fn one_node_per_object_and_one_primitive_per_run() {
         let (json, _) = chunks(&sample());
         let nodes = json["nodes"].as_array().unwrap();
-        assert_eq!(nodes.len(), 3);
+        assert_eq!(nodes.len(), 4);
         assert_eq!(nodes[0]["name"], "red part");
         assert_eq!(nodes[0]["mesh"], 0);
         assert!(nodes[1].get("name").is_none());
@@ -501,7 +513,13 @@ mod tests {
         assert_eq!(p0[0]["indices"], 1);
         assert_eq!(p0[1]["attributes"]["POSITION"], 4);
         assert_eq!(meshes[1]["primitives"][0]["indices"], 3);
-        assert_eq!(json["scenes"][0]["nodes"], serde_json::json!([0, 1, 2]));
+        // One root node holds the objects' nodes, turning the z-up scene to glTF's y-up.
+        assert_eq!(json["scenes"][0]["nodes"], serde_json::json!([3]));
+        assert_eq!(nodes[3]["children"], serde_json::json!([0, 1, 2]));
+        assert_eq!(
+            floats(&nodes[3]["matrix"]),
+            [1., 0., 0., 0., 0., 0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1.]
+        );
     }
 
     #[test]
@@ -568,7 +586,8 @@ mod tests {
         gltf::Gltf::from_slice(&b).unwrap();
         let b = write(|s| s.object(0, &ObjectInfo::default()).unwrap());
         let (json, _) = chunks(&b);
-        assert_eq!(json["nodes"], serde_json::json!([{}]));
+        assert_eq!(json["nodes"][0], serde_json::json!({}));
+        assert_eq!(json["nodes"][1]["children"], serde_json::json!([0]));
         gltf::Gltf::from_slice(&b).unwrap();
     }
 

@@ -689,9 +689,12 @@ mod round_trip {
     fn glb_round_trip_keeps_objects() {
         let got = read_back("a.glb");
         // GLB groups an object's triangles (its two runs become two primitives of one mesh), so
-        // compare as multisets of triangles.
+        // compare as multisets of triangles; the z-up scene comes back y-up, (x, y, z) → (x, z,
+        // −y), as glTF wants (`glb` module docs; `+ 0.0` makes −0 print as 0).
+        let y_up = |p: [f64; 3]| [p[0], p[2], -p[1] + 0.0];
         let mut g: Vec<String> = got.triangles.iter().map(|t| format!("{:?}", t.positions)).collect();
-        let mut w: Vec<String> = expected().triangles.iter().map(|t| format!("{:?}", t.positions)).collect();
+        let mut w: Vec<String> =
+            expected().triangles.iter().map(|t| format!("{:?}", t.positions.map(y_up))).collect();
         g.sort();
         w.sort();
         assert_eq!(g, w);

@@ -215,7 +215,11 @@ mod tests {
         let params = tw_io::generate::PlantParams { triangles: 10_000, seed: 3 };
         let src = tw_io::generate::PlantSource::new(params).unwrap();
         let scene = tw_io::Scene::from_sources(vec![Box::new(src)]);
-        let options = tw_build::BuildOptions { memory: 128 << 20, up, ..Default::default() };
+        let options = tw_build::BuildOptions {
+            memory: 128 << 20,
+            up: tw_io::up::UpRequest::Axis(up),
+            ..Default::default()
+        };
         tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
         let store = Store::open(&path).unwrap();
         (dir, store)

@@ -63,6 +63,7 @@ mod route;
 mod voxels;
 
 use tw_core::Rng;
+use tw_store::units::{EYE_HEIGHT_M, WALK_SPEED_M_S};
 use tw_store::{Store, StoreError};
 
 use crate::path::{CameraPath, PathFrame};
@@ -180,20 +181,9 @@ pub struct GeneratedPath {
     pub report: PathReport,
 }
 
-/// Metres per unit for a store's units string (`""` is taken as metres).
-pub fn metres_per_unit(units: &str) -> Option<f64> {
-    Some(match units.trim().to_ascii_lowercase().as_str() {
-        "" | "m" | "meter" | "metre" | "meters" | "metres" => 1.0,
-        "mm" | "millimeter" | "millimetre" | "millimeters" | "millimetres" => 1e-3,
-        "cm" | "centimeter" | "centimetre" | "centimeters" | "centimetres" => 1e-2,
-        "dm" => 0.1,
-        "km" => 1e3,
-        "in" | "inch" | "inches" => 0.0254,
-        "ft" | "foot" | "feet" => 0.3048,
-        "yd" | "yard" | "yards" => 0.9144,
-        _ => return None,
-    })
-}
+/// Metres per unit for a store's units string: the one definition is in tw-store, shared
+/// with the viewer's walk mode.
+pub use tw_store::units::metres_per_unit;
 
 /// A length for messages: three significant digits at any scale (`16.8`, `0.00212`, `1520`).
 pub fn format_length(x: f64) -> String {
@@ -291,11 +281,11 @@ fn eye_and_speed(store: &Store, options: &PathOptions) -> Result<(f64, f64), Pat
     let bad = |m: String| Err(PathGenError::Options(m));
     let unit = metres_per_unit(store.units());
     let scale = 1.0 / unit.unwrap_or(1.0);
-    let eye = options.eye_height.unwrap_or(1.7 * scale);
+    let eye = options.eye_height.unwrap_or(EYE_HEIGHT_M * scale);
     if !(eye.is_finite() && eye > 0.0) {
         return bad(format!("eye height must be a positive number, got {eye}"));
     }
-    let speed = options.speed.unwrap_or(1.4 * scale * eye / (1.7 * scale));
+    let speed = options.speed.unwrap_or(WALK_SPEED_M_S * scale * eye / (EYE_HEIGHT_M * scale));
     if !(speed.is_finite() && speed > 0.0) {
         return bad(format!("speed must be a positive number, got {speed}"));
     }
@@ -454,13 +444,5 @@ mod tests {
         assert_eq!(format_length(0.0021234), "0.00212");
         assert_eq!(format_length(1516.3), "1516");
         assert_eq!(format_length(0.0), "0");
-    }
-
-    #[test]
-    fn units_scale_the_defaults() {
-        assert_eq!(metres_per_unit(""), Some(1.0));
-        assert_eq!(metres_per_unit("mm"), Some(1e-3));
-        assert_eq!(metres_per_unit(" M "), Some(1.0));
-        assert_eq!(metres_per_unit("parsec"), None);
     }
 }
