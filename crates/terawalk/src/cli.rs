@@ -64,8 +64,12 @@ pub enum Command {
     /// Describe a store file; `--verify` checks every checksum and invariant.
     #[command(after_help = "Examples:\n  terawalk info plant.tw\n  terawalk info plant.tw --verify")]
     Info(InfoArgs),
-    /// Render one frame of a store on the GPU (headless; LOD cut and frustum culling as a walk would).
+    /// Render a frame, or every frame of a camera path (PNGs, video), of a store or model on the
+    /// GPU (headless; LOD cut and frustum culling as a walk would).
     #[command(after_help = "Examples:\n  terawalk render plant.tw -o frame.png\n  \
+                            terawalk render engine.glb -o engine.png   # a model: built into the cache once\n  \
+                            terawalk render plant.tw --path walk.json --frames-dir frames/\n  \
+                            terawalk render plant.tw --path walk.json --video walk.mp4 --size 1920x1080\n  \
                             terawalk render plant.tw -o lod.png --color level --error 4\n  \
                             terawalk render plant.tw -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --size 1920x1080\n  \
                             WGPU_BACKEND=gl terawalk render plant.tw -o frame.png")]
@@ -76,8 +80,10 @@ pub enum Command {
                             terawalk bench plant.tw --path path.json --reference --frames 20\n  \
                             terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
     Bench(BenchArgs),
-    /// Open a store in an interactive window: fly, walk or orbit; HUD, controls, debug view.
+    /// Open a store or model in an interactive window: fly, walk or orbit; HUD, controls, debug
+    /// view.
     #[command(after_help = "Examples:\n  terawalk view plant.tw\n  \
+                            terawalk view scan.ply.gz --up y   # a model: built into the cache once\n  \
                             terawalk view plant.tw --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --error 2\n  \
                             terawalk view plant.tw --path walk.json --play\n  \
                             xvfb-run -a terawalk view plant.tw --path walk.json --exit-after 30 --screenshot out.png\n  \
@@ -85,7 +91,11 @@ pub enum Command {
                             WGPU_BACKEND=gl terawalk view plant.tw --render-scale 0.5\n\n\
                             Keys: WASD move, mouse drag look, wheel speed, 1/2/3 fly/walk/orbit, right click \
                             orbit around a point, F debug view, L freeze LOD, R record, P play, F12 screenshot, \
-                            F1 help, Esc quit.")]
+                            F1 help, Esc quit (first it clears a pick or measurement). Design review: click \
+                            picks an object (name, id, triangles, box, point), H hide, I isolate, Shift+H show \
+                            all, M measure (two clicks, snaps to vertices), 4-9 axis views (+X -X +Y -Y +Z -Z), \
+                            0 iso, O orthographic, F11 fullscreen, Tab panels; named viewpoints in the Controls \
+                            panel (saved to STORE.views.json).")]
     View(ViewArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
@@ -99,6 +109,55 @@ pub enum Command {
                             terawalk path engine.tw -o approach.json --part approach   # overview to close view\n  \
                             terawalk path ship_mm.tw -o p.json --eye-height 1700")]
     Path(PathArgs),
+    /// Write a store's scene back out: the LOD cut `render` draws (or the full-detail triangles
+    /// in a region) as GLB, or the whole LOD hierarchy as an OGC 3D Tiles 1.1 tileset.
+    #[command(after_help = "Examples:\n  terawalk export plant.tw -o cut.glb\n  \
+                            terawalk export plant.tw -o near.glb --error 2 --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"\n  \
+                            terawalk export plant.tw -o full.glb --error 0\n  \
+                            terawalk export plant.tw -o room.glb --region 0,0,0,20,20,5\n  \
+                            terawalk export plant.tw --tiles plant-tiles/")]
+    Export(ExportArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct ExportArgs {
+    /// A store file written by `terawalk build`.
+    pub store: PathBuf,
+    /// The GLB file to write (glTF 2.0 binary, y-up, one mesh per object, positions in the
+    /// input's coordinates and units).
+    #[arg(short, long, required_unless_present = "tiles", conflicts_with = "tiles")]
+    pub output: Option<PathBuf>,
+    /// Write an OGC 3D Tiles 1.1 tileset into this folder instead: tileset.json and
+    /// tiles/N.glb, one tile per LOD level of each part of the hierarchy (refine REPLACE).
+    #[arg(long)]
+    pub tiles: Option<PathBuf>,
+    /// Pixel error threshold τ of the LOD cut, as `render --error` (0 = full resolution).
+    #[arg(long, default_value_t = 1.0, conflicts_with_all = ["region", "tiles"])]
+    pub error: f32,
+    /// Camera "eye;target;up;fovy" in input coordinates, as `render --camera`, or just
+    /// "eye;target" (up: the store's axis; the default field of view). Default: `render`'s
+    /// overview of the whole scene.
+    #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["region", "tiles"])]
+    pub camera: Option<String>,
+    /// Viewport WIDTHxHEIGHT the pixel error is measured in, as `render --size`.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size, conflicts_with_all = ["region", "tiles"])]
+    pub size: (u32, u32),
+    /// Export the full-detail triangles whose three vertices lie in this box instead of a
+    /// camera's cut: "minx,miny,minz,maxx,maxy,maxz" in input coordinates.
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "tiles")]
+    pub region: Option<String>,
+    /// --tiles: parts of the hierarchy with at most this many full-detail triangles are not
+    /// split into smaller tiles, only refined level by level (fewer, larger tiles when higher).
+    #[arg(long, default_value = "64k", value_parser = parse_count, requires = "tiles")]
+    pub tile_triangles: u64,
+    /// Memory budget of the decoded page cache (at least 1M; the root pages are kept beyond
+    /// it).
+    #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
+    pub memory: u64,
+    /// Export and exit 0 even when store pages fail their checksum (a camera's cut is then
+    /// drawn from coarser levels, or has holes).
+    #[arg(long)]
+    pub allow_damaged: bool,
 }
 
 #[derive(Args, Debug)]
@@ -222,11 +281,29 @@ pub enum RenderColoring {
 
 #[derive(Args, Debug)]
 pub struct RenderArgs {
-    /// A store file written by `terawalk build`.
+    /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
+    /// into the cache (see --cache-dir).
     pub store: PathBuf,
-    /// Output PNG.
-    #[arg(short, long)]
-    pub output: PathBuf,
+    /// Output PNG (one frame; with --path, give --frames-dir or --video instead).
+    #[arg(short, long, required_unless_present_any = ["frames_dir", "video"], conflicts_with = "path")]
+    pub output: Option<PathBuf>,
+    /// A camera path (JSON, as `terawalk path` writes and `bench` reads): render every frame of
+    /// it, into --frames-dir and/or --video.
+    #[arg(long, requires = "sequence")]
+    pub path: Option<PathBuf>,
+    /// Folder for the frames of --path: DIR/frame-00000.png, DIR/frame-00001.png, …
+    #[arg(long, group = "sequence", requires = "path")]
+    pub frames_dir: Option<PathBuf>,
+    /// Encode the frames of --path into this video (e.g. walk.mp4) with ffmpeg, which must be
+    /// on PATH.
+    #[arg(long, group = "sequence", requires = "path")]
+    pub video: Option<PathBuf>,
+    /// Frame rate of --video (default: the one the path was made for).
+    #[arg(long, requires = "video")]
+    pub fps: Option<f64>,
+    /// Render only the first N frames of --path.
+    #[arg(long, requires = "path")]
+    pub frames: Option<usize>,
     /// Image size WIDTHxHEIGHT.
     #[arg(long, default_value = "1280x720", value_parser = parse_size)]
     pub size: (u32, u32),
@@ -237,7 +314,7 @@ pub struct RenderArgs {
     pub samples: SamplesChoice,
     /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
     /// whole scene from an oblique direction.
-    #[arg(long, allow_hyphen_values = true)]
+    #[arg(long, allow_hyphen_values = true, conflicts_with = "path")]
     pub camera: Option<String>,
     /// Pixel error threshold τ of the LOD cut (0 = full resolution).
     #[arg(long, default_value_t = 1.0)]
@@ -254,14 +331,39 @@ pub struct RenderArgs {
     #[arg(long)]
     pub allow_damaged: bool,
     /// Up axis of the default camera (x, y or z) instead of the one the store records, without
-    /// a rebuild (--camera gives its own up vector).
+    /// a rebuild (--camera gives its own up vector). A model file is built with it.
     #[arg(long, value_parser = parse_up_axis)]
     pub up: Option<u8>,
+    #[command(flatten)]
+    pub open: OpenArgs,
+}
+
+/// How `render` and `view` open a model file given in place of a store: built once into a
+/// cache folder, then reused while the file (path, size, modification time) and the options
+/// that shape the store stay the same.
+#[derive(Args, Debug, Clone)]
+#[command(next_help_heading = "Opening a model file")]
+pub struct OpenArgs {
+    /// Folder of the stores built from model files. Default: $TERAWALK_CACHE, else
+    /// $XDG_CACHE_HOME/terawalk, else ~/.cache/terawalk.
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Most disk space the cached stores may take: each time a model is opened, the least
+    /// recently used stores beyond it are removed (never the one being opened).
+    #[arg(long, default_value = "20G", value_parser = parse_bytes)]
+    pub cache_size: u64,
+    /// Units of the model's coordinates, recorded in the store (as `build --units`).
+    #[arg(long, default_value = "")]
+    pub units: String,
+    /// Memory budget of the build (as `build --memory`).
+    #[arg(long, default_value = "2G", value_parser = parse_bytes)]
+    pub build_memory: u64,
 }
 
 #[derive(Args, Debug)]
 pub struct ViewArgs {
-    /// A store file written by `terawalk build`.
+    /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
+    /// into the cache (see --cache-dir).
     pub store: PathBuf,
     /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees".
     /// Default: the first frame of --path, else the whole scene from an oblique direction.
@@ -277,9 +379,10 @@ pub struct ViewArgs {
     #[arg(long)]
     pub exit_after: Option<u64>,
     /// Drive the session with a script and quit after its last step: one step per line —
-    /// `wait N`, `hold KEY N`, `press KEY`, `look DX DY`, `scroll LINES`, `resize WxH`,
-    /// `minimize`, `restore`, `screenshot FILE`, `screenshot-window FILE` (`#` comments). With
-    /// --path, the path advances one frame per frame.
+    /// `wait N`, `hold KEY N`, `press KEY` (or `press shift+KEY`), `look DX DY`, `scroll LINES`,
+    /// `click X Y`, `view +x|-x|+y|-y|+z|-z|iso`, `save-view NAME`, `load-view NAME`,
+    /// `resize WxH`, `minimize`, `restore`, `screenshot FILE`, `screenshot-window FILE` (`#`
+    /// comments). With --path, the path advances one frame per frame.
     #[arg(long)]
     pub script: Option<PathBuf>,
     /// Save the last frame as PNG on exit (with --exit-after or --script).
@@ -327,9 +430,11 @@ pub struct ViewArgs {
     #[arg(long)]
     pub debug_view: bool,
     /// Up axis for the camera and walk mode's gravity (x, y or z), overriding the one the store
-    /// records, without a rebuild.
+    /// records, without a rebuild. A model file is built with it.
     #[arg(long, value_parser = parse_up_axis)]
     pub up: Option<u8>,
+    #[command(flatten)]
+    pub open: OpenArgs,
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]

@@ -29,11 +29,12 @@ fn main() {
         cli::Command::Preview(a) => commands::preview::run(a),
         cli::Command::Build(a) => commands::build::run(a, cli.quiet),
         cli::Command::Info(a) => commands::info::run(a),
-        cli::Command::Render(a) => commands::render::run(a),
+        cli::Command::Render(a) => commands::render::run(a, cli.quiet),
         cli::Command::Bench(a) => commands::bench::run(a).map(|_| ()),
-        cli::Command::View(a) => commands::view::run(a),
+        cli::Command::View(a) => commands::view::run(a, cli.quiet),
         cli::Command::Demo(a) => commands::demo::run(a),
         cli::Command::Path(a) => commands::path::run(a, cli.quiet),
+        cli::Command::Export(a) => commands::export::run(a),
     };
     if let Err(e) = result {
         if out::is_closed_pipe(&e) {

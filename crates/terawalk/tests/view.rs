@@ -172,6 +172,9 @@ fn scripted_run_on(
     run_under_xvfb(store_file, backend, &["--exit-after", "8"], "8 frames", extra, check_image)
 }
 
+/// One Xvfb at a time: `xvfb-run -a` picks a free display number racily.
+static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 /// Runs the viewer under Xvfb on the circle path until `stop` says (`--exit-after N` or
 /// `--script FILE`, relative to the run's folder, where `script` is written first), checks that
 /// stdout reports `frames` and that the `--screenshot` shows the model (`check_image`).
@@ -183,8 +186,6 @@ fn run_under_xvfb(
     extra: &[&str],
     check_image: bool,
 ) -> Option<(tempfile::TempDir, String)> {
-    // One Xvfb at a time: `xvfb-run -a` picks a free display number racily.
-    static XVFB: std::sync::Mutex<()> = std::sync::Mutex::new(());
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
     let Some(xvfb_run) = which("xvfb-run") else {
         assert!(
@@ -349,4 +350,202 @@ fn a_bad_script_is_a_clear_error_before_any_window() {
     assert_clean_error(&o, "missing.txt");
     let o = terawalk(&["view", s, "--script", "s.txt", "--exit-after", "3"], dir.path());
     assert_clean_error(&o, "give one of them");
+}
+
+/// Three named unit cubes side by side along x (`left` [0, 1], `middle` [1.5, 2.5], `right`
+/// [3, 4]; y and z in [0, 1]), built through the CLI in metres: a model whose objects and
+/// points are known, for the design-review tools.
+fn cubes_store() -> &'static Path {
+    static STORE: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    &STORE
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let mut obj = String::new();
+            for (k, (name, x0)) in [("left", 0.0), ("middle", 1.5), ("right", 3.0)].into_iter().enumerate() {
+                obj += &format!("o {name}\n");
+                // Vertex i: x bit 2, y bit 1, z bit 0.
+                for i in 0..8 {
+                    obj += &format!("v {} {} {}\n", x0 + (i >> 2) as f64, (i >> 1) & 1, i & 1);
+                }
+                let v = |x: usize, y: usize, z: usize| k * 8 + x * 4 + y * 2 + z + 1;
+                for a in 0..2 {
+                    for q in [
+                        [v(a, 0, 0), v(a, 1, 0), v(a, 1, 1), v(a, 0, 1)],
+                        [v(0, a, 0), v(1, a, 0), v(1, a, 1), v(0, a, 1)],
+                        [v(0, 0, a), v(1, 0, a), v(1, 1, a), v(0, 1, a)],
+                    ] {
+                        obj += &format!("f {} {} {}\nf {} {} {}\n", q[0], q[1], q[2], q[0], q[2], q[3]);
+                    }
+                }
+            }
+            std::fs::write(dir.path().join("cubes.obj"), obj).unwrap();
+            let o = terawalk(
+                &["-q", "build", "cubes.obj", "-o", "cubes.tw", "--units", "m", "--threads", "1"],
+                dir.path(),
+            );
+            assert!(o.status.success(), "{}", text(&o.stderr));
+            let p = dir.path().join("cubes.tw");
+            (dir, p)
+        })
+        .1
+}
+
+/// Runs `script` in the viewer under Xvfb (Vulkan) over a copy of `store_file` in the run's
+/// folder (its viewpoints file is written there), without a path; returns the folder and
+/// stderr (the viewer's messages), or None when skipped as [`run_under_xvfb`] skips.
+fn review_session(store_file: &Path, script: &str) -> Option<(tempfile::TempDir, String)> {
+    let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(xvfb_run) = which("xvfb-run") else {
+        assert!(!require_gpu(), "TERAWALK_REQUIRE_GPU is set but xvfb-run is missing");
+        eprintln!("skipped: xvfb-run not found (apt-get install xvfb xauth)");
+        return None;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(store_file, dir.path().join("m.tw")).unwrap();
+    std::fs::write(dir.path().join("script.txt"), script).unwrap();
+    let mut cmd = Command::new(xvfb_run);
+    cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view", "m.tw"])
+        .args(["--size", "480x320", "--script", "script.txt"])
+        .current_dir(dir.path())
+        .env("WGPU_BACKEND", "vulkan")
+        .env("TERAWALK_LOG", "info,wgpu_hal=off,wgpu_core=warn,naga=warn");
+    let lvp = Path::new("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json");
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() && lvp.exists() {
+        cmd.env("VK_ICD_FILENAMES", lvp);
+    }
+    let o = run_with_timeout(cmd, Duration::from_secs(240)).expect("the viewer did not exit in time");
+    let err = text(&o.stderr);
+    if !o.status.success() {
+        let no_device = err.contains("no GPU adapter") || err.contains("cannot open a window");
+        assert!(no_device && !require_gpu(), "view failed: {err}");
+        eprintln!("skipped: no display or adapter: {err}");
+        return None;
+    }
+    assert!(!err.contains("panicked"), "{err}");
+    Some((dir, err))
+}
+
+/// A PNG's RGBA pixels and width.
+fn rgba(png_file: &Path) -> (Vec<u8>, usize) {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(png_file).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    buf.truncate(info.buffer_size());
+    (buf, info.width as usize)
+}
+
+/// Pixels that are not the background in the columns `x0..x1`.
+fn covered_in_columns(png_file: &Path, x0: usize, x1: usize) -> usize {
+    let (px, w) = rgba(png_file);
+    px.chunks_exact(4)
+        .enumerate()
+        .filter(|(i, p)| (x0..x1).contains(&(i % w)) && p[..3] != [205, 218, 235])
+        .count()
+}
+
+/// The text after `needle` in the viewer's messages, up to the end of its line.
+fn message_after<'a>(err: &'a str, needle: &str) -> &'a str {
+    let at = err.find(needle).unwrap_or_else(|| panic!("no {needle:?} in: {err}")) + needle.len();
+    err[at..].lines().next().unwrap_or_default()
+}
+
+#[test]
+fn pick_hide_isolate_and_measure_under_xvfb() {
+    // From -y the three cubes stand side by side: `left` in columns ~90..180, `middle` around
+    // the centre (~200..280), `right` ~300..390; the centre pixel's ray hits `middle`'s front
+    // face at (2, 0, 0.5). From +x the centre pixel hits `right` at (4, 0.5, 0.5).
+    let script = "view -y\nwait 8\nscreenshot front.png\nclick 240 160\nwait 3\nscreenshot picked.png\n\
+                  press I\nwait 3\nscreenshot isolated.png\npress shift+H\nwait 3\nclick 240 160\n\
+                  press H\nwait 3\nscreenshot hidden.png\npress shift+H\nwait 3\nscreenshot all.png\n\
+                  press M\nclick 240 160\nview +x\nwait 8\nclick 240 160\nwait 1\n";
+    let Some((dir, err)) = review_session(cubes_store(), script) else { return };
+    let shot = |n: &str| dir.path().join(n);
+    // The pick names the object, its triangles, the point and the box in metres.
+    let picked = message_after(&err, "picked ");
+    assert!(picked.starts_with("`middle` (id 1): 12 triangles, at (2.0000, 0.0000, 0.5000) m"), "{picked}");
+    assert!(picked.contains("box (1.5000, 0.0000, 0.0000) – (2.5000, 1.0000, 1.0000)"), "{picked}");
+    // Tinted orange: the centre pixel turns from grey to red > blue.
+    let centre = |n: &str| {
+        let (px, w) = rgba(&shot(n));
+        let i = (160 * w + 240) * 4;
+        [px[i] as i32, px[i + 1] as i32, px[i + 2] as i32]
+    };
+    let (grey, tinted) = (centre("front.png"), centre("picked.png"));
+    assert!((grey[0] - grey[2]).abs() < 10 && tinted[0] > tinted[2] + 60, "{grey:?} → {tinted:?}");
+    // Isolated: nothing but `middle` leaves the background; all three before and after.
+    let (left, mid, right) = ((0, 190), (200, 280), (290, 480));
+    for n in ["front.png", "all.png"] {
+        for (x0, x1) in [left, mid, right] {
+            assert!(covered_in_columns(&shot(n), x0, x1) > 1000, "{n}: columns {x0}..{x1} empty");
+        }
+    }
+    let iso = shot("isolated.png");
+    assert_eq!(covered_in_columns(&iso, left.0, left.1) + covered_in_columns(&iso, right.0, right.1), 0);
+    assert!(covered_in_columns(&iso, mid.0, mid.1) > 1000);
+    // Hidden: `middle` is gone, the others stay.
+    let hidden = shot("hidden.png");
+    assert_eq!(covered_in_columns(&hidden, mid.0 + 10, mid.1 - 10), 0);
+    assert!(
+        covered_in_columns(&hidden, left.0, left.1) > 1000
+            && covered_in_columns(&hidden, right.0, right.1) > 1000
+    );
+    // Measured from (2, 0, 0.5) to (4, 0.5, 0.5): √4.25 m.
+    let m = message_after(&err, "measure: distance ");
+    let d: f64 = m.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{m}"));
+    assert!((d - 4.25f64.sqrt()).abs() < 1e-3 && m.contains(" m from (2.0000, 0.0000, 0.5000)"), "{m}");
+
+    // Snapping: clicks 2 pixels inside the corners of `middle`'s front face (found in the
+    // first session's picture) measure corner to corner, (2.5, 0, 1) to (1.5, 0, 0): √2 m.
+    let (px, w) = rgba(&shot("front.png"));
+    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+    for (i, p) in px.chunks_exact(4).enumerate() {
+        let (x, y) = (i % w, i / w);
+        if (mid.0..mid.1).contains(&x) && p[..3] != [205, 218, 235] {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+    }
+    let script = format!(
+        "view -y\nwait 8\npress M\nclick {} {}\nclick {} {}\nwait 1\n",
+        x1 - 2,
+        y0 + 2,
+        x0 + 2,
+        y1 - 2
+    );
+    let Some((_, err)) = review_session(cubes_store(), &script) else { return };
+    let m = message_after(&err, "measure: distance ");
+    let d: f64 = m.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{m}"));
+    assert!((d - 2f64.sqrt()).abs() < 1e-4 && m.contains("(2.5000, 0.0000, 1.0000)"), "{m}");
+    assert!(m.ends_with("snapped to a vertex"), "{m}");
+}
+
+#[test]
+fn preset_views_viewpoints_and_ortho_under_xvfb() {
+    // The +x view differs from the starting one; a viewpoint saved in the iso view and recalled
+    // after moving elsewhere gives the same camera and the same picture, and its file is next to
+    // the store; O toggles the orthographic view.
+    let script = "wait 4\nscreenshot start.png\nview +x\nwait 6\nscreenshot x.png\nview iso\nwait 6\n\
+                  save-view corner\nscreenshot saved.png\nview +z\nhold W 3\nwait 4\nscreenshot moved.png\n\
+                  load-view corner\nwait 6\nscreenshot loaded.png\nload-view nowhere\nview -y\nwait 6\n\
+                  screenshot perspective.png\npress O\nwait 6\nscreenshot ortho.png\npress O\nwait 6\n\
+                  screenshot back.png\n";
+    let Some((dir, err)) = review_session(cubes_store(), script) else { return };
+    let img = |n: &str| tw_gpu::Image::from_png_bytes(&std::fs::read(dir.path().join(n)).unwrap()).unwrap();
+    let share = |a: &str, b: &str| img(a).differing_share(&img(b)).unwrap();
+    assert!(share("start.png", "x.png") > 0.02, "the +x view looks like the start");
+    assert!(share("saved.png", "moved.png") > 0.02, "the camera did not move away");
+    assert_eq!(share("saved.png", "loaded.png"), 0.0, "the viewpoint did not restore the picture");
+    let saved = message_after(&err, "viewpoint `corner` saved to ");
+    let loaded = message_after(&err, "viewpoint `corner` restored: ");
+    assert!(saved.ends_with(loaded), "saved {saved} / loaded {loaded}");
+    assert!(err.contains("no viewpoint `nowhere` in"), "{err}");
+    let views = tw_view::viewpoints::Viewpoints::load(&dir.path().join("m.tw.views.json")).unwrap();
+    assert_eq!(views.views.iter().map(|v| v.name.as_str()).collect::<Vec<_>>(), ["corner"]);
+    // Orthographic from -y: the cubes' inner side faces (darker shades in perspective) vanish,
+    // the front faces keep their place; O again returns to the perspective picture.
+    let (_, perspective) = coverage(&dir.path().join("perspective.png"));
+    let (_, ortho) = coverage(&dir.path().join("ortho.png"));
+    assert!(perspective >= 2 && ortho < perspective, "colours: perspective {perspective}, ortho {ortho}");
+    assert!(share("perspective.png", "ortho.png") < 0.05, "the orthographic view lost the framing");
+    assert!(share("perspective.png", "back.png") < 0.005, "O twice did not return");
 }

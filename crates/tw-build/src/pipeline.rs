@@ -223,6 +223,43 @@ fn remove_stale_temporaries(output: &Path, work_root: &Path) {
     }
 }
 
+/// A build's temporary working directory. It is removed when dropped, by the program's signal
+/// handler (registered with `tw_store::cleanup`), and after a SIGKILL by the next build into the
+/// same folder (locked while it lives; see `remove_stale_temporaries`). Steps before the
+/// build proper (converting inputs, `tw_io::convert`) keep their files in one too.
+#[derive(Debug)]
+pub struct WorkDir {
+    // Dropped in this order: the directory goes while it is still registered and locked.
+    dir: tempfile::TempDir,
+    _cleanup: tw_store::cleanup::TempGuard,
+    _lock: std::fs::File,
+}
+
+impl WorkDir {
+    /// Creates a working directory in `root` (which must exist).
+    pub fn create(root: &Path) -> Result<WorkDir, BuildError> {
+        let dir = tempfile::Builder::new()
+            .prefix(WORK_DIR_PREFIX)
+            .tempdir_in(root)
+            .map_err(|e| BuildError::io(root, e))?;
+        let _cleanup = tw_store::cleanup::register(dir.path());
+        let _lock = tw_store::cleanup::lock_dir(dir.path()).map_err(|e| BuildError::io(dir.path(), e))?;
+        Ok(WorkDir { dir, _cleanup, _lock })
+    }
+
+    pub fn path(&self) -> &Path {
+        self.dir.path()
+    }
+}
+
+/// The folder a build's working directories go into: `work_dir`, else the output's folder.
+pub fn work_root(output: &Path, work_dir: Option<&Path>) -> PathBuf {
+    match work_dir {
+        Some(d) => d.to_path_buf(),
+        None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
+    }
+}
+
 /// The phases; parallel steps run on `pool` (the importers themselves need not be `Send`).
 fn build_with_pool(
     scene: Scene,
@@ -232,17 +269,9 @@ fn build_with_pool(
     pool: &rayon::ThreadPool,
 ) -> Result<BuildReport, BuildError> {
     let mut report = BuildReport::default();
-    let work_root = match &options.work_dir {
-        Some(d) => d.clone(),
-        None => output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new(".")).to_path_buf(),
-    };
+    let work_root = work_root(output, options.work_dir.as_deref());
     remove_stale_temporaries(output, &work_root);
-    let work = tempfile::Builder::new()
-        .prefix(WORK_DIR_PREFIX)
-        .tempdir_in(&work_root)
-        .map_err(|e| BuildError::io(&work_root, e))?;
-    let _cleanup = tw_store::cleanup::register(work.path());
-    let _lock = tw_store::cleanup::lock_dir(work.path()).map_err(|e| BuildError::io(work.path(), e))?;
+    let work = WorkDir::create(&work_root)?;
     let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
     let mut t = Timer { report: &mut report, start: Instant::now() };
 

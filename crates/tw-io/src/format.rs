@@ -94,6 +94,16 @@ pub fn detect(input: &mut Input) -> Result<Format, ImportError> {
                 Ok(Format::Gltf)
             } else if text.lines().any(|l| l.starts_with("v ")) {
                 Ok(Format::Obj)
+            } else if let Some((converter, format)) = crate::convert::Converter::for_name(&path) {
+                // Only `terawalk build` (and the commands that build on the fly) convert.
+                Err(ImportError::parse(
+                    &path,
+                    Position::File,
+                    format!(
+                        "{format} is not read directly: `terawalk build` converts it with {} first",
+                        converter.tool()
+                    ),
+                ))
             } else {
                 Err(ImportError::parse(
                     &path,
@@ -165,5 +175,7 @@ mod tests {
         assert!(e.to_string().contains("unknown format"), "{e}");
         let e = detect_bytes("a.obj", b"").unwrap_err();
         assert!(e.to_string().contains("empty file"), "{e}");
+        let e = detect_bytes("a.ifc", b"ISO-10303-21;\nHEADER;\n").unwrap_err();
+        assert!(e.to_string().contains("IFC is not read directly: `terawalk build` converts it"), "{e}");
     }
 }

@@ -14,6 +14,8 @@
 //! - [`Scene`]: several inputs streamed as one scene, object ids kept distinct, degenerate
 //!   triangles dropped and counted.
 //! - [`generate`]: the procedural power plant; [`write`](mod@write): PLY/OBJ/STL/GLB writers.
+//! - [`convert`]: IFC, STEP/IGES, FBX, COLLADA, ... turned into OBJ/GLB by external tools
+//!   (IfcOpenShell, Open CASCADE, assimp) for `terawalk build`.
 //!
 //! ```no_run
 //! use tw_io::{Scene, SceneOptions, SceneStats};
@@ -23,6 +25,7 @@
 //! println!("{} triangles in {} objects", stats.triangles, summary.objects);
 //! ```
 
+pub mod convert;
 pub mod error;
 pub mod format;
 pub mod fuzz;

@@ -4,7 +4,16 @@
 //! debug view's lines, runs the UI and presents. It redraws continuously only while something
 //! moves (keys held, smoothing, playback, recording, a scripted run); otherwise it waits for
 //! events, so an idle viewer costs nothing. Minimising (zero size) skips frames; closing or Esc
-//! ends the loop; errors end it and are returned from [`crate::run`].
+//! (with nothing picked or measured) ends the loop; errors end it and are returned from
+//! [`crate::run`].
+//!
+//! Design review: a left click (press and release without dragging) picks the object under the
+//! cursor ([`crate::pick::pick_triangle`]) and tints it, or, while measuring (M), adds a
+//! measurement point snapped to a vertex within [`SNAP_PX`] pixels; H / I / Shift+H hide,
+//! isolate, show all ([`crate::review::ObjectFilter`], which the scene honours when drawing and
+//! picking); 4…9, 0 are the preset views, O the orthographic view
+//! ([`Controller::dolly_zoom`]), F11 fullscreen, and named viewpoints are saved next to the
+//! store ([`crate::viewpoints`]).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -22,16 +31,34 @@ use crate::debug_view;
 use crate::error::ViewError;
 use crate::gfx::Gfx;
 use crate::hud::{FrameTimes, HudFrame, Throughput};
-use crate::pick::{camera_ray, Ray};
+use crate::pick::{camera_ray, snap_to_vertex, Ray};
 use crate::recorder::{Player, Recorder};
+use crate::review::{format_distance, Measure, ObjectFilter, Picked};
 use crate::scene::Scene;
 use crate::script::{ScriptRunner, Step};
 use crate::settings::{Coloring, Settings};
 use crate::ui::{self, Action, Line};
+use crate::viewpoints::{Preset, Viewpoint, Viewpoints};
 use crate::ViewOptions;
 
 /// The most node boxes the debug view draws.
 const MAX_BOXES: usize = 4000;
+
+/// A measurement point snaps to a vertex of the picked triangle this close, in window pixels.
+pub const SNAP_PX: f32 = 8.0;
+
+/// A left button released this close to where it went down is a click (pick), not a drag.
+const CLICK_PX: f32 = 4.0;
+
+/// The orthographic view's field of view (see [`Controller::dolly_zoom`]): 1°.
+const ORTHO_FOVY: f32 = std::f32::consts::PI / 180.0;
+
+/// The colour of the measurement's line and points (RGBA).
+const MEASURE_COLOR: [u8; 4] = [255, 220, 40, 255];
+
+/// What the last drawn frame was drawn from (culling and drawing cameras, settings, size in
+/// pixels, the objects shown, the highlighted object): the scene is drawn again when it changes.
+type DrawnKey = (Camera, Camera, Settings, [u32; 2], ObjectFilter, Option<u32>);
 
 /// The window and what draws into it (made when the event loop resumes).
 struct WindowState {
@@ -65,7 +92,7 @@ pub(crate) struct App {
     times: FrameTimes,
     disk: Throughput,
     frames: u64,
-    drawn_key: Option<(Camera, Camera, Settings, [u32; 2])>,
+    drawn_key: Option<DrawnKey>,
     message: Option<(String, Instant)>,
     /// A window screenshot (UI included) to take at the next present.
     window_shot: Option<std::path::PathBuf>,
@@ -73,6 +100,19 @@ pub(crate) struct App {
     script: Option<ScriptRunner>,
     /// Minimised (by a script step, or a zero-size window): frames are skipped.
     minimized: bool,
+    /// Design review: the objects drawn, the picked object and what the HUD says of it, the
+    /// measurement and whether clicks measure (M).
+    filter: ObjectFilter,
+    picked: Option<Picked>,
+    pick_lines: Vec<(String, String)>,
+    measure: Measure,
+    measuring: bool,
+    /// Where the left button went down (its release near there is a click).
+    press_at: Option<[f32; 2]>,
+    /// The store's named viewpoints, read at first use.
+    viewpoints: Option<Viewpoints>,
+    /// In the orthographic view (O): the perspective field of view to return to.
+    ortho: Option<f32>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -119,6 +159,14 @@ impl App {
             window_shot: None,
             script,
             minimized: false,
+            filter: ObjectFilter::default(),
+            picked: None,
+            pick_lines: Vec::new(),
+            measure: Measure::default(),
+            measuring: false,
+            press_at: None,
+            viewpoints: None,
+            ortho: None,
             error: None,
             report: Default::default(),
         };
@@ -265,11 +313,245 @@ impl App {
                 }
             }
             Action::ResetView => {
+                self.ortho = None;
                 self.frozen = None;
                 self.settings.debug_view = false;
                 self.controller = Controller::new(&self.start_camera, &self.scene.scene_frame());
             }
+            Action::Hide => match self.picked.take() {
+                Some(p) => {
+                    self.pick_lines.clear();
+                    self.filter.hide(p.object);
+                    self.say(format!("hidden: {} (Shift+H shows all)", self.object_name(p.object)));
+                }
+                None => self.say("nothing picked to hide (click an object first)".into()),
+            },
+            Action::Isolate => match self.picked {
+                Some(p) => {
+                    self.filter.isolate(p.object);
+                    self.say(format!("isolated: {} (Shift+H shows all)", self.object_name(p.object)));
+                }
+                None => self.say("nothing picked to isolate (click an object first)".into()),
+            },
+            Action::ShowAll => {
+                self.filter.show_all();
+                self.say("showing every object".into());
+            }
+            Action::ToggleMeasure => {
+                self.measuring = !self.measuring;
+                self.measure = Measure::default();
+                let m = if self.measuring { "measure: click two points (Esc clears)" } else { "measure off" };
+                self.say(m.into());
+            }
+            Action::View(p) => {
+                let cam = p.camera(self.scene.bounds(), self.scene.up(), self.controller.fovy);
+                self.go_to(&cam);
+                self.say(format!("view {}", p.name()));
+            }
+            Action::SaveView(name) => self.save_view(&name),
+            Action::LoadView(name) => self.load_view(&name),
+            Action::ToggleOrtho => self.toggle_ortho(),
+            Action::ToggleFullscreen => {
+                if let Some(w) = &self.win {
+                    let full = w.window.fullscreen().is_some();
+                    w.window.set_fullscreen((!full).then_some(winit::window::Fullscreen::Borderless(None)));
+                }
+            }
         }
+    }
+
+    /// O: the orthographic view and back, keeping what is ahead framed (the orbit pivot, else
+    /// the surface under the centre of the view, else the model's centre).
+    fn toggle_ortho(&mut self) {
+        if self.controller.mode == Mode::Walk && self.ortho.is_none() {
+            self.say("orthographic view: not in walk mode (1 fly, 3 orbit)".into());
+            return;
+        }
+        let c = &self.controller;
+        let focus = if c.mode == Mode::Orbit {
+            c.distance
+        } else {
+            let ray = Ray { origin: c.eye, dir: c.forward() };
+            let (lo, hi) = self.scene.bounds();
+            let to_centre = ((lo + hi) * 0.5 - c.eye).dot(c.forward()).max(c.scene_size * 0.01);
+            self.scene.pick(&ray, f32::MAX).unwrap_or(to_centre)
+        };
+        match self.ortho.take() {
+            None => {
+                self.ortho = Some(self.controller.fovy);
+                self.controller.dolly_zoom(ORTHO_FOVY, focus);
+                self.say("orthographic view (O: perspective)".into());
+            }
+            Some(fovy) => {
+                self.controller.dolly_zoom(fovy, focus);
+                self.say("perspective view".into());
+            }
+        }
+    }
+
+    /// Moves the camera to `cam`, keeping the mode and speeds (orbit: around `cam`'s target).
+    fn go_to(&mut self, cam: &Camera) {
+        self.frozen = None;
+        self.settings.debug_view = false;
+        self.playing = false;
+        let old = &self.controller;
+        let mut k = Controller::new(cam, &self.scene.scene_frame());
+        k.speed = old.speed;
+        k.walk_speed = old.walk_speed;
+        match old.mode {
+            Mode::Orbit => k.set_mode(Mode::Orbit, Some(cam.target)),
+            m => k.mode = m,
+        }
+        self.controller = k;
+    }
+
+    /// The viewpoints, read from the store's file at first use (a bad file is reported and
+    /// left alone: saving then starts a new list only after the user is told).
+    fn viewpoints(&mut self) -> Result<&mut Viewpoints, String> {
+        if self.viewpoints.is_none() {
+            let file = self.scene.views_file().to_path_buf();
+            self.viewpoints = Some(Viewpoints::load(&file).map_err(|e| e.to_string())?);
+        }
+        Ok(self.viewpoints.as_mut().expect("loaded above"))
+    }
+
+    /// Saves the camera as viewpoint `name` in the store's viewpoints file.
+    fn save_view(&mut self, name: &str) {
+        let c = &self.controller;
+        let mut cam = c.camera();
+        if c.mode == Mode::Orbit {
+            cam.target = c.pivot;
+        }
+        let v = Viewpoint::from_camera(name, &cam, self.scene.header().grid_origin);
+        let file = self.scene.views_file().to_path_buf();
+        let result = self.viewpoints().and_then(|list| {
+            list.set(v);
+            list.save(&file).map_err(|e| e.to_string())
+        });
+        match result {
+            Ok(()) => {
+                self.say(format!("viewpoint `{name}` saved to {}: {}", file.display(), camera_text(&cam)))
+            }
+            Err(e) => self.say(format!("viewpoint `{name}` not saved: {e}")),
+        }
+    }
+
+    /// Goes to the saved viewpoint `name`.
+    fn load_view(&mut self, name: &str) {
+        let origin = self.scene.header().grid_origin;
+        let (bounds, up) = (self.scene.bounds(), self.scene.up());
+        let cam = match self.viewpoints() {
+            Ok(list) => list.get(name).map(|v| v.camera(origin, bounds, up)),
+            Err(e) => {
+                self.say(format!("viewpoint `{name}` not loaded: {e}"));
+                return;
+            }
+        };
+        match cam {
+            Some(cam) => {
+                // A viewpoint saved in the orthographic view is one again (O returns to the
+                // starting field of view).
+                self.ortho = (cam.fovy <= ORTHO_FOVY * 1.01).then_some(self.start_camera.fovy);
+                self.go_to(&cam);
+                let now = self.controller.camera();
+                self.say(format!("viewpoint `{name}` restored: {}", camera_text(&now)));
+            }
+            None => self.say(format!("no viewpoint `{name}` in {}", self.scene.views_file().display())),
+        }
+    }
+
+    /// The saved viewpoints' names (none when the file cannot be read).
+    fn viewpoint_names(&mut self) -> Vec<String> {
+        self.viewpoints().map(|l| l.views.iter().map(|v| v.name.clone()).collect()).unwrap_or_default()
+    }
+
+    fn object_name(&self, id: u32) -> String {
+        match self.scene.store().objects().get(id as usize) {
+            Some(o) => format!("`{}` (object {id})", o.name),
+            None => format!("object {id}"),
+        }
+    }
+
+    /// Left click at the cursor: picks the object there, or adds a measurement point.
+    fn click(&mut self) {
+        let (Some([x, y]), Some(w)) = (self.cursor, &self.win) else { return };
+        let size = w.window.inner_size();
+        let (vw, vh) = (size.width as f32, size.height as f32);
+        let cam = self.controller.camera();
+        let ray = camera_ray(&cam, x, y, vw, vh);
+        let Some(hit) = self.scene.pick_triangle(&ray, cam.far) else {
+            if !self.measuring {
+                self.picked = None;
+                self.pick_lines.clear();
+            }
+            self.say(format!("nothing under the cursor at ({x:.0}, {y:.0})"));
+            return;
+        };
+        let point = ray.at(hit.t);
+        let units = tw_store::units::unit_suffix(self.scene.units()).to_string();
+        let at = |p: glam::Vec3| {
+            let [x, y, z] = self.scene.input_position(p).map(format_distance);
+            format!("({x}, {y}, {z})")
+        };
+        if self.measuring {
+            let vp = cam.view_projection(vw / vh.max(1.0));
+            let (p, snapped) = snap_to_vertex(point, &hit.corners, &vp, vw, vh, SNAP_PX);
+            self.measure.add(p);
+            let snap = if snapped { ", snapped to a vertex" } else { "" };
+            let m = match (self.measure.a, self.measure.distance()) {
+                (Some(a), Some(d)) => {
+                    format!(
+                        "measure: distance {} {units} from {} to {}{snap}",
+                        format_distance(d as f64),
+                        at(a),
+                        at(p)
+                    )
+                }
+                _ => format!("measure: first point {} {units}{snap}", at(p)),
+            };
+            self.say(m);
+            return;
+        }
+        let id = hit.object;
+        let obj = self.scene.store().objects().get(id as usize);
+        let name = obj.map_or_else(|| "(not in the object table)".to_string(), |o| o.name.clone());
+        let triangles = obj.map_or(0, |o| o.triangles);
+        let bbox = self.scene.object_box(id);
+        self.picked = Some(Picked { object: id, point });
+        self.pick_lines = vec![
+            ("picked".into(), format!("{name} (id {id})")),
+            ("triangles".into(), crate::hud::count(triangles)),
+            ("point".into(), format!("{} {units}", at(point))),
+        ];
+        if let Some((lo, hi)) = bbox {
+            self.pick_lines.push(("box min".into(), format!("{} {units}", at(lo))));
+            self.pick_lines.push(("box max".into(), format!("{} {units}", at(hi))));
+        }
+        let bbox_text = bbox.map(|(lo, hi)| format!(", box {} – {}", at(lo), at(hi))).unwrap_or_default();
+        self.say(format!(
+            "picked `{name}` (id {id}): {triangles} triangles, at {} {units}{bbox_text}",
+            at(point)
+        ));
+    }
+
+    /// The HUD's design-review lines: the pick, the filter, the measurement.
+    fn review_lines(&self) -> Vec<(String, String)> {
+        let mut out = self.pick_lines.clone();
+        if let Some(i) = self.filter.isolated() {
+            out.push(("isolated".into(), self.object_name(i)));
+        } else if self.filter.hidden_count() > 0 {
+            out.push(("hidden".into(), format!("{} object(s)", self.filter.hidden_count())));
+        }
+        if self.measuring {
+            let units = tw_store::units::unit_suffix(self.scene.units());
+            let v = match self.measure.distance() {
+                Some(d) => format!("{} {units}", format_distance(d as f64)),
+                None if self.measure.is_empty() => "click the first point".into(),
+                None => "click the second point".into(),
+            };
+            out.push(("measure".into(), v));
+        }
+        out
     }
 
     /// `output_dir/PREFIX-<unix seconds>-<frame>.EXT`.
@@ -335,8 +617,29 @@ impl App {
         if repeat {
             return;
         }
+        let shift = self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight);
         match code {
+            KeyCode::Escape if self.measuring || self.picked.is_some() => {
+                self.measuring = false;
+                self.measure = Measure::default();
+                self.picked = None;
+                self.pick_lines.clear();
+                self.say("cleared the pick and the measurement (Esc again quits)".into());
+            }
             KeyCode::Escape => event_loop.exit(),
+            KeyCode::KeyH if shift => self.act(Action::ShowAll),
+            KeyCode::KeyH => self.act(Action::Hide),
+            KeyCode::KeyI => self.act(Action::Isolate),
+            KeyCode::KeyM => self.act(Action::ToggleMeasure),
+            KeyCode::KeyO => self.act(Action::ToggleOrtho),
+            KeyCode::F11 => self.act(Action::ToggleFullscreen),
+            KeyCode::Digit4 => self.act(Action::View(Preset::PosX)),
+            KeyCode::Digit5 => self.act(Action::View(Preset::NegX)),
+            KeyCode::Digit6 => self.act(Action::View(Preset::PosY)),
+            KeyCode::Digit7 => self.act(Action::View(Preset::NegY)),
+            KeyCode::Digit8 => self.act(Action::View(Preset::PosZ)),
+            KeyCode::Digit9 => self.act(Action::View(Preset::NegZ)),
+            KeyCode::Digit0 => self.act(Action::View(Preset::Iso)),
             KeyCode::F1 => self.settings.show_help = !self.settings.show_help,
             KeyCode::F12
                 if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) =>
@@ -352,7 +655,7 @@ impl App {
             KeyCode::KeyR => self.act(Action::ToggleRecording),
             KeyCode::KeyP => self.act(Action::TogglePlayback),
             KeyCode::Home => self.act(Action::ResetView),
-            KeyCode::KeyH => {
+            KeyCode::Tab => {
                 let show = !(self.settings.show_hud || self.settings.show_controls);
                 self.settings.show_hud = show;
                 self.settings.show_controls = show;
@@ -397,6 +700,22 @@ impl App {
                     self.key(k, true, false, event_loop);
                     self.key(k, false, false, event_loop);
                 }
+                Step::PressShifted(k) => {
+                    let held = self.keys.contains(&KeyCode::ShiftLeft);
+                    self.key(KeyCode::ShiftLeft, true, false, event_loop);
+                    self.key(k, true, false, event_loop);
+                    self.key(k, false, false, event_loop);
+                    if !held {
+                        self.key(KeyCode::ShiftLeft, false, false, event_loop);
+                    }
+                }
+                Step::Click(x, y) => {
+                    self.cursor = Some([x, y]);
+                    self.click();
+                }
+                Step::View(p) => self.act(Action::View(p)),
+                Step::SaveView(name) => self.save_view(&name),
+                Step::LoadView(name) => self.load_view(&name),
                 Step::Look(dx, dy) => {
                     self.look[0] += dx;
                     self.look[1] += dy;
@@ -478,6 +797,7 @@ impl App {
         }
         let draw = match camera {
             Some(c) => {
+                self.ortho = None;
                 self.controller = {
                     let mut k = Controller::new(&c, &self.scene.scene_frame());
                     k.mode = self.controller.mode;
@@ -512,7 +832,9 @@ impl App {
             self.scene.set_memory_budget(self.settings.memory_budget)?;
             self.drawn_key = None;
         }
-        let key = (cull, draw, self.settings.clone(), px);
+        self.scene.set_filter(&self.filter);
+        self.scene.set_highlight(self.picked.map(|p| p.object));
+        let key = (cull, draw, self.settings.clone(), px, self.filter.clone(), self.picked.map(|p| p.object));
         // Drawn again while the last frame is not final (pages arriving, occlusion settling).
         let rendered = self.drawn_key.as_ref() != Some(&key) || self.scene.wants_redraw();
         if rendered {
@@ -523,6 +845,9 @@ impl App {
         let info = self.scene.last_frame();
         let ss = self.scene.stream_stats();
         self.disk.push(self.started.elapsed().as_secs_f64(), self.scene.bytes_read());
+
+        let review = self.review_lines();
+        let viewpoint_names = self.viewpoint_names();
 
         // 3. Debug view lines (in window points).
         let w = self.win.as_mut().expect("checked above");
@@ -547,6 +872,21 @@ impl App {
                 }
                 for (lo, hi) in self.scene.occluded_node_boxes(MAX_BOXES) {
                     add(&debug_view::box_edges(lo, hi), debug_view::OCCLUDED_COLOR);
+                }
+            }
+        }
+
+        // The measurement: its points and the line between them, over the scene.
+        if let Some(a) = self.measure.a {
+            let vp = draw.view_projection(view_size[0] / view_size[1]);
+            let b = self.measure.b.unwrap_or(a);
+            if let Some((pa, pb)) = debug_view::project_segment(&vp, (a, b), view_size) {
+                lines.push(Line { a: pa, b: pb, color: MEASURE_COLOR });
+                for p in [pa, pb] {
+                    for (dx, dy) in [(5.0, 0.0), (0.0, 5.0)] {
+                        let (a, b) = ([p[0] - dx, p[1] - dy], [p[0] + dx, p[1] + dy]);
+                        lines.push(Line { a, b, color: MEASURE_COLOR });
+                    }
                 }
             }
         }
@@ -599,9 +939,10 @@ impl App {
             speed: self.controller.active_speed() as f64,
             units: self.scene.units().to_string(),
             mode: format!(
-                "{}{}{}",
+                "{}{}{}{}",
                 self.controller.mode.name(),
                 if self.frozen.is_some() { ", debug view" } else { "" },
+                if self.ortho.is_some() { ", orthographic" } else { "" },
                 if self.settings.lod_freeze { ", LOD frozen" } else { "" }
             ),
             adapter: {
@@ -626,6 +967,9 @@ impl App {
             message: self.message.as_ref().map(|(m, _)| m.as_str()),
             scene: w.scene_tex.map(|(id, _)| id),
             lines: &lines,
+            review: &review,
+            measuring: self.measuring,
+            viewpoints: &viewpoint_names,
         };
         let mut actions = Vec::new();
         let settings = &mut self.settings;
@@ -732,8 +1076,20 @@ impl ApplicationHandler for App {
             WindowEvent::MouseInput { state, button, .. } => {
                 let pressed = state == ElementState::Pressed;
                 match button {
-                    MouseButton::Left if !pressed => self.dragging = false,
-                    MouseButton::Left if !egui_pointer => self.dragging = true,
+                    MouseButton::Left if !pressed => {
+                        self.dragging = false;
+                        // Released where it went down: a click, not a drag.
+                        let near = |a: [f32; 2], b: [f32; 2]| (a[0] - b[0]).hypot(a[1] - b[1]) <= CLICK_PX;
+                        if let (Some(a), Some(b)) = (self.press_at.take(), self.cursor) {
+                            if near(a, b) && !egui_pointer {
+                                self.click();
+                            }
+                        }
+                    }
+                    MouseButton::Left if !egui_pointer => {
+                        self.dragging = true;
+                        self.press_at = self.cursor;
+                    }
                     MouseButton::Right if pressed && !egui_pointer => self.pick_pivot(),
                     _ => {}
                 }
@@ -771,4 +1127,13 @@ impl ApplicationHandler for App {
             }
         }
     }
+}
+
+/// A camera for messages: eye and view direction, scene space.
+fn camera_text(c: &Camera) -> String {
+    let d = c.direction();
+    format!(
+        "eye ({:.4}, {:.4}, {:.4}) looking ({:.4}, {:.4}, {:.4})",
+        c.eye.x, c.eye.y, c.eye.z, d.x, d.y, d.z
+    )
 }

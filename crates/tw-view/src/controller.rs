@@ -257,6 +257,25 @@ impl Controller {
         }
     }
 
+    /// Changes the field of view to `fovy` and moves the eye along the view direction so that
+    /// what was `focus` units ahead keeps its size on screen (a "dolly zoom"). The viewer's
+    /// orthographic view is this with a very narrow field of view from far away: the renderer
+    /// and the LOD selection stay perspective (a projection of their own would touch both), and
+    /// at 1° the perspective of a model's depth is under 1 % of its size. In orbit mode the
+    /// pivot stays and the distance follows.
+    pub fn dolly_zoom(&mut self, fovy: f32, focus: f32) {
+        let fovy = fovy.clamp(0.001, 3.0);
+        let focus = if focus.is_finite() && focus > 0.0 { focus } else { self.scene_size * 0.5 };
+        let scale = (self.fovy * 0.5).tan() / (fovy * 0.5).tan();
+        let point = self.eye + self.forward() * focus;
+        self.eye = point - self.forward() * (focus * scale);
+        self.fovy = fovy;
+        if self.mode == Mode::Orbit {
+            self.distance = (self.pivot - self.eye).length();
+            self.target_distance = self.distance;
+        }
+    }
+
     /// The speed of the current mode (walk or fly), scene units per second.
     pub fn active_speed(&self) -> f32 {
         if self.mode == Mode::Walk {
@@ -421,5 +440,20 @@ mod tests {
             c.update(0.016, &Input { scroll: 1.0, ..Default::default() });
         }
         assert!((c.eye - p).length() < d);
+    }
+
+    #[test]
+    fn a_dolly_zoom_keeps_the_focus_framed() {
+        let mut c = ctl_in(1.0);
+        let eye = c.eye;
+        let f = c.forward();
+        let width = |c: &Controller, d: f32| (c.fovy * 0.5).tan() * d;
+        let before = width(&c, 5.0);
+        c.dolly_zoom(0.02, 5.0);
+        let back = (eye + f * 5.0 - c.eye).length();
+        assert!((width(&c, back) - before).abs() < before * 1e-3, "the focus changed size");
+        assert!((c.forward() - f).length() < 1e-6 && back > 100.0);
+        c.dolly_zoom(1.0, back);
+        assert!((c.eye - eye).length() < 1e-2 && c.fovy == 1.0, "back where it was: {}", c.eye);
     }
 }

@@ -8,15 +8,20 @@
 //! - [`controller`]: fly / walk / orbit camera controllers (plain data, unit-tested);
 //! - [`hud`]: fps, frame-time graph, disk throughput and the HUD's figures;
 //! - [`debug_view`]: the third-person debug view's geometry (frustum, node boxes, projection);
-//! - [`pick`]: CPU ray casting for the orbit pivot and walk mode's ground;
+//! - [`pick`]: CPU ray casting for the orbit pivot, walk mode's ground, picking objects and
+//!   measuring (snapping to a vertex);
+//! - [`review`]: design-review state: hidden / isolated objects, the picked object, the
+//!   point-to-point measurement;
+//! - [`viewpoints`]: the axis and isometric preset views, named viewpoints saved next to the
+//!   store;
 //! - [`recorder`]: camera path recording and playback (the `path`/`bench` JSON format);
 //! - [`scene`]: the store and its `tw_frame::Walkthrough` (streamer, renderer, occlusion
 //!   culling), the scene texture egui shows;
 //! - [`gfx`]: window surface, device and egui-wgpu;
 //! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;
-//! - [`script`]: scripted sessions (`--script`: keys, mouse look, resizes, minimising,
-//!   screenshots, frame by frame);
+//! - [`script`]: scripted sessions (`--script`: keys, mouse look, clicks, resizes, minimising,
+//!   preset and named views, screenshots, frame by frame);
 //! - `app`: the winit event loop tying them together.
 //!
 //! [`run`] opens the window and returns when it is closed, after `exit_after` frames or the
@@ -30,10 +35,12 @@ pub mod hud;
 pub mod pick;
 pub mod readback;
 pub mod recorder;
+pub mod review;
 pub mod scene;
 pub mod script;
 pub mod settings;
 pub mod ui;
+pub mod viewpoints;
 
 mod app;
 

@@ -20,6 +20,13 @@
 //!   drew are drawn again from the drawing camera straight into the scene texture;
 //!   [`Scene::visible_node_boxes`] / [`Scene::occluded_node_boxes`] give the nodes the debug
 //!   view outlines (pink / yellow).
+//! - **Hidden objects and the highlight** ([`Scene::set_filter`], [`Scene::set_highlight`]):
+//!   with objects hidden or one isolated, the cut is selected without occlusion culling (a hidden
+//!   object must not occlude what is behind it, and the renderer's occlusion tests know nothing
+//!   of objects) and drawn again into the scene texture with a triangle mask per cluster (the
+//!   debug view's path, [`tw_gpu::Renderer::draw_masked`]): a cluster mixes objects, so the
+//!   filter works per triangle, and costs nothing while every object is shown. The picked
+//!   object is tinted through the renderer's object colour table (the material colouring).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -32,7 +39,8 @@ use tw_store::{Header, Store};
 
 use crate::controller::SceneFrame;
 use crate::error::ViewError;
-use crate::pick::{pick_clusters, Ray};
+use crate::pick::{pick_clusters, pick_triangle, Ray, TriangleHit};
+use crate::review::ObjectFilter;
 use crate::settings::Settings;
 
 /// What [`Scene::frame`] did.
@@ -62,6 +70,17 @@ struct SelectKey {
     frustum: bool,
     viewport: [u32; 2],
     occlusion: tw_frame::Occlusion,
+    /// Selected with objects hidden (without occlusion culling).
+    filtered: bool,
+}
+
+/// How the picked object is tinted: half its colour, half this orange (sRGB).
+pub const HIGHLIGHT: [u8; 4] = [255, 140, 0, 255];
+
+/// `color` (the store's, or the default) blended half-way to [`HIGHLIGHT`].
+pub fn tint(color: Option<[u8; 4]>) -> [u8; 4] {
+    let c = color.unwrap_or(tw_gpu::DEFAULT_COLOR);
+    std::array::from_fn(|i| ((c[i] as u16 + HIGHLIGHT[i] as u16) / 2) as u8)
 }
 
 /// Format of the scene's colour texture. The renderer's own target is `Rgba8Unorm` holding the
@@ -149,6 +168,14 @@ pub struct Scene {
     last: FrameInfo,
     /// The up axis the camera follows: the store's, or `view --up`'s override.
     up_axis: u8,
+    /// The objects drawn and picked.
+    filter: ObjectFilter,
+    /// The object to tint, and the one the renderer's colour table tints now (a new renderer
+    /// starts with the store's colours).
+    highlight: Option<u32>,
+    tinted: Option<u32>,
+    /// Where named viewpoints are saved (default: next to the store).
+    views_file: std::path::PathBuf,
 }
 
 impl Scene {
@@ -156,6 +183,7 @@ impl Scene {
     /// (the streamer starts with the first frame).
     pub fn new(store: Store, memory_budget: u64) -> Scene {
         let up_axis = store.header().up_axis.min(2);
+        let views_file = crate::viewpoints::views_file(store.path());
         Scene {
             store: Arc::new(store),
             memory_budget,
@@ -170,7 +198,38 @@ impl Scene {
             prev_cut: Vec::new(),
             last: FrameInfo::default(),
             up_axis,
+            filter: ObjectFilter::default(),
+            highlight: None,
+            tinted: None,
+            views_file,
         }
+    }
+
+    /// The named viewpoints' file: `STORE.views.json` next to the store unless set here (a
+    /// model opened through a build cache keeps its viewpoints next to the model instead).
+    pub fn views_file(&self) -> &std::path::Path {
+        &self.views_file
+    }
+
+    pub fn set_views_file(&mut self, file: std::path::PathBuf) {
+        self.views_file = file;
+    }
+
+    /// The objects to draw (and pick) from the next frame on.
+    pub fn set_filter(&mut self, filter: &ObjectFilter) {
+        if *filter != self.filter {
+            self.filter = filter.clone();
+            self.key = None;
+        }
+    }
+
+    pub fn filter(&self) -> &ObjectFilter {
+        &self.filter
+    }
+
+    /// The object to tint from the next frame on (material colouring).
+    pub fn set_highlight(&mut self, object: Option<u32>) {
+        self.highlight = object;
     }
 
     /// Overrides the store's up axis (0 x, 1 y, 2 z) for the camera and walk mode's gravity
@@ -345,6 +404,7 @@ impl Scene {
             self.walk = Some(Walkthrough::new(self.store.clone(), renderer, options)?);
             self.gpu_request = settings.gpu_budget;
             self.key = None;
+            self.tinted = None;
         }
         let walk = self.walk.as_mut().expect("made above");
         let (ow, oh) = walk.renderer().size();
@@ -352,18 +412,36 @@ impl Scene {
             walk.replace_renderer(g.renderer(size, settings.gpu_budget)?);
             self.gpu_request = settings.gpu_budget;
             self.key = None;
+            self.tinted = None;
+        }
+        if self.tinted != self.highlight {
+            let objects = self.store.objects();
+            let h = self.highlight;
+            let colors = objects.iter().enumerate().map(|(i, o)| {
+                if h == Some(i as u32) {
+                    Some(tint(o.color))
+                } else {
+                    o.color
+                }
+            });
+            walk.renderer_mut().set_object_colors(colors);
+            self.tinted = self.highlight;
         }
         if self.gpu_request != settings.gpu_budget {
             walk.renderer_mut().set_gpu_budget(settings.gpu_budget.max(tw_gpu::MIN_BUDGET));
             self.gpu_request = settings.gpu_budget;
         }
         walk.set_color_mode(settings.coloring.to_gpu());
+        let filtered = !self.filter.is_all();
+        // Hidden objects must not occlude: no occlusion culling while any is hidden.
+        let occlusion = if filtered { tw_frame::Occlusion::None } else { settings.occlusion };
         let key = SelectKey {
             camera: *cull,
             tau: settings.pixel_error,
             frustum: settings.frustum_culling,
             viewport: size,
-            occlusion: settings.occlusion,
+            occlusion,
+            filtered,
         };
         let frozen = settings.lod_freeze && self.key.is_some();
         let mut info = if frozen { FrameInfo { selected: false, ..self.last } } else { FrameInfo::default() };
@@ -371,7 +449,7 @@ impl Scene {
             let fs = FrameSettings {
                 tau: settings.pixel_error,
                 frustum_culling: settings.frustum_culling,
-                occlusion: settings.occlusion,
+                occlusion,
                 wait_for_pages: false,
                 ..Default::default()
             };
@@ -399,14 +477,15 @@ impl Scene {
             if cut_changed {
                 self.prev_cut.clone_from(cut);
             }
-            self.settle = settings.occlusion != tw_frame::Occlusion::None
-                && (self.key.as_ref() != Some(&key) || cut_changed);
+            self.settle =
+                occlusion != tw_frame::Occlusion::None && (self.key.as_ref() != Some(&key) || cut_changed);
             self.key = Some(key);
         }
         g.ensure_target(size);
         let target = g.target.as_ref().expect("made above");
-        if frozen || cull != draw {
-            // The clusters the culling camera drew, seen from the drawing camera.
+        if frozen || cull != draw || filtered {
+            // The clusters the culling camera drew, seen from the drawing camera, without the
+            // hidden objects' triangles.
             let t = Instant::now();
             let cache = walk.streamer().cache().clone();
             let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
@@ -419,23 +498,26 @@ impl Scene {
             }
             pages.sort_by_key(|(p, _)| *p);
             pages.dedup_by_key(|(p, _)| *p);
-            let clusters: Vec<_> = self
+            let filter = &self.filter;
+            let (clusters, masks): (Vec<_>, Vec<_>) = self
                 .drawn
                 .iter()
                 .filter_map(|c| {
                     let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
-                    pages[i].1.clusters.get(c.index_in_page as usize).map(|pc| (*c, pc))
+                    let pc = pages[i].1.clusters.get(c.index_in_page as usize)?;
+                    let mask = if filtered { filter.mask(&pc.objects) } else { u128::MAX };
+                    (mask != 0).then_some(((*c, pc), mask))
                 })
-                .collect();
+                .unzip();
             let grid_step = self.store.header().grid_step;
             let r = walk.renderer_mut();
             r.begin_frame();
             let view = Target::View { view: &target.view, format: SCENE_FORMAT, size: (size[0], size[1]) };
-            r.draw(view, draw, grid_step, &clusters, true)?;
+            r.draw_masked(view, draw, grid_step, &clusters, filtered.then_some(&masks[..]), true)?;
             let ms = t.elapsed().as_secs_f32() * 1e3;
             info.render_ms = if frozen { ms } else { info.render_ms + ms };
             info.gpu = r.stats().pool;
-            if frozen {
+            if frozen || filtered {
                 info.triangles = r.stats().triangles;
                 info.clusters = r.stats().clusters;
             }
@@ -476,8 +558,24 @@ impl Scene {
     }
 
     /// Distance along `ray` to the nearest triangle drawn by the last frame (resident pages
-    /// only; nothing is loaded).
+    /// only; nothing is loaded; hidden objects are not hit).
     pub fn pick(&self, ray: &Ray, max_t: f32) -> Option<f32> {
+        if self.filter.is_all() {
+            let step = self.header().grid_step;
+            let resident = self.resident(&self.drawn);
+            let items = resident.iter().filter_map(|(r, page)| {
+                let c = page.clusters.get(r.index_in_page as usize)?;
+                let (lo, hi) = page.bounds.get(r.index_in_page as usize)?;
+                Some((tw_runtime::frustum::grid_box(*lo, *hi, step), c))
+            });
+            return pick_clusters(ray, items.collect::<Vec<_>>(), step, max_t);
+        }
+        self.pick_triangle(ray, max_t).map(|h| h.t)
+    }
+
+    /// The nearest triangle of a shown object along `ray` among those the last frame drew, with
+    /// its object id and corners (resident pages only).
+    pub fn pick_triangle(&self, ray: &Ray, max_t: f32) -> Option<TriangleHit> {
         let step = self.header().grid_step;
         let resident = self.resident(&self.drawn);
         let items = resident.iter().filter_map(|(r, page)| {
@@ -485,7 +583,27 @@ impl Scene {
             let (lo, hi) = page.bounds.get(r.index_in_page as usize)?;
             Some((tw_runtime::frustum::grid_box(*lo, *hi, step), c))
         });
-        pick_clusters(ray, items.collect::<Vec<_>>(), step, max_t)
+        pick_triangle(ray, items.collect::<Vec<_>>(), step, max_t, |o| self.filter.shows(o))
+    }
+
+    /// The scene-space box of object `id`'s triangles in the current cut's resident clusters
+    /// (the store keeps no per-object bounds; this is the object as loaded at the current level
+    /// of detail, within the view frustum when frustum culling is on), `None` when none is.
+    pub fn object_box(&self, id: u32) -> Option<(Vec3, Vec3)> {
+        let cut = &self.selection()?.clusters;
+        let step = self.header().grid_step;
+        let mut bounds: Option<(Vec3, Vec3)> = None;
+        for (r, page) in self.resident(cut) {
+            let Some(c) = page.clusters.get(r.index_in_page as usize) else { continue };
+            for (tri, _) in c.indices.chunks_exact(3).zip(&c.objects).filter(|(_, &o)| o == id) {
+                for &v in tri {
+                    let Some(p) = c.positions.get(v as usize) else { continue };
+                    let p = Vec3::from_array(p.map(|g| (g as f64 * step) as f32));
+                    bounds = Some(bounds.map_or((p, p), |(lo, hi)| (lo.min(p), hi.max(p))));
+                }
+            }
+        }
+        bounds
     }
 
     /// Scene-space boxes of the nodes that own a cluster the last frame drew (the visible

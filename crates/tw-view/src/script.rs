@@ -9,8 +9,13 @@
 //! wait 10              # draw 10 frames (the controller or --path moves the camera)
 //! hold W 20            # hold a key for 20 frames (W A S D Q E, Up Down Left Right, Shift…)
 //! press F1             # press and release a key (any key the viewer knows: F1, L, C, 2, …)
+//! press Shift+H        # … with Shift held (show all objects)
 //! look 120 -40         # move the mouse-look by (dx, dy) pixels
 //! scroll 3             # the wheel: +3 lines (speed)
+//! click 240 160        # left click at window pixel (x, y): pick (or measure, after `press M`)
+//! view +x              # a preset view: +x -x +y -y +z -z iso (as keys 4…9, 0)
+//! save-view door       # save the camera as viewpoint `door` (STORE.views.json)
+//! load-view door       # go to the saved viewpoint `door`
 //! resize 640x360       # ask for a new window size (applied when the window system agrees)
 //! minimize             # minimise: frames are skipped until `restore`
 //! restore
@@ -27,13 +32,21 @@ use std::path::{Path, PathBuf};
 
 use winit::keyboard::KeyCode;
 
+use crate::viewpoints::Preset;
+
 /// One step of a script.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Step {
     Wait(u32),
     Hold(KeyCode, u32),
     Press(KeyCode),
+    /// A key pressed with Shift held.
+    PressShifted(KeyCode),
     Look(f32, f32),
+    Click(f32, f32),
+    View(Preset),
+    SaveView(String),
+    LoadView(String),
     Scroll(f32),
     Resize(u32, u32),
     Minimize,
@@ -147,6 +160,16 @@ impl Script {
                     .ok_or_else(|| err(format!("`{s}` is not a number")))
             };
             let key = |s: &str| parse_key(s).ok_or_else(|| err(format!("unknown key `{s}`")));
+            let pixel = |s: &str| {
+                number(s)?;
+                s.parse::<f32>()
+                    .ok()
+                    .filter(|v| *v >= 0.0)
+                    .ok_or_else(|| err(format!("`{s}` is not a pixel coordinate (>= 0)")))
+            };
+            let preset = |s: &str| {
+                Preset::parse(s).ok_or_else(|| err(format!("unknown view `{s}` (+x -x +y -y +z -z iso)")))
+            };
             let step = match cmd.as_str() {
                 "wait" => {
                     want(1)?;
@@ -158,7 +181,27 @@ impl Script {
                 }
                 "press" => {
                     want(1)?;
-                    Step::Press(key(args[0])?)
+                    let lower = args[0].to_ascii_lowercase();
+                    match lower.strip_prefix("shift+") {
+                        Some(k) => Step::PressShifted(key(k)?),
+                        None => Step::Press(key(args[0])?),
+                    }
+                }
+                "click" => {
+                    want(2)?;
+                    Step::Click(pixel(args[0])?, pixel(args[1])?)
+                }
+                "view" => {
+                    want(1)?;
+                    Step::View(preset(args[0])?)
+                }
+                "save-view" => {
+                    want(1)?;
+                    Step::SaveView(args[0].to_string())
+                }
+                "load-view" => {
+                    want(1)?;
+                    Step::LoadView(args[0].to_string())
                 }
                 "look" => {
                     want(2)?;
@@ -197,8 +240,9 @@ impl Script {
                 }
                 other => {
                     return Err(err(format!(
-                        "unknown step `{other}` (wait, hold, press, look, scroll, resize, minimize, \
-                         restore, screenshot, screenshot-window)"
+                        "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
+                         save-view, load-view, resize, minimize, restore, screenshot, \
+                         screenshot-window)"
                     )))
                 }
             };
@@ -339,7 +383,8 @@ mod tests {
     fn parses_every_step_and_comments() {
         let s = parse(
             "# a walk\nwait 3\nhold w 2  # forward\npress F1\nlook 10 -5\nscroll 2\nresize 320x200\n\
-             minimize\nrestore\nscreenshot a.png\nscreenshot-window b.png\n\n",
+             minimize\nrestore\nscreenshot a.png\nscreenshot-window b.png\n\npress shift+H\n\
+             click 12 30.5\nview -Z\nview iso\nsave-view door\nload-view door\n",
         )
         .unwrap();
         assert_eq!(
@@ -355,6 +400,12 @@ mod tests {
                 Step::Restore,
                 Step::Screenshot("a.png".into()),
                 Step::WindowScreenshot("b.png".into()),
+                Step::PressShifted(KeyCode::KeyH),
+                Step::Click(12.0, 30.5),
+                Step::View(Preset::NegZ),
+                Step::View(Preset::Iso),
+                Step::SaveView("door".into()),
+                Step::LoadView("door".into()),
             ]
         );
         assert_eq!(s.frames(), 6);
@@ -369,6 +420,10 @@ mod tests {
             ("resize 0x10", 1, "not a size"),
             ("wait -1", 1, "not a frame count"),
             ("look 1 nan", 1, "not a number"),
+            ("click 1 -2", 1, "not a pixel coordinate"),
+            ("view front", 1, "unknown view `front`"),
+            ("press shift+nope", 1, "unknown key `nope`"),
+            ("save-view", 1, "takes 1 argument"),
         ] {
             let e = parse(text).unwrap_err().to_string();
             assert!(e.starts_with(&format!("s.txt:{line}: ")) && e.contains(needle), "{e}");

@@ -8,9 +8,10 @@ use egui::{Color32, Pos2, Rect, Stroke};
 use crate::controller::Mode;
 use crate::hud::{FrameTimes, HudFrame};
 use crate::settings::{Coloring, Occlusion, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE};
+use crate::viewpoints::Preset;
 
 /// A button or key the app acts on.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Action {
     Screenshot,
     ToggleRecording,
@@ -18,6 +19,19 @@ pub enum Action {
     SetMode(Mode),
     ToggleDebugView,
     ResetView,
+    /// Hide / isolate the picked object, show every object again.
+    Hide,
+    Isolate,
+    ShowAll,
+    /// Clicks measure (or pick) from now on.
+    ToggleMeasure,
+    View(Preset),
+    /// The orthographic view and back.
+    ToggleOrtho,
+    /// Save the camera as / go to a named viewpoint.
+    SaveView(String),
+    LoadView(String),
+    ToggleFullscreen,
 }
 
 /// A 2D line in window points with its colour.
@@ -43,6 +57,11 @@ pub struct View<'a> {
     /// The scene image and its size in pixels.
     pub scene: Option<egui::TextureId>,
     pub lines: &'a [Line],
+    /// The design-review lines of the HUD (pick, hidden objects, measurement).
+    pub review: &'a [(String, String)],
+    pub measuring: bool,
+    /// The store's named viewpoints.
+    pub viewpoints: &'a [String],
 }
 
 /// Keyboard help (F1).
@@ -52,6 +71,14 @@ pub const HELP: &[(&str, &str)] = &[
     ("Shift", "four times faster"),
     ("left drag", "look around (orbit: turn around the pivot)"),
     ("right click", "orbit around the clicked point"),
+    ("left click", "pick an object: name, id, triangles, box, point (tinted orange)"),
+    ("H / I", "hide / isolate the picked object"),
+    ("Shift+H", "show every object again"),
+    ("M", "measure: click two points (snaps to a vertex within 8 px)"),
+    ("4 5 / 6 7 / 8 9", "views from +X −X / +Y −Y / +Z −Z"),
+    ("0", "isometric view"),
+    ("O", "orthographic / perspective view"),
+    ("F11", "fullscreen"),
     ("scroll wheel", "speed (fly, walk); distance (orbit)"),
     ("1 / 2 / 3", "fly / walk / orbit"),
     ("F", "debug view: freeze the culling camera, move a second one out"),
@@ -59,11 +86,11 @@ pub const HELP: &[(&str, &str)] = &[
     ("C", "next debug colouring"),
     ("R", "start / stop recording a path"),
     ("P", "play / stop the loaded path"),
-    ("H", "hide / show the panels"),
+    ("Tab", "hide / show the panels"),
     ("Home", "back to the starting view"),
     ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
     ("F1", "this help"),
-    ("Esc", "quit"),
+    ("Esc", "clear the pick and the measurement; quit when there is none"),
 ];
 
 /// Builds this frame's UI.
@@ -135,6 +162,16 @@ fn hud(ui: &mut egui::Ui, view: &View) {
             ui.end_row();
         }
     });
+    if !view.review.is_empty() {
+        ui.separator();
+        egui::Grid::new("review").num_columns(2).show(ui, |ui| {
+            for (k, v) in view.review {
+                ui.label(k);
+                ui.monospace(v);
+                ui.end_row();
+            }
+        });
+    }
     ui.label("frame time (top = max(largest, 33 ms))");
     let (rect, _) = ui.allocate_exact_size(egui::vec2(240.0, 50.0), egui::Sense::hover());
     let p = ui.painter_at(rect);
@@ -217,4 +254,53 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
             s.show_help = !s.show_help;
         }
     });
+    ui.separator();
+    review(ui, view, actions);
+}
+
+/// The design-review controls: hide / isolate / show all, measuring, preset and named views.
+fn review(ui: &mut egui::Ui, view: &View, actions: &mut Vec<Action>) {
+    ui.horizontal(|ui| {
+        for (label, a) in
+            [("hide (H)", Action::Hide), ("isolate (I)", Action::Isolate), ("show all", Action::ShowAll)]
+        {
+            if ui.button(label).clicked() {
+                actions.push(a);
+            }
+        }
+        if ui.selectable_label(view.measuring, "measure (M)").clicked() {
+            actions.push(Action::ToggleMeasure);
+        }
+    });
+    ui.horizontal(|ui| {
+        ui.label("view");
+        for p in Preset::ALL {
+            if ui.small_button(p.name()).clicked() {
+                actions.push(Action::View(p));
+            }
+        }
+        if ui.small_button("ortho (O)").clicked() {
+            actions.push(Action::ToggleOrtho);
+        }
+    });
+    ui.horizontal(|ui| {
+        let id = egui::Id::unique("terawalk viewpoint name");
+        let mut name = ui.data_mut(|d| d.get_temp::<String>(id)).unwrap_or_default();
+        ui.add(egui::TextEdit::singleline(&mut name).desired_width(110.0).hint_text("viewpoint name"));
+        let trimmed = name.trim().to_string();
+        if ui.add_enabled(!trimmed.is_empty(), egui::Button::new("save view")).clicked() {
+            actions.push(Action::SaveView(trimmed));
+        }
+        ui.data_mut(|d| d.insert_temp(id, name));
+    });
+    if !view.viewpoints.is_empty() {
+        ui.horizontal_wrapped(|ui| {
+            ui.label("go to");
+            for v in view.viewpoints {
+                if ui.small_button(v).clicked() {
+                    actions.push(Action::LoadView(v.clone()));
+                }
+            }
+        });
+    }
 }

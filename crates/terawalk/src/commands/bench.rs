@@ -356,7 +356,8 @@ fn print_comparison(report: &BenchReport) {
             });
             outln!(
                 "{:>10}: {}: triangles drawn / exact visible triangles: median {e:.1}{of_cut}",
-                "culling", run.name
+                "culling",
+                run.name
             );
         }
         let s = &run.summary;

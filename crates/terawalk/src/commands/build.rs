@@ -1,11 +1,12 @@
 //! `terawalk build`: inputs → store file (tw-build), with a progress bar per phase and a summary.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use tw_build::{BuildOptions, BuildProgress};
+use tw_io::convert::{ConvertOptions, Converter};
 use tw_io::{Scene, SceneOptions};
 
 use crate::cli::BuildArgs;
@@ -96,6 +97,98 @@ fn output_path(args: &BuildArgs) -> Result<PathBuf> {
     }
 }
 
+/// Builds `args.inputs` into `output` with the phases' progress bars: the one build that
+/// `terawalk build` and the commands opening a model directly (`commands::open`) share. The
+/// store appears atomically (tw-build writes a temporary file and renames it).
+pub fn build_store(args: &BuildArgs, output: &std::path::Path, quiet: bool) -> Result<tw_build::BuildReport> {
+    let prepared = convert_inputs(args, output, quiet)?;
+    let scene = Scene::open(&prepared.inputs, SceneOptions { import: import_options(args) })?;
+    let mut opts = options(args);
+    if opts.units.is_empty() {
+        opts.units = prepared.units.unwrap_or_default().to_string();
+    }
+    let mut bars = Bars { bar: None, quiet };
+    tw_build::build(scene, output, &opts, &mut bars).with_context(|| format!("building {}", output.display()))
+}
+
+/// The inputs as the importers get them: those in a format terawalk does not read (IFC, STEP,
+/// FBX, ...: `tw_io::convert`) converted into a working directory like the build's own
+/// (`tw_build::pipeline::WorkDir`: removed when this is dropped, on a signal, and after a kill
+/// by the next build), which lives until the build has read them.
+struct Prepared {
+    inputs: Vec<PathBuf>,
+    /// The units of the coordinates when every input was converted by tools that agree on them.
+    units: Option<&'static str>,
+    _work: Option<tw_build::pipeline::WorkDir>,
+}
+
+/// Converts the inputs that need it (see [`Prepared`]), reporting each tool's command and time.
+fn convert_inputs(args: &BuildArgs, output: &Path, quiet: bool) -> Result<Prepared> {
+    let converters: Vec<_> = args.inputs.iter().map(|p| Converter::for_path(p)).collect();
+    if converters.iter().all(Option::is_none) {
+        return Ok(Prepared { inputs: args.inputs.clone(), units: None, _work: None });
+    }
+    let root = tw_build::pipeline::work_root(output, args.work_dir.as_deref());
+    let work = tw_build::pipeline::WorkDir::create(&root)?;
+    let options = convert_options()?;
+    let (mut inputs, mut units) = (Vec::new(), Vec::new());
+    for (i, (input, converter)) in args.inputs.iter().zip(converters).enumerate() {
+        let Some((converter, format)) = converter else {
+            inputs.push(input.clone());
+            units.push(None);
+            continue;
+        };
+        let dir = work.path().join(format!("input-{i}"));
+        std::fs::create_dir(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let spinner = (!quiet).then(|| progress::elapsed("convert"));
+        if let Some(s) = &spinner {
+            s.set_message(format!("{} ({format}) with {}", input.display(), converter.tool()));
+        }
+        let converted = tw_io::convert::convert(input, converter, &dir, &options);
+        if let Some(s) = spinner {
+            s.finish_and_clear();
+        }
+        let c = converted?;
+        let summary = if c.summary.is_empty() { String::new() } else { format!(" ({})", c.summary) };
+        let line = format!(
+            "converted {} ({format}) with {} in {:.1} s{summary}: {}",
+            input.display(),
+            converter.tool(),
+            c.elapsed.as_secs_f64(),
+            c.command
+        );
+        tracing::info!("{line}");
+        if !quiet {
+            outln!("{line}");
+        }
+        inputs.push(c.output);
+        units.push(c.units);
+    }
+    let agreed = units.first().copied().flatten().filter(|u| units.iter().all(|x| *x == Some(*u)));
+    Ok(Prepared { inputs, units: agreed, _work: Some(work) })
+}
+
+/// The converters' settings: the tools from `PATH` unless `TERAWALK_ASSIMP` or
+/// `TERAWALK_PYTHON` (a virtual environment's python, say) name others, and the time limit
+/// `TERAWALK_CONVERT_TIMEOUT` (seconds; default [`tw_io::convert::DEFAULT_TIMEOUT`]).
+fn convert_options() -> Result<ConvertOptions> {
+    let mut o = ConvertOptions::default();
+    if let Some(p) = std::env::var_os("TERAWALK_ASSIMP") {
+        o.assimp = p.into();
+    }
+    if let Some(p) = std::env::var_os("TERAWALK_PYTHON") {
+        o.python = p.into();
+    }
+    if let Ok(text) = std::env::var("TERAWALK_CONVERT_TIMEOUT") {
+        let secs = text.trim().parse::<f64>().ok().filter(|s| s.is_finite() && *s > 0.0);
+        let secs = secs.with_context(|| {
+            format!("TERAWALK_CONVERT_TIMEOUT={text:?}: expected a positive number of seconds")
+        })?;
+        o.timeout = std::time::Duration::from_secs_f64(secs.min(1e9));
+    }
+    Ok(o)
+}
+
 pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let output = output_path(&args)?;
@@ -114,11 +207,7 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         max_written: args.temp_space.unwrap_or(u64::MAX),
         ..Default::default()
     });
-    let scene = Scene::open(&args.inputs, SceneOptions { import: import_options(&args) })?;
-    let opts = options(&args);
-    let mut bars = Bars { bar: None, quiet };
-    let r = tw_build::build(scene, &output, &opts, &mut bars)
-        .with_context(|| format!("building {}", output.display()))?;
+    let r = build_store(&args, &output, quiet)?;
     let secs = start.elapsed().as_secs_f64();
     outln!("wrote {} ({})", output.display(), fmt_bytes(r.file_bytes));
     outln!("  up: {}", r.up);

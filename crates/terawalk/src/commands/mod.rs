@@ -4,18 +4,23 @@ pub mod bench;
 pub mod build;
 pub mod damage;
 pub mod demo;
+pub mod export;
 pub mod generate;
 pub mod info;
+pub mod open;
 pub mod path;
 pub mod preview;
 pub mod render;
 pub mod stats;
+pub mod video;
 pub mod view;
 
 use std::path::Path;
 
 /// Opens the store a command reads. The store's errors name the file; a model file given in
-/// its place (`terawalk view model.glb`) gets the command that makes a store of it.
+/// its place (`terawalk info model.glb`) gets the command that makes a store of it. `render`
+/// and `view` build a model into a cache instead ([`open::open`], which says why `bench`,
+/// `info` and `path` do not).
 pub fn open_store(path: &Path) -> anyhow::Result<tw_store::Store> {
     tw_store::Store::open(path).map_err(|e| {
         let model = tw_io::format::Format::from_name(path).is_some();

@@ -1,16 +1,22 @@
-//! `terawalk render`: one frame of a store on the GPU, headless (tw-runtime selects the LOD cut
-//! with frustum culling, tw-gpu draws it and reads it back), written as PNG.
+//! `terawalk render`: frames of a store on the GPU, headless (tw-runtime selects the LOD cut
+//! with frustum culling, tw-gpu draws it and reads it back): one frame written as PNG, or every
+//! frame of a camera path as numbered PNGs and/or a video (ffmpeg, `commands::video`). A model
+//! file is opened through the build cache (`commands::open`).
 
-use std::time::Instant;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
 use tw_core::Aabb;
-use tw_gpu::{ColorMode, Renderer};
-use tw_runtime::{Camera, InputCamera, PageCache, SelectOptions, Selector};
-use tw_store::Header;
+use tw_gpu::{ColorMode, Image, Renderer};
+use tw_runtime::{Camera, CameraPath, InputCamera, PageCache, SelectOptions, Selection, Selector};
+use tw_store::{Header, Store};
 
 use crate::cli::{RenderArgs, RenderColoring, View};
 use crate::commands::preview::preset_direction;
+use crate::commands::{open, video};
+use crate::progress;
 use crate::units::{fmt_bytes, fmt_count};
 
 /// The up axis the camera uses: `--up` when given (overriding the store's at run time, no
@@ -28,40 +34,91 @@ pub fn default_camera(header: &Header, size: (u32, u32), up: usize) -> Result<Ca
     Ok(Camera::from_input_coordinates(c.eye, c.target, c.up, c.fovy_deg, header)?)
 }
 
-pub fn run(args: RenderArgs) -> Result<()> {
+pub fn run(args: RenderArgs, quiet: bool) -> Result<()> {
     if !(args.error.is_finite() && args.error >= 0.0) {
         anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
     }
-    tw_core::output::check_output(&args.output, &[&args.store])?;
-    let store = crate::commands::open_store(&args.store)?;
-    let header = store.header();
+    if let Some(fps) = args.fps.filter(|f| !(f.is_finite() && *f > 0.0)) {
+        anyhow::bail!("--fps must be a number > 0, got {fps}");
+    }
+    if args.frames == Some(0) {
+        anyhow::bail!("--frames N needs N ≥ 1");
+    }
+    let inputs: Vec<&Path> =
+        [Some(args.store.as_path()), args.path.as_deref()].into_iter().flatten().collect();
+    for out in [&args.output, &args.video].into_iter().flatten() {
+        tw_core::output::check_output(out, &inputs)?;
+    }
+    // Before a model is built: a missing ffmpeg is known at once.
+    let ffmpeg = args.video.as_ref().map(|_| video::find_ffmpeg()).transpose()?;
+    let path = args.path.as_deref().map(CameraPath::load).transpose()?;
+    let (store_path, store) = open::open(&args.store, args.up, &args.open, quiet)?;
+    let mut frame = FrameRenderer::new(&store, &args)?;
+    match (&path, &args.output) {
+        (Some(p), _) => render_sequence(&mut frame, p, &args, ffmpeg.as_deref(), quiet)?,
+        (None, Some(output)) => render_one(&mut frame, output, &args)?,
+        (None, None) => anyhow::bail!("give -o FILE.png, or --path with --frames-dir or --video"),
+    }
+    crate::commands::damage::check(&store_path, &frame.cache.failed_pages(), args.allow_damaged)
+}
+
+/// The headless renderer, page cache and LOD selector of a store, reused from frame to frame.
+struct FrameRenderer<'s> {
+    store: &'s Store,
+    renderer: Renderer,
+    cache: PageCache,
+    selector: Selector,
+    options: SelectOptions,
+}
+
+/// One rendered frame and what it took.
+struct Frame {
+    image: Image,
+    selection: Selection,
+    select_time: Duration,
+}
+
+impl<'s> FrameRenderer<'s> {
+    fn new(store: &'s Store, args: &RenderArgs) -> Result<Self> {
+        let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+        outln!("adapter: {}", renderer.adapter_summary());
+        renderer.set_samples(args.samples.resolve(&renderer))?;
+        renderer.set_store_colors(store);
+        renderer.set_color_mode(match args.color {
+            RenderColoring::Material => ColorMode::Material,
+            RenderColoring::Object => ColorMode::Object,
+            RenderColoring::Level => ColorMode::Level,
+            RenderColoring::Cluster => ColorMode::Cluster,
+        });
+        let cache = PageCache::new(store, args.memory);
+        cache.load_root_pages(store);
+        let selector = Selector::new(store);
+        let options =
+            SelectOptions { tau: args.error, viewport: [args.size.0, args.size.1], frustum_culling: true };
+        Ok(FrameRenderer { store, renderer, cache, selector, options })
+    }
+
+    /// The LOD cut for `camera`, drawn and read back.
+    fn draw(&mut self, camera: &Camera) -> Result<Frame> {
+        let t = Instant::now();
+        let selection = self.selector.select(self.store, &self.cache, camera, &self.options);
+        let select_time = t.elapsed();
+        let image = self.renderer.render_selection(self.store, &self.cache, camera, &selection)?;
+        Ok(Frame { image, selection, select_time })
+    }
+}
+
+/// `-o FILE`: one frame from `--camera` (or the default overview), with the figures of its cut.
+fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Result<()> {
+    let header = frame.store.header();
     let camera = match &args.camera {
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
         None => default_camera(header, args.size, up_axis(header, args.up))?,
     };
-    let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
-    outln!("adapter: {}", renderer.adapter_summary());
-    renderer.set_samples(args.samples.resolve(&renderer))?;
-    renderer.set_store_colors(&store);
-    renderer.set_color_mode(match args.color {
-        RenderColoring::Material => ColorMode::Material,
-        RenderColoring::Object => ColorMode::Object,
-        RenderColoring::Level => ColorMode::Level,
-        RenderColoring::Cluster => ColorMode::Cluster,
-    });
-
-    let cache = PageCache::new(&store, args.memory);
-    cache.load_root_pages(&store);
-    let t = Instant::now();
-    let selector = Selector::new(&store);
-    let options =
-        SelectOptions { tau: args.error, viewport: [args.size.0, args.size.1], frustum_culling: true };
-    let selection = selector.select(&store, &cache, &camera, &options);
-    let select_time = t.elapsed();
-    let image = renderer.render_selection(&store, &cache, &camera, &selection)?;
-    let stats = renderer.stats();
-    image.save_png(&args.output)?;
-    let cs = cache.stats();
+    let Frame { image, selection, select_time } = frame.draw(&camera)?;
+    image.save_png(output)?;
+    let stats = frame.renderer.stats();
+    let cs = frame.cache.stats();
     outln!(
         "selection: {} clusters, {} triangles (τ = {} px) in {:.1} ms; {} pages touched, {} resident \
          ({}), {} culled by frustum",
@@ -88,8 +145,78 @@ pub fn run(args: RenderArgs) -> Result<()> {
         fmt_bytes(stats.pool.resident_bytes),
         stats.pool.batches,
         fmt_count(stats.draw_calls),
-        renderer.draw_mode(),
+        frame.renderer.draw_mode(),
     );
-    outln!("wrote {} ({}x{})", args.output.display(), args.size.0, args.size.1);
-    crate::commands::damage::check(&args.store, &cache.failed_pages(), args.allow_damaged)
+    outln!("wrote {} ({}x{})", output.display(), args.size.0, args.size.1);
+    Ok(())
+}
+
+/// `DIR/frame-00042.png`: numbered from 0, five digits (more past 99,999 frames), so that the
+/// names sort in frame order and ffmpeg's `frame-%05d.png` pattern reads them.
+fn frame_file(dir: &Path, index: usize) -> PathBuf {
+    dir.join(format!("frame-{index:05}.png"))
+}
+
+/// `--path`: every frame of the camera path (the first `--frames`), written as numbered PNGs
+/// into `--frames-dir` and/or piped into ffmpeg for `--video`, with a progress bar and a summary.
+/// Every camera is checked before the first frame is drawn.
+fn render_sequence(
+    frame: &mut FrameRenderer,
+    path: &CameraPath,
+    args: &RenderArgs,
+    ffmpeg: Option<&Path>,
+    quiet: bool,
+) -> Result<()> {
+    let header = frame.store.header();
+    let file = args.path.as_deref().unwrap_or(Path::new("--path")).display();
+    let count = args.frames.map_or(path.frames.len(), |n| n.min(path.frames.len()));
+    if count == 0 {
+        anyhow::bail!("the camera path {file} has no frames");
+    }
+    let cameras: Vec<Camera> = path.frames[..count]
+        .iter()
+        .enumerate()
+        .map(|(i, f)| f.to_scene(header).with_context(|| format!("{file}: frame {i}")))
+        .collect::<Result<_>>()?;
+    if let Some(dir) = &args.frames_dir {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
+    let fps = args.fps.unwrap_or(path.fps);
+    let mut encoder = match (ffmpeg, &args.video) {
+        (Some(ffmpeg), Some(out)) => Some(video::Encoder::start(ffmpeg, args.size, fps, out)?),
+        _ => None,
+    };
+    let bar = if quiet { ProgressBar::hidden() } else { progress::count(count as u64, "render") };
+    let start = Instant::now();
+    let mut triangles = 0u64;
+    for (i, camera) in cameras.iter().enumerate() {
+        let f = frame.draw(camera).with_context(|| format!("{file}: frame {i}"))?;
+        triangles += f.selection.triangles;
+        if let Some(dir) = &args.frames_dir {
+            f.image.save_png(&frame_file(dir, i))?;
+        }
+        if let Some(e) = encoder.as_mut() {
+            e.frame(&f.image.opaque())?;
+        }
+        bar.set_position(i as u64 + 1);
+    }
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+    if let Some(e) = encoder {
+        e.finish()?;
+    }
+    let (w, h) = args.size;
+    outln!(
+        "rendered {count} frames ({w}x{h}, τ = {} px) in {secs:.1} s: {:.1} ms a frame, {} triangles a frame on average",
+        args.error,
+        secs * 1e3 / count as f64,
+        fmt_count(triangles / count as u64)
+    );
+    if let Some(dir) = &args.frames_dir {
+        outln!("wrote {} … {}", frame_file(dir, 0).display(), frame_file(dir, count - 1).display());
+    }
+    if let Some(out) = &args.video {
+        outln!("wrote {} ({count} frames at {fps} fps, {:.1} s)", out.display(), count as f64 / fps);
+    }
+    Ok(())
 }

@@ -9,7 +9,7 @@ use tw_view::{Coloring, Occlusion, Scene, Settings, ViewOptions};
 use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, ViewArgs};
 use crate::commands::render::{default_camera, up_axis};
 
-pub fn run(args: ViewArgs) -> Result<()> {
+pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
     let inputs: Vec<&std::path::Path> =
         [Some(args.store.as_path()), args.path.as_deref(), args.script.as_deref()]
             .into_iter()
@@ -41,7 +41,7 @@ pub fn run(args: ViewArgs) -> Result<()> {
         Some(p) => Some(tw_view::script::Script::load(p)?),
         None => None,
     };
-    let store = crate::commands::open_store(&args.store)?;
+    let (_, store) = crate::commands::open::open(&args.store, args.up, &args.open, quiet)?;
     let path = match &args.path {
         Some(p) => Some(CameraPath::load(p)?),
         None => None,

@@ -14,7 +14,10 @@
 //! "Coordinate System and Units"). So the object nodes hang under one root node whose `matrix`
 //! turns +Z into +Y (a −90° turn about X: (x, y, z) → (x, z, −y)), and the positions stay as
 //! given: glTF viewers, and terawalk's own importer with its glTF default `--up y`, show the
-//! model upright.
+//! model upright. A writer whose scene has another up axis says so
+//! ([`GlbWriter::set_up_axis`]: `terawalk export` writes a store's recorded axis), and may scale
+//! the scene at the same node ([`GlbWriter::set_scale`]: 3D Tiles content in metres); the
+//! positions still stay as given.
 //!
 //! Layout of the file, assembled in [`SceneWriter::finish`]:
 //! ```text
@@ -47,9 +50,14 @@ const OVERHEAD: u64 = 12 + 8 + 8;
 /// (and the per-run records in memory) would grow without bound.
 const MAX_RUNS: usize = 1 << 22;
 
-/// The root node's matrix (column-major, as glTF stores it): a −90° turn about X taking the
-/// written z-up scene to glTF's +Y up, (x, y, z) → (x, z, −y).
-const Z_UP_TO_Y_UP: &str = "[1,0,0,0,0,0,-1,0,0,1,0,0,0,0,0,1]";
+/// The root node's matrix for each up axis of the written scene (column-major, as glTF stores
+/// it), turning that axis to glTF's +Y. z: a −90° turn about X, (x, y, z) → (x, z, −y);
+/// y: the identity; x: a +90° turn about Z, (x, y, z) → (−y, x, z).
+pub const UP_TO_Y_UP: [[f64; 16]; 3] = [
+    [0., 1., 0., 0., -1., 0., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.],
+    [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.],
+    [1., 0., 0., 0., 0., 0., -1., 0., 0., 1., 0., 0., 0., 0., 0., 1.],
+];
 
 /// A maximal sequence of consecutive triangles of one object: one primitive.
 #[derive(Clone, Debug)]
@@ -80,6 +88,10 @@ pub struct GlbWriter {
     max_bin: u64,
     max_runs: usize,
     scratch: Vec<u8>,
+    /// Up axis of the written scene (0 x, 1 y, 2 z) and a uniform scale, both applied by the
+    /// root node (module docs).
+    up_axis: u8,
+    scale: f64,
 }
 
 impl GlbWriter {
@@ -97,7 +109,35 @@ impl GlbWriter {
             max_bin: u32::MAX as u64 - OVERHEAD,
             max_runs: MAX_RUNS,
             scratch: Vec::new(),
+            up_axis: 2,
+            scale: 1.0,
         })
+    }
+
+    /// The up axis of the scene to be written (0 x, 1 y, 2 z; default z): the root node turns
+    /// it to glTF's +Y. Another value is an error.
+    pub fn set_up_axis(&mut self, axis: u8) -> Result<(), ImportError> {
+        if axis > 2 {
+            return Err(ImportError::Sink(format!(
+                "{}: up axis {axis} is not 0 (x), 1 (y) or 2 (z)",
+                self.out.target().display()
+            )));
+        }
+        self.up_axis = axis;
+        Ok(())
+    }
+
+    /// A uniform scale the root node applies after the turn (default 1): metres per unit for
+    /// content that must be in metres. It must be finite and positive.
+    pub fn set_scale(&mut self, scale: f64) -> Result<(), ImportError> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(ImportError::Sink(format!(
+                "{}: scale {scale} is not a finite positive number",
+                self.out.target().display()
+            )));
+        }
+        self.scale = scale;
+        Ok(())
     }
 
     /// Makes room for `vertices` and `indices` more in the current run of `object` (starting a
@@ -159,9 +199,23 @@ struct Layout<'a> {
     runs: &'a [Run],
     vertices: u64,
     index_count: u64,
+    up_axis: u8,
+    scale: f64,
 }
 
 impl Layout<'_> {
+    /// The root node's name and matrix (JSON array text), for the scene's up axis and scale.
+    fn root_matrix(&self) -> (String, String) {
+        let axis = self.up_axis.min(2) as usize;
+        let name = format!("{}-up to y-up", ["x", "y", "z"][axis]);
+        let mut m = UP_TO_Y_UP[axis];
+        for v in &mut m[..12] {
+            *v *= self.scale;
+        }
+        let text: Vec<String> = m.iter().map(|v| format!("{}", v + 0.0)).collect();
+        (name, format!("[{}]", text.join(",")))
+    }
+
     /// Serialises the JSON chunk's text (unpadded).
     fn write_json(&self, w: &mut impl Write) -> io::Result<()> {
         let infos = &self.objects.infos;
@@ -210,7 +264,8 @@ impl Layout<'_> {
                 }
                 w.write_all(b"}")?;
             }
-            write!(w, r#",{{"name":"z-up to y-up","matrix":{Z_UP_TO_Y_UP},"children":["#)?;
+            let (name, matrix) = self.root_matrix();
+            write!(w, r#",{{"name":"{name}","matrix":{matrix},"children":["#)?;
             for o in 0..infos.len() {
                 write!(w, "{}{o}", if o > 0 { "," } else { "" })?;
             }
@@ -391,9 +446,20 @@ impl TriangleSink for GlbWriter {
 
 impl SceneWriter for GlbWriter {
     fn finish(self: Box<Self>) -> Result<WriteSummary, ImportError> {
-        let GlbWriter { out, positions, indices, objects, runs, vertices, index_count, triangles, .. } =
-            *self;
-        let layout = Layout { objects: &objects, runs: &runs, vertices, index_count };
+        let GlbWriter {
+            out,
+            positions,
+            indices,
+            objects,
+            runs,
+            vertices,
+            index_count,
+            triangles,
+            up_axis,
+            scale,
+            ..
+        } = *self;
+        let layout = Layout { objects: &objects, runs: &runs, vertices, index_count, up_axis, scale };
         let target = out.target().to_path_buf();
         let err = io_err(&target);
         let mut counter = Counter { inner: io::sink(), n: 0 };
@@ -589,6 +655,38 @@ mod tests {
         assert_eq!(json["nodes"][0], serde_json::json!({}));
         assert_eq!(json["nodes"][1]["children"], serde_json::json!([0]));
         gltf::Gltf::from_slice(&b).unwrap();
+    }
+
+    /// A scene with another up axis gets the root matrix that turns that axis to +Y, scaled;
+    /// bad axes and scales are errors naming the file.
+    #[test]
+    fn root_node_follows_the_up_axis_and_scale() {
+        let dir = tempfile::tempdir().unwrap();
+        let root_of = |axis: u8, scale: f64| {
+            let p = dir.path().join("a.glb");
+            let mut w = GlbWriter::create(&p).unwrap();
+            w.set_up_axis(axis).unwrap();
+            w.set_scale(scale).unwrap();
+            let mut w: Box<dyn SceneWriter> = Box::new(w);
+            test_scene::stream(&mut *w).unwrap();
+            w.finish().unwrap();
+            let (json, _) = chunks(&std::fs::read(&p).unwrap());
+            (json["nodes"][3]["name"].clone(), floats(&json["nodes"][3]["matrix"]))
+        };
+        let (name, m) = root_of(1, 1.0);
+        assert_eq!(name, "y-up to y-up");
+        assert_eq!(m, [1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1., 0., 0., 0., 0., 1.]);
+        // x up: +X goes to +Y, +Y to −X; the scale multiplies the turn, not the w row.
+        let (name, m) = root_of(0, 0.001);
+        assert_eq!(name, "x-up to y-up");
+        assert_eq!(m, [0., 0.001, 0., 0., -0.001, 0., 0., 0., 0., 0., 0.001, 0., 0., 0., 0., 1.]);
+        let (_, m) = root_of(2, 2.0);
+        assert_eq!(m, [2., 0., 0., 0., 0., 0., -2., 0., 0., 2., 0., 0., 0., 0., 0., 1.]);
+        let mut w = GlbWriter::create(&dir.path().join("b.glb")).unwrap();
+        assert!(w.set_up_axis(3).unwrap_err().to_string().contains("b.glb"));
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(w.set_scale(bad).unwrap_err().to_string().contains("b.glb"), "{bad}");
+        }
     }
 
     #[test]

@@ -1,0 +1,308 @@
+//! Preset and named viewpoints. [`Preset`]: the six axis views and an isometric one, framing the
+//! model's bounds (the eye on the axis through the bounds' centre, far enough that the bounding
+//! sphere fills the field of view). [`Viewpoints`]: cameras saved under a name in a JSON file
+//! next to the store ([`views_file`]), in the store's input coordinates (the grid origin added
+//! back, as `--camera` and path files use), so that the file stays meaningful outside the
+//! viewer and across rebuilds of the store with another grid origin.
+//!
+//! ```json
+//! {"format":"terawalk-views","version":1,
+//!  "views":[{"name":"entrance","eye":[1,2,3],"target":[1,3,3],"fovy":60}]}
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use glam::{DVec3, Vec3};
+use tw_runtime::Camera;
+
+use crate::controller::clip_planes;
+
+/// The `format` field of a viewpoints file.
+pub const VIEWS_FORMAT: &str = "terawalk-views";
+pub const VIEWS_VERSION: u64 = 1;
+
+/// A view along an axis of the scene, or the isometric one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Preset {
+    PosX,
+    NegX,
+    PosY,
+    NegY,
+    PosZ,
+    NegZ,
+    Iso,
+}
+
+impl Preset {
+    pub const ALL: [Preset; 7] =
+        [Preset::PosX, Preset::NegX, Preset::PosY, Preset::NegY, Preset::PosZ, Preset::NegZ, Preset::Iso];
+
+    /// The side the eye is on: `+x` looks from +X towards −X.
+    pub fn name(self) -> &'static str {
+        match self {
+            Preset::PosX => "+x",
+            Preset::NegX => "-x",
+            Preset::PosY => "+y",
+            Preset::NegY => "-y",
+            Preset::PosZ => "+z",
+            Preset::NegZ => "-z",
+            Preset::Iso => "iso",
+        }
+    }
+
+    pub fn parse(s: &str) -> Option<Preset> {
+        let s = s.to_ascii_lowercase();
+        Preset::ALL.into_iter().find(|p| p.name() == s || (s.len() == 1 && p.name() == format!("+{s}")))
+    }
+
+    /// Unit direction from the model's centre to the eye, for the scene's `up` axis (the
+    /// isometric view comes from above, in front and to the right: +a −b +up for the other
+    /// two axes a, b in x y z order).
+    pub fn direction(self, up: Vec3) -> Vec3 {
+        match self {
+            Preset::PosX => Vec3::X,
+            Preset::NegX => -Vec3::X,
+            Preset::PosY => Vec3::Y,
+            Preset::NegY => -Vec3::Y,
+            Preset::PosZ => Vec3::Z,
+            Preset::NegZ => -Vec3::Z,
+            Preset::Iso => {
+                let up = up.normalize_or(Vec3::Z);
+                let others: Vec<Vec3> =
+                    [Vec3::X, Vec3::Y, Vec3::Z].into_iter().filter(|a| a.dot(up).abs() < 0.5).collect();
+                match others.as_slice() {
+                    [a, b] => (*a - *b + up).normalize(),
+                    _ => Vec3::ONE.normalize(),
+                }
+            }
+        }
+    }
+
+    /// The camera of this view of `bounds` (scene space) with vertical field of view `fovy`.
+    pub fn camera(self, bounds: (Vec3, Vec3), up: Vec3, fovy: f32) -> Camera {
+        let (lo, hi) = bounds;
+        let centre = (lo + hi) * 0.5;
+        let radius = ((hi - lo).length() * 0.5).max(1e-3);
+        let half = (fovy.clamp(0.1, 3.0) * 0.5).sin();
+        let dir = self.direction(up);
+        let eye = centre + dir * (radius / half * 1.05);
+        // Along the up axis the camera's up is another axis (the controller keeps the scene's).
+        let cam_up = if dir.dot(up).abs() > 0.99 { up.any_orthonormal_vector() } else { up };
+        let (near, far) = clip_planes(eye, bounds);
+        Camera { eye, target: centre, up: cam_up, fovy, near, far }
+    }
+}
+
+/// The viewpoints file of a store: `scene.tw` → `scene.tw.views.json`, next to it.
+pub fn views_file(store: &Path) -> PathBuf {
+    let mut name = store.file_name().map(|n| n.to_os_string()).unwrap_or_else(|| "scene".into());
+    name.push(".views.json");
+    store.with_file_name(name)
+}
+
+/// A named camera in the store's input coordinates; `fovy` in degrees.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Viewpoint {
+    pub name: String,
+    pub eye: [f64; 3],
+    pub target: [f64; 3],
+    pub fovy: f64,
+}
+
+impl Viewpoint {
+    /// `camera` (scene space) under `name`; `origin` is the store's grid origin.
+    pub fn from_camera(name: &str, camera: &Camera, origin: [f64; 3]) -> Viewpoint {
+        let o = DVec3::from_array(origin);
+        Viewpoint {
+            name: name.to_string(),
+            eye: (camera.eye.as_dvec3() + o).to_array(),
+            target: (camera.target.as_dvec3() + o).to_array(),
+            fovy: (camera.fovy as f64).to_degrees(),
+        }
+    }
+
+    /// The scene-space camera (clip planes seeing all of `bounds`, the scene's `up`).
+    pub fn camera(&self, origin: [f64; 3], bounds: (Vec3, Vec3), up: Vec3) -> Camera {
+        let o = DVec3::from_array(origin);
+        let eye = (DVec3::from_array(self.eye) - o).as_vec3();
+        let target = (DVec3::from_array(self.target) - o).as_vec3();
+        let (near, far) = clip_planes(eye, bounds);
+        Camera { eye, target, up, fovy: (self.fovy.to_radians() as f32).clamp(0.01, 3.1), near, far }
+    }
+}
+
+/// A viewpoints file that cannot be read or written, with its path (and line and column).
+#[derive(Debug, thiserror::Error)]
+pub enum ViewpointError {
+    #[error("{path}: {source}")]
+    Io { path: PathBuf, source: std::io::Error },
+    #[error("{path}: {msg}")]
+    Format { path: PathBuf, msg: String },
+}
+
+/// The named viewpoints of a store, in the order they were first saved.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Viewpoints {
+    pub views: Vec<Viewpoint>,
+}
+
+impl Viewpoints {
+    /// Reads `path`; a missing file is an empty list (nothing saved yet).
+    pub fn load(path: &Path) -> Result<Viewpoints, ViewpointError> {
+        let text = match std::fs::read_to_string(path) {
+            Ok(t) => t,
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Viewpoints::default()),
+            Err(source) => return Err(ViewpointError::Io { path: path.to_path_buf(), source }),
+        };
+        Viewpoints::parse(&text, path)
+    }
+
+    /// Parses a file's `text`; `path` names it in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Viewpoints, ViewpointError> {
+        let err = |msg: String| ViewpointError::Format { path: path.to_path_buf(), msg };
+        let v: serde_json::Value = serde_json::from_str(text).map_err(|e| err(e.to_string()))?;
+        if v.get("format").and_then(|f| f.as_str()) != Some(VIEWS_FORMAT) {
+            return Err(err(format!("not a viewpoints file (\"format\" is not \"{VIEWS_FORMAT}\")")));
+        }
+        match v.get("version").and_then(|f| f.as_u64()) {
+            Some(VIEWS_VERSION) => {}
+            other => {
+                return Err(err(format!("unsupported version {other:?} (this viewer reads {VIEWS_VERSION})")))
+            }
+        }
+        let list =
+            v.get("views").and_then(|l| l.as_array()).ok_or_else(|| err("no \"views\" list".into()))?;
+        let mut views = Vec::with_capacity(list.len());
+        for (i, item) in list.iter().enumerate() {
+            let at = |field: &str| format!("views[{i}].{field}");
+            let point = |field: &str| -> Result<[f64; 3], ViewpointError> {
+                let a = item.get(field).and_then(|p| p.as_array()).filter(|a| a.len() == 3);
+                let p: Option<Vec<f64>> =
+                    a.map(|a| a.iter().filter_map(|x| x.as_f64()).filter(|x| x.is_finite()).collect());
+                p.filter(|p| p.len() == 3)
+                    .map(|p| [p[0], p[1], p[2]])
+                    .ok_or_else(|| err(format!("{} is not three finite numbers", at(field))))
+            };
+            let name = item
+                .get("name")
+                .and_then(|n| n.as_str())
+                .filter(|n| !n.is_empty())
+                .ok_or_else(|| err(format!("{} is not a name", at("name"))))?;
+            let fovy = item
+                .get("fovy")
+                .and_then(|f| f.as_f64())
+                .filter(|f| *f > 0.0 && *f < 180.0)
+                .ok_or_else(|| err(format!("{} is not an angle in (0, 180) degrees", at("fovy"))))?;
+            let (eye, target) = (point("eye")?, point("target")?);
+            if eye == target {
+                return Err(err(format!("{}: the eye is the target", at("name"))));
+            }
+            views.push(Viewpoint { name: name.to_string(), eye, target, fovy });
+        }
+        Ok(Viewpoints { views })
+    }
+
+    /// Writes the list to `path` (whole, through a temporary file next to it).
+    pub fn save(&self, path: &Path) -> Result<(), ViewpointError> {
+        let views: Vec<serde_json::Value> = self
+            .views
+            .iter()
+            .map(|v| serde_json::json!({"name": v.name, "eye": v.eye, "target": v.target, "fovy": v.fovy}))
+            .collect();
+        let doc = serde_json::json!({"format": VIEWS_FORMAT, "version": VIEWS_VERSION, "views": views});
+        let text = serde_json::to_string_pretty(&doc).unwrap_or_default();
+        let io = |source| ViewpointError::Io { path: path.to_path_buf(), source };
+        let tmp = path.with_extension("json.tmp");
+        std::fs::write(&tmp, text + "\n").map_err(io)?;
+        std::fs::rename(&tmp, path).map_err(io)
+    }
+
+    /// Adds `v`, replacing a viewpoint of the same name.
+    pub fn set(&mut self, v: Viewpoint) {
+        match self.views.iter_mut().find(|w| w.name == v.name) {
+            Some(w) => *w = v,
+            None => self.views.push(v),
+        }
+    }
+
+    pub fn get(&self, name: &str) -> Option<&Viewpoint> {
+        self.views.iter().find(|v| v.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_frame_the_bounds_from_their_side() {
+        let bounds = (Vec3::ZERO, Vec3::new(4.0, 1.0, 1.0));
+        let centre = Vec3::new(2.0, 0.5, 0.5);
+        for p in Preset::ALL {
+            let c = p.camera(bounds, Vec3::Z, 1.0);
+            assert_eq!(c.target, centre, "{}", p.name());
+            assert!(c.validate().is_ok(), "{}", p.name());
+            // Outside the bounding sphere, on the preset's side.
+            let d = c.eye - centre;
+            assert!(d.length() > (bounds.1 - bounds.0).length() * 0.5, "{}", p.name());
+            assert!(d.normalize().dot(p.direction(Vec3::Z)) > 0.999, "{}", p.name());
+            assert_eq!(Preset::parse(p.name()), Some(p));
+        }
+        assert!(Preset::PosX.camera(bounds, Vec3::Z, 1.0).eye.x > 4.0);
+        assert_eq!(Preset::parse("X"), Some(Preset::PosX));
+        assert_eq!(Preset::parse("front"), None);
+        assert!(Preset::Iso.direction(Vec3::Z).z > 0.0 && Preset::Iso.direction(Vec3::Y).y > 0.0);
+    }
+
+    #[test]
+    fn viewpoints_round_trip_through_the_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let store = dir.path().join("plant.tw");
+        let file = views_file(&store);
+        assert_eq!(file, dir.path().join("plant.tw.views.json"));
+        assert_eq!(Viewpoints::load(&file).unwrap(), Viewpoints::default(), "no file: no views");
+        let origin = [1000.0, -20.0, 3.5];
+        let cam =
+            Camera::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 5.0, 3.0), Vec3::Z, 1.0, 0.1, 50.0).unwrap();
+        let mut views = Viewpoints::default();
+        views.set(Viewpoint::from_camera("door", &cam, origin));
+        views.set(Viewpoint::from_camera(
+            "top",
+            &Preset::PosZ.camera((Vec3::ZERO, Vec3::ONE), Vec3::Z, 1.0),
+            origin,
+        ));
+        views.set(Viewpoint::from_camera("door", &cam, origin));
+        assert_eq!(views.views.len(), 2, "same name replaces");
+        views.save(&file).unwrap();
+        let back = Viewpoints::load(&file).unwrap();
+        assert_eq!(back, views);
+        assert_eq!(back.get("door").unwrap().eye, [1001.0, -18.0, 6.5]);
+        let bounds = (Vec3::ZERO, Vec3::splat(10.0));
+        let again = back.get("door").unwrap().camera(origin, bounds, Vec3::Z);
+        assert!((again.eye - cam.eye).length() < 1e-5 && (again.target - cam.target).length() < 1e-5);
+        assert!((again.fovy - cam.fovy).abs() < 1e-6);
+    }
+
+    #[test]
+    fn bad_files_name_the_file_and_the_field() {
+        let p = Path::new("v.json");
+        for (text, needle) in [
+            ("{", "v.json: EOF while parsing"),
+            ("{\"format\":\"x\",\"version\":1,\"views\":[]}", "not a viewpoints file"),
+            ("{\"format\":\"terawalk-views\",\"version\":9,\"views\":[]}", "unsupported version"),
+            (
+                "{\"format\":\"terawalk-views\",\"version\":1,\"views\":[{\"name\":\"a\",\"eye\":[0,0],\
+                 \"target\":[1,1,1],\"fovy\":60}]}",
+                "views[0].eye is not three finite numbers",
+            ),
+            (
+                "{\"format\":\"terawalk-views\",\"version\":1,\"views\":[{\"name\":\"a\",\"eye\":[0,0,0],\
+                 \"target\":[1,1,1],\"fovy\":0}]}",
+                "views[0].fovy",
+            ),
+        ] {
+            let e = Viewpoints::parse(text, p).unwrap_err().to_string();
+            assert!(e.starts_with("v.json: ") && e.contains(needle), "{e}");
+        }
+    }
+}
