@@ -19,8 +19,9 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Instant;
 
-use tw_runtime::Camera;
+use tw_runtime::{Camera, StreamStats};
 use winit::application::ApplicationHandler;
+use winit::dpi::PhysicalSize;
 use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow};
 use winit::keyboard::{KeyCode, PhysicalKey};
@@ -34,7 +35,7 @@ use crate::hud::{FrameTimes, HudFrame, Throughput};
 use crate::pick::{camera_ray, snap_to_vertex, Ray};
 use crate::recorder::{Player, Recorder};
 use crate::review::{format_distance, Measure, ObjectFilter, Picked};
-use crate::scene::Scene;
+use crate::scene::{FrameInfo, Scene};
 use crate::script::{ScriptRunner, Step};
 use crate::settings::{Coloring, Settings};
 use crate::ui::{self, Action, Line};
@@ -758,7 +759,51 @@ impl App {
         steps.last
     }
 
+    /// One frame, in named steps: the script's steps, the camera, the scene, the lines over it,
+    /// the HUD and UI, the present, then the count of frames (a scripted run may end here) and
+    /// whether the next frame must follow at once.
     fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
+        let dt = self.frame_time();
+        // The script's steps first: a resize it asks for may apply at once.
+        let last_step = self.script_steps(event_loop);
+        let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
+        if self.minimized || size.width == 0 || size.height == 0 {
+            self.skip_frame(event_loop, last_step);
+            return Ok(());
+        }
+
+        let draw = self.move_camera(dt);
+        let cull = self.frozen.unwrap_or(draw);
+        let px = self.draw_scene(cull, draw, size, dt)?;
+        let info = self.scene.last_frame();
+        let ss = self.scene.stream_stats();
+        self.disk.push(self.started.elapsed().as_secs_f64(), self.scene.bytes_read());
+
+        let review = self.review_lines();
+        let viewpoint_names = self.viewpoint_names();
+        let lines = self.overlay_lines(&draw, px, size);
+        self.update_scene_texture();
+        let hud = self.hud_frame(&info, &ss);
+        let (out, actions) = self.run_ui(&hud, &lines, &review, &viewpoint_names);
+        let repaint_now = self.present(out)?;
+        for a in actions {
+            self.act(a);
+        }
+
+        if self.count_frame(event_loop, size, info.triangles, last_step)? {
+            return Ok(());
+        }
+        self.idle = !self.animating();
+        if repaint_now || self.animating() {
+            if let Some(w) = &self.win {
+                w.window.request_redraw();
+            }
+        }
+        Ok(())
+    }
+
+    /// The seconds since the last frame, the time the camera moves by.
+    fn frame_time(&mut self) -> f32 {
         let now = Instant::now();
         let mut dt = (now - self.last_time).as_secs_f32();
         self.last_time = now;
@@ -766,37 +811,30 @@ impl App {
             // After waiting for events, the time since the last frame is not motion time.
             dt = dt.min(1.0 / 60.0);
         }
-        // The script's steps first: a resize it asks for may apply at once.
-        let last_step = self.script_steps(event_loop);
-        let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
-        if self.minimized || size.width == 0 || size.height == 0 {
-            // Minimised: nothing to draw. A script goes on counting frames.
-            if self.script.is_some() {
-                self.frames += 1;
-                self.report.frames = self.frames;
-                self.report.minimized_frames += 1;
-                if last_step {
-                    event_loop.exit();
-                } else if let Some(w) = &self.win {
-                    w.window.request_redraw();
-                }
-            }
-            return Ok(());
-        }
+        dt
+    }
 
-        // 1. The camera: the path, or the controller.
-        let mut camera = None;
-        if self.playing {
-            let scripted = self.options.exit_after.is_some() || self.script.is_some();
-            let p = self.player.as_mut().expect("playing needs a path");
-            camera = if scripted { p.step() } else { p.advance(dt as f64) };
-            if camera.is_none() {
-                self.playing = false;
-                self.say("path finished".into());
+    /// A frame while minimised: nothing to draw, but a script goes on counting frames (and
+    /// ends on its last step).
+    fn skip_frame(&mut self, event_loop: &ActiveEventLoop, last_step: bool) {
+        if self.script.is_some() {
+            self.frames += 1;
+            self.report.frames = self.frames;
+            self.report.minimized_frames += 1;
+            if last_step {
+                event_loop.exit();
+            } else if let Some(w) = &self.win {
+                w.window.request_redraw();
             }
         }
-        let draw = match camera {
+    }
+
+    /// Moves the camera by `dt` seconds, along the path while one plays, else by the
+    /// controller; records it while recording. Returns the camera to draw from.
+    fn move_camera(&mut self, dt: f32) -> Camera {
+        let draw = match self.play_path(dt) {
             Some(c) => {
+                // The controller takes over from the path's camera when the path ends or stops.
                 self.ortho = None;
                 self.controller = {
                     let mut k = Controller::new(&c, &self.scene.scene_frame());
@@ -808,13 +846,7 @@ impl App {
                 c
             }
             None => {
-                let ground = if self.controller.mode == Mode::Walk {
-                    let c = &self.controller;
-                    let ray = Ray { origin: c.eye, dir: -c.up };
-                    self.scene.pick(&ray, c.scene_size).map(|t| c.eye.dot(c.up) - t)
-                } else {
-                    None
-                };
+                let ground = self.ground_below();
                 let input = self.input(ground);
                 self.controller.update(dt, &input);
                 self.controller.camera()
@@ -823,9 +855,45 @@ impl App {
         if let Some(r) = self.recorder.as_mut() {
             r.push(&draw, self.scene.header(), dt as f64);
         }
-        let cull = self.frozen.unwrap_or(draw);
+        draw
+    }
 
-        // 2. Select and draw the scene when anything changed.
+    /// The path's next camera while a path plays: frame by frame in scripted runs (so that they
+    /// are reproducible), else in real time. Playing stops at the path's end.
+    fn play_path(&mut self, dt: f32) -> Option<Camera> {
+        if !self.playing {
+            return None;
+        }
+        let scripted = self.options.exit_after.is_some() || self.script.is_some();
+        let p = self.player.as_mut().expect("playing needs a path");
+        let camera = if scripted { p.step() } else { p.advance(dt as f64) };
+        if camera.is_none() {
+            self.playing = false;
+            self.say("path finished".into());
+        }
+        camera
+    }
+
+    /// In walk mode, the height (along up) of the ground below the eye, found by casting a ray
+    /// down ([`Input::ground`]); `None` in other modes or when the ray hits nothing.
+    fn ground_below(&self) -> Option<f32> {
+        if self.controller.mode != Mode::Walk {
+            return None;
+        }
+        let c = &self.controller;
+        let ray = Ray { origin: c.eye, dir: -c.up };
+        self.scene.pick(&ray, c.scene_size).map(|t| c.eye.dot(c.up) - t)
+    }
+
+    /// Selects and draws the scene at the render scale when anything changed since the frame
+    /// last drawn; returns the size of the scene image in pixels.
+    fn draw_scene(
+        &mut self,
+        cull: Camera,
+        draw: Camera,
+        size: PhysicalSize<u32>,
+        dt: f32,
+    ) -> Result<[u32; 2], ViewError> {
         let scale = self.settings.render_scale.clamp(0.1, 1.0);
         let px = [((size.width as f32 * scale) as u32).max(1), ((size.height as f32 * scale) as u32).max(1)];
         if self.settings.memory_budget != self.scene.memory_budget() {
@@ -842,56 +910,65 @@ impl App {
             self.drawn_key = Some(key);
             self.times.push(dt);
         }
-        let info = self.scene.last_frame();
-        let ss = self.scene.stream_stats();
-        self.disk.push(self.started.elapsed().as_secs_f64(), self.scene.bytes_read());
+        Ok(px)
+    }
 
-        let review = self.review_lines();
-        let viewpoint_names = self.viewpoint_names();
-
-        // 3. Debug view lines (in window points).
-        let w = self.win.as_mut().expect("checked above");
+    /// The lines drawn over the scene, in window points: the debug view's and the measurement's.
+    fn overlay_lines(&self, draw: &Camera, px: [u32; 2], size: PhysicalSize<u32>) -> Vec<Line> {
+        let w = self.win.as_ref().expect("redraw checked the window");
         let ppp = egui_winit::pixels_per_point(w.egui.egui_ctx(), &w.window);
         let view_size = [size.width as f32 / ppp, size.height as f32 / ppp];
         let mut lines = Vec::new();
-        if let Some(f) = &self.frozen {
-            let vp = draw.view_projection(view_size[0] / view_size[1]);
-            let aspect = px[0] as f32 / px[1] as f32;
-            let corners = debug_view::frustum_corners(f, aspect, Some(self.controller.scene_size * 0.5));
-            let mut add = |segs: &[debug_view::Segment], color| {
-                for s in segs {
-                    if let Some((a, b)) = debug_view::project_segment(&vp, *s, view_size) {
-                        lines.push(Line { a, b, color });
-                    }
+        self.debug_view_lines(draw, px, view_size, &mut lines);
+        self.measure_lines(draw, view_size, &mut lines);
+        lines
+    }
+
+    /// In the debug view (the culling camera frozen): the frozen frustum, and the node boxes
+    /// drawn and occluded when they are shown, as seen from the drawing camera.
+    fn debug_view_lines(&self, draw: &Camera, px: [u32; 2], view_size: [f32; 2], lines: &mut Vec<Line>) {
+        let Some(f) = &self.frozen else { return };
+        let vp = draw.view_projection(view_size[0] / view_size[1]);
+        let aspect = px[0] as f32 / px[1] as f32;
+        let corners = debug_view::frustum_corners(f, aspect, Some(self.controller.scene_size * 0.5));
+        let mut add = |segs: &[debug_view::Segment], color| {
+            for s in segs {
+                if let Some((a, b)) = debug_view::project_segment(&vp, *s, view_size) {
+                    lines.push(Line { a, b, color });
                 }
-            };
-            add(&debug_view::frustum_edges(&corners), debug_view::FRUSTUM_COLOR);
-            if self.settings.show_boxes {
-                for (lo, hi) in self.scene.visible_node_boxes(MAX_BOXES) {
-                    add(&debug_view::box_edges(lo, hi), debug_view::VISIBLE_COLOR);
-                }
-                for (lo, hi) in self.scene.occluded_node_boxes(MAX_BOXES) {
-                    add(&debug_view::box_edges(lo, hi), debug_view::OCCLUDED_COLOR);
+            }
+        };
+        add(&debug_view::frustum_edges(&corners), debug_view::FRUSTUM_COLOR);
+        if self.settings.show_boxes {
+            for (lo, hi) in self.scene.visible_node_boxes(MAX_BOXES) {
+                add(&debug_view::box_edges(lo, hi), debug_view::VISIBLE_COLOR);
+            }
+            for (lo, hi) in self.scene.occluded_node_boxes(MAX_BOXES) {
+                add(&debug_view::box_edges(lo, hi), debug_view::OCCLUDED_COLOR);
+            }
+        }
+    }
+
+    /// The measurement: its points (small crosses) and the line between them, over the scene.
+    fn measure_lines(&self, draw: &Camera, view_size: [f32; 2], lines: &mut Vec<Line>) {
+        let Some(a) = self.measure.a else { return };
+        let vp = draw.view_projection(view_size[0] / view_size[1]);
+        let b = self.measure.b.unwrap_or(a);
+        if let Some((pa, pb)) = debug_view::project_segment(&vp, (a, b), view_size) {
+            lines.push(Line { a: pa, b: pb, color: MEASURE_COLOR });
+            for p in [pa, pb] {
+                for (dx, dy) in [(5.0, 0.0), (0.0, 5.0)] {
+                    let (a, b) = ([p[0] - dx, p[1] - dy], [p[0] + dx, p[1] + dy]);
+                    lines.push(Line { a, b, color: MEASURE_COLOR });
                 }
             }
         }
+    }
 
-        // The measurement: its points and the line between them, over the scene.
-        if let Some(a) = self.measure.a {
-            let vp = draw.view_projection(view_size[0] / view_size[1]);
-            let b = self.measure.b.unwrap_or(a);
-            if let Some((pa, pb)) = debug_view::project_segment(&vp, (a, b), view_size) {
-                lines.push(Line { a: pa, b: pb, color: MEASURE_COLOR });
-                for p in [pa, pb] {
-                    for (dx, dy) in [(5.0, 0.0), (0.0, 5.0)] {
-                        let (a, b) = ([p[0] - dx, p[1] - dy], [p[0] + dx, p[1] + dy]);
-                        lines.push(Line { a, b, color: MEASURE_COLOR });
-                    }
-                }
-            }
-        }
-
-        // 4. The scene texture, registered with egui-wgpu (again when it was made anew).
+    /// Registers the scene texture with egui-wgpu, again when the scene made it anew (a new
+    /// generation), so that the UI shows the image just drawn.
+    fn update_scene_texture(&mut self) {
+        let w = self.win.as_mut().expect("redraw checked the window");
         if let Some((view, _, generation)) = self.scene.target() {
             match w.scene_tex {
                 Some((_, g)) if g == generation => {}
@@ -911,10 +988,13 @@ impl App {
                 }
             }
         }
+    }
 
-        // 5. HUD and UI.
-        let st = info.stats;
-        let hud = HudFrame {
+    /// What the HUD shows of this frame.
+    fn hud_frame(&self, info: &FrameInfo, ss: &StreamStats) -> HudFrame {
+        let w = self.win.as_ref().expect("redraw checked the window");
+        let st = &info.stats;
+        HudFrame {
             fps: self.times.fps(),
             frame_ms: self.times.times().last().unwrap_or(0.0) * 1e3,
             select_ms: info.select_ms,
@@ -949,13 +1029,25 @@ impl App {
                 let i = w.gfx.adapter.get_info();
                 format!("{} ({:?})", i.name.split(" (").next().unwrap_or(&i.name), i.backend)
             },
-        };
+        }
+    }
+
+    /// Runs the UI (HUD, panels, the scene image and the lines over it); returns egui's output
+    /// and the actions the user asked for (applied after the present).
+    fn run_ui(
+        &mut self,
+        hud: &HudFrame,
+        lines: &[Line],
+        review: &[(String, String)],
+        viewpoints: &[String],
+    ) -> (egui::FullOutput, Vec<Action>) {
         if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
             self.message = None;
         }
+        let w = self.win.as_mut().expect("redraw checked the window");
         let raw = w.egui.take_egui_input(&w.window);
         let view = ui::View {
-            hud: &hud,
+            hud,
             times: &self.times,
             mode: self.controller.mode,
             recording: self.recorder.as_ref().map(|r| r.len()),
@@ -966,14 +1058,21 @@ impl App {
             has_path: self.player.is_some(),
             message: self.message.as_ref().map(|(m, _)| m.as_str()),
             scene: w.scene_tex.map(|(id, _)| id),
-            lines: &lines,
-            review: &review,
+            lines,
+            review,
             measuring: self.measuring,
-            viewpoints: &viewpoint_names,
+            viewpoints,
         };
         let mut actions = Vec::new();
         let settings = &mut self.settings;
-        let mut out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
+        let out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
+        (out, actions)
+    }
+
+    /// Presents the UI's output, taking the window screenshot when one is due; returns whether
+    /// egui asks to be repainted at once.
+    fn present(&mut self, mut out: egui::FullOutput) -> Result<bool, ViewError> {
+        let w = self.win.as_mut().expect("redraw checked the window");
         w.egui.handle_platform_output(&w.window, out.platform_output);
         let jobs = w.egui.egui_ctx().tessellate(out.shapes, out.pixels_per_point);
         let want_window = self.window_shot.is_some();
@@ -991,13 +1090,18 @@ impl App {
                 Err(e) => self.say(format!("window screenshot failed: {e}")),
             }
         }
-        let repaint_now =
-            out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero());
-        for a in actions {
-            self.act(a);
-        }
+        Ok(out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero()))
+    }
 
-        // 6. Scripted runs: stop after N frames with a screenshot (the window's at frame N-1).
+    /// Counts the frame. Scripted runs stop after N frames (or at the script's last step) with
+    /// a screenshot, the window's taken at frame N-1; returns whether the run ended here.
+    fn count_frame(
+        &mut self,
+        event_loop: &ActiveEventLoop,
+        size: PhysicalSize<u32>,
+        triangles: u64,
+        last_step: bool,
+    ) -> Result<bool, ViewError> {
         self.frames += 1;
         if let (Some(n), Some(p)) = (self.options.exit_after, &self.options.window_screenshot) {
             if self.frames + 1 == n {
@@ -1014,18 +1118,12 @@ impl App {
                         return Err(ViewError::NoFrame(format!("cannot write {}", p.display())));
                     }
                 }
-                self.report.last_triangles = info.triangles;
+                self.report.last_triangles = triangles;
                 event_loop.exit();
-                return Ok(());
+                return Ok(true);
             }
         }
-        self.idle = !self.animating();
-        if repaint_now || self.animating() {
-            if let Some(w) = &self.win {
-                w.window.request_redraw();
-            }
-        }
-        Ok(())
+        Ok(false)
     }
 }
 
