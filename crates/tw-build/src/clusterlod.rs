@@ -21,19 +21,25 @@
 //!    group is at its target; free parts whose radius is within the error the simplifier reached
 //!    anyway are removed too (they cost nothing). meshopt's own `Prune` option ignores locks (a
 //!    part cut by a group border would lose one half: a crack), so it is not used.
-//! 2. *Errors that bound what vanished.* The error of a removed part is the radius of the input
-//!    part it is made of (half its box diagonal at level 0): every one of that part's input
-//!    points lies within that distance of its centre, so a part whose radius projects below τ
-//!    pixels covers less than a τ-pixel disc, the deviation the cut allows anywhere else. The
-//!    input part's, not the current one's: the simplifier may have shrunk it at a quadric error
+//! 2. *Errors that bound what vanished.* A removed part is charged how far the input points it
+//!    stands for lie from a set with no area: the radius of the input part it is made of (half
+//!    its box diagonal: every point lies within it of the centre), or, when smaller, the
+//!    largest distance of that input part's vertices from its principal axis, a line
+//!    ([`input_part_bound`]). Removing the part is collapsing it onto that point or line, a
+//!    deviation the cut allows anywhere else, and a part narrower than τ pixels covers no more
+//!    than a τ-pixel band. The line matters on real assemblies: pins, rails, pipes, cable trays
+//!    and beams are far thinner than they are long, and the radius charged them their length
+//!    (measured: the 24 M assembly's overview cut 1.44 M → 0.60 M triangles, the 10^7 plant's
+//!    fly-over 790 k → 393 k; docs/benchmarks-log.md, "Assemblies", session 27). The input
+//!    part's bound, not the current one's: the simplifier may have shrunk it at a quadric error
 //!    that reads less than the shrinking. A part the simplifier collapsed to nothing counts the
 //!    same way (a collapsed box reads less than its size). The group's error is the largest of
-//!    the simplifier's and those radii. To keep parts from vanishing at a collapse's error in
+//!    the simplifier's and those bounds. To keep parts from vanishing at a collapse's error in
 //!    the first place, one triangle of every free part is locked while the group is
-//!    simplified, so that parts go only by removal, smallest first. The price of the bound,
-//!    measured on the 10^7 plant's 90-frame path: 534 k triangles in the median cut and 39.3 dB
-//!    worst PSNR, against 351 k and 38.4 dB when collapsed parts keep meshopt's estimate
-//!    (docs/benchmarks-log.md, "Assemblies", 2026-12-06).
+//!    simplified, so that parts go only by removal, smallest first. The price of charging
+//!    collapsed parts, measured on the 10^7 plant's 90-frame path: 534 k triangles in the median
+//!    cut and 39.3 dB worst PSNR, against 351 k and 38.4 dB when collapsed parts keep meshopt's
+//!    estimate (docs/benchmarks-log.md, "Assemblies", 2026-12-06).
 //! 3. *Errors that grow step by step.* Reaching the target at any error made a group's error
 //!    jump: to halve a group of small parts, parts up to the median size had to go, and the
 //!    largest of them set the error of the whole group, ten times its clusters' (the overview
@@ -164,7 +170,7 @@ pub(crate) fn build_dag(
     mut output: impl FnMut(DagBounds, &[DagCluster<'_>]) -> i32,
 ) -> DagStats {
     let vertices = crate::lod::adapter(positions);
-    let input_radius = input_part_radius(positions, indices);
+    let input_radius = input_part_bound(positions, indices);
     let mut stats = DagStats::default();
     let mut cluster_indices: Vec<u32> = Vec::new();
     let mut clusters: Vec<Cluster> = Vec::new();
@@ -418,7 +424,7 @@ fn simplify_group(
 }
 
 /// One try of [`simplify_group`]: simplification within `limit` and removal of free parts of
-/// radius ≤ `limit`. Returns the triangles, the error and the triangles removed as parts.
+/// bound ≤ `limit`. Returns the triangles, the error and the triangles removed as parts.
 fn simplify_parts(
     parts: &Parts<'_>,
     vertices: &VertexDataAdapter<'_>,
@@ -428,7 +434,7 @@ fn simplify_parts(
     limit: f32,
 ) -> (Vec<u32>, f32, usize) {
     // The simplifier may reduce a free part but not make it vanish (one of its triangles is
-    // locked): parts go only by `prune_free`, smallest first, each charged its radius. Left to
+    // locked): parts go only by `prune_free`, smallest first, each charged its bound. Left to
     // itself, the simplifier collapses whole parts wherever that is cheapest in its quadric
     // measure, whatever their size.
     let pinned: Vec<u32> = parts.first_triangles(merged);
@@ -449,51 +455,137 @@ fn simplify_parts(
         parts.restore_largest(merged, &mut out);
     }
     let count = parts.count(&out);
-    // A part the simplifier collapsed away is gone as if it had been removed: its radius bounds
+    // A part the simplifier collapsed away is gone as if it had been removed: its bound holds
     // the error there (meshopt's quadric error is an estimate, lower on a collapsed part).
     error = error.max(parts.vanished_radius(&count));
     let (removed, radius) = parts.prune_free(&mut out, &count, target, error, limit);
     (out, error.max(radius), removed)
 }
 
-/// Per vertex: the radius (half the box diagonal) of the connected part of the input triangles
-/// it belongs to; 0 for a vertex on no triangle. Simplification only moves vertices onto
-/// others of their part, so a part of any level is made of one input part, and that part's
-/// radius bounds the distance of each of its input points from its centre, however the part
-/// was simplified before (the simplifier's error is a quadric estimate: a part it shrank would
-/// read smaller than what it stands for).
+/// Per vertex: how far the input points of the connected input part it belongs to lie from a
+/// set with no area (0 for a vertex on no triangle): the smaller of the part's radius (half its
+/// box diagonal: from its centre) and the largest distance of its vertices from its principal
+/// axis (from a line; a pin, a rail, a pipe or a beam is far thinner than it is long). Removing
+/// the part is collapsing it onto that point or line, so this bounds the deviation (module
+/// comment, rule 2). Simplification only moves vertices onto others of their part, so a part of
+/// any level is made of one input part, and the bound holds however the part was simplified
+/// before (the simplifier's error is a quadric estimate: a part it shrank would read smaller
+/// than what it stands for).
 ///
-/// Walks the used vertices, not the indices (a vertex is on about six triangles), and takes the
-/// square root once per part, at its root (a root is its part's smallest vertex, so it comes
-/// first in the last sweep).
-fn input_part_radius(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
-    let mut parts = UnionFind::new(positions.len());
-    parts.union_triangles(indices, |v| v);
+/// Walks the used vertices, not the indices (a vertex is on about six triangles): once for the
+/// parts' boxes and moments, once for the distances from their axes.
+fn input_part_bound(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
+    let mut union = UnionFind::new(positions.len());
+    union.union_triangles(indices, |v| v);
     let mut used = vec![false; positions.len()];
     for &v in indices {
         used[v as usize] = true;
     }
-    let mut lo = vec![[f32::MAX; 3]; positions.len()];
-    let mut hi = vec![[f32::MIN; 3]; positions.len()];
+    // Dense part numbers, in order of each part's smallest vertex.
+    let mut part = vec![u32::MAX; positions.len()];
+    let mut count = 0u32;
     for v in (0..positions.len()).filter(|&v| used[v]) {
-        let root = parts.find(v as u32) as usize;
-        let q = positions[v];
+        let root = union.find(v as u32) as usize;
+        if part[root] == u32::MAX {
+            part[root] = count;
+            count += 1;
+        }
+        part[v] = part[root];
+    }
+    let mut boxes = vec![([f32::MAX; 3], [f32::MIN; 3]); count as usize];
+    let mut moments = vec![Moments::default(); count as usize];
+    for v in (0..positions.len()).filter(|&v| used[v]) {
+        let (p, q) = (part[v] as usize, positions[v]);
+        let (lo, hi) = &mut boxes[p];
+        *lo = std::array::from_fn(|i| lo[i].min(q[i]));
+        *hi = std::array::from_fn(|i| hi[i].max(q[i]));
+        moments[p].add(q);
+    }
+    let axes: Vec<Axis> = moments.iter().map(Moments::axis).collect();
+    let mut off_axis = vec![0.0f64; count as usize];
+    for v in (0..positions.len()).filter(|&v| used[v]) {
+        let p = part[v] as usize;
+        off_axis[p] = off_axis[p].max(axes[p].distance(positions[v]));
+    }
+    let bound: Vec<f32> = boxes
+        .iter()
+        .zip(&off_axis)
+        .map(|((lo, hi), &line)| {
+            let d2: f64 = (0..3).map(|i| (hi[i] as f64 - lo[i] as f64).powi(2)).sum();
+            crate::lod::round_up((d2.sqrt() * 0.5).min(line))
+        })
+        .collect();
+    part.iter().map(|&p| bound.get(p as usize).copied().unwrap_or(0.0)).collect()
+}
+
+/// Sums of a point set's coordinates and their products: its centroid and covariance. The
+/// coordinates are taken relative to the first point, so that the covariance (a difference of
+/// two sums) keeps its digits far from the origin.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Moments {
+    n: f64,
+    first: [f64; 3],
+    sum: [f64; 3],
+    products: [[f64; 3]; 3],
+}
+
+impl Moments {
+    pub(crate) fn add(&mut self, q: [f32; 3]) {
+        let q = q.map(f64::from);
+        if self.n == 0.0 {
+            self.first = q;
+        }
+        let q: [f64; 3] = std::array::from_fn(|i| q[i] - self.first[i]);
+        self.n += 1.0;
         for i in 0..3 {
-            lo[root][i] = lo[root][i].min(q[i]);
-            hi[root][i] = hi[root][i].max(q[i]);
+            self.sum[i] += q[i];
+            for j in 0..3 {
+                self.products[i][j] += q[i] * q[j];
+            }
         }
     }
-    let mut radius = vec![0.0f32; positions.len()];
-    for v in (0..positions.len()).filter(|&v| used[v]) {
-        let root = parts.find(v as u32) as usize;
-        radius[v] = if root == v {
-            let d2: f64 = (0..3).map(|i| (hi[v][i] as f64 - lo[v][i] as f64).powi(2)).sum();
-            crate::lod::round_up(d2.sqrt() * 0.5)
-        } else {
-            radius[root]
-        };
+
+    /// The line through the centroid along the principal direction (power iteration on the
+    /// covariance, started from the coordinate axis of largest variance). Any line gives a
+    /// valid bound in [`Axis::distance`]; this one makes it small for long thin parts.
+    pub(crate) fn axis(&self) -> Axis {
+        let n = self.n.max(1.0);
+        let c = self.sum.map(|s| s / n);
+        let cov: [[f64; 3]; 3] =
+            std::array::from_fn(|i| std::array::from_fn(|j| self.products[i][j] / n - c[i] * c[j]));
+        let widest = (0..3).max_by(|&a, &b| cov[a][a].total_cmp(&cov[b][b])).unwrap_or(0);
+        let mut d = [0.0f64; 3];
+        d[widest] = 1.0;
+        for _ in 0..24 {
+            let next: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| cov[i][j] * d[j]).sum());
+            let len = next.iter().map(|x| x * x).sum::<f64>().sqrt();
+            if !(len > 0.0 && len.is_finite()) {
+                break;
+            }
+            d = next.map(|x| x / len);
+        }
+        Axis { origin: std::array::from_fn(|i| c[i] + self.first[i]), direction: d }
     }
-    radius
+}
+
+/// A line: a point and a unit direction.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Axis {
+    origin: [f64; 3],
+    direction: [f64; 3],
+}
+
+impl Axis {
+    /// Distance of `q` from the line. A part whose vertices are all within r of a line lies
+    /// within r of it everywhere (a triangle's points are convex combinations of its corners,
+    /// and the distance to a line is convex): removing it is collapsing it onto that line,
+    /// which has no area, within r (module comment, rule 2).
+    pub(crate) fn distance(&self, q: [f32; 3]) -> f64 {
+        let v: [f64; 3] = std::array::from_fn(|i| q[i] as f64 - self.origin[i]);
+        let along: f64 = (0..3).map(|i| v[i] * self.direction[i]).sum();
+        let d2: f64 = (0..3).map(|i| (v[i] - along * self.direction[i]).powi(2)).sum();
+        d2.max(0.0).sqrt()
+    }
 }
 
 /// Per vertex of the mesh: its part in the group being simplified (`u32::MAX`: not in the
@@ -517,7 +609,7 @@ struct Parts<'a> {
     table: &'a mut PartTable,
     /// The group's vertices, in order of first use (the entries of `table` to clear).
     vertices: Vec<u32>,
-    /// Per part: the radius of the input part it is made of ([`input_part_radius`]), whether a
+    /// Per part: the bound of the input part it is made of ([`input_part_bound`]), whether a
     /// vertex is anchored, its first triangle.
     radius: Vec<f32>,
     locked: Vec<bool>,
@@ -596,7 +688,7 @@ impl<'a> Parts<'a> {
         count.iter().zip(&self.radius).filter(|(&c, _)| c == 0).map(|(_, &r)| r).fold(0.0, f32::max)
     }
 
-    /// Puts back the input triangles of the part with the largest radius (ties: the first).
+    /// Puts back the input triangles of the part with the largest bound (ties: the first).
     fn restore_largest(&self, merged: &[u32], out: &mut Vec<u32>) {
         let largest =
             (0..self.radius.len()).reduce(|a, b| if self.radius[b] > self.radius[a] { b } else { a });
@@ -605,9 +697,9 @@ impl<'a> Parts<'a> {
         }
     }
 
-    /// Removes whole free parts from `out`, smallest radius first (ties: first triangle), until
+    /// Removes whole free parts from `out`, smallest bound first (ties: first triangle), until
     /// at most `target` triangles are left, never the last part (rule 2). Returns the triangles
-    /// removed and the largest removed radius.
+    /// removed and the largest removed bound.
     fn prune_free(
         &self,
         out: &mut Vec<u32>,
@@ -703,6 +795,36 @@ mod tests {
             shuffled_moved |= moved_tris != shuffled;
         }
         assert!(shuffled_moved);
+    }
+
+    /// The 12 triangles of the box from `lo` to `hi`, its corners appended to `positions`.
+    fn push_box(positions: &mut Vec<[f32; 3]>, indices: &mut Vec<u32>, lo: [f32; 3], hi: [f32; 3]) {
+        let base = positions.len() as u32;
+        positions
+            .extend((0..8).map(|k| std::array::from_fn(|i| if k >> i & 1 == 1 { hi[i] } else { lo[i] })));
+        for [a, b, c, d] in
+            [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+        {
+            indices.extend([a, b, c, a, c, d].map(|k| base + k));
+        }
+    }
+
+    #[test]
+    fn a_part_is_charged_its_distance_from_a_point_or_a_line() {
+        // A 10×1×1 beam, far from the origin (the moments keep their digits), a 2×2×2 cube, and
+        // a vertex on no triangle.
+        let (mut positions, mut indices) = (Vec::new(), Vec::new());
+        push_box(&mut positions, &mut indices, [1e6, 2e6, 3e6], [1e6 + 10.0, 2e6 + 1.0, 3e6 + 1.0]);
+        push_box(&mut positions, &mut indices, [0.0; 3], [2.0; 3]);
+        positions.push([5.0; 3]);
+        let bound = input_part_bound(&positions, &indices);
+        // The beam: half its cross-section's diagonal from its axis, not half its length.
+        let beam = 0.5f32.hypot(0.5);
+        assert!(bound[..8].iter().all(|&b| (b - beam).abs() < 1e-3), "{:?}", &bound[..8]);
+        // The cube: no line is better than its centre by much; the x axis through the centre
+        // gives √2, less than the radius √3.
+        assert!(bound[8..16].iter().all(|&b| (b - 2f32.sqrt()).abs() < 1e-4), "{:?}", &bound[8..16]);
+        assert_eq!(bound[16], 0.0, "a vertex on no triangle");
     }
 
     #[test]

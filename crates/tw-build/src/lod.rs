@@ -790,8 +790,9 @@ mod tests {
     #[test]
     fn parts_missing_from_a_cut_are_within_its_error() {
         // A part that no triangle of the cut touches was removed (pruned or collapsed): its
-        // radius (half its box diagonal, the farthest any of its points is from the centre)
-        // must be within the error the cut was selected for.
+        // points must lie within the error the cut was selected for of a point (its radius,
+        // half its box diagonal) or of a line, which has no area (the distance of its vertices
+        // from its principal axis; crate::clusterlod, rule 2).
         let soup = assembly(20_000, 9);
         let grid = grid_for(&[&soup]);
         let mesh = cell(&soup, &grid);
@@ -818,7 +819,20 @@ mod tests {
                 }
                 let d2: f64 = (0..3).map(|i| ((hi[i] - lo[i]) as f64 * grid.step).powi(2)).sum();
                 let radius = d2.sqrt() * 0.5;
-                assert!(radius <= tau as f64 * (1.0 + 1e-6), "τ {tau}: a part of radius {radius} is missing");
+                let mut moments = crate::clusterlod::Moments::default();
+                // Each vertex once (the part lists one per triangle corner), in the order of the
+                // builder's sweep: the same moments, so the same axis.
+                let vertices: std::collections::BTreeSet<u32> = part.iter().copied().collect();
+                let points: Vec<[f32; 3]> =
+                    vertices.iter().map(|&v| mesh.positions[v as usize].map(|c| c as f32)).collect();
+                points.iter().for_each(|&q| moments.add(q));
+                let axis = moments.axis();
+                let off_axis = points.iter().map(|&q| axis.distance(q)).fold(0.0, f64::max) * grid.step;
+                let deviation = radius.min(off_axis);
+                assert!(
+                    deviation <= tau as f64 * (1.0 + 1e-6),
+                    "τ {tau}: a part {deviation} from a point or a line is missing"
+                );
             }
         }
         assert!(missing_somewhere > 0, "coarse cuts drop parts");

@@ -116,6 +116,11 @@ fn main() {
     // Groups of leaf nodes (cells) and of inner nodes (HLOD), and the step ratios of each.
     let nodes = store.nodes();
     let (mut cell_ratio, mut hlod_ratio) = (BTreeMap::new(), BTreeMap::new());
+    let mut spread = BTreeMap::new();
+    let mut object_ratio = BTreeMap::new();
+    // Triangles whose group's error, seen from the cluster's own sphere rather than the group's,
+    // would be within τ: what the size of the group's sphere alone keeps in the cut.
+    let (mut sphere_bound, mut sphere_bound_leaf) = (0u64, 0u64);
     for c in &selection.clusters {
         let page = cache.get(&store, c.page).expect("page");
         let info = page.info()[c.index_in_page as usize];
@@ -134,6 +139,22 @@ fn main() {
             let by_kind = if leaf { &mut cell_ratio } else { &mut hlod_ratio };
             *by_kind.entry(bucket(group_px / own_px)).or_default() += t;
         }
+        // The largest own error among the group's members: a cluster far below it waits for
+        // its siblings (a group has one error).
+        let members = page.info()[g.first_cluster as usize..(g.first_cluster + g.cluster_count) as usize]
+            .iter()
+            .map(|i| page.steps()[i.step as usize].0)
+            .fold(0.0f32, f32::max);
+        if metric.sphere(g.error, sphere) <= tau as f64 {
+            sphere_bound += t;
+            if nodes.get(g.node as usize).is_some_and(|n| n.child_count == 0) {
+                sphere_bound_leaf += t;
+            }
+        }
+        if error > 0.0 {
+            *object_ratio.entry(bucket((g.error / error) as f64)).or_default() += t;
+            *spread.entry(bucket((members / error) as f64)).or_default() += t;
+        }
         for (count, radius) in cluster_parts(cluster) {
             let px = metric.sphere((radius * step) as f32, sphere);
             *parts.entry(bucket(px)).or_default() += count;
@@ -150,6 +171,12 @@ fn main() {
     print_buckets("by group error ÷ own error", "×", &ratio);
     print_buckets("the same, groups of cells (leaf nodes)", "×", &cell_ratio);
     print_buckets("the same, groups of HLOD (inner nodes)", "×", &hlod_ratio);
+    print_buckets("by group error ÷ own error, object space", "×", &object_ratio);
+    print_buckets("by the group's largest member own error ÷ own error", "×", &spread);
     print_buckets("by the radius of connected parts inside clusters", "px", &parts);
+    println!(
+        "held by the group's sphere alone (its error within τ from the cluster's own sphere): {sphere_bound} \
+         triangles, {sphere_bound_leaf} of them in groups of cells"
+    );
     println!("exact duplicate triangles (same vertices in one cluster): {duplicate}");
 }
