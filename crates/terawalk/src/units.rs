@@ -120,17 +120,9 @@ fn sig3(v: f64) -> String {
     }
 }
 
-/// "12,345,678".
+/// "12,345,678" (`tw_core::digits::thousands`).
 pub fn fmt_count(n: u64) -> String {
-    let s = n.to_string();
-    let mut out = String::with_capacity(s.len() + s.len() / 3);
-    for (i, c) in s.chars().enumerate() {
-        if i > 0 && (s.len() - i).is_multiple_of(3) {
-            out.push(',');
-        }
-        out.push(c);
-    }
-    out
+    tw_core::digits::thousands(n)
 }
 
 #[cfg(test)]

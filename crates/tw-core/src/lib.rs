@@ -19,6 +19,7 @@
 pub mod bounds;
 pub mod cleanup;
 pub mod color;
+pub mod digits;
 pub mod direct_io;
 pub mod disk_space;
 pub mod mem;

@@ -337,17 +337,9 @@ fn bytes(b: u64) -> String {
     }
 }
 
-/// `n` with thousands separated by commas ("12,345,678"): a count read at a glance.
+/// `n` with thousands separated by commas (one definition: `tw_core::digits`).
 fn thousands(n: u64) -> String {
-    let digits = n.to_string();
-    let mut o = String::with_capacity(digits.len() + digits.len() / 3);
-    for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i).is_multiple_of(3) {
-            o.push(',');
-        }
-        o.push(c);
-    }
-    o
+    tw_core::digits::thousands(n)
 }
 
 /// Standard base64 with padding (RFC 4648).

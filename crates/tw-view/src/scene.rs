@@ -39,7 +39,7 @@ use tw_store::{Header, Store};
 
 use crate::controller::SceneFrame;
 use crate::error::ViewError;
-use crate::pick::{pick_clusters, pick_triangle, Ray, TriangleHit};
+use crate::pick::{pick_triangle, Ray, TriangleHit};
 use crate::review::ObjectFilter;
 use crate::settings::Settings;
 
@@ -560,16 +560,6 @@ impl Scene {
     /// Distance along `ray` to the nearest triangle drawn by the last frame (resident pages
     /// only; nothing is loaded; hidden objects are not hit).
     pub fn pick(&self, ray: &Ray, max_t: f32) -> Option<f32> {
-        if self.filter.is_all() {
-            let step = self.header().grid_step;
-            let resident = self.resident(&self.drawn);
-            let items = resident.iter().filter_map(|(r, page)| {
-                let c = page.clusters.get(r.index_in_page as usize)?;
-                let (lo, hi) = page.bounds.get(r.index_in_page as usize)?;
-                Some((tw_runtime::frustum::grid_box(*lo, *hi, step), c))
-            });
-            return pick_clusters(ray, items.collect::<Vec<_>>(), step, max_t);
-        }
         self.pick_triangle(ray, max_t).map(|h| h.t)
     }
 

@@ -15,7 +15,7 @@ use anyhow::{bail, Context, Result};
 
 /// Finds `ffmpeg` on PATH, or says how to install it.
 pub fn find_ffmpeg() -> Result<PathBuf> {
-    find_on_path("ffmpeg", std::env::var_os("PATH")).ok_or_else(|| {
+    tw_io::convert::find_program(Path::new("ffmpeg")).ok_or_else(|| {
         anyhow::anyhow!(
             "--video needs ffmpeg, which is not on PATH. Install it:\n    \
              sudo apt install ffmpeg      (Debian, Ubuntu)\n    \
@@ -25,22 +25,6 @@ pub fn find_ffmpeg() -> Result<PathBuf> {
              ffmpeg -framerate 30 -i DIR/frame-%05d.png -pix_fmt yuv420p video.mp4"
         )
     })
-}
-
-/// The executable file `name` in the first folder of `path` (a PATH value) holding one.
-fn find_on_path(name: &str, path: Option<OsString>) -> Option<PathBuf> {
-    std::env::split_paths(&path?).map(|dir| dir.join(name)).find(|p| is_executable(p))
-}
-
-#[cfg(unix)]
-fn is_executable(p: &Path) -> bool {
-    use std::os::unix::fs::PermissionsExt;
-    std::fs::metadata(p).is_ok_and(|m| m.is_file() && m.permissions().mode() & 0o111 != 0)
-}
-
-#[cfg(not(unix))]
-fn is_executable(p: &Path) -> bool {
-    p.is_file() || p.with_extension("exe").is_file()
 }
 
 /// ffmpeg's arguments: raw RGBA frames of `size` at `fps` on standard input, encoded into
@@ -185,6 +169,11 @@ mod tests {
         assert_eq!(partial_name(Path::new("v")), PathBuf::from(".v.partial"));
     }
 
+    /// Where ffmpeg would be found with `path` as the `PATH` value.
+    fn find_on_path(path: Option<std::ffi::OsString>) -> Option<PathBuf> {
+        tw_io::convert::find_program_in(Path::new("ffmpeg"), path)
+    }
+
     #[cfg(unix)]
     #[test]
     fn ffmpeg_is_found_only_as_an_executable_on_path() {
@@ -197,9 +186,9 @@ mod tests {
         std::fs::write(exe.join("ffmpeg"), "#!/bin/sh\n").unwrap();
         std::fs::set_permissions(exe.join("ffmpeg"), std::fs::Permissions::from_mode(0o755)).unwrap();
         let path = std::env::join_paths([&plain, &exe]).unwrap();
-        assert_eq!(find_on_path("ffmpeg", Some(path)), Some(exe.join("ffmpeg")));
+        assert_eq!(find_on_path(Some(path)), Some(exe.join("ffmpeg")));
         let path = std::env::join_paths([&plain]).unwrap();
-        assert_eq!(find_on_path("ffmpeg", Some(path)), None);
-        assert_eq!(find_on_path("ffmpeg", None), None);
+        assert_eq!(find_on_path(Some(path)), None);
+        assert_eq!(find_on_path(None), None);
     }
 }

@@ -23,6 +23,8 @@
 
 mod run;
 
+pub use run::{find_program, find_program_in};
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Duration;

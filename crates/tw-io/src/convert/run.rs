@@ -83,11 +83,15 @@ pub fn tail(path: &Path, max_lines: usize) -> String {
 /// but symbolic links kept (a virtual environment's `bin/python` is one, and Python finds its
 /// environment by that path). `None` when no such executable file exists.
 pub fn find_program(program: &Path) -> Option<PathBuf> {
+    find_program_in(program, std::env::var_os("PATH"))
+}
+
+/// [`find_program`] with `path` as the `PATH` value (`None`: no folders to look in).
+pub fn find_program_in(program: &Path, path: Option<std::ffi::OsString>) -> Option<PathBuf> {
     let found = if program.components().count() > 1 {
         is_executable(program).then(|| program.to_path_buf())
     } else {
-        let path = std::env::var_os("PATH")?;
-        std::env::split_paths(&path).map(|dir| dir.join(program)).find(|p| is_executable(p))
+        std::env::split_paths(&path?).map(|dir| dir.join(program)).find(|p| is_executable(p))
     }?;
     std::path::absolute(found).ok()
 }
