@@ -16,7 +16,8 @@
 # fuzz/regressions/TARGET; new inputs it finds go to fuzz/target/corpus/TARGET (not committed;
 # `cargo fuzz cmin` can fold the interesting ones into fuzz/corpus). A crash, timeout or
 # out-of-memory input is copied to fuzz/regressions/TARGET/, which the ordinary test run replays
-# (the `fuzz` modules' tests in tw-io and tw-runtime, tw-view's script tests); the script then exits with status 1 after the summary.
+# (the `fuzz` modules' tests in tw-io and tw-runtime, tw-view's script tests, tw-net's
+# `net_corpus_replays`); the script then exits with status 1 after the summary.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 

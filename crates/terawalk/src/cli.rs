@@ -88,14 +88,15 @@ pub enum Command {
                             terawalk view plant.tw --path walk.json --play\n  \
                             xvfb-run -a terawalk view plant.tw --path walk.json --exit-after 30 --screenshot out.png\n  \
                             terawalk view plant.tw --script tour.txt --screenshot end.png\n  \
-                            WGPU_BACKEND=gl terawalk view plant.tw --render-scale 0.5\n\n\
+                            WGPU_BACKEND=gl terawalk view plant.tw --render-scale 0.5\n  \
+                            terawalk view plant.tw --renderer rt --flashlight   # CPU ray tracer, supersampled when still\n\n\
                             Keys: WASD move, mouse drag look, wheel speed, 1/2/3 fly/walk/orbit, right click \
                             orbit around a point, F debug view, L freeze LOD, R record, P play, F12 screenshot, \
                             F1 help, Esc quit (first it clears a pick or measurement). Design review: click \
                             picks an object (name, id, triangles, box, point), H hide, I isolate, Shift+H show \
                             all, M measure (two clicks, snaps to vertices), 4-9 axis views (+X -X +Y -Y +Z -Z), \
                             0 iso, O orthographic, F11 fullscreen, Tab panels; named viewpoints in the Controls \
-                            panel (saved to STORE.views.json).")]
+                            panel (saved to STORE.views.json). G raster / rt (ray traced), T flashlight (rt).")]
     View(ViewArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
@@ -117,6 +118,45 @@ pub enum Command {
                             terawalk export plant.tw -o room.glb --region 0,0,0,20,20,5\n  \
                             terawalk export plant.tw --tiles plant-tiles/")]
     Export(ExportArgs),
+    /// Serve occlusion culling over TCP: cull each camera a `bench --cull-server` client sends
+    /// and answer with the visible set's delta (the occlusion switch's cull server).
+    #[command(after_help = "Examples:\n  terawalk cull-server plant.tw --listen 127.0.0.1:7878\n  \
+                            terawalk bench plant.tw --cull-server 127.0.0.1:7878")]
+    CullServer(CullServerArgs),
+    /// Collision detection on the thesis' scenes (CULLIDE, FAR, the exact CPU reference): per
+    /// step milliseconds, pairs found and pairs missed against the reference.
+    #[command(after_help = "Examples:\n  terawalk collide cylinders --steps 20\n  \
+                            terawalk collide breaking --steps 10 --method cullide,far,reference\n  \
+                            terawalk collide bunnies --method cullide --resolution 128,512,1400\n  \
+                            terawalk collide cloth --steps 5 --scale 0.1 --method far,reference\n  \
+                            terawalk collide tori --method far --groups 256,16\n  \
+                            terawalk collide cylinders --within 0.05 --method far,reference")]
+    Collide(crate::commands::collide::CollideArgs),
+}
+
+#[derive(Args, Debug)]
+pub struct CullServerArgs {
+    /// A store file written by `terawalk build` (clients must open the same store).
+    pub store: PathBuf,
+    /// Address to listen on, host:port (port 0: any free port; the address is printed).
+    #[arg(long, default_value = "127.0.0.1:7878")]
+    pub listen: String,
+    /// Page cache budget of each client's culling walkthrough.
+    #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
+    pub memory: u64,
+    /// GPU memory budget of each client's renderer.
+    #[arg(long, default_value = "512M", value_parser = parse_bytes)]
+    pub gpu_memory: u64,
+    /// The occlusion strategy for clients that leave it to the server (`bench --cull-server`
+    /// sends its run's own strategy).
+    #[arg(long, default_value = "auto", value_parser = parse_occlusion)]
+    pub occlusion: OcclusionChoice,
+    /// Open a GPU device per client instead of sharing one.
+    #[arg(long)]
+    pub own_devices: bool,
+    /// Longest wait for a client's read or write, in milliseconds.
+    #[arg(long, default_value_t = 10_000, value_name = "MS")]
+    pub timeout_ms: u64,
 }
 
 #[derive(Args, Debug)]
@@ -279,6 +319,30 @@ pub enum RenderColoring {
     Cluster,
 }
 
+impl RenderColoring {
+    /// The renderers' colour mode (tw-gpu and tw-rt share it).
+    pub fn mode(self) -> tw_core::color::ColorMode {
+        use tw_core::color::ColorMode;
+        match self {
+            RenderColoring::Material => ColorMode::Material,
+            RenderColoring::Object => ColorMode::Object,
+            RenderColoring::Level => ColorMode::Level,
+            RenderColoring::Cluster => ColorMode::Cluster,
+        }
+    }
+}
+
+/// Which renderer draws the frames.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum RendererChoice {
+    /// The rasterizer (wgpu: a GPU, or Mesa's CPU drivers where there is none).
+    #[default]
+    Raster,
+    /// The CPU ray tracer on every core (tw-rt; no GPU needed): the same LOD cut, shaded the
+    /// same way, optionally with a flashlight and hard shadows.
+    Rt,
+}
+
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
@@ -322,8 +386,8 @@ pub struct RenderArgs {
     /// How to colour triangles.
     #[arg(long, value_enum, default_value = "material")]
     pub color: RenderColoring,
-    /// Memory budget of the decoded page cache (at least 1M; the
-    /// root pages are kept beyond it).
+    /// Memory budget of the decoded page cache (at least 1M; the root pages are kept beyond
+    /// it). With --renderer rt a quarter of it goes to the ray tracer's cluster BVHs.
     #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
     /// Write the image and exit 0 even when store pages fail their checksum (their geometry is
@@ -334,6 +398,13 @@ pub struct RenderArgs {
     /// a rebuild (--camera gives its own up vector). A model file is built with it.
     #[arg(long, value_parser = parse_up_axis)]
     pub up: Option<u8>,
+    /// Which renderer draws: raster (the default) or rt, the CPU ray tracer.
+    #[arg(long, value_enum, default_value = "raster")]
+    pub renderer: RendererChoice,
+    /// With --renderer rt: light the scene by a flashlight above and beside the eye, with hard
+    /// shadows (shadow rays), instead of the headlight.
+    #[arg(long)]
+    pub flashlight: bool,
     #[command(flatten)]
     pub open: OpenArgs,
 }
@@ -433,6 +504,15 @@ pub struct ViewArgs {
     /// records, without a rebuild. A model file is built with it.
     #[arg(long, value_parser = parse_up_axis)]
     pub up: Option<u8>,
+    /// Which renderer draws: raster (the default) or rt, the CPU ray tracer, which adds a
+    /// sample per pixel each frame while the camera stands still (up to 64; G switches, T
+    /// toggles the flashlight).
+    #[arg(long, value_enum, default_value = "raster")]
+    pub renderer: RendererChoice,
+    /// With --renderer rt: start with the flashlight (above and beside the eye, hard shadows)
+    /// instead of the headlight.
+    #[arg(long)]
+    pub flashlight: bool,
     #[command(flatten)]
     pub open: OpenArgs,
 }
@@ -472,8 +552,8 @@ pub struct BenchArgs {
     /// Pixel error threshold τ of the LOD cut.
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
-    /// Memory budget of the decoded page cache (RAM; at least 1M; the
-    /// root pages are kept beyond it).
+    /// Memory budget of the decoded page cache (RAM; at least 1M; the root pages are kept
+    /// beyond it). With --renderer rt a quarter of it goes to the ray tracer's cluster BVHs.
     #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
     /// Occlusion culling strategies, comma-separated (none, hzb, queries, gpu-hzb; auto = the
@@ -520,6 +600,22 @@ pub struct BenchArgs {
     /// damaged store fails the command after the report is written.
     #[arg(long)]
     pub allow_damaged: bool,
+    /// Cull on a `terawalk cull-server` at this address (host:port): each frame draws the
+    /// visible set the server sent for the frame before (one frame of latency), or culls
+    /// locally when none came in time.
+    #[arg(long, value_name = "ADDR", conflicts_with_all = ["reference", "compare", "exact"])]
+    pub cull_server: Option<String>,
+    /// With --cull-server: longest wait for a frame's visible set before culling locally, ms.
+    #[arg(long, default_value_t = 250, value_name = "MS", requires = "cull_server")]
+    pub cull_timeout_ms: u64,
+    /// Which renderer draws the frames: raster (the default) or rt, the CPU ray tracer (one run
+    /// instead of one per --occlusion strategy: rays need no occlusion culling; --compare
+    /// measures it against the rasterized full-detail reference).
+    #[arg(long, value_enum, default_value = "raster", conflicts_with_all = ["reference", "exact", "cull_server"])]
+    pub renderer: RendererChoice,
+    /// With --renderer rt: a flashlight above and beside the eye with hard shadows.
+    #[arg(long)]
+    pub flashlight: bool,
 }
 
 /// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device

@@ -22,7 +22,10 @@ fn main() {
     tw_gpu::headless::quiet_device_select();
     let cli = cli::Cli::parse();
     init_logging(cli.verbose, cli.quiet);
-    on_interrupt_remove_temporaries();
+    // The cull server stops on Ctrl-C by itself (it says goodbye to its clients first).
+    if !matches!(cli.command, cli::Command::CullServer(_)) {
+        on_interrupt_remove_temporaries();
+    }
     let result = match cli.command {
         cli::Command::Stats(a) => commands::stats::run(a),
         cli::Command::Generate(a) => commands::generate::run(a),
@@ -35,6 +38,8 @@ fn main() {
         cli::Command::Demo(a) => commands::demo::run(a),
         cli::Command::Path(a) => commands::path::run(a, cli.quiet),
         cli::Command::Export(a) => commands::export::run(a),
+        cli::Command::CullServer(a) => commands::cull_server::run(a),
+        cli::Command::Collide(a) => commands::collide::run(a),
     };
     if let Err(e) = result {
         if out::is_closed_pipe(&e) {

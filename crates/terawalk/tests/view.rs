@@ -394,6 +394,15 @@ fn cubes_store() -> &'static Path {
 /// folder (its viewpoints file is written there), without a path; returns the folder and
 /// stderr (the viewer's messages), or None when skipped as [`run_under_xvfb`] skips.
 fn review_session(store_file: &Path, script: &str) -> Option<(tempfile::TempDir, String)> {
+    script_session(store_file, script, &[]).map(|(dir, _, err)| (dir, err))
+}
+
+/// [`review_session`] with more options; returns the folder, stdout and stderr.
+fn script_session(
+    store_file: &Path,
+    script: &str,
+    extra: &[&str],
+) -> Option<(tempfile::TempDir, String, String)> {
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
     let Some(xvfb_run) = which("xvfb-run") else {
         assert!(!require_gpu(), "TERAWALK_REQUIRE_GPU is set but xvfb-run is missing");
@@ -406,6 +415,7 @@ fn review_session(store_file: &Path, script: &str) -> Option<(tempfile::TempDir,
     let mut cmd = Command::new(xvfb_run);
     cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view", "m.tw"])
         .args(["--size", "480x320", "--script", "script.txt"])
+        .args(extra)
         .current_dir(dir.path())
         .env("WGPU_BACKEND", "vulkan")
         .env("TERAWALK_LOG", "info,wgpu_hal=off,wgpu_core=warn,naga=warn");
@@ -422,7 +432,7 @@ fn review_session(store_file: &Path, script: &str) -> Option<(tempfile::TempDir,
         return None;
     }
     assert!(!err.contains("panicked"), "{err}");
-    Some((dir, err))
+    Some((dir, text(&o.stdout), err))
 }
 
 /// A PNG's RGBA pixels and width.
@@ -548,4 +558,35 @@ fn preset_views_viewpoints_and_ortho_under_xvfb() {
     assert!(perspective >= 2 && ortho < perspective, "colours: perspective {perspective}, ortho {ortho}");
     assert!(share("perspective.png", "ortho.png") < 0.05, "the orthographic view lost the framing");
     assert!(share("perspective.png", "back.png") < 0.005, "O twice did not return");
+}
+
+#[test]
+fn flashlight_needs_the_ray_tracer() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = store().to_str().unwrap();
+    let o = terawalk(&["view", s, "--flashlight", "--exit-after", "1"], dir.path());
+    assert_clean_error(&o, "--flashlight needs --renderer rt");
+}
+
+#[test]
+fn ray_traced_view_supersamples_while_the_camera_stands_still() {
+    // `--renderer rt` with a still camera: the CPU ray tracer's image goes into the window's
+    // scene texture (screenshots read it back) and each frame adds a sample per pixel; T turns
+    // the flashlight on, which starts the mean again, and the samples then add up again.
+    let script = "wait 3\nscreenshot first.png\npress T\nwait 12\n";
+    let extra = ["--renderer", "rt", "--screenshot", "shot.png"];
+    let Some((dir, out, err)) = script_session(store(), script, &extra) else { return };
+    assert!(err.contains("flashlight on"), "T did not toggle the flashlight: {err}");
+    let number = |line: &str| -> u32 {
+        line.split_whitespace().next().and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("{out}"))
+    };
+    let frames = number(out.lines().find(|l| l.contains(" frames (")).unwrap_or_default());
+    let samples = number(message_after(&out, "ray traced: "));
+    // One a frame at most, and fewer than the frames (the flashlight started the mean again
+    // after the third); more than one, unless pages kept changing the cut until the end.
+    assert!(frames >= 15 && (2..=frames - 3).contains(&samples), "{samples} samples per pixel: {out}");
+    for shot in ["first.png", "shot.png"] {
+        let (covered, colours) = coverage(&dir.path().join(shot));
+        assert!(covered > 0.05 && colours >= 8, "{shot}: {covered} covered, {colours} colours");
+    }
 }

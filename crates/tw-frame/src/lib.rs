@@ -22,6 +22,8 @@
 
 mod gpu_hzb;
 pub mod occlude;
+pub mod remote;
+pub mod traced;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -388,6 +390,38 @@ impl Walkthrough {
     }
 }
 
+/// The pages a frame's cut needs, held while it is drawn, and how streaming went.
+struct Streamed {
+    /// Sorted by page.
+    pages: Vec<(u32, Arc<ResidentPage>)>,
+    stats: StreamStats,
+    /// `None` for a blocking frame (`wait_for_pages`).
+    times: Option<tw_runtime::StreamTimes>,
+}
+
+/// A frame's first step, shared by both renderers: the LOD cut of `camera` into `selection`
+/// and the pages it needs — streamed (missing pages requested, resident ancestors drawn in their
+/// place) or, with `wait_for_pages`, loaded on the spot.
+fn select_and_stream(
+    streamer: &mut Streamer,
+    selection: &mut Selection,
+    camera: &Camera,
+    settings: &FrameSettings,
+    (w, h): (u32, u32),
+) -> Streamed {
+    let options =
+        SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
+    if settings.wait_for_pages {
+        let stats;
+        (*selection, stats) = streamer.frame_blocking(camera, &options);
+        Streamed { pages: resident_pages(streamer, &selection.clusters), stats, times: None }
+    } else {
+        let frame = streamer.frame(camera, &options);
+        *selection = frame.selection;
+        Streamed { pages: frame.pages, stats: frame.stats, times: Some(frame.times) }
+    }
+}
+
 /// Loads the pages of `clusters[from..]` into `cache` in parallel, up to `pages` distinct ones
 /// (errors are left for the caller's own [`PageCache::get`], which reports them); returns the
 /// end of the clusters whose pages were loaded.
@@ -488,20 +522,14 @@ impl Walkthrough {
         settings: &FrameSettings,
     ) -> Result<DrawnFrame, FrameError> {
         let start = Instant::now();
-        let (w, h) = self.renderer.size();
-        let options =
-            SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
         let store = self.streamer.store().clone();
-        let (pages, stream, stream_times): (Vec<(u32, Arc<ResidentPage>)>, StreamStats, _) =
-            if settings.wait_for_pages {
-                let stream;
-                (self.selection, stream) = self.streamer.frame_blocking(camera, &options);
-                (resident_pages(&self.streamer, &self.selection.clusters), stream, None)
-            } else {
-                let frame = self.streamer.frame(camera, &options);
-                self.selection = frame.selection;
-                (frame.pages, frame.stats, Some(frame.times))
-            };
+        let Streamed { pages, stats: stream, times: stream_times } = select_and_stream(
+            &mut self.streamer,
+            &mut self.selection,
+            camera,
+            settings,
+            self.renderer.size(),
+        );
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
         let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();

@@ -1,78 +1,17 @@
 //! Colours: where a triangle's colour comes from ([`ColorMode`]) and the CPU versions of the
-//! debug palettes that draw.wgsl computes on the GPU (the object hash and the LOD-level palette).
+//! debug palettes that draw.wgsl computes on the GPU (the object hash and the LOD-level palette,
+//! defined in `tw_core::color` so that the ray tracer colours the same way).
 
-/// Colour of objects without one in the store (sRGB).
-pub const DEFAULT_COLOR: [u8; 4] = [180, 180, 180, 255];
+pub use tw_core::color::{hash_color, level_color, ColorMode, BACKGROUND, DEFAULT_COLOR};
 
-/// Background (sRGB) that [`crate::Image::save_png`] puts where nothing was drawn.
-pub const BACKGROUND: [u8; 3] = [205, 218, 235];
-
-/// Where a triangle's colour comes from.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum ColorMode {
-    /// The object's colour from the store's object table, [`DEFAULT_COLOR`] without one.
-    #[default]
-    Material,
-    /// A colour from a hash of the object id.
-    Object,
-    /// A colour per LOD level (0 = full resolution).
-    Level,
-    /// A colour from a hash of the cluster (page, index in page).
-    Cluster,
-}
-
-impl ColorMode {
-    /// The shader's code for the mode (draw.wgsl `base_color`).
-    pub(crate) fn code(self) -> u32 {
-        match self {
-            ColorMode::Material => 0,
-            ColorMode::Object => 1,
-            ColorMode::Level => 2,
-            ColorMode::Cluster => 3,
-        }
+/// The shader's code for `mode` (draw.wgsl `base_color`).
+pub(crate) fn mode_code(mode: ColorMode) -> u32 {
+    match mode {
+        ColorMode::Material => 0,
+        ColorMode::Object => 1,
+        ColorMode::Level => 2,
+        ColorMode::Cluster => 3,
     }
-}
-
-/// A distinct, fairly saturated sRGB colour for an id (MurmurHash3's finaliser; the same as
-/// tw-preview's `hash_color`; draw.wgsl computes it in f32).
-pub fn hash_color(id: u32) -> [u8; 4] {
-    let mut h = id.wrapping_add(0x9e37_79b9);
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x85eb_ca6b);
-    h ^= h >> 13;
-    h = h.wrapping_mul(0xc2b2_ae35);
-    h ^= h >> 16;
-    let hue = (h & 0xffff) as f64 / 65536.0 * 6.0;
-    let sat = 0.45 + 0.35 * ((h >> 16) & 0xff) as f64 / 255.0;
-    let val = 0.75 + 0.25 * (h >> 24) as f64 / 255.0;
-    let f = hue.fract();
-    let (p, q, t) = (val * (1.0 - sat), val * (1.0 - sat * f), val * (1.0 - sat * (1.0 - f)));
-    let rgb = match hue as u32 {
-        0 => [val, t, p],
-        1 => [q, val, p],
-        2 => [p, val, t],
-        3 => [p, q, val],
-        4 => [t, p, val],
-        _ => [val, p, q],
-    };
-    let [r, g, b] = rgb.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
-    [r, g, b, 255]
-}
-
-/// The colour of LOD level `level`: full resolution green, then yellow, orange, red, magenta,
-/// blue, cyan, repeating.
-pub fn level_color(level: u8) -> [u8; 4] {
-    const PALETTE: [[u8; 4]; 8] = [
-        [80, 200, 90, 255],
-        [220, 210, 70, 255],
-        [240, 150, 50, 255],
-        [225, 70, 60, 255],
-        [200, 80, 200, 255],
-        [90, 110, 230, 255],
-        [70, 200, 220, 255],
-        [240, 240, 240, 255],
-    ];
-    PALETTE[level as usize % PALETTE.len()]
 }
 
 /// Packs an sRGB colour the way draw.wgsl's `unpack_srgb` reads it.
@@ -83,18 +22,6 @@ pub(crate) fn pack(c: [u8; 4]) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn hash_colors_differ_between_ids() {
-        let colors: std::collections::HashSet<_> = (0..64).map(hash_color).collect();
-        assert!(colors.len() > 50);
-    }
-
-    #[test]
-    fn level_colors_cycle() {
-        assert_ne!(level_color(0), level_color(1));
-        assert_eq!(level_color(0), level_color(8));
-    }
 
     #[test]
     fn packing_is_little_endian_rgba() {

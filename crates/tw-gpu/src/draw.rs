@@ -116,7 +116,7 @@ impl Pipelines {
             Some(i) => i,
             None => {
                 let constants = [
-                    ("COLOR_MODE", mode.code() as f64),
+                    ("COLOR_MODE", crate::color::mode_code(mode) as f64),
                     ("ENCODE_SRGB", if format.is_srgb() { 0.0 } else { 1.0 }),
                 ];
                 let p = pipeline(

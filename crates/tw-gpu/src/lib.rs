@@ -16,6 +16,8 @@
 //! - [`ids`]: the item buffer and the exact visible sets.
 //! - [`depth`]: reverse-Z depth readback for the CPU HZB.
 //! - [`query`]: hardware occlusion queries of boxes against the frame's depth.
+//! - [`visibility`]: full-visibility queries of triangles in a given order (CULLIDE's passes,
+//!   for `tw-collide`).
 //! - [`gpu_cull`]: the GPU hierarchical Z-buffer built in compute shaders, the cull of
 //!   candidate boxes against it feeding indirect draws in the same frame (`gpu-hzb`).
 //! - [`msaa`]: 4× multisampling of the shaded passes, with the farthest-sample depth resolve
@@ -57,6 +59,7 @@ pub mod pool;
 pub mod query;
 mod readback;
 mod renderer;
+pub mod visibility;
 
 pub use wgpu;
 
@@ -71,7 +74,8 @@ pub use ids::{ClusterVisibility, Item, ItemBuffer, VisibleSet};
 pub use image::Image;
 pub use msaa::SUPPORTED_SAMPLES;
 pub use pool::{PoolStats, MIN_BUDGET};
-pub use renderer::{FrameStats, Renderer, SelectionPages, Target, MAX_RUNS};
+pub use renderer::{FrameStats, Renderer, Target, MAX_RUNS};
+pub use tw_runtime::SelectionPages;
 
 /// Identifies a cluster: its page, index in the page and group (as selected). The pool keys
 /// clusters by (page, index in page).

@@ -144,6 +144,20 @@ impl Camera {
         self.projection(aspect) * self.view()
     }
 
+    /// The shading's headlight: the unit direction from the target towards the eye (both
+    /// renderers shade by it: tw-gpu's draw.wgsl and tw-rt).
+    pub fn headlight(&self) -> Vec3 {
+        (self.eye - self.target).normalize_or(Vec3::Z)
+    }
+
+    /// The shading's sun: a unit direction from above (the camera's up), tilted towards a fixed
+    /// scene direction, so that faces of different orientation differ in brightness.
+    pub fn sun_direction(&self) -> Vec3 {
+        let up = self.up.normalize_or(Vec3::Z);
+        let tilt = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
+        (up * 0.8 + (tilt - up * tilt.dot(up)).normalize_or_zero() * 0.35).normalize_or(up)
+    }
+
     /// `H / (2 tan(fovy / 2))`: pixels per unit of size at unit distance, for a viewport
     /// `viewport_height` pixels high (docs/DESIGN.md, D3).
     pub fn pixel_scale(&self, viewport_height: f32) -> f64 {

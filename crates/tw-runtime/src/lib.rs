@@ -56,6 +56,7 @@ pub mod occlusion;
 pub mod path;
 pub mod pathgen;
 pub mod prefetch;
+pub mod resolve;
 pub mod select;
 pub mod stream;
 pub mod triangle_test;
@@ -75,6 +76,7 @@ pub use pathgen::{
     WalkParams,
 };
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
+pub use resolve::SelectionPages;
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};
 pub use triangle_test::{

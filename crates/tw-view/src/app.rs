@@ -14,6 +14,10 @@
 //! picking); 4…9, 0 are the preset views, O the orthographic view
 //! ([`Controller::dolly_zoom`]), F11 fullscreen, and named viewpoints are saved next to the
 //! store ([`crate::viewpoints`]).
+//!
+//! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
+//! tracer's flashlight; while the camera stands still the ray-traced image gathers samples, and
+//! the scene asks for frames until it has them all ([`Scene::wants_redraw`]).
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -37,7 +41,7 @@ use crate::recorder::{Player, Recorder};
 use crate::review::{format_distance, Measure, ObjectFilter, Picked};
 use crate::scene::{FrameInfo, Scene};
 use crate::script::{ScriptRunner, Step};
-use crate::settings::{Coloring, Settings};
+use crate::settings::{Coloring, RendererKind, Settings};
 use crate::ui::{self, Action, Line};
 use crate::viewpoints::{Preset, Viewpoint, Viewpoints};
 use crate::ViewOptions;
@@ -323,14 +327,16 @@ impl App {
                 Some(p) => {
                     self.pick_lines.clear();
                     self.filter.hide(p.object);
-                    self.say(format!("hidden: {} (Shift+H shows all)", self.object_name(p.object)));
+                    let note = self.raster_only_note();
+                    self.say(format!("hidden: {} (Shift+H shows all){note}", self.object_name(p.object)));
                 }
                 None => self.say("nothing picked to hide (click an object first)".into()),
             },
             Action::Isolate => match self.picked {
                 Some(p) => {
                     self.filter.isolate(p.object);
-                    self.say(format!("isolated: {} (Shift+H shows all)", self.object_name(p.object)));
+                    let note = self.raster_only_note();
+                    self.say(format!("isolated: {} (Shift+H shows all){note}", self.object_name(p.object)));
                 }
                 None => self.say("nothing picked to isolate (click an object first)".into()),
             },
@@ -352,12 +358,37 @@ impl App {
             Action::SaveView(name) => self.save_view(&name),
             Action::LoadView(name) => self.load_view(&name),
             Action::ToggleOrtho => self.toggle_ortho(),
+            Action::ToggleRenderer => {
+                let r = match self.settings.renderer {
+                    RendererKind::Raster => RendererKind::Rt,
+                    RendererKind::Rt => RendererKind::Raster,
+                };
+                self.settings.renderer = r;
+                self.say(format!("renderer: {}", r.name()));
+            }
+            Action::ToggleFlashlight => {
+                self.settings.flashlight = !self.settings.flashlight;
+                let state = if self.settings.flashlight { "on" } else { "off" };
+                let note = match self.settings.renderer {
+                    RendererKind::Rt => "",
+                    RendererKind::Raster => " (it lights the ray-traced image: G switches to rt)",
+                };
+                self.say(format!("flashlight {state}{note}"));
+            }
             Action::ToggleFullscreen => {
                 if let Some(w) = &self.win {
                     let full = w.window.fullscreen().is_some();
                     w.window.set_fullscreen((!full).then_some(winit::window::Fullscreen::Borderless(None)));
                 }
             }
+        }
+    }
+
+    /// Said with hide and isolate while ray tracing, which traces every object.
+    fn raster_only_note(&self) -> &'static str {
+        match self.settings.renderer {
+            RendererKind::Raster => "",
+            RendererKind::Rt => "; the ray tracer still shows it (G: raster)",
         }
     }
 
@@ -654,6 +685,8 @@ impl App {
             KeyCode::KeyF => self.act(Action::ToggleDebugView),
             KeyCode::KeyL => self.settings.lod_freeze = !self.settings.lod_freeze,
             KeyCode::KeyR => self.act(Action::ToggleRecording),
+            KeyCode::KeyG => self.act(Action::ToggleRenderer),
+            KeyCode::KeyT => self.act(Action::ToggleFlashlight),
             KeyCode::KeyP => self.act(Action::TogglePlayback),
             KeyCode::Home => self.act(Action::ResetView),
             KeyCode::Tab => {
@@ -1004,7 +1037,11 @@ impl App {
             nodes_visible: st.nodes_visited.saturating_sub(st.nodes_culled_frustum + st.nodes_culled_lod),
             nodes_frustum_culled: st.nodes_culled_frustum,
             nodes_lod_culled: st.nodes_culled_lod,
-            occlusion: self.settings.occlusion.name().to_string(),
+            // Rays find the visible surface themselves: no occlusion culling when ray tracing.
+            occlusion: match self.settings.renderer {
+                RendererKind::Raster => self.settings.occlusion.name().to_string(),
+                RendererKind::Rt => String::new(),
+            },
             occlusion_tested: info.occlusion.tested,
             occlusion_culled: info.occlusion.culled,
             cull_ms: info.cull_ms,
@@ -1028,6 +1065,19 @@ impl App {
             adapter: {
                 let i = w.gfx.adapter.get_info();
                 format!("{} ({:?})", i.name.split(" (").next().unwrap_or(&i.name), i.backend)
+            },
+            renderer: match self.settings.renderer {
+                RendererKind::Raster => "raster".into(),
+                RendererKind::Rt => format!(
+                    "rt (CPU, {} threads), {}",
+                    tw_rt::scene::StoreTracer::threads(),
+                    if self.settings.flashlight { "flashlight (T)" } else { "headlight (T: flashlight)" }
+                ),
+            },
+            samples: info.samples,
+            max_samples: match self.settings.renderer {
+                RendererKind::Raster => 0,
+                RendererKind::Rt => crate::accumulate::MAX_SAMPLES,
             },
         }
     }
@@ -1119,6 +1169,7 @@ impl App {
                     }
                 }
                 self.report.last_triangles = triangles;
+                self.report.samples = self.scene.last_frame().samples;
                 event_loop.exit();
                 return Ok(true);
             }

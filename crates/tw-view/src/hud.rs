@@ -133,12 +133,18 @@ pub struct HudFrame {
     pub units: String,
     pub mode: String,
     pub adapter: String,
+    /// The renderer (`raster`, `rt` with its threads and light) and, ray traced, the samples
+    /// per pixel in the image shown and their most (0 when rasterized).
+    pub renderer: String,
+    pub samples: u32,
+    pub max_samples: u32,
 }
 
 impl HudFrame {
     /// Labelled lines, in display order.
     pub fn lines(&self) -> Vec<(&'static str, String)> {
-        vec![
+        let mut lines = vec![
+            ("renderer", self.renderer.clone()),
             ("fps", format!("{:.1} ({:.1} ms)", self.fps, self.frame_ms)),
             (
                 "select / cull / draw",
@@ -167,6 +173,8 @@ impl HudFrame {
                 "GPU memory",
                 if self.gpu_budget > 0 {
                     format!("{} / {}", bytes(self.gpu_bytes), bytes(self.gpu_budget))
+                } else if self.max_samples > 0 {
+                    "none (the ray tracer runs on the CPU)".to_string()
                 } else {
                     format!("{} (no renderer yet)", bytes(self.gpu_bytes))
                 },
@@ -177,7 +185,12 @@ impl HudFrame {
             ("position", self.position_text()),
             ("speed", format!("{} {}/s", format_length(self.speed), unit_suffix(&self.units))),
             ("adapter", self.adapter.clone()),
-        ]
+        ];
+        if self.max_samples > 0 {
+            let still = if self.samples >= self.max_samples { " (complete)" } else { "" };
+            lines.insert(1, ("samples", format!("{} / {} per pixel{still}", self.samples, self.max_samples)));
+        }
+        lines
     }
 
     /// The eye's input coordinates with the store's unit (`"12.5, -3.20, 1.70 m"`), to three
@@ -293,6 +306,15 @@ mod tests {
         let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
         assert_eq!(get("occlusion-culled"), "80 of 120 clusters tested (hzb)");
         assert_eq!(get("GPU memory"), "1.0 MiB / 512.0 MiB");
+        assert!(lines.iter().all(|l| l.0 != "samples"), "no samples line when rasterized");
+        let h = HudFrame { renderer: "rt".into(), samples: 5, max_samples: 64, ..Default::default() };
+        let lines = h.lines();
+        let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
+        assert_eq!(get("renderer"), "rt");
+        assert_eq!(get("samples"), "5 / 64 per pixel");
+        assert_eq!(get("GPU memory"), "none (the ray tracer runs on the CPU)");
+        let h = HudFrame { samples: 64, max_samples: 64, ..Default::default() };
+        assert!(h.lines().contains(&("samples", "64 / 64 per pixel (complete)".to_string())));
         assert!(lines.iter().any(|l| l.0 == "occlusion-culled"));
         assert_eq!(bytes(10), "10 B");
         assert_eq!(count(12_345), "12.3 k");

@@ -17,6 +17,9 @@
 //! - [`recorder`]: camera path recording and playback (the `path`/`bench` JSON format);
 //! - [`scene`]: the store and its `tw_frame::Walkthrough` (streamer, renderer, occlusion
 //!   culling), the scene texture egui shows;
+//! - [`traced`]: the ray-traced mode (`--renderer rt`): `tw_frame`'s traced walkthrough and
+//!   the running mean of its samples while the camera stands still;
+//! - [`accumulate`]: progressive supersampling's sample positions and running mean;
 //! - [`gfx`]: window surface, device and egui-wgpu;
 //! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;
@@ -27,6 +30,7 @@
 //! [`run`] opens the window and returns when it is closed, after `exit_after` frames or the
 //! last step of a `script`, or with the first error (no panics on user input).
 
+pub mod accumulate;
 pub mod controller;
 pub mod debug_view;
 pub mod error;
@@ -39,6 +43,7 @@ pub mod review;
 pub mod scene;
 pub mod script;
 pub mod settings;
+pub mod traced;
 pub mod ui;
 pub mod viewpoints;
 
@@ -48,7 +53,7 @@ use std::path::PathBuf;
 
 pub use error::ViewError;
 pub use scene::Scene;
-pub use settings::{Coloring, Occlusion, Settings};
+pub use settings::{Coloring, Occlusion, RendererKind, Settings};
 use tw_runtime::{Camera, CameraPath};
 
 /// How to start the viewer.
@@ -96,6 +101,8 @@ pub struct ViewReport {
     pub minimized_frames: u64,
     /// The window size of the last frame drawn.
     pub last_size: [u32; 2],
+    /// Ray traced: samples per pixel in the last frame's image (0 when rasterized).
+    pub samples: u32,
 }
 
 /// Opens the window over `scene` and runs until it is closed (see the crate documentation).

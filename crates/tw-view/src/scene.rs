@@ -27,6 +27,11 @@
 //!   debug view's path, [`tw_gpu::Renderer::draw_masked`]): a cluster mixes objects, so the
 //!   filter works per triangle, and costs nothing while every object is shown. The picked
 //!   object is tinted through the renderer's object colour table (the material colouring).
+//! - **Ray tracing** ([`Settings::renderer`] `Rt`): [`crate::traced::TracedScene`] selects,
+//!   streams and traces the frame on the CPU and keeps the running mean of its samples while
+//!   the camera stands still; the mean is written into the scene texture
+//!   (`Queue::write_texture`), so egui, screenshots and picking see it as they see a drawn
+//!   frame. One renderer is kept at a time: switching drops the other's streamer (and GPU pool).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -41,7 +46,8 @@ use crate::controller::SceneFrame;
 use crate::error::ViewError;
 use crate::pick::{pick_triangle, Ray, TriangleHit};
 use crate::review::ObjectFilter;
-use crate::settings::Settings;
+use crate::settings::{RendererKind, Settings};
+use crate::traced::TracedScene;
 
 /// What [`Scene::frame`] did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -60,6 +66,8 @@ pub struct FrameInfo {
     pub occlusion: OcclusionStats,
     /// The GPU cluster pool after the frame.
     pub gpu: PoolStats,
+    /// Ray traced: samples per pixel in the image shown (0 when rasterized).
+    pub samples: u32,
 }
 
 /// What the current selection was made from.
@@ -153,6 +161,8 @@ pub struct Scene {
     gfx: Option<SceneGfx>,
     /// Made at the first frame (its own target has the frame's size).
     walk: Option<Walkthrough>,
+    /// The ray-traced mode's walkthrough and samples, made at its first frame.
+    traced: Option<TracedScene>,
     /// The clusters the last selected frame drew, and those it found occluded.
     drawn: Vec<ClusterRef>,
     occluded: Vec<ClusterRef>,
@@ -189,6 +199,7 @@ impl Scene {
             memory_budget,
             gfx: None,
             walk: None,
+            traced: None,
             drawn: Vec::new(),
             occluded: Vec::new(),
             key: None,
@@ -314,9 +325,13 @@ impl Scene {
     /// Whether the last frame is not final yet: its cut asked for pages, pages were being
     /// loaded, or the occlusion history is settling after a change. The app keeps redrawing
     /// meanwhile (the picture refines as the pages arrive).
+    /// Ray traced, it also stays true while the still image gathers samples.
     pub fn wants_redraw(&self) -> bool {
-        self.last.selected
-            && (self.last.stream.pages_requested > 0 || self.last.stream.in_flight > 0 || self.settle)
+        let streaming = self.last.stream.pages_requested > 0 || self.last.stream.in_flight > 0;
+        if let Some(t) = &self.traced {
+            return streaming || t.refining();
+        }
+        self.last.selected && (streaming || self.settle)
     }
 
     /// A new streamer with `bytes` of budget (the resident pages are dropped and reloaded as
@@ -328,6 +343,8 @@ impl Scene {
                 let options = StreamOptions { budget_bytes: bytes, ..*w.streamer().options() };
                 w.set_stream_options(options)?;
             }
+            // The ray tracer splits the budget between pages and BVHs: made again at its next frame.
+            self.traced = None;
             self.key = None;
         }
         Ok(())
@@ -335,7 +352,11 @@ impl Scene {
 
     /// The last selected cut (before occlusion culling).
     pub fn selection(&self) -> Option<&Selection> {
-        self.walk.as_ref().map(|w| w.selection())
+        match (&self.walk, &self.traced) {
+            (Some(w), _) => Some(w.selection()),
+            (None, Some(t)) => Some(t.selection()),
+            (None, None) => None,
+        }
     }
 
     pub fn last_frame(&self) -> FrameInfo {
@@ -396,6 +417,10 @@ impl Scene {
         size: [u32; 2],
     ) -> Result<FrameInfo, ViewError> {
         let size = [size[0].clamp(1, tw_gpu::MAX_SIDE), size[1].clamp(1, tw_gpu::MAX_SIDE)];
+        if settings.renderer == RendererKind::Rt {
+            return self.frame_traced(draw, settings, size);
+        }
+        self.traced = None;
         let g = self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
         // The walkthrough, its own target at the frame's size.
         if self.walk.is_none() {
@@ -466,6 +491,7 @@ impl Scene {
                 stream: d.info.stream,
                 occlusion: d.info.occlusion,
                 gpu: d.info.gpu,
+                samples: 0,
             };
             self.bytes_read += d.info.stream.bytes_read;
             self.drawn = d.drawn;
@@ -538,10 +564,75 @@ impl Scene {
         Ok(info)
     }
 
+    /// Ray traces the frame from `draw` (the cut selected from it too) and shows the mean of
+    /// its samples so far in the scene texture.
+    fn frame_traced(
+        &mut self,
+        draw: &Camera,
+        settings: &Settings,
+        size: [u32; 2],
+    ) -> Result<FrameInfo, ViewError> {
+        let g = self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
+        if self.traced.is_none() {
+            // One renderer at a time: the rasterizer's streamer and GPU pool go.
+            self.walk = None;
+            self.key = None;
+            self.traced = Some(TracedScene::new(self.store.clone(), size, self.memory_budget)?);
+        }
+        let traced = self.traced.as_mut().expect("made above");
+        let out = traced.frame(draw, settings, size, self.highlight)?;
+        let t = &out.info.times;
+        let info = FrameInfo {
+            selected: true,
+            select_ms: t.select.as_secs_f32() * 1e3,
+            render_ms: (t.upload + t.render).as_secs_f32() * 1e3,
+            triangles: out.info.triangles,
+            clusters: out.info.clusters,
+            stats: out.info.select,
+            stream: out.info.stream,
+            samples: out.samples,
+            ..Default::default()
+        };
+        tracing::debug!(
+            "traced frame {}x{}: select {:.1} ms, BVHs {:.1} ms, trace and shade {:.1} ms, mean {:.1} ms, \
+             total {:.1} ms; {} samples per pixel",
+            size[0],
+            size[1],
+            info.select_ms,
+            t.upload.as_secs_f32() * 1e3,
+            t.render.as_secs_f32() * 1e3,
+            out.mean_ms,
+            t.total.as_secs_f32() * 1e3 + out.mean_ms,
+            out.samples
+        );
+        self.bytes_read += info.stream.bytes_read;
+        self.drawn.clone_from(&traced.selection().clusters);
+        self.occluded.clear();
+        g.ensure_target(size);
+        if out.changed {
+            let target = g.target.as_ref().expect("made above");
+            g.queue.write_texture(
+                target.texture.as_image_copy(),
+                traced.image(),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(size[0] * 4),
+                    rows_per_image: Some(size[1]),
+                },
+                wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
+            );
+        }
+        self.last = info;
+        Ok(info)
+    }
+
     /// Decoded clusters of `list` with their resident pages (nothing is loaded).
     fn resident<'a>(&self, list: &'a [ClusterRef]) -> Vec<(&'a ClusterRef, Arc<ResidentPage>)> {
-        let Some(w) = self.walk.as_ref() else { return Vec::new() };
-        let cache = w.streamer().cache();
+        let cache = match (&self.walk, &self.traced) {
+            (Some(w), _) => w.streamer().cache(),
+            (None, Some(t)) => t.streamer().cache(),
+            (None, None) => return Vec::new(),
+        };
         let mut last: Option<(u32, Arc<ResidentPage>)> = None;
         let mut out = Vec::with_capacity(list.len());
         for r in list {

@@ -37,6 +37,28 @@ impl Coloring {
     }
 }
 
+/// Which renderer draws the scene (`view --renderer`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum RendererKind {
+    /// tw-gpu on the window's device (every technique of the viewer).
+    #[default]
+    Raster,
+    /// tw-rt on every core: the same LOD cut ray traced, with progressive supersampling while
+    /// the camera stands still ([`crate::traced`]).
+    Rt,
+}
+
+impl RendererKind {
+    pub const ALL: [RendererKind; 2] = [RendererKind::Raster, RendererKind::Rt];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            RendererKind::Raster => "raster",
+            RendererKind::Rt => "rt",
+        }
+    }
+}
+
 /// Every control of the viewer.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Settings {
@@ -52,6 +74,10 @@ pub struct Settings {
     /// GPU memory budget for resident cluster geometry, bytes (tw-gpu's pool).
     pub gpu_budget: u64,
     pub coloring: Coloring,
+    /// The renderer, and (ray traced only) the flashlight: a light above and beside the eye with
+    /// hard shadows instead of the headlight.
+    pub renderer: RendererKind,
+    pub flashlight: bool,
     /// Third-person debug view: culling from the frozen camera, drawing from a second one.
     pub debug_view: bool,
     /// Draw the boxes of visible / occluded nodes (in the debug view).
@@ -73,6 +99,8 @@ impl Default for Settings {
             memory_budget: 1 << 30,
             gpu_budget: tw_gpu::DEFAULT_GPU_BUDGET,
             coloring: Coloring::Material,
+            renderer: RendererKind::Raster,
+            flashlight: false,
             debug_view: false,
             show_boxes: true,
             render_scale: 1.0,
@@ -114,5 +142,7 @@ mod tests {
         assert!(MEMORY_RANGE.contains(&s.memory_budget));
         assert!(GPU_MEMORY_RANGE.contains(&s.gpu_budget));
         assert_eq!(Coloring::Level.to_gpu(), tw_gpu::ColorMode::Level);
+        assert!(s.renderer == RendererKind::Raster && !s.flashlight);
+        assert_eq!(RendererKind::ALL.map(RendererKind::name), ["raster", "rt"]);
     }
 }

@@ -7,7 +7,9 @@ use egui::{Color32, Pos2, Rect, Stroke};
 
 use crate::controller::Mode;
 use crate::hud::{FrameTimes, HudFrame};
-use crate::settings::{Coloring, Occlusion, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE};
+use crate::settings::{
+    Coloring, Occlusion, RendererKind, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE,
+};
 use crate::viewpoints::Preset;
 
 /// A button or key the app acts on.
@@ -32,6 +34,9 @@ pub enum Action {
     SaveView(String),
     LoadView(String),
     ToggleFullscreen,
+    /// Raster ↔ ray traced, and the ray tracer's flashlight.
+    ToggleRenderer,
+    ToggleFlashlight,
 }
 
 /// A 2D line in window points with its colour.
@@ -84,6 +89,9 @@ pub const HELP: &[(&str, &str)] = &[
     ("F", "debug view: freeze the culling camera, move a second one out"),
     ("L", "freeze the LOD cut"),
     ("C", "next debug colouring"),
+    ("G", "renderer: raster / rt (CPU ray tracer; supersamples while the camera stands still)"),
+    ("T", "rt: flashlight with hard shadows / headlight"),
+    ("", "rt: hide, isolate, LOD freeze and the debug view's culling camera act in raster only"),
     ("R", "start / stop recording a path"),
     ("P", "play / stop the loaded path"),
     ("Tab", "hide / show the panels"),
@@ -201,6 +209,16 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
                 actions.push(Action::SetMode(m));
             }
         }
+    });
+    ui.horizontal(|ui| {
+        ui.label("renderer (G)");
+        for r in RendererKind::ALL {
+            ui.selectable_value(&mut s.renderer, r, r.name());
+        }
+        ui.add_enabled(
+            s.renderer == RendererKind::Rt,
+            egui::Checkbox::new(&mut s.flashlight, "flashlight (T)"),
+        );
     });
     ui.add(egui::Slider::new(&mut s.pixel_error, PIXEL_ERROR_RANGE).logarithmic(true).text("pixel error"));
     egui::ComboBox::from_label("occlusion").selected_text(s.occlusion.name()).show_ui(ui, |ui| {

@@ -23,13 +23,15 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
+use tw_frame::traced::TracedWalkthrough;
 use tw_frame::{ExactVisibility, FrameInfo, FrameSettings, Occlusion, Walkthrough};
-use tw_gpu::{ColorMode, Image, Renderer};
+use tw_gpu::{Image, Renderer};
 use tw_report::{BenchReport, DamagedPage, FrameRecord, ReportImage, Run, RunKind, RunMeta};
+use tw_rt::scene::TraceSettings;
 use tw_runtime::pathgen::{generate_path, PathOptions};
 use tw_runtime::{Camera, CameraPath, StreamOptions};
 
-use crate::cli::{BenchArgs, RenderColoring};
+use crate::cli::{BenchArgs, RendererChoice};
 use crate::units::fmt_count;
 
 /// What `run` measured, for callers such as `demo`.
@@ -97,13 +99,25 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     renderer.set_samples(samples)?;
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
     let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
-    walk.set_color_mode(color_mode(args.color));
+    walk.set_color_mode(args.color.mode());
 
-    let strategies: Vec<Occlusion> = if args.reference {
+    let (mut traced, cold_start) = match args.renderer {
+        RendererChoice::Raster => (None, None),
+        RendererChoice::Rt => {
+            let (t, cold) = traced_walkthrough(&args, walk.store().clone(), &cameras[0])?;
+            (Some(t), Some(cold))
+        }
+    };
+    let strategies: Vec<Occlusion> = if args.reference || traced.is_some() {
         vec![Occlusion::None]
     } else {
         args.occlusion.iter().map(|o| o.resolve(walk.renderer())).collect()
     };
+    let mut remote = args.cull_server.as_deref().map(|addr| {
+        let wait = std::time::Duration::from_millis(args.cull_timeout_ms);
+        crate::commands::cull_client::RemoteCulling::start(addr, walk.store(), wait)
+    });
+    let mut net_lines = Vec::new();
     let every = args.compare.or(if args.exact { Some(10) } else { None });
     let image_frames = image_frames(cameras.len(), args.images);
     let mut images = Vec::new();
@@ -137,6 +151,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         // is a run of its own: "none #2" (the report's runs have distinct names).
         let repeat = strategies[..ri].iter().filter(|&&s| s == strategy).count();
         let name = match (args.reference, repeat) {
+            _ if traced.is_some() => "rt".to_string(),
             (true, _) => "reference".to_string(),
             (false, 0) => strategy.name().to_string(),
             (false, k) => format!("{} #{}", strategy.name(), k + 1),
@@ -150,13 +165,24 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             triangle_culling: !args.whole_clusters,
         };
         walk.reset();
+        if let Some(t) = traced.as_mut() {
+            t.reset();
+        }
         for _ in 0..args.warmup {
-            frame(&mut walk, &cameras[0], &settings, args.reference)?;
+            frame(&mut walk, traced.as_mut(), remote.as_mut(), &cameras[0], &settings, args.reference)?;
+        }
+        if let Some(r) = &mut remote {
+            // The warm-up frames' figures are not the run's.
+            r.take_totals();
         }
         let mut records = Vec::with_capacity(cameras.len());
         let bar = crate::progress::count(cameras.len() as u64, name.clone());
         for (i, camera) in cameras.iter().enumerate() {
-            let (image, info) = frame(&mut walk, camera, &settings, args.reference)?;
+            let (image, info) =
+                frame(&mut walk, traced.as_mut(), remote.as_mut(), camera, &settings, args.reference)?;
+            if let (0, Some(cold)) = (i, &cold_start) {
+                cold.report(image.covered_pixels());
+            }
             let mut rec = record(i, &frames[i].segment, &info);
             // The reference draws full detail (τ = 0): no model of what it needs.
             let tau = if args.reference { 0.0 } else { settings.tau as f64 };
@@ -189,7 +215,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             bar.inc(1);
         }
         bar.finish_and_clear();
-        let description = if args.reference {
+        let description = if let Some(t) = &traced {
+            format!(
+                "ray traced on the CPU (tw-rt, {} threads{}), LOD cut at {} px, frustum culling",
+                tw_rt::scene::StoreTracer::threads(),
+                if t.trace.flashlight { ", flashlight with hard shadows" } else { "" },
+                args.error
+            )
+        } else if args.reference {
             "full detail, no culling (τ = 0, frustum and occlusion culling off)".to_string()
         } else {
             let cutoff = if strategy == Occlusion::Queries && args.visible_pixels > 0 {
@@ -207,6 +240,12 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         };
         let run = Run::new(name, description, records, tw_report::peak_rss_bytes());
         print_run(&run);
+        if let Some(r) = &mut remote {
+            for (key, value) in r.take_totals().lines(&run.name) {
+                outln!("{:>10}: {key}: {value}", "network");
+                net_lines.push((key, value));
+            }
+        }
         tracing::info!("after {}: {}", run.name, memory_now());
         runs.push(run);
     }
@@ -245,7 +284,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             ("frames".into(), cameras.len().to_string()),
             ("warmup".into(), args.warmup.to_string()),
             ("samples per pixel".into(), samples.to_string()),
-        ],
+        ]
+        .into_iter()
+        .chain(args.cull_server.iter().map(|a| ("cull server".to_string(), a.clone())))
+        .chain(net_lines)
+        .collect(),
     };
     let mut report = BenchReport::new(meta, runs);
     let failed = walk.streamer().cache().failed_pages();
@@ -258,13 +301,75 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     Ok(BenchOutcome { html: files.html })
 }
 
+/// One frame: the reference, or ray traced with `--renderer rt`, or through the cull server
+/// with `--cull-server`, or culled here.
 fn frame(
     walk: &mut Walkthrough,
+    traced: Option<&mut TracedWalkthrough>,
+    remote: Option<&mut crate::commands::cull_client::RemoteCulling>,
     camera: &Camera,
     settings: &FrameSettings,
     reference: bool,
 ) -> Result<(Image, FrameInfo)> {
-    Ok(if reference { walk.reference(camera)? } else { walk.frame(camera, settings)? })
+    if let Some(t) = traced {
+        let (image, info, _) = t.frame(camera, settings)?;
+        return Ok((image, info));
+    }
+    Ok(match remote {
+        _ if reference => walk.reference(camera)?,
+        Some(r) => r.frame(walk, camera, settings)?,
+        None => walk.frame(camera, settings)?,
+    })
+}
+
+/// The first ray-traced frames after a cold start (a page cache holding the root pages only),
+/// all of the first camera: when each was complete and how many pixels it covered, to tell when
+/// the image became recognisable against the first measured (warm) frame of the same camera.
+struct ColdStart {
+    frames: Vec<(std::time::Duration, usize)>,
+}
+
+/// Frames [`ColdStart`] traces: the streamer loads a walk's first view within a few.
+const COLD_FRAMES: usize = 8;
+
+impl ColdStart {
+    fn report(&self, warm_covered: usize) {
+        let share = |covered: usize| 100.0 * covered as f64 / warm_covered.max(1) as f64;
+        let Some(&(first, covered)) = self.frames.first() else { return };
+        let mut line = format!(
+            "cold start: first ray-traced image after {:.0} ms covering {:.1} % of what the warm frame covers",
+            first.as_secs_f64() * 1e3,
+            share(covered)
+        );
+        match self.frames.iter().find(|&&(_, c)| share(c) >= 95.0) {
+            Some((t, c)) => {
+                line += &format!("; ≥ 95 % ({:.1} %) after {:.0} ms", share(*c), t.as_secs_f64() * 1e3)
+            }
+            None => line += &format!("; under 95 % for its first {} frames", self.frames.len()),
+        }
+        outln!("{line}");
+    }
+}
+
+/// `--renderer rt`: the ray tracer's walkthrough, with its first frames timed from a cold start.
+fn traced_walkthrough(
+    args: &BenchArgs,
+    store: Arc<tw_store::Store>,
+    first: &Camera,
+) -> Result<(TracedWalkthrough, ColdStart)> {
+    let start = std::time::Instant::now();
+    let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
+    let trace =
+        TraceSettings { coloring: args.color.mode(), flashlight: args.flashlight, ..Default::default() };
+    let mut traced = TracedWalkthrough::new(store, args.size, stream, trace)?;
+    let settings = FrameSettings { tau: args.error, wait_for_pages: args.wait, ..Default::default() };
+    let mut cold = ColdStart { frames: Vec::with_capacity(COLD_FRAMES) };
+    for _ in 0..COLD_FRAMES {
+        let (image, ..) = traced.frame(first, &settings)?;
+        cold.frames.push((start.elapsed(), image.covered_pixels()));
+    }
+    outln!("renderer: CPU ray tracer, {} threads", tw_rt::scene::StoreTracer::threads());
+    Ok((traced, cold))
 }
 
 fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
@@ -410,15 +515,6 @@ fn image_frames(len: usize, n: usize) -> Vec<usize> {
 fn memory_now() -> String {
     let mb = |b: Option<u64>| b.map_or("?".to_string(), crate::units::fmt_bytes);
     format!("RSS {}, peak {}", mb(tw_report::rss_bytes()), mb(tw_report::peak_rss_bytes()))
-}
-
-fn color_mode(c: RenderColoring) -> ColorMode {
-    match c {
-        RenderColoring::Material => ColorMode::Material,
-        RenderColoring::Object => ColorMode::Object,
-        RenderColoring::Level => ColorMode::Level,
-        RenderColoring::Cluster => ColorMode::Cluster,
-    }
 }
 
 /// The machine, for the report's header: CPU model (where /proc/cpuinfo names it), cores this

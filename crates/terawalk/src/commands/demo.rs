@@ -113,6 +113,10 @@ pub fn run(args: DemoArgs) -> Result<()> {
         images: 4,
         color: crate::cli::RenderColoring::Material,
         allow_damaged: false,
+        cull_server: None,
+        cull_timeout_ms: 250,
+        renderer: crate::cli::RendererChoice::Raster,
+        flashlight: false,
     };
     let outcome = crate::commands::bench::run(bench)?;
 

@@ -2,6 +2,9 @@
 
 pub mod bench;
 pub mod build;
+pub mod collide;
+pub mod cull_client;
+pub mod cull_server;
 pub mod damage;
 pub mod demo;
 pub mod export;

@@ -1,7 +1,8 @@
-//! `terawalk render`: frames of a store on the GPU, headless (tw-runtime selects the LOD cut
-//! with frustum culling, tw-gpu draws it and reads it back): one frame written as PNG, or every
-//! frame of a camera path as numbered PNGs and/or a video (ffmpeg, `commands::video`). A model
-//! file is opened through the build cache (`commands::open`).
+//! `terawalk render`: frames of a store, headless (tw-runtime selects the LOD cut with frustum
+//! culling; tw-gpu draws it and reads it back, or with `--renderer rt` tw-rt ray traces it): one
+//! frame written as PNG, or every frame of a camera path as numbered PNGs and/or a video
+//! (ffmpeg, `commands::video`). A model file is opened through the build cache
+//! (`commands::open`).
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -9,11 +10,14 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use tw_core::Aabb;
-use tw_gpu::{ColorMode, Image, Renderer};
-use tw_runtime::{Camera, CameraPath, InputCamera, PageCache, SelectOptions, Selection, Selector};
+use tw_gpu::{Image, Renderer};
+use tw_rt::scene::{StoreTracer, TraceSettings, TraceStats};
+use tw_runtime::{
+    Camera, CameraPath, InputCamera, PageCache, SelectOptions, Selection, SelectionPages, Selector,
+};
 use tw_store::{Header, Store};
 
-use crate::cli::{RenderArgs, RenderColoring, View};
+use crate::cli::{RenderArgs, RendererChoice, View};
 use crate::commands::preview::preset_direction;
 use crate::commands::{open, video};
 use crate::progress;
@@ -65,10 +69,17 @@ pub fn run(args: RenderArgs, quiet: bool) -> Result<()> {
 /// The headless renderer, page cache and LOD selector of a store, reused from frame to frame.
 struct FrameRenderer<'s> {
     store: &'s Store,
-    renderer: Renderer,
+    backend: Backend,
+    size: (u32, u32),
     cache: PageCache,
     selector: Selector,
     options: SelectOptions,
+}
+
+/// What draws the cut: the rasterizer or the ray tracer (`--renderer`).
+enum Backend {
+    Raster(Box<Renderer>),
+    Rt(Box<StoreTracer>, TraceSettings),
 }
 
 /// One rendered frame and what it took.
@@ -76,26 +87,46 @@ struct Frame {
     image: Image,
     selection: Selection,
     select_time: Duration,
+    /// The ray tracer's figures (`--renderer rt`).
+    traced: Option<TraceStats>,
 }
 
 impl<'s> FrameRenderer<'s> {
     fn new(store: &'s Store, args: &RenderArgs) -> Result<Self> {
-        let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
-        outln!("adapter: {}", renderer.adapter_summary());
-        renderer.set_samples(args.samples.resolve(&renderer))?;
-        renderer.set_store_colors(store);
-        renderer.set_color_mode(match args.color {
-            RenderColoring::Material => ColorMode::Material,
-            RenderColoring::Object => ColorMode::Object,
-            RenderColoring::Level => ColorMode::Level,
-            RenderColoring::Cluster => ColorMode::Cluster,
-        });
-        let cache = PageCache::new(store, args.memory);
+        let backend = match args.renderer {
+            RendererChoice::Raster => {
+                let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+                outln!("adapter: {}", renderer.adapter_summary());
+                renderer.set_samples(args.samples.resolve(&renderer))?;
+                renderer.set_store_colors(store);
+                renderer.set_color_mode(args.color.mode());
+                Backend::Raster(Box::new(renderer))
+            }
+            RendererChoice::Rt => {
+                outln!("renderer: CPU ray tracer, {} threads", StoreTracer::threads());
+                let settings = TraceSettings {
+                    coloring: args.color.mode(),
+                    flashlight: args.flashlight,
+                    ..Default::default()
+                };
+                let (_, bvhs) = StoreTracer::budget_split(args.memory);
+                Backend::Rt(Box::new(StoreTracer::new(store, bvhs)), settings)
+            }
+        };
+        if args.flashlight && args.renderer != RendererChoice::Rt {
+            anyhow::bail!("--flashlight needs --renderer rt (shadows are ray traced)");
+        }
+        // The ray tracer's cluster BVHs share --memory with the decoded pages.
+        let pages = match args.renderer {
+            RendererChoice::Raster => args.memory,
+            RendererChoice::Rt => StoreTracer::budget_split(args.memory).0,
+        };
+        let cache = PageCache::new(store, pages);
         cache.load_root_pages(store);
         let selector = Selector::new(store);
         let options =
             SelectOptions { tau: args.error, viewport: [args.size.0, args.size.1], frustum_culling: true };
-        Ok(FrameRenderer { store, renderer, cache, selector, options })
+        Ok(FrameRenderer { store, backend, size: args.size, cache, selector, options })
     }
 
     /// The LOD cut for `camera`, drawn and read back.
@@ -103,8 +134,18 @@ impl<'s> FrameRenderer<'s> {
         let t = Instant::now();
         let selection = self.selector.select(self.store, &self.cache, camera, &self.options);
         let select_time = t.elapsed();
-        let image = self.renderer.render_selection(self.store, &self.cache, camera, &selection)?;
-        Ok(Frame { image, selection, select_time })
+        let (image, traced) = match &mut self.backend {
+            Backend::Raster(renderer) => {
+                (renderer.render_selection(self.store, &self.cache, camera, &selection)?, None)
+            }
+            Backend::Rt(tracer, settings) => {
+                let pages = SelectionPages::resolve(self.store, &self.cache, &selection.clusters);
+                let frame = tracer.trace(&pages, camera, self.size, settings);
+                let image = Image { width: frame.width, height: frame.height, rgba: frame.rgba };
+                (image, Some(frame.stats))
+            }
+        };
+        Ok(Frame { image, selection, select_time, traced })
     }
 }
 
@@ -115,9 +156,8 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
         None => default_camera(header, args.size, up_axis(header, args.up))?,
     };
-    let Frame { image, selection, select_time } = frame.draw(&camera)?;
+    let Frame { image, selection, select_time, traced } = frame.draw(&camera)?;
     image.save_png(output)?;
-    let stats = frame.renderer.stats();
     let cs = frame.cache.stats();
     outln!(
         "selection: {} clusters, {} triangles (τ = {} px) in {:.1} ms; {} pages touched, {} resident \
@@ -131,6 +171,18 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         fmt_bytes(cs.resident_bytes),
         fmt_count(selection.stats.nodes_culled_frustum + selection.stats.groups_culled_frustum),
     );
+    match (&frame.backend, traced) {
+        (Backend::Raster(renderer), _) => print_raster_stats(renderer),
+        (Backend::Rt(tracer, _), Some(t)) => print_trace_stats(&t, tracer.bytes()),
+        (Backend::Rt(..), None) => {}
+    }
+    outln!("wrote {} ({}x{})", output.display(), args.size.0, args.size.1);
+    Ok(())
+}
+
+/// What the rasterizer did for the last frame.
+fn print_raster_stats(renderer: &Renderer) {
+    let stats = renderer.stats();
     outln!(
         "render: {} triangles drawn, {} clusters; upload {:.1} ms, GPU + readback {:.1} ms",
         fmt_count(stats.triangles),
@@ -145,10 +197,27 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         fmt_bytes(stats.pool.resident_bytes),
         stats.pool.batches,
         fmt_count(stats.draw_calls),
-        frame.renderer.draw_mode(),
+        renderer.draw_mode(),
     );
-    outln!("wrote {} ({}x{})", output.display(), args.size.0, args.size.1);
-    Ok(())
+}
+
+/// What the ray tracer did for the last frame.
+fn print_trace_stats(t: &TraceStats, bytes: usize) {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    outln!(
+        "ray tracing: {} clusters, {} triangles; {} cluster BVHs built in {:.1} ms, top level {:.1} ms; \
+         {} rays in {:.1} ms ({:.1} M rays/s), shading {:.1} ms; BVHs hold {}",
+        fmt_count(t.clusters as u64),
+        fmt_count(t.triangles),
+        fmt_count(t.blas.built as u64),
+        ms(t.blas.build_time),
+        ms(t.tlas_time),
+        fmt_count(t.rays),
+        ms(t.trace_time),
+        t.rays as f64 / t.trace_time.as_secs_f64().max(1e-9) / 1e6,
+        ms(t.shade_time),
+        fmt_bytes(bytes as u64),
+    );
 }
 
 /// `DIR/frame-00042.png`: numbered from 0, five digits (more past 99,999 frames), so that the

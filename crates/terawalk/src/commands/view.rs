@@ -4,9 +4,9 @@
 
 use anyhow::{Context, Result};
 use tw_runtime::{CameraPath, InputCamera};
-use tw_view::{Coloring, Occlusion, Scene, Settings, ViewOptions};
+use tw_view::{Coloring, Occlusion, RendererKind, Scene, Settings, ViewOptions};
 
-use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, ViewArgs};
+use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, RendererChoice, ViewArgs};
 use crate::commands::render::{default_camera, up_axis};
 
 pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
@@ -23,6 +23,9 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
     }
     if !(0.1..=1.0).contains(&args.render_scale) {
         anyhow::bail!("--render-scale must be in 0.1..=1, got {}", args.render_scale);
+    }
+    if args.flashlight && args.renderer != RendererChoice::Rt {
+        anyhow::bail!("--flashlight needs --renderer rt (shadows are ray traced)");
     }
     let occlusion = match args.occlusion {
         OcclusionChoice::Auto => Occlusion::None,
@@ -76,6 +79,11 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         },
         render_scale: args.render_scale,
         debug_view: args.debug_view,
+        renderer: match args.renderer {
+            RendererChoice::Raster => RendererKind::Raster,
+            RendererChoice::Rt => RendererKind::Rt,
+        },
+        flashlight: args.flashlight,
         ..Settings::default()
     };
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -116,6 +124,9 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
             report.last_size[0],
             report.last_size[1]
         );
+        if report.samples > 0 {
+            outln!("ray traced: {} samples per pixel in the last frame", report.samples);
+        }
     }
     Ok(())
 }

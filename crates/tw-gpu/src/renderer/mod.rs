@@ -11,15 +11,13 @@ pub use passes::MAX_RUNS;
 
 use std::time::Duration;
 
-use tw_runtime::{ClusterRef, PageCache};
-use tw_store::{PageCluster, Store};
+use tw_store::Store;
 
 use crate::draw::{IndirectArgs, Pipelines};
 use crate::pool::ClusterPool;
 use crate::readback::Readback;
 use crate::{
-    color, depth, gpu_cull, msaa, query, ClusterKey, ColorMode, DrawMode, PoolStats, DEFAULT_COLOR,
-    GL_DEPTH_ROUNDING,
+    color, depth, gpu_cull, msaa, query, ColorMode, DrawMode, PoolStats, DEFAULT_COLOR, GL_DEPTH_ROUNDING,
 };
 use device::adapter_summary;
 
@@ -225,48 +223,6 @@ impl Renderer {
     /// Whether [`query_boxes`](Self::query_boxes) returns pixel counts (else 0/1: GL).
     pub fn queries_count_samples(&self) -> bool {
         self.info.backend != wgpu::Backend::Gl
-    }
-}
-
-/// The decoded pages of a selection's clusters, held while the frame is drawn.
-pub struct SelectionPages {
-    pages: Vec<std::sync::Arc<tw_runtime::ResidentPage>>,
-    refs: Vec<(ClusterKey, usize)>,
-}
-
-impl SelectionPages {
-    /// Looks the pages of `clusters` up in `cache` (loading them if needed); clusters whose page
-    /// fails are skipped and logged.
-    pub fn resolve(store: &Store, cache: &PageCache, clusters: &[ClusterRef]) -> SelectionPages {
-        let mut pages = Vec::new();
-        let mut slot_of: std::collections::HashMap<u32, usize> = std::collections::HashMap::new();
-        let mut refs = Vec::with_capacity(clusters.len());
-        for r in clusters {
-            let slot = match slot_of.get(&r.page) {
-                Some(&s) => s,
-                None => match cache.get(store, r.page) {
-                    Ok(page) => {
-                        pages.push(page);
-                        slot_of.insert(r.page, pages.len() - 1);
-                        pages.len() - 1
-                    }
-                    Err(e) => {
-                        tracing::error!("cluster {r:?} skipped: {e}");
-                        continue;
-                    }
-                },
-            };
-            refs.push((*r, slot));
-        }
-        SelectionPages { pages, refs }
-    }
-
-    /// The clusters, in the selection's order (clusters beyond their page are skipped).
-    pub fn clusters(&self) -> Vec<(ClusterKey, &PageCluster)> {
-        self.refs
-            .iter()
-            .filter_map(|&(k, slot)| self.pages[slot].clusters.get(k.index_in_page as usize).map(|c| (k, c)))
-            .collect()
     }
 }
 

@@ -8,12 +8,13 @@ use glam::Vec3;
 use tw_runtime::{full_mask, Camera, PageCache, Selection, TriangleMask};
 use tw_store::{PageCluster, Store};
 
-use super::{bind_group, Attachments, Pass, Renderer, SelectionPages, Target};
+use super::{bind_group, Attachments, Pass, Renderer, Target};
 use crate::draw::{self, Uniforms, DEPTH_FORMAT};
 use crate::pool::{DrawArgs, Ensure, PoolKey};
 use crate::{
     color, query, ClusterKey, DrawMode, FrameStats, GpuError, Image, ItemBuffer, COLOR_FORMAT, DEFAULT_COLOR,
 };
+use tw_runtime::SelectionPages;
 
 /// A batch is submitted (and waited for before the next is prepared) once it has uploaded a
 /// `1 / UPLOADS_PER_BATCH` part of the GPU budget. Each upload is staged in host memory until
@@ -290,16 +291,12 @@ impl Renderer {
     pub(crate) fn write_uniforms(&self, camera: &Camera, (width, height): (u32, u32)) {
         let aspect = width as f32 / height as f32;
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
-        // The sun: from above (the camera's up), tilted towards a fixed scene direction.
-        let up = camera.up.normalize_or(Vec3::Z);
-        let tilt = if up.dot(Vec3::X).abs() < 0.9 { Vec3::X } else { Vec3::Y };
-        let sun = (up * 0.8 + (tilt - up * tilt.dot(up)).normalize_or_zero() * 0.35).normalize_or(up);
         let u = Uniforms {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
-            sun: sun.extend(0.0).to_array(),
+            sun: camera.sun_direction().extend(0.0).to_array(),
             params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
-            headlight: (camera.eye - camera.target).normalize_or(Vec3::Z).extend(0.0).to_array(),
+            headlight: camera.headlight().extend(0.0).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
     }
