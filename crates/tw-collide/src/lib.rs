@@ -11,12 +11,19 @@
 //! - [`fatten`]: FAR's oriented box around a triangle.
 //! - [`sap`]: sweep-and-prune over boxes, between the culling and the exact tests.
 //! - [`scenes`]: the thesis' scenes with generated motion.
+//! - [`closest`]: exact closest points of a segment and a triangle.
+//! - [`capsule`]: the walker's capsule moved through triangles (collide and slide, step up,
+//!   land): the viewer's walk mode.
+//! - [`nearby`]: the triangles of a store's resident clusters within a box, for [`capsule`].
 //!
 //! The GPU side is `tw_gpu::visibility` (plain draws and occlusion queries).
 
 pub mod bvh;
+pub mod capsule;
+pub mod closest;
 pub mod cullide;
 pub mod fatten;
+pub mod nearby;
 pub mod reference;
 pub mod sap;
 pub mod scenes;

@@ -2,6 +2,7 @@
 
 use crate::aabb::{Aabb, SlabRay};
 use crate::build::{build_binary, BuildOptions};
+use crate::packet::{traverse_packet, Packet, PacketLeaves};
 use crate::ray::Ray;
 use crate::simd::Simd;
 use crate::traverse::{traverse, LeafVisitor, NodeRay, Visit};
@@ -97,6 +98,44 @@ impl Bvh {
         }
         let _ = simd;
         traverse(&self.nodes, &node_ray, t_min, &mut t_max, &mut prims)
+    }
+}
+
+/// The primitive handler of [`Bvh::traverse_packet`] (a trait for the reason given at
+/// [`crate::traverse::LeafVisitor`]).
+pub(crate) trait PrimPackets<const N: usize> {
+    /// Tests the rays `lanes` (bit per lane) of `p` against primitive `prim`, shrinking the
+    /// `p.t_max` of those that hit.
+    fn visit(&mut self, prim: u32, lanes: u32, p: &mut Packet<N>);
+}
+
+impl Bvh {
+    /// The packet counterpart of [`Bvh::traverse`]: walks the tree with the whole packet and
+    /// hands each primitive whose leaf some ray enters to `prims`, with the mask of those rays.
+    /// Compiled for whichever instruction set its caller is.
+    #[inline(always)]
+    pub(crate) fn traverse_packet<const N: usize, V: PrimPackets<N>>(
+        &self,
+        p: &mut Packet<N>,
+        prims: &mut V,
+    ) {
+        traverse_packet(&self.nodes, p, &mut PacketPrims { bvh: self, prims });
+    }
+}
+
+/// Leaf handler of [`Bvh::traverse_packet`]: the primitives of the leaf, one by one.
+struct PacketPrims<'a, V> {
+    bvh: &'a Bvh,
+    prims: &'a mut V,
+}
+
+impl<const N: usize, V: PrimPackets<N>> PacketLeaves<N> for PacketPrims<'_, V> {
+    #[inline(always)]
+    fn visit(&mut self, leaf: u32, lanes: u32, p: &mut Packet<N>) {
+        let Leaf { first, count } = self.bvh.leaves[leaf as usize];
+        for &prim in &self.bvh.prim_indices[first as usize..(first + count) as usize] {
+            self.prims.visit(prim, lanes, p);
+        }
     }
 }
 

@@ -1,4 +1,5 @@
-//! Packet traversal for coherent rays: 8 rays walk the tree together.
+//! Packet traversal for coherent rays: 8 rays (or another width up to 32) walk the tree
+//! together.
 //!
 //! Node culling uses interval arithmetic over the packet (the "ranged" or frustum-like test of
 //! Wald, Boulos & Shirley 2007, "Ray Tracing Deformable Scenes using Dynamic Bounding Volume
@@ -9,30 +10,35 @@
 //! SIMD (the same watertight code as the single-ray path, so the results are identical).
 //! Packets whose rays disagree in direction signs or in the watertight axis permutation are
 //! traced ray by ray.
+//!
+//! The walk ([`traverse_packet`]) hands leaves to a visitor with the mask of rays entering
+//! them, so it serves both a triangle BVH (triangle tests at the leaves) and the top level of a
+//! two-level scene, whose leaves walk a cluster's BVH with the same prepared packet for the
+//! rays that reached them ([`traverse_packet_lanes`]).
 
 use crate::aabb::{max, min, ROBUST_FAR};
 use crate::mesh::TriangleBvh;
 use crate::ray::{Hit, Ray};
 use crate::simd::Simd;
 use crate::traverse::{prefetch, prefetch_children, Stack};
-use crate::triangle::{lanes, Shear};
+use crate::triangle::{lanes, Shear, TriGroup};
 use crate::wide::{WideNode, LEAF, W};
 
-/// Rays per packet.
+/// Rays per packet of [`TriangleBvh::intersect_packet`] (one AVX2 register per value). The
+/// traversal is generic in the width: a two-level scene uses wider packets (`scene::cut`).
 pub const PACKET: usize = 8;
-const ALL_LANES: u32 = (1 << PACKET) - 1;
 
-/// A packet prepared for traversal.
-struct Packet {
+/// A packet of `N` rays (at most 32: lane masks are `u32`) prepared for traversal.
+pub(crate) struct Packet<const N: usize> {
     /// Per-ray origins, `o[axis][lane]`.
-    o: [[f32; PACKET]; 3],
+    o: [[f32; N]; 3],
     /// Per-ray inverse directions, `inv[axis][lane]`.
-    inv: [[f32; PACKET]; 3],
+    inv: [[f32; N]; 3],
     /// Shear per lane in the common permutation `k`.
-    s: [[f32; PACKET]; 3],
+    s: [[f32; N]; 3],
     k: [usize; 3],
-    t_min: [f32; PACKET],
-    t_max: [f32; PACKET],
+    t_min: [f32; N],
+    t_max: [f32; N],
     /// Interval data: origin bound to subtract from the near / far plane, inverse bounds.
     o_near: [f32; 3],
     o_far: [f32; 3],
@@ -46,23 +52,29 @@ struct Packet {
     common_origin: bool,
 }
 
-impl Packet {
+impl<const N: usize> Packet<N> {
+    /// The lane mask of a full packet.
+    pub(crate) const ALL: u32 = {
+        assert!(N >= 1 && N <= 32, "lane masks are u32");
+        u32::MAX >> (32 - N)
+    };
+
     /// `None` when the rays cannot share one traversal (mixed direction signs or mixed
     /// watertight permutations). Lanes beyond `rays.len()` repeat ray 0 with an empty interval.
     /// Computed lane-parallel: the per-ray divisions (inverse directions, shear) were a tenth
     /// of the packet time when done ray by ray.
     #[inline(always)]
-    fn new(rays: &[Ray]) -> Option<Packet> {
+    pub(crate) fn new(rays: &[Ray]) -> Option<Packet<N>> {
         let first = rays.first()?;
         let k = Shear::axes(first.dir.to_array());
-        let mut d = [[0.0f32; PACKET]; 3];
+        let mut d = [[0.0f32; N]; 3];
         let mut p = Packet {
-            o: [[0.0; PACKET]; 3],
-            inv: [[0.0; PACKET]; 3],
-            s: [[0.0; PACKET]; 3],
+            o: [[0.0; N]; 3],
+            inv: [[0.0; N]; 3],
+            s: [[0.0; N]; 3],
             k,
-            t_min: [first.t_min; PACKET],
-            t_max: [f32::NEG_INFINITY; PACKET],
+            t_min: [first.t_min; N],
+            t_max: [f32::NEG_INFINITY; N],
             o_near: [0.0; 3],
             o_far: [0.0; 3],
             inv_lo: [0.0; 3],
@@ -71,7 +83,7 @@ impl Packet {
             t_min_all: first.t_min,
             common_origin: true,
         };
-        for lane in 0..PACKET {
+        for lane in 0..N {
             let r = rays.get(lane).unwrap_or(first);
             for a in 0..3 {
                 d[a][lane] = r.dir[a];
@@ -91,7 +103,7 @@ impl Packet {
         };
         let code0 = code(0);
         let mut uniform = true;
-        for lane in 1..PACKET {
+        for lane in 1..N {
             uniform &= code(lane) == code0;
             for a in 0..3 {
                 p.common_origin &= p.o[a][lane].to_bits() == p.o[a][0].to_bits();
@@ -101,7 +113,7 @@ impl Packet {
             return None;
         }
         let [kx, ky, kz] = k;
-        for lane in 0..PACKET {
+        for lane in 0..N {
             for a in 0..3 {
                 p.inv[a][lane] = 1.0 / d[a][lane];
             }
@@ -114,7 +126,7 @@ impl Packet {
         for a in 0..3 {
             let (mut o_lo, mut o_hi) = (p.o[a][0], p.o[a][0]);
             let (mut i_lo, mut i_hi) = (p.inv[a][0], p.inv[a][0]);
-            for lane in 1..PACKET {
+            for lane in 1..N {
                 (o_lo, o_hi) = (min(p.o[a][lane], o_lo), max(p.o[a][lane], o_hi));
                 (i_lo, i_hi) = (min(p.inv[a][lane], i_lo), max(p.inv[a][lane], i_hi));
             }
@@ -130,7 +142,7 @@ impl Packet {
     #[inline(always)]
     fn t_max_any(&self) -> f32 {
         let mut m = f32::NEG_INFINITY;
-        for lane in 0..PACKET {
+        for lane in 0..N {
             m = max(self.t_max[lane], m);
         }
         m
@@ -150,7 +162,7 @@ fn leaf_mask(node: &WideNode) -> u32 {
 /// Conservative entry distances of the `W` children for the whole packet and the mask of
 /// children some ray may enter before `t_max_any`.
 #[inline(always)]
-fn node_hits(node: &WideNode, p: &Packet, t_max_any: f32) -> ([f32; W], u32) {
+fn node_hits<const N: usize>(node: &WideNode, p: &Packet<N>, t_max_any: f32) -> ([f32; W], u32) {
     let b = &node.bounds;
     let mut near = [0.0f32; W];
     let mut hit = [false; W];
@@ -177,12 +189,12 @@ fn node_hits(node: &WideNode, p: &Packet, t_max_any: f32) -> ([f32; W], u32) {
 /// The rays of the packet that enter child `slot`'s box before their current hits (bit per
 /// lane). The interval test is conservative for the packet as a whole; leaf children also pass
 /// this per-ray test, with the box still in cache from the node test, and the mask they carry
-/// on the stack decides how their triangles are tested (see `packet_leaf`).
+/// on the stack decides how their triangles are tested (see `TriPackets::visit`).
 #[inline(always)]
-fn lanes_entering(node: &WideNode, slot: usize, p: &Packet) -> u32 {
+fn lanes_entering<const N: usize>(node: &WideNode, slot: usize, p: &Packet<N>) -> u32 {
     let b = &node.bounds;
-    let mut hit = [false; PACKET];
-    for lane in 0..PACKET {
+    let mut hit = [false; N];
+    for lane in 0..N {
         let mut n = p.t_min[lane];
         let mut f = f32::INFINITY;
         for a in 0..3 {
@@ -203,8 +215,91 @@ fn lanes_entering(node: &WideNode, slot: usize, p: &Packet) -> u32 {
 /// Leaves entered by at most this many rays of a packet test them one by one against the
 /// leaf's 4 triangles at once, instead of each triangle against all 8 lanes. Measured on the
 /// dragon: 3 beat 2 and equalled 5 and 8. (Handing whole subtrees entered by few rays to
-/// single-ray traversal, as Embree's hybrid mode does, measured slower here.)
+/// single-ray traversal, as Embree's hybrid mode does, measured slower here; so did tracing
+/// the rays of a two-level scene's cluster one by one when at most 2, 4 or 8 of 16 reach it.)
 const FEW_RAYS: u32 = 3;
+
+/// The leaf handler of [`traverse_packet`] (a trait rather than a closure for the reason given
+/// at [`crate::traverse::LeafVisitor`]: it must inline into the AVX2 entry points).
+pub(crate) trait PacketLeaves<const N: usize> {
+    /// Tests the rays `lanes` (bit per lane) of `p` against leaf `leaf`, shrinking `p.t_max` of
+    /// those that hit.
+    fn visit(&mut self, leaf: u32, lanes: u32, p: &mut Packet<N>);
+
+    /// Prefetches what [`PacketLeaves::visit`] will read for `leaf`.
+    fn prefetch(&self, _leaf: u32) {}
+}
+
+/// Walks the tree of `nodes` with the whole packet: interval culling of inner children
+/// ([`node_hits`]), a per-ray test of leaf children ([`lanes_entering`]), and every reached leaf
+/// handed to `leaves` with the mask of rays entering it, near leaves first (roughly). One walk
+/// serves both triangle BVHs and the top level of a two-level scene, whose leaf handler walks a
+/// cluster's tree with the same packet ([`traverse_packet_lanes`]).
+#[inline(always)]
+pub(crate) fn traverse_packet<const N: usize, V: PacketLeaves<N>>(
+    nodes: &[WideNode],
+    p: &mut Packet<N>,
+    leaves: &mut V,
+) {
+    if nodes.is_empty() {
+        return;
+    }
+    let mut t_max_any = p.t_max_any();
+    let mut stack = Stack::<u32>::new();
+    let (mut cur, mut cur_lanes) = (0u32, Packet::<N>::ALL);
+    loop {
+        if cur & LEAF == 0 {
+            let node = &nodes[cur as usize];
+            let (near, mut mask) = node_hits(node, p, t_max_any);
+            let mut lanes_in = [Packet::<N>::ALL; W];
+            let mut leaf_slots = mask & leaf_mask(node);
+            while leaf_slots != 0 {
+                let slot = leaf_slots.trailing_zeros() as usize;
+                leaf_slots &= leaf_slots - 1;
+                lanes_in[slot] = lanes_entering(node, slot, p);
+                if lanes_in[slot] == 0 {
+                    mask &= !(1 << slot);
+                }
+            }
+            if mask != 0 {
+                prefetch_children(nodes, &node.child, mask, |l| leaves.prefetch(l));
+                (cur, cur_lanes) = stack.push_sorted_pop_nearest(&node.child, &near, &lanes_in, mask);
+                continue;
+            }
+        } else {
+            leaves.visit(cur & !LEAF, cur_lanes, p);
+            t_max_any = p.t_max_any();
+        }
+        match stack.pop_within(t_max_any) {
+            Some(entry) => (cur, cur_lanes) = entry,
+            None => break,
+        }
+    }
+}
+
+/// [`traverse_packet`] for the rays `lanes` of the packet only (a cluster's tree entered by part
+/// of a packet): the other rays' `t_max` is -inf during the walk, so no box or triangle test
+/// passes for them and they do not widen the packet's cull distance, and is restored after.
+#[inline(always)]
+pub(crate) fn traverse_packet_lanes<const N: usize, V: PacketLeaves<N>>(
+    nodes: &[WideNode],
+    p: &mut Packet<N>,
+    lanes: u32,
+    leaves: &mut V,
+) {
+    let saved = p.t_max;
+    for lane in 0..N {
+        if lanes & (1 << lane) == 0 {
+            p.t_max[lane] = f32::NEG_INFINITY;
+        }
+    }
+    traverse_packet(nodes, p, leaves);
+    for lane in 0..N {
+        if lanes & (1 << lane) == 0 {
+            p.t_max[lane] = saved[lane];
+        }
+    }
+}
 
 impl TriangleBvh {
     /// Closest hits of `rays` into `hits` (index by index), tracing them in packets of
@@ -235,9 +330,14 @@ impl TriangleBvh {
     #[inline(always)]
     fn packets_impl(&self, rays: &[Ray], hits: &mut [Option<Hit>]) {
         for (r, h) in rays.chunks(PACKET).zip(hits.chunks_mut(PACKET)) {
-            match Packet::new(r) {
-                Some(p) if p.common_origin => self.packet::<true>(p, h),
-                Some(p) => self.packet::<false>(p, h),
+            match Packet::<PACKET>::new(r) {
+                Some(mut p) => {
+                    let mut best = [None; PACKET];
+                    self.packet_lanes(&mut p, Packet::<PACKET>::ALL, &mut best, 0);
+                    for (h, b) in h.iter_mut().zip(best) {
+                        *h = b;
+                    }
+                }
                 None => {
                     for (ray, hit) in r.iter().zip(h.iter_mut()) {
                         *hit = self.intersect_impl(ray);
@@ -247,62 +347,48 @@ impl TriangleBvh {
         }
     }
 
-    /// Traces one prepared packet; writes `hits[..hits.len().min(PACKET)]`.
+    /// Traces the rays `lanes` of a prepared packet, each within its current `[t_min, t_max]`;
+    /// a nearer hit replaces `best[lane]` (with `tag | triangle` as its primitive) and shrinks
+    /// the lane's `t_max`.
     #[inline(always)]
-    fn packet<const COMMON_ORIGIN: bool>(&self, mut p: Packet, hits: &mut [Option<Hit>]) {
+    pub(crate) fn packet_lanes<const N: usize>(
+        &self,
+        p: &mut Packet<N>,
+        lanes: u32,
+        best: &mut [Option<Hit>; N],
+        tag: u32,
+    ) {
         let nodes = &self.bvh.nodes;
-        let mut best: [Option<Hit>; PACKET] = [None; PACKET];
-        if !nodes.is_empty() {
-            let mut t_max_any = p.t_max_any();
-            let mut stack = Stack::<u32>::new();
-            let (mut cur, mut cur_lanes) = (0u32, ALL_LANES);
-            loop {
-                if cur & LEAF == 0 {
-                    let node = &nodes[cur as usize];
-                    let (near, mut mask) = node_hits(node, &p, t_max_any);
-                    let mut lanes_in = [ALL_LANES; W];
-                    let mut leaves = mask & leaf_mask(node);
-                    while leaves != 0 {
-                        let slot = leaves.trailing_zeros() as usize;
-                        leaves &= leaves - 1;
-                        lanes_in[slot] = lanes_entering(node, slot, &p);
-                        if lanes_in[slot] == 0 {
-                            mask &= !(1 << slot);
-                        }
-                    }
-                    if mask != 0 {
-                        prefetch_children(nodes, &node.child, mask, |l| {
-                            if let Some(g) = self.groups.get(l as usize) {
-                                prefetch(g);
-                            }
-                        });
-                        (cur, cur_lanes) = stack.push_sorted_pop_nearest(&node.child, &near, &lanes_in, mask);
-                        continue;
-                    }
-                } else {
-                    self.packet_leaf::<COMMON_ORIGIN>(cur & !LEAF, cur_lanes, &mut p, &mut best);
-                    t_max_any = p.t_max_any();
-                }
-                match stack.pop_within(t_max_any) {
-                    Some(entry) => (cur, cur_lanes) = entry,
-                    None => break,
-                }
-            }
-        }
-        for (h, b) in hits.iter_mut().zip(best) {
-            *h = b;
+        if p.common_origin {
+            traverse_packet_lanes(
+                nodes,
+                p,
+                lanes,
+                &mut TriPackets::<N, true> { groups: &self.groups, best, tag },
+            );
+        } else {
+            traverse_packet_lanes(
+                nodes,
+                p,
+                lanes,
+                &mut TriPackets::<N, false> { groups: &self.groups, best, tag },
+            );
         }
     }
+}
 
-    /// Tests the packet's rays against every triangle of leaf `leaf`.
+/// Leaf handler of triangle packets: the closest hits so far, per lane.
+struct TriPackets<'a, const N: usize, const COMMON_ORIGIN: bool> {
+    groups: &'a [TriGroup],
+    best: &'a mut [Option<Hit>; N],
+    /// ORed into every hit's primitive (a two-level scene's cluster bits; 0 for a mesh).
+    tag: u32,
+}
+
+impl<const N: usize, const COMMON_ORIGIN: bool> PacketLeaves<N> for TriPackets<'_, N, COMMON_ORIGIN> {
+    /// Tests the rays `lanes_in` against every triangle of leaf `leaf`.
     #[inline(always)]
-    fn packet_leaf<const COMMON_ORIGIN: bool>(
-        &self,
-        leaf: u32,
-        lanes_in: u32,
-        p: &mut Packet,
-        best: &mut [Option<Hit>; PACKET],
-    ) {
+    fn visit(&mut self, leaf: u32, lanes_in: u32, p: &mut Packet<N>) {
         let g = &self.groups[leaf as usize];
         if lanes_in.count_ones() <= FEW_RAYS {
             // Ray by ray: one 4-lane test covers the whole group; the same arithmetic per
@@ -315,35 +401,43 @@ impl TriangleBvh {
                 let shear = Shear { k: p.k, s: [p.s[0][lane], p.s[1][lane], p.s[2][lane]] };
                 if let Some((tri, t, u, v)) = g.intersect(&origin, &shear, p.t_min[lane], p.t_max[lane]) {
                     p.t_max[lane] = t;
-                    best[lane] = Some(Hit { t, prim: g.prim[tri], u, v });
+                    self.best[lane] = Some(Hit { t, prim: self.tag | g.prim[tri], u, v });
                 }
             }
             return;
         }
         for tri in 0..g.count() {
             let rel = |vert: usize| {
-                let mut r = [[0.0f32; PACKET]; 3];
+                let mut r = [[0.0f32; N]; 3];
                 for (j, &axis) in p.k.iter().enumerate() {
                     let v = g.v[vert][axis][tri];
                     if COMMON_ORIGIN {
                         // The same value every lane would compute, computed once.
-                        r[j] = [v - p.o[axis][0]; PACKET];
+                        r[j] = [v - p.o[axis][0]; N];
                     } else {
-                        for lane in 0..PACKET {
+                        for lane in 0..N {
                             r[j][lane] = v - p.o[axis][lane];
                         }
                     }
                 }
                 r
             };
-            let h = lanes::<PACKET>(&rel(0), &rel(1), &rel(2), &p.s, &p.t_min, &p.t_max);
+            let h = lanes::<N>(&rel(0), &rel(1), &rel(2), &p.s, &p.t_min, &p.t_max);
             let mut m = h.mask;
             while m != 0 {
                 let lane = m.trailing_zeros() as usize;
                 m &= m - 1;
                 p.t_max[lane] = h.t[lane];
-                best[lane] = Some(Hit { t: h.t[lane], prim: g.prim[tri], u: h.u[lane], v: h.v[lane] });
+                self.best[lane] =
+                    Some(Hit { t: h.t[lane], prim: self.tag | g.prim[tri], u: h.u[lane], v: h.v[lane] });
             }
+        }
+    }
+
+    #[inline(always)]
+    fn prefetch(&self, leaf: u32) {
+        if let Some(g) = self.groups.get(leaf as usize) {
+            prefetch(g);
         }
     }
 }

@@ -9,6 +9,13 @@ pub const EYE_HEIGHT_M: f64 = 1.7;
 pub const WALK_SPEED_M_S: f64 = 1.4;
 /// Standard gravity, metres per second squared.
 pub const GRAVITY_M_S2: f64 = 9.81;
+/// Radius of a walker's body (the walk mode's collision capsule), metres: `terawalk path`'s
+/// agent radius (0.12 eye heights), so the generated walks fit the walker.
+pub const WALKER_RADIUS_M: f64 = 0.2;
+/// The top of a walker's head above the eye, metres.
+pub const HEAD_ABOVE_EYE_M: f64 = 0.1;
+/// The highest ledge a walker steps up onto, metres.
+pub const STEP_HEIGHT_M: f64 = 0.35;
 
 /// Metres per unit for a store's units string (case and surrounding blanks ignored; `""`, no
 /// units recorded, is taken as metres); `None` for a unit this table does not know.

@@ -31,6 +31,7 @@ use winit::event_loop::{ActiveEventLoop, ControlFlow};
 use winit::keyboard::{KeyCode, PhysicalKey};
 use winit::window::{Window, WindowId};
 
+use crate::collision::WalkCollision;
 use crate::controller::{Controller, Input, Mode};
 use crate::debug_view;
 use crate::error::ViewError;
@@ -80,6 +81,8 @@ pub(crate) struct App {
     settings: Settings,
     win: Option<WindowState>,
     controller: Controller,
+    /// Walk mode's collision (N: fly through).
+    walker: WalkCollision,
     start_camera: Camera,
     frozen: Option<Camera>,
     player: Option<Player>,
@@ -130,6 +133,7 @@ impl App {
         };
         let mut controller = Controller::new(&options.camera, &scene.scene_frame());
         controller.set_mode(options.mode, None);
+        let walker = WalkCollision::new(&scene);
         let mut settings = options.settings.clone();
         settings.memory_budget = scene.memory_budget();
         let start_debug = settings.debug_view;
@@ -140,6 +144,7 @@ impl App {
         let mut app = App {
             start_camera: options.camera,
             controller,
+            walker,
             settings,
             player,
             playing,
@@ -663,6 +668,15 @@ impl App {
             KeyCode::KeyH => self.act(Action::Hide),
             KeyCode::KeyI => self.act(Action::Isolate),
             KeyCode::KeyM => self.act(Action::ToggleMeasure),
+            KeyCode::KeyN => {
+                self.walker.fly_through = !self.walker.fly_through;
+                let m = if self.walker.fly_through {
+                    "walk: fly through walls"
+                } else {
+                    "walk: walls stop the walker"
+                };
+                self.say(m.into());
+            }
             KeyCode::KeyO => self.act(Action::ToggleOrtho),
             KeyCode::F11 => self.act(Action::ToggleFullscreen),
             KeyCode::Digit4 => self.act(Action::View(Preset::PosX)),
@@ -879,9 +893,16 @@ impl App {
                 c
             }
             None => {
-                let ground = self.ground_below();
+                // Colliding, the capsule finds the ground itself.
+                let colliding = self.controller.mode == Mode::Walk
+                    && !self.walker.fly_through
+                    && self.scene.selection().is_some();
+                let ground = if colliding { None } else { self.ground_below() };
                 let input = self.input(ground);
-                self.controller.update(dt, &input);
+                match self.walker.collider(&self.scene).filter(|_| colliding).as_mut() {
+                    Some(c) => self.controller.update_with(dt, &input, Some(c)),
+                    None => self.controller.update(dt, &input),
+                }
                 self.controller.camera()
             }
         };
@@ -1056,11 +1077,16 @@ impl App {
             speed: self.controller.active_speed() as f64,
             units: self.scene.units().to_string(),
             mode: format!(
-                "{}{}{}{}",
+                "{}{}{}{}{}",
                 self.controller.mode.name(),
                 if self.frozen.is_some() { ", debug view" } else { "" },
                 if self.ortho.is_some() { ", orthographic" } else { "" },
-                if self.settings.lod_freeze { ", LOD frozen" } else { "" }
+                if self.settings.lod_freeze { ", LOD frozen" } else { "" },
+                if self.controller.mode == Mode::Walk {
+                    format!(", {}", self.walker.status())
+                } else {
+                    String::new()
+                }
             ),
             adapter: {
                 let i = w.gfx.adapter.get_info();

@@ -6,11 +6,14 @@
 //!   pitch clamped short of the poles), speed scaled by the scroll wheel, starting at a fraction
 //!   of the model's size; velocity is smoothed (exponential approach), so motion starts and stops
 //!   softly.
-//! - **Walk**: as fly but horizontal, at walking speed; the eye is held at `eye_height` above
-//!   the ground below it (the caller finds it by casting a ray down, [`Input::ground`]; without
-//!   one the floor is the bottom of the model's bounds), falling under gravity along the up axis
-//!   when the ground drops away. Walls are not collided with (collision is planned:
-//!   docs/DESIGN.md, `tw-collide`). Eye height (1.7 m), walking speed (1.4 m/s) and gravity
+//! - **Walk**: as fly but horizontal, at walking speed, falling under gravity along the up axis.
+//!   With a [`Collide`] (the viewer's: the walker's capsule against the resident geometry,
+//!   `tw_collide::capsule`) the feet, `eye_height` below the eye, are moved by the frame's
+//!   motion through it: walls stop and are slid along, steps are climbed, the fall stops on
+//!   the ground it reports. Without one ("fly through", or no geometry at hand) the eye is held
+//!   at `eye_height` above the ground below it (the caller finds it by casting a ray down,
+//!   [`Input::ground`]), and walls are walked through. Either way the floor is at least the
+//!   bottom of the model's bounds. Eye height (1.7 m), walking speed (1.4 m/s) and gravity
 //!   (9.81 m/s²) are human-scale lengths converted with the store's units
 //!   ([`tw_store::units`], the definitions `terawalk path` uses too): a millimetre model is
 //!   walked 1700 units above its deck.
@@ -57,6 +60,21 @@ pub struct Input {
     pub scroll: f32,
     /// Height (along up) of the ground below the eye, if a ray down hit something.
     pub ground: Option<f32>,
+}
+
+/// Where a walker's move ended ([`Collide::walk`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Walked {
+    pub feet: Vec3,
+    /// Standing on walkable ground: the fall stops.
+    pub grounded: bool,
+}
+
+/// Moves a walker's feet through the scene: the walk mode's collision, supplied by the caller so
+/// that the controller stays free of windows and geometry.
+pub trait Collide {
+    /// The feet at `feet` moved by `motion` (scene units; gravity's part along −up included).
+    fn walk(&mut self, feet: Vec3, motion: Vec3) -> Walked;
 }
 
 /// Radians of turn per pixel of mouse motion.
@@ -192,8 +210,13 @@ impl Controller {
         self.look_at(p);
     }
 
-    /// Advances by `dt` seconds.
+    /// Advances by `dt` seconds (walk mode without collision).
     pub fn update(&mut self, dt: f32, input: &Input) {
+        self.update_with(dt, input, None);
+    }
+
+    /// Advances by `dt` seconds; in walk mode the feet move through `collide` when given.
+    pub fn update_with(&mut self, dt: f32, input: &Input, collide: Option<&mut dyn Collide>) {
         let dt = dt.clamp(0.0, 0.25);
         let [dx, dy] = input.look;
         self.yaw -= dx * LOOK_SENSITIVITY;
@@ -220,9 +243,13 @@ impl Controller {
                     * speed
                     * boost;
                 self.velocity += (wish - self.velocity) * blend;
-                self.eye += self.velocity * dt;
-                if self.mode == Mode::Walk {
-                    self.apply_gravity(dt, input.ground);
+                match (self.mode, collide) {
+                    (Mode::Walk, Some(c)) => self.walk_through(dt, c),
+                    (Mode::Walk, None) => {
+                        self.eye += self.velocity * dt;
+                        self.apply_gravity(dt, input.ground);
+                    }
+                    _ => self.eye += self.velocity * dt,
                 }
             }
             Mode::Orbit => {
@@ -235,6 +262,25 @@ impl Controller {
                 self.distance += (self.target_distance - self.distance) * blend;
                 self.eye = self.pivot - self.forward() * self.distance;
             }
+        }
+    }
+
+    /// Walk mode with collision: the frame's horizontal motion and fall move the feet through
+    /// `collide`; standing on ground stops the fall. The bottom of the model's bounds is a floor.
+    fn walk_through(&mut self, dt: f32, collide: &mut dyn Collide) {
+        self.vertical_speed -= self.gravity * dt;
+        let motion = self.velocity * dt + self.up * (self.vertical_speed * dt);
+        let feet = self.eye - self.up * self.eye_height;
+        let walked = collide.walk(feet, motion);
+        self.eye = walked.feet + self.up * self.eye_height;
+        if walked.grounded && self.vertical_speed < 0.0 {
+            self.vertical_speed = 0.0;
+        }
+        let floor = self.bounds.0.dot(self.up).min(self.bounds.1.dot(self.up)) + self.eye_height;
+        let h = self.eye.dot(self.up);
+        if h < floor {
+            self.eye += self.up * (floor - h);
+            self.vertical_speed = 0.0;
         }
     }
 
@@ -425,6 +471,39 @@ mod tests {
             c.update(0.016, &Input::default());
         }
         assert!((c.eye.z - (-10.0 + c.eye_height)).abs() < 1e-3, "{:?}", c.eye);
+    }
+
+    /// A floor at z = 0 and a wall at y = 3, in the walker's terms (feet are what is moved).
+    struct Room;
+    impl Collide for Room {
+        fn walk(&mut self, feet: Vec3, motion: Vec3) -> Walked {
+            let mut f = feet + motion;
+            f.y = f.y.min(3.0 - 0.2);
+            let grounded = f.z <= 0.0;
+            f.z = f.z.max(0.0);
+            Walked { feet: f, grounded }
+        }
+    }
+
+    #[test]
+    fn walking_with_collision_moves_the_feet_through_it_and_lands() {
+        let mut c = ctl();
+        c.set_mode(Mode::Walk, None);
+        // From 2 above the floor the eye falls to eye height above it and stays there.
+        for _ in 0..200 {
+            c.update_with(0.016, &Input::default(), Some(&mut Room));
+        }
+        assert!((c.eye.z - c.eye_height).abs() < 1e-4 && !c.is_moving(), "{:?}", c.eye);
+        // Walking at the wall (+y): held a radius short of it, however long.
+        for _ in 0..600 {
+            c.update_with(0.016, &Input { forward: 1.0, fast: true, ..Default::default() }, Some(&mut Room));
+        }
+        assert!((c.eye.y - 2.8).abs() < 1e-4 && (c.eye.z - c.eye_height).abs() < 1e-4, "{:?}", c.eye);
+        // Without collision (fly through) the wall is walked through.
+        for _ in 0..100 {
+            c.update(0.016, &Input { forward: 1.0, ground: Some(0.0), ..Default::default() });
+        }
+        assert!(c.eye.y > 3.0, "{:?}", c.eye);
     }
 
     #[test]

@@ -6,6 +6,7 @@
 //! - [`settings`]: every control as plain data (pixel error, occlusion strategy, culling, LOD
 //!   freeze, memory budget, colourings, debug view);
 //! - [`controller`]: fly / walk / orbit camera controllers (plain data, unit-tested);
+//! - [`collision`]: walk mode's capsule against the resident geometry (`tw-collide`);
 //! - [`hud`]: fps, frame-time graph, disk throughput and the HUD's figures;
 //! - [`debug_view`]: the third-person debug view's geometry (frustum, node boxes, projection);
 //! - [`pick`]: CPU ray casting for the orbit pivot, walk mode's ground, picking objects and
@@ -31,6 +32,7 @@
 //! last step of a `script`, or with the first error (no panics on user input).
 
 pub mod accumulate;
+pub mod collision;
 pub mod controller;
 pub mod debug_view;
 pub mod error;

@@ -648,6 +648,19 @@ impl Scene {
         out
     }
 
+    /// The triangles within `query` that walk mode collides with, into `out`: the full-detail
+    /// clusters there and the last cut's (resident pages only; nothing is loaded, so nothing
+    /// waits).
+    pub fn gather_nearby(&self, query: &tw_collide::Aabb, out: &mut tw_collide::nearby::Nearby) {
+        let cache = match (&self.walk, &self.traced) {
+            (Some(w), _) => w.streamer().cache(),
+            (None, Some(t)) => t.streamer().cache(),
+            (None, None) => return out.gather(&self.store, query, &[], |_| None),
+        };
+        let cut = self.selection().map_or(&[][..], |s| &s.clusters[..]);
+        out.gather(&self.store, query, cut, |p| cache.try_get(p));
+    }
+
     /// Distance along `ray` to the nearest triangle drawn by the last frame (resident pages
     /// only; nothing is loaded; hidden objects are not hit).
     pub fn pick(&self, ray: &Ray, max_t: f32) -> Option<f32> {

@@ -86,6 +86,7 @@ pub const HELP: &[(&str, &str)] = &[
     ("F11", "fullscreen"),
     ("scroll wheel", "speed (fly, walk); distance (orbit)"),
     ("1 / 2 / 3", "fly / walk / orbit"),
+    ("N", "walk: fly through walls / collide with them (the HUD shows the collision's time)"),
     ("F", "debug view: freeze the culling camera, move a second one out"),
     ("L", "freeze the LOD cut"),
     ("C", "next debug colouring"),

@@ -240,6 +240,9 @@ fn shade_pixels(
         .zip(triangles.par_chunks_mut(w))
         .enumerate()
         .for_each(|(y, (((rgba, objects), clusters), triangles))| {
+            // Without a flashlight a triangle has one colour (flat shading, as the rasterizer's):
+            // neighbouring pixels on the same triangle reuse it.
+            let mut last: Option<(u32, [u8; 4])> = None;
             for x in 0..w {
                 let i = y * w + x;
                 if prims[i] == u32::MAX {
@@ -247,13 +250,20 @@ fn shade_pixels(
                 }
                 let (c, t) = split_prim(prims[i]);
                 let Some(&(key, cluster)) = entries.get(c as usize) else { continue };
-                let Some(corners) = corners(cluster, t as usize, grid_step) else { continue };
-                let headlight = light.map(|l| {
-                    let p = camera.pixel_ray(x as u32, y as u32, width, height).at(distance[i]);
-                    flashlight(scene, p, l)
-                });
-                rgba[x * 4..x * 4 + 4]
-                    .copy_from_slice(&shader.shade(key, cluster, t as usize, corners, headlight));
+                let color = match last {
+                    Some((prim, color)) if prim == prims[i] && light.is_none() => color,
+                    _ => {
+                        let Some(corners) = corners(cluster, t as usize, grid_step) else { continue };
+                        let headlight = light.map(|l| {
+                            let p = camera.pixel_ray(x as u32, y as u32, width, height).at(distance[i]);
+                            flashlight(scene, p, l)
+                        });
+                        let color = shader.shade(key, cluster, t as usize, corners, headlight);
+                        last = Some((prims[i], color));
+                        color
+                    }
+                };
+                rgba[x * 4..x * 4 + 4].copy_from_slice(&color);
                 objects[x] = cluster.objects.get(t as usize).copied().unwrap_or(u32::MAX);
                 clusters[x] = c;
                 triangles[x] = t;
