@@ -44,9 +44,15 @@ pub const DEFAULT_COLOR: [u8; 4] = [180, 180, 180, 255];
 /// Background (sRGB) that tw-gpu's `Image::save_png` puts where nothing was drawn.
 pub const BACKGROUND: [u8; 3] = [205, 218, 235];
 
-/// A distinct, fairly saturated sRGB colour for an id (MurmurHash3's finaliser; the same as
-/// tw-preview's `hash_color`; tw-gpu's draw.wgsl computes it in f32).
+/// A distinct, fairly saturated sRGB colour for an id (MurmurHash3's finaliser, then HSV; tw-gpu's
+/// draw.wgsl computes the same in f32).
 pub fn hash_color(id: u32) -> [u8; 4] {
+    let [r, g, b] = hash_color_f64(id).map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
+    [r, g, b, 255]
+}
+
+/// [`hash_color`] before quantization, channels in 0..=1 (tw-preview shades with it).
+pub fn hash_color_f64(id: u32) -> [f64; 3] {
     let mut h = id.wrapping_add(0x9e37_79b9);
     h ^= h >> 16;
     h = h.wrapping_mul(0x85eb_ca6b);
@@ -58,16 +64,14 @@ pub fn hash_color(id: u32) -> [u8; 4] {
     let val = 0.75 + 0.25 * (h >> 24) as f64 / 255.0;
     let f = hue.fract();
     let (p, q, t) = (val * (1.0 - sat), val * (1.0 - sat * f), val * (1.0 - sat * (1.0 - f)));
-    let rgb = match hue as u32 {
+    match hue as u32 {
         0 => [val, t, p],
         1 => [q, val, p],
         2 => [p, val, t],
         3 => [p, q, val],
         4 => [t, p, val],
         _ => [val, p, q],
-    };
-    let [r, g, b] = rgb.map(|v| (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8);
-    [r, g, b, 255]
+    }
 }
 
 /// The colour of LOD level `level`: full resolution green, then yellow, orange, red, magenta,

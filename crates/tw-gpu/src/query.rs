@@ -23,6 +23,43 @@ pub const EYE_INSIDE: u64 = u64::MAX;
 
 const MAX_QUERIES: usize = 4096;
 
+/// What every pass drawing with query.wgsl needs (the box queries here, the collision passes of
+/// [`crate::visibility`]): the layout of its one uniform (a matrix), the pipeline layout and the
+/// shader module.
+pub(crate) struct QueryShader {
+    pub layout: wgpu::BindGroupLayout,
+    pub pipeline_layout: wgpu::PipelineLayout,
+    pub module: wgpu::ShaderModule,
+}
+
+impl QueryShader {
+    pub fn new(device: &wgpu::Device, label: &str) -> QueryShader {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some(label),
+            entries: &[wgpu::BindGroupLayoutEntry {
+                binding: 0,
+                visibility: wgpu::ShaderStages::VERTEX,
+                ty: wgpu::BindingType::Buffer {
+                    ty: wgpu::BufferBindingType::Uniform,
+                    has_dynamic_offset: false,
+                    min_binding_size: None,
+                },
+                count: None,
+            }],
+        });
+        let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some(label),
+            bind_group_layouts: &[Some(&layout)],
+            immediate_size: 0,
+        });
+        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+            label: Some(label),
+            source: wgpu::ShaderSource::Wgsl(include_str!("query.wgsl").into()),
+        });
+        QueryShader { layout, pipeline_layout, module }
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy, Pod, Zeroable)]
 struct Corner {
@@ -55,28 +92,7 @@ impl BoxQueries {
         depth_format: wgpu::TextureFormat,
         samples: u32,
     ) -> BoxQueries {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("box queries"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("box queries"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("box queries"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("query.wgsl").into()),
-        });
+        let QueryShader { layout, pipeline_layout: pl, module } = QueryShader::new(device, "box queries");
         let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
             label: Some("box queries"),
             layout: Some(&pl),

@@ -27,6 +27,7 @@ use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
 
 use crate::error::GpuError;
+use crate::query::QueryShader;
 use crate::readback::Readback;
 
 const MAX_QUERIES: u32 = 4096;
@@ -130,29 +131,8 @@ impl Visibility {
         adapter: wgpu::AdapterInfo,
         resolution: u32,
     ) -> Visibility {
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("visibility"),
-            entries: &[wgpu::BindGroupLayoutEntry {
-                binding: 0,
-                visibility: wgpu::ShaderStages::VERTEX,
-                ty: wgpu::BindingType::Buffer {
-                    ty: wgpu::BufferBindingType::Uniform,
-                    has_dynamic_offset: false,
-                    min_binding_size: None,
-                },
-                count: None,
-            }],
-        });
-        let pl = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
-            label: Some("visibility"),
-            bind_group_layouts: &[Some(&layout)],
-            immediate_size: 0,
-        });
         // The box-query shader is the same transform of a position by one matrix.
-        let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
-            label: Some("visibility"),
-            source: wgpu::ShaderSource::Wgsl(include_str!("query.wgsl").into()),
-        });
+        let QueryShader { layout, pipeline_layout: pl, module } = QueryShader::new(&device, "visibility");
         let pipeline = |compare: wgpu::CompareFunction, write: bool, cull: Option<wgpu::Face>| {
             device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
                 label: Some("visibility"),

@@ -436,28 +436,10 @@ fn to_u8(v: f64) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
 }
 
-/// A distinct, fairly saturated colour for an object id (a fixed hash, the same on every run).
+/// A distinct, fairly saturated colour for an object id (a fixed hash, the same on every run and
+/// in every renderer: `tw_core::color::hash_color_f64`).
 pub fn hash_color(id: ObjectId) -> [f64; 3] {
-    // The 32-bit finaliser of MurmurHash3.
-    let mut h = id.wrapping_add(0x9e37_79b9);
-    h ^= h >> 16;
-    h = h.wrapping_mul(0x85eb_ca6b);
-    h ^= h >> 13;
-    h = h.wrapping_mul(0xc2b2_ae35);
-    h ^= h >> 16;
-    let hue = (h & 0xffff) as f64 / 65536.0 * 6.0;
-    let sat = 0.45 + 0.35 * ((h >> 16) & 0xff) as f64 / 255.0;
-    let val = 0.75 + 0.25 * (h >> 24) as f64 / 255.0;
-    let f = hue.fract();
-    let (p, q, t) = (val * (1.0 - sat), val * (1.0 - sat * f), val * (1.0 - sat * (1.0 - f)));
-    match hue as u32 {
-        0 => [val, t, p],
-        1 => [q, val, p],
-        2 => [p, val, t],
-        3 => [p, q, val],
-        4 => [t, p, val],
-        _ => [val, p, q],
-    }
+    tw_core::color::hash_color_f64(id)
 }
 
 #[cfg(test)]
