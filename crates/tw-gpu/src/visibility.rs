@@ -90,17 +90,7 @@ impl Visibility {
     /// target of `resolution` × `resolution`.
     pub fn new_headless(resolution: u32) -> Result<Visibility, GpuError> {
         let backends = wgpu::Backends::all().with_env();
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = backends;
-        desc.flags = wgpu::InstanceFlags::default().with_env();
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter { backends: format!("{backends:?}"), reason: e.to_string() })?;
+        let adapter = crate::Renderer::headless_adapter(backends)?;
         let info = adapter.get_info();
         let have = adapter.limits();
         let limits = wgpu::Limits {

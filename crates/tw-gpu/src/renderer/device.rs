@@ -22,6 +22,22 @@ impl Renderer {
         Renderer::new_headless_with(width, height, wgpu::Backends::all().with_env())
     }
 
+    /// The first high-performance adapter of `backends`, without a display (headless
+    /// rendering, and the collision passes of [`crate::visibility`]).
+    pub(crate) fn headless_adapter(backends: wgpu::Backends) -> Result<wgpu::Adapter, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
+        desc.backends = backends;
+        desc.flags = wgpu::InstanceFlags::default().with_env();
+        let instance = wgpu::Instance::new(desc);
+        pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+            power_preference: wgpu::PowerPreference::HighPerformance,
+            force_fallback_adapter: false,
+            compatible_surface: None,
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::NoAdapter { backends: format!("{backends:?}"), reason: e.to_string() })
+    }
+
     /// [`Renderer::new_headless`] on the given backends (the environment is not consulted).
     pub fn new_headless_with(
         width: u32,
@@ -31,17 +47,7 @@ impl Renderer {
         if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
             return Err(GpuError::Size { width, height, max: MAX_SIDE });
         }
-        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle();
-        desc.backends = backends;
-        desc.flags = wgpu::InstanceFlags::default().with_env();
-        let instance = wgpu::Instance::new(desc);
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            force_fallback_adapter: false,
-            compatible_surface: None,
-            ..Default::default()
-        }))
-        .map_err(|e| GpuError::NoAdapter { backends: format!("{backends:?}"), reason: e.to_string() })?;
+        let adapter = Renderer::headless_adapter(backends)?;
         let info = adapter.get_info();
         Renderer::check_adapter(&adapter)?;
         let limits = Renderer::device_limits(&adapter);
