@@ -4,6 +4,8 @@ use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 
+use tw_frame::shadow::ShadowOptions;
+
 use crate::units::{parse_bytes, parse_count, parse_page_budget};
 
 #[derive(Parser, Debug)]
@@ -71,11 +73,14 @@ pub enum Command {
                             terawalk render plant.tw --path walk.json --frames-dir frames/\n  \
                             terawalk render plant.tw --path walk.json --video walk.mp4 --size 1920x1080\n  \
                             terawalk render plant.tw -o lod.png --color level --error 4\n  \
+                            terawalk render plant.tw -o sun.png --light sun:40,35   # shadows of a sun\n  \
+                            terawalk render plant.tw -o mask.png --light point:120,80,6 --color shadow\n  \
                             terawalk render plant.tw -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --size 1920x1080\n  \
                             WGPU_BACKEND=gl terawalk render plant.tw -o frame.png")]
     Render(RenderArgs),
     /// Render a camera path headless and write a report (HTML with plots, JSON with every figure).
     #[command(after_help = "Examples:\n  terawalk bench plant.tw --path path.json --out report/\n  \
+                            terawalk bench plant.tw --path walk.json --occlusion hzb --light sun   # shadows on vs off\n  \
                             terawalk bench plant.tw --path path.json --occlusion none,hzb --compare 10 --exact\n  \
                             terawalk bench plant.tw --path path.json --reference --frames 20\n  \
                             terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
@@ -96,7 +101,9 @@ pub enum Command {
                             picks an object (name, id, triangles, box, point), H hide, I isolate, Shift+H show \
                             all, M measure (two clicks, snaps to vertices), 4-9 axis views (+X -X +Y -Y +Z -Z), \
                             0 iso, O orthographic, F11 fullscreen, Tab panels; named viewpoints in the Controls \
-                            panel (saved to STORE.views.json). G raster / rt (ray traced), T flashlight (rt).")]
+                            panel (saved to STORE.views.json). G raster / rt (ray traced), T flashlight (rt). \
+                            Shadows (--light): J on/off, [ ] turn the sun, Shift+[ ] its elevation, U point \
+                            light at the eye.")]
     View(ViewArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]
@@ -317,6 +324,9 @@ pub enum RenderColoring {
     Level,
     /// A distinct colour per cluster.
     Cluster,
+    /// The shadow mask of --light: white where the light reaches, black where it is blocked,
+    /// grey where surfaces face away from it (for comparing renderers' shadows).
+    Shadow,
 }
 
 impl RenderColoring {
@@ -328,6 +338,7 @@ impl RenderColoring {
             RenderColoring::Object => ColorMode::Object,
             RenderColoring::Level => ColorMode::Level,
             RenderColoring::Cluster => ColorMode::Cluster,
+            RenderColoring::Shadow => ColorMode::Shadow,
         }
     }
 }
@@ -406,6 +417,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub flashlight: bool,
     #[command(flatten)]
+    pub shadows: ShadowArgs,
+    #[command(flatten)]
     pub open: OpenArgs,
 }
 
@@ -429,6 +442,79 @@ pub struct OpenArgs {
     /// Memory budget of the build (as `build --memory`).
     #[arg(long, default_value = "2G", value_parser = parse_bytes)]
     pub build_memory: u64,
+}
+
+/// Shadows of one light (`render`, `view`, `bench`): shadow maps drawn from the light-view sets
+/// with the eye's LOD, cross-culled (Govindaraju's thesis ch. 4); the ray tracer casts shadow
+/// rays instead.
+#[derive(Args, Debug, Clone)]
+#[command(next_help_heading = "Shadows")]
+pub struct ShadowArgs {
+    /// Cast shadows from a light: sun (the shading's own sun direction), sun:AZIMUTH,ELEVATION
+    /// (degrees; azimuth around the up axis), or point:X,Y,Z (input coordinates).
+    #[arg(long, value_name = "LIGHT", value_parser = parse_light)]
+    pub light: Option<tw_runtime::InputLight>,
+    /// Shadow-map layer size in texels per side (64..=8192).
+    #[arg(long, default_value_t = ShadowOptions::default().size, value_name = "TEXELS", requires = "light")]
+    pub shadow_map: u32,
+    /// Sun cascades along the view depth (1..=4); a point light uses the faces of a cube.
+    #[arg(long, default_value_t = ShadowOptions::default().cascades, value_name = "N", requires = "light")]
+    pub cascades: u32,
+    /// Depth bias of the shadow lookup, in texels of depth slope.
+    #[arg(long, default_value_t = ShadowOptions::default().bias_texels, value_name = "TEXELS", requires = "light")]
+    pub shadow_bias: f32,
+    /// Cross-culling: classify receivers as fully lit, fully shadowed or partly shadowed against
+    /// the light's depth, so only the partly shadowed ones look the map up (the image is the
+    /// same either way; off for comparing).
+    #[arg(long, default_value = "on", value_parser = parse_on_off, value_name = "on|off", requires = "light", action = clap::ArgAction::Set)]
+    pub cross_culling: bool,
+}
+
+impl Default for ShadowArgs {
+    /// No light (no shadows), the default map settings.
+    fn default() -> Self {
+        let o = ShadowOptions::default();
+        ShadowArgs {
+            light: None,
+            shadow_map: o.size,
+            cascades: o.cascades,
+            shadow_bias: o.bias_texels,
+            cross_culling: true,
+        }
+    }
+}
+
+impl ShadowArgs {
+    /// The frame's shadow settings for `camera` on a store whose up axis is `up_axis`; `None`
+    /// without --light. Errors name the flag.
+    pub fn settings(
+        &self,
+        header: &tw_store::Header,
+        up_axis: u8,
+        camera: &tw_runtime::Camera,
+    ) -> anyhow::Result<Option<tw_frame::ShadowSettings>> {
+        let Some(light) = self.light else { return Ok(None) };
+        let options =
+            ShadowOptions { size: self.shadow_map, cascades: self.cascades, bias_texels: self.shadow_bias };
+        options.validate().map_err(|e| anyhow::anyhow!("--shadow-map/--cascades/--shadow-bias: {e}"))?;
+        Ok(Some(tw_frame::ShadowSettings {
+            light: light.to_scene(header, up_axis, camera),
+            options,
+            cross_culling: self.cross_culling,
+        }))
+    }
+}
+
+fn parse_light(s: &str) -> Result<tw_runtime::InputLight, String> {
+    tw_runtime::InputLight::parse(s).map_err(|e| e.to_string())
+}
+
+fn parse_on_off(s: &str) -> Result<bool, String> {
+    match s.trim() {
+        "on" => Ok(true),
+        "off" => Ok(false),
+        _ => Err(format!("expected on or off, got {s:?}")),
+    }
 }
 
 #[derive(Args, Debug)]
@@ -513,6 +599,8 @@ pub struct ViewArgs {
     /// instead of the headlight.
     #[arg(long)]
     pub flashlight: bool,
+    #[command(flatten)]
+    pub shadows: ShadowArgs,
     #[command(flatten)]
     pub open: OpenArgs,
 }
@@ -616,6 +704,14 @@ pub struct BenchArgs {
     /// With --renderer rt: a flashlight above and beside the eye with hard shadows.
     #[arg(long)]
     pub flashlight: bool,
+    /// Measure popping: after each frame, draw its camera with the previous frame's cut and with
+    /// its own (whole, no occlusion culling) and record the pixels that differ and their PSNR —
+    /// the image change the LOD causes on its own. The extra draws sit between the frames
+    /// (outside their clocks) but disturb the caches: compare frame times from runs without it.
+    #[arg(long, conflicts_with_all = ["reference", "cull_server", "renderer"])]
+    pub popping: bool,
+    #[command(flatten)]
+    pub shadows: ShadowArgs,
 }
 
 /// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device

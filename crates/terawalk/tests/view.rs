@@ -590,3 +590,29 @@ fn ray_traced_view_supersamples_while_the_camera_stands_still() {
         assert!(covered > 0.05 && colours >= 8, "{shot}: {covered} covered, {colours} colours");
     }
 }
+
+#[test]
+fn shadow_keys_turn_the_light_under_xvfb() {
+    // `--light sun:30,45` starts with shadows on. `]` turns the sun by 5° around the up axis,
+    // Shift+[ lowers it by 5°, J turns shadows off and on, U leaves a point light at the eye and
+    // U again returns to the sun; G then traces the same light with shadow rays. Each key says
+    // the light in the message line.
+    let script = "wait 3\nscreenshot lit.png\npress ]\npress shift+[\nwait 2\npress J\nwait 2\npress J\n\
+                  press U\nwait 2\nscreenshot point.png\npress U\npress G\nwait 3\n";
+    let extra = ["--light", "sun:30,45", "--shadow-map", "512", "--screenshot", "shot.png"];
+    let Some((dir, _, err)) = script_session(store(), script, &extra) else { return };
+    for said in [
+        "shadows: sun at azimuth 35°, elevation 45°",
+        "shadows: sun at azimuth 35°, elevation 40°",
+        "shadows off (J on)",
+        "shadows: point light at (",
+        "renderer: rt",
+    ] {
+        assert!(err.contains(said), "no {said:?} in: {err}");
+    }
+    assert!(message_after(&err, "shadows: point light at (").contains("U back to the sun"), "{err}");
+    for shot in ["lit.png", "point.png", "shot.png"] {
+        let (covered, colours) = coverage(&dir.path().join(shot));
+        assert!(covered > 0.05 && colours >= 8, "{shot}: {covered} covered, {colours} colours");
+    }
+}

@@ -36,7 +36,18 @@ pub enum ColorMode {
     Level,
     /// A colour from a hash of the cluster: [`cluster_color`].
     Cluster,
+    /// The shadow mask of the light (`--light`): [`SHADOW_LIT`] where the light reaches the
+    /// surface, [`SHADOW_BLOCKED`] where something blocks it, [`SHADOW_AWAY`] where the surface
+    /// faces away from it — flat, unshaded, so that two renderers' shadows compare pixel by pixel.
+    Shadow,
 }
+
+/// [`ColorMode::Shadow`]: a surface the light reaches (sRGB).
+pub const SHADOW_LIT: [u8; 4] = [255, 255, 255, 255];
+/// [`ColorMode::Shadow`]: a surface facing the light whose light is blocked (sRGB).
+pub const SHADOW_BLOCKED: [u8; 4] = [0, 0, 0, 255];
+/// [`ColorMode::Shadow`]: a surface facing away from the light (sRGB).
+pub const SHADOW_AWAY: [u8; 4] = [128, 128, 128, 255];
 
 /// Colour of objects without one in the store (sRGB).
 pub const DEFAULT_COLOR: [u8; 4] = [180, 180, 180, 255];

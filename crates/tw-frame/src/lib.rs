@@ -21,8 +21,11 @@
 //! objects and triangles (docs/DESIGN.md "Measuring").
 
 mod gpu_hzb;
+pub mod mask;
 pub mod occlude;
+pub mod popping;
 pub mod remote;
+pub mod shadow;
 pub mod traced;
 
 use std::sync::Arc;
@@ -38,6 +41,7 @@ use tw_runtime::{
 use tw_store::{PageCluster, Store};
 
 pub use occlude::{Occlusion, OcclusionStats};
+pub use shadow::{ShadowInfo, ShadowSettings};
 
 /// What a frame draws, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -58,6 +62,8 @@ pub struct FrameSettings {
     /// only those that can show a pixel ([`tw_runtime::triangle_test`]; conservative, on by
     /// default). Off: whole clusters, as GigaWalk draws whole objects.
     pub triangle_culling: bool,
+    /// Shadows of a light (`--light`; [`shadow`]): `None` draws the unshadowed shading.
+    pub shadows: Option<ShadowSettings>,
 }
 
 impl Default for FrameSettings {
@@ -69,6 +75,7 @@ impl Default for FrameSettings {
             wait_for_pages: false,
             visible_pixels: 0,
             triangle_culling: true,
+            shadows: None,
         }
     }
 }
@@ -127,6 +134,9 @@ pub struct FrameInfo {
     pub occlusion: OcclusionStats,
     /// The GPU cluster pool after the frame.
     pub gpu: PoolStats,
+    /// The shadow stage (all zero without shadows); its time is part of `times.total`, not of
+    /// the other stages.
+    pub shadow: ShadowInfo,
 }
 
 /// Errors of a frame.
@@ -156,6 +166,10 @@ pub struct Walkthrough {
     renderer: Renderer,
     occlusion: occlude::OcclusionState,
     selection: Selection,
+    /// The last frame's shadow layers (`None` without shadows).
+    shadows: Option<tw_runtime::Shadows>,
+    /// The clusters the light saw last frame (the light-view occlusion history, [`shadow`]).
+    light_seen: std::collections::HashSet<ClusterRef>,
 }
 
 impl Walkthrough {
@@ -173,6 +187,8 @@ impl Walkthrough {
             renderer,
             occlusion: occlude::OcclusionState::default(),
             selection: Selection::default(),
+            shadows: None,
+            light_seen: Default::default(),
         })
     }
 
@@ -182,6 +198,15 @@ impl Walkthrough {
 
     pub fn streamer(&self) -> &Streamer {
         &self.streamer
+    }
+
+    pub fn streamer_mut(&mut self) -> &mut Streamer {
+        &mut self.streamer
+    }
+
+    /// The shadow-map layers the last frame drew (`None` when it drew no shadows).
+    pub fn last_shadows(&self) -> Option<&tw_runtime::Shadows> {
+        self.shadows.as_ref()
     }
 
     pub fn renderer(&self) -> &Renderer {
@@ -215,6 +240,7 @@ impl Walkthrough {
     /// a teleport or a change of settings.
     pub fn reset(&mut self) {
         self.occlusion.reset();
+        self.light_seen.clear();
         self.streamer.reset_history();
     }
 
@@ -275,6 +301,7 @@ impl Walkthrough {
             draw_calls: gpu.draw_calls,
             occlusion: OcclusionStats::default(),
             gpu: gpu.pool,
+            shadow: ShadowInfo::default(),
         };
         Ok((image, info))
     }
@@ -537,6 +564,36 @@ impl Walkthrough {
             let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
             pages[i].1.bounds.get(c.index_in_page as usize).copied()
         };
+        let shadow = match &settings.shadows {
+            Some(shadows) => {
+                let (w, h) = self.renderer.size();
+                let options = SelectOptions {
+                    tau: settings.tau,
+                    viewport: [w, h],
+                    frustum_culling: settings.frustum_culling,
+                };
+                let receivers = shadow::receivers(settings.occlusion, &self.occlusion, &clusters);
+                let (info, layers) = shadow::prepare(
+                    shadows,
+                    &mut self.streamer,
+                    &mut self.renderer,
+                    camera,
+                    &options,
+                    settings.wait_for_pages,
+                    &receivers,
+                    bounds,
+                    &mut self.light_seen,
+                )?;
+                self.shadows = Some(layers);
+                info
+            }
+            None => {
+                shadow::clear(&mut self.renderer);
+                self.shadows = None;
+                self.light_seen.clear();
+                ShadowInfo::default()
+            }
+        };
         self.occlusion.visible_pixels = settings.visible_pixels;
         self.occlusion.triangle_culling = settings.triangle_culling;
         let culled = occlude::draw_culled(
@@ -571,6 +628,7 @@ impl Walkthrough {
             draw_calls: gpu.draw_calls,
             occlusion: culled.stats,
             gpu: gpu.pool,
+            shadow,
         };
         Ok(DrawnFrame { info, drawn: culled.drawn, occluded: culled.occluded })
     }

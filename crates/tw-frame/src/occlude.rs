@@ -174,6 +174,13 @@ pub struct OcclusionState {
     pub hierarchy_forced: bool,
 }
 
+impl OcclusionState {
+    /// The clusters last frame found visible (next frame's occluders).
+    pub(crate) fn history(&self) -> &OcclusionHistory {
+        &self.history
+    }
+}
+
 /// Every how many frames an occluder's triangles drawn in the first pass are tested again
 /// (see [`draw_culled`]); the others only keep them in the history.
 const RETEST_PERIOD: u64 = 4;

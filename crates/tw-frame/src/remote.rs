@@ -108,6 +108,7 @@ impl Walkthrough {
             draw_calls: gpu.draw_calls,
             occlusion: OcclusionStats::default(),
             gpu: gpu.pool,
+            shadow: Default::default(),
         })
     }
 

@@ -3,11 +3,21 @@
 //! by priority with resident ancestors standing in for missing ones — then tw-rt traces the cut
 //! on every core instead of wgpu drawing it. There is no occlusion culling step: the rays find
 //! the visible surface themselves, and a ray never touches a page that is not resident.
+//!
+//! **Shadows** (a light in [`TraceSettings::light`] or [`FrameSettings::shadows`]): shadow rays
+//! must meet every cluster that can cast into the view, also those outside the eye's frustum.
+//! The cut is then selected without frustum culling — at the eye's LOD, the thesis' LOD
+//! consistency the rasterizer's light views follow too, under the same page budget — and cut
+//! down to the clusters in the light's sweep of the eye's frustum
+//! ([`tw_rt::scene::casters::CasterVolume`]), which holds the eye's own. Primary rays, limited by
+//! the clip planes, see exactly what the frustum-culled cut shows, since frustum culling only
+//! removes clusters.
 
 use std::sync::Arc;
 use std::time::Instant;
 
 use tw_gpu::Image;
+use tw_rt::scene::casters::CasterVolume;
 use tw_rt::scene::{StoreTracer, TraceSettings, TraceStats, TracedFrame};
 use tw_runtime::{Camera, SelectionPages, StreamOptions, Streamer};
 use tw_store::Store;
@@ -48,7 +58,8 @@ impl TracedWalkthrough {
         &self.tracer
     }
 
-    /// The last frame's LOD cut (what it traced; the viewer picks among these clusters).
+    /// The last frame's LOD cut (what it traced, with a light the casters outside the view
+    /// too; the viewer picks among these clusters: `TracedFrame::clusters` indexes it).
     pub fn selection(&self) -> &tw_runtime::Selection {
         &self.selection
     }
@@ -66,18 +77,29 @@ impl TracedWalkthrough {
 
     /// Traces one frame of `camera` (`settings.occlusion` is ignored: rays need none) and
     /// returns its image, statistics in the rasterizer's terms (BVH builds as `upload`, tracing
-    /// and shading as `render`) and the ray tracer's own, and the per-pixel hits.
+    /// and shading as `render`) and the ray tracer's own, and the per-pixel hits. The light of
+    /// `settings.shadows`, if any, is traced (else [`TraceSettings::light`]'s); the cut then
+    /// holds the casters outside the view too (module documentation).
     pub fn frame(
         &mut self,
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<(Image, FrameInfo, TracedFrame), FrameError> {
         let start = Instant::now();
+        let trace =
+            TraceSettings { light: settings.shadows.map(|s| s.light).or(self.trace.light), ..self.trace };
+        let select_settings =
+            FrameSettings { frustum_culling: settings.frustum_culling && trace.light.is_none(), ..*settings };
         let Streamed { pages, stats: stream, times: stream_times } =
-            select_and_stream(&mut self.streamer, &mut self.selection, camera, settings, self.size);
+            select_and_stream(&mut self.streamer, &mut self.selection, camera, &select_settings, self.size);
+        if let (Some(light), true) = (trace.light, settings.frustum_culling) {
+            let aspect = self.size.0 as f32 / self.size.1.max(1) as f32;
+            let volume = CasterVolume::new(camera, aspect, &light);
+            volume.keep_casters(&mut self.selection, &pages, self.streamer.store().header().grid_step);
+        }
         let select = start.elapsed();
         let held = SelectionPages::from_resident(&pages, &self.selection.clusters);
-        let mut traced = self.tracer.trace(&held, camera, self.size, &self.trace);
+        let mut traced = self.tracer.trace(&held, camera, self.size, &trace);
         let t: TraceStats = traced.stats;
         let info = FrameInfo {
             times: FrameTimes {

@@ -11,6 +11,7 @@ pub(crate) fn mode_code(mode: ColorMode) -> u32 {
         ColorMode::Object => 1,
         ColorMode::Level => 2,
         ColorMode::Cluster => 3,
+        ColorMode::Shadow => 4,
     }
 }
 

@@ -5,8 +5,9 @@
 //! backend then loops over the draws itself) or a loop of `draw_indexed` otherwise. Both give the
 //! same draws in the same order, hence the same image. Depth is reverse-Z (`Greater`, clear 0)
 //! in `Depth32Float`; both faces are drawn (inputs are not consistently wound).
-//! Shaders: common.wgsl (uniforms, slot table, vertex stage), draw.wgsl (shading), ids.wgsl
-//! (item buffer).
+//! Shaders: common.wgsl (uniforms, slot table, vertex stage), draw.wgsl (shading), shadow.wgsl
+//! (the shadow map's depth pass and the shading with shadows, [`crate::shadow`]), ids.wgsl (item
+//! buffer).
 
 use crate::color::ColorMode;
 use crate::pool::{DrawArgs, UNIT};
@@ -34,12 +35,33 @@ pub(crate) struct Uniforms {
     pub headlight: [f32; 4],
 }
 
+/// How a shaded pipeline lights its triangles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Shading {
+    /// The fixed sun, no shadows (draw.wgsl `vs_shade`).
+    Plain,
+    /// The shadows' light, on or off by the cluster's class (`Lit`, `Shadowed`), no lookup
+    /// (shadow.wgsl `fs_classified`).
+    Classified,
+    /// The shadows' light, with a lookup in a map of this many layers for the fragments of
+    /// `Partial` clusters (shadow.wgsl `fs_shadowed`).
+    Lookup(u32),
+}
+
+/// What a shaded pipeline is made for: (format, samples, mode, shading).
+type ShadedKey = (wgpu::TextureFormat, u32, ColorMode, Shading);
+
 /// The pipelines and their layout.
 pub(crate) struct Pipelines {
     pub bind_layout: wgpu::BindGroupLayout,
     layout: wgpu::PipelineLayout,
+    /// Group 1 of the shading with shadows (shadow.wgsl: uniforms, slot classes, the map).
+    pub shadow_layout: wgpu::BindGroupLayout,
+    shadowed_layout: wgpu::PipelineLayout,
     shade: wgpu::ShaderModule,
-    shaded: Vec<((wgpu::TextureFormat, u32, ColorMode), wgpu::RenderPipeline)>,
+    shaded: Vec<(ShadedKey, wgpu::RenderPipeline)>,
+    /// The shadow map's depth-only pipeline.
+    shadow_depth: Option<wgpu::RenderPipeline>,
     item: Option<wgpu::RenderPipeline>,
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
     pub primitive_index: bool,
@@ -84,7 +106,19 @@ impl Pipelines {
             bind_group_layouts: &[Some(&bind_layout)],
             immediate_size: 0,
         });
-        let source = format!("{}\n{}", include_str!("common.wgsl"), include_str!("draw.wgsl"));
+        let shadow_layout = crate::shadow::bind_layout(device);
+        let shadowed_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("clusters with shadows"),
+            bind_group_layouts: &[Some(&bind_layout), Some(&shadow_layout)],
+            immediate_size: 0,
+        });
+        let source = format!(
+            "{}\n{}\n{}\n{}",
+            shadow_mask_constants(),
+            include_str!("common.wgsl"),
+            include_str!("draw.wgsl"),
+            include_str!("shadow.wgsl")
+        );
         let shade = device.create_shader_module(wgpu::ShaderModuleDescriptor {
             label: Some("clusters"),
             source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -92,8 +126,11 @@ impl Pipelines {
         Pipelines {
             bind_layout,
             layout,
+            shadow_layout,
+            shadowed_layout,
             shade,
             shaded: Vec::new(),
+            shadow_depth: None,
             item: None,
             primitive_index: device.features().contains(wgpu::Features::PRIMITIVE_INDEX),
         }
@@ -104,14 +141,23 @@ impl Pipelines {
     /// are the shader's pipeline constants (draw.wgsl `COLOR_MODE`, `ENCODE_SRGB`), not
     /// uniforms: lavapipe (Mesa 22.3) recompiles, and keeps, a copy of a shader that branches
     /// on uniform values at every bind (docs/RUNTIME.md, "Memory").
+    ///
+    /// With shadows ([`Shading::Classified`], [`Shading::Lookup`]: shadow.wgsl `vs_shadowed`,
+    /// bind group 1 of [`Pipelines::shadow_layout`]) the number of map layers is the pipeline
+    /// constant `SHADOW_LAYERS`. Classified clusters get a pipeline without the lookup code: on
+    /// CPU drivers a branch not taken still costs its code (lavapipe runs both sides under a
+    /// mask): with one pipeline branching on the class, a 1280×720 pass of only `Lit` clusters
+    /// took 76 ms against 34 ms unshadowed; with its own pipeline, 25–33 ms (tests/shadows.rs
+    /// `bench_shadow_passes`, release, a busy 2-core machine).
     pub fn shaded(
         &mut self,
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
         samples: u32,
         mode: ColorMode,
+        shading: Shading,
     ) -> &wgpu::RenderPipeline {
-        let key = (format, samples, mode);
+        let key = (format, samples, mode, shading);
         let i = match self.shaded.iter().position(|(k, _)| *k == key) {
             Some(i) => i,
             None => {
@@ -119,15 +165,38 @@ impl Pipelines {
                     ("COLOR_MODE", crate::color::mode_code(mode) as f64),
                     ("ENCODE_SRGB", if format.is_srgb() { 0.0 } else { 1.0 }),
                 ];
-                let p = pipeline(
-                    device,
-                    &self.layout,
-                    &self.shade,
-                    ("vs_shade", &constants),
-                    "fs_main",
-                    format,
-                    samples,
-                );
+                let p = match shading {
+                    Shading::Plain => pipeline(
+                        device,
+                        &self.layout,
+                        &self.shade,
+                        ("vs_shade", &constants),
+                        ("fs_main", &[]),
+                        format,
+                        samples,
+                    ),
+                    Shading::Classified => pipeline(
+                        device,
+                        &self.shadowed_layout,
+                        &self.shade,
+                        ("vs_shadowed", &constants),
+                        ("fs_classified", &[]),
+                        format,
+                        samples,
+                    ),
+                    Shading::Lookup(layers) => {
+                        let all = [constants[0], constants[1], ("SHADOW_LAYERS", layers as f64)];
+                        pipeline(
+                            device,
+                            &self.shadowed_layout,
+                            &self.shade,
+                            ("vs_shadowed", &all),
+                            ("fs_shadowed", &all),
+                            format,
+                            samples,
+                        )
+                    }
+                };
                 self.shaded.push((key, p));
                 self.shaded.len() - 1
             }
@@ -151,11 +220,77 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item =
-                Some(pipeline(device, &self.layout, &module, ("vs_main", &[]), "fs_items", ITEM_FORMAT, 1));
+            self.item = Some(pipeline(
+                device,
+                &self.layout,
+                &module,
+                ("vs_main", &[]),
+                ("fs_items", &[]),
+                ITEM_FORMAT,
+                1,
+            ));
         }
         self.item.as_ref().expect("just created")
     }
+
+    /// The shadow map's depth-only pipeline (shadow.wgsl `vs_depth`, no fragment stage),
+    /// created on first use: standard depth (`Less`, 0 nearest the light), both faces drawn,
+    /// and [`SHADOW_DEPTH_BIAS`] so that a lit surface is not shadowed by itself.
+    pub fn shadow_depth(&mut self, device: &wgpu::Device) -> &wgpu::RenderPipeline {
+        if self.shadow_depth.is_none() {
+            self.shadow_depth = Some(device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("shadow map"),
+                layout: Some(&self.layout),
+                vertex: wgpu::VertexState {
+                    module: &self.shade,
+                    entry_point: Some("vs_depth"),
+                    compilation_options: Default::default(),
+                    buffers: &[Some(wgpu::VertexBufferLayout {
+                        array_stride: UNIT,
+                        step_mode: wgpu::VertexStepMode::Vertex,
+                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                    })],
+                },
+                primitive: wgpu::PrimitiveState {
+                    topology: wgpu::PrimitiveTopology::TriangleList,
+                    cull_mode: None,
+                    ..Default::default()
+                },
+                depth_stencil: Some(wgpu::DepthStencilState {
+                    format: DEPTH_FORMAT,
+                    depth_write_enabled: Some(true),
+                    depth_compare: Some(wgpu::CompareFunction::Less),
+                    stencil: Default::default(),
+                    bias: SHADOW_DEPTH_BIAS,
+                }),
+                multisample: Default::default(),
+                fragment: None,
+                multiview_mask: None,
+                cache: None,
+            }));
+        }
+        self.shadow_depth.as_ref().expect("just created")
+    }
+}
+
+/// The shadow map's depth bias (pushing stored depths away from the light). The slope term
+/// covers a surface's own depth change across a texel: a point is compared with the depth
+/// rasterized at its texel's centre (shadow.wgsl `light_reaches`), at most half a texel away in
+/// x and y, i.e. at most one texel's change along the steeper axis; 2 doubles that for margin.
+/// The constant term (units of the float depth's precision at the primitive's depth) covers the
+/// rounding between the rasterized depth and the depth the shading computes for a surface facing
+/// the light squarely (a floor under the sun at noon), where the slope term is 0.
+pub(crate) const SHADOW_DEPTH_BIAS: wgpu::DepthBiasState =
+    wgpu::DepthBiasState { constant: 16, slope_scale: 2.0, clamp: 0.0 };
+
+/// WGSL constants of [`ColorMode::Shadow`]'s mask colours (sRGB, 0..1), from `tw_core::color`.
+fn shadow_mask_constants() -> String {
+    use tw_core::color::{SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT};
+    let c = |name: &str, v: [u8; 4]| {
+        let f = |b: u8| format!("{:?}", b as f32 / 255.0);
+        format!("const {name}: vec3<f32> = vec3<f32>({}, {}, {});\n", f(v[0]), f(v[1]), f(v[2]))
+    };
+    c("SHADOW_LIT", SHADOW_LIT) + &c("SHADOW_BLOCKED", SHADOW_BLOCKED) + &c("SHADOW_AWAY", SHADOW_AWAY)
 }
 
 fn pipeline(
@@ -163,7 +298,7 @@ fn pipeline(
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
     (vertex, constants): (&str, &[(&str, f64)]),
-    fragment: &str,
+    (fragment, fragment_constants): (&str, &[(&str, f64)]),
     format: wgpu::TextureFormat,
     samples: u32,
 ) -> wgpu::RenderPipeline {
@@ -196,7 +331,10 @@ fn pipeline(
         fragment: Some(wgpu::FragmentState {
             module,
             entry_point: Some(fragment),
-            compilation_options: Default::default(),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: fragment_constants,
+                ..Default::default()
+            },
             targets: &[Some(wgpu::ColorTargetState {
                 format,
                 blend: None,
@@ -232,12 +370,13 @@ impl IndirectArgs {
     }
 }
 
-/// Records the draws of one batch into `pass` (pipeline and bind group already set).
+/// Records the draws of one batch into `pass` (pipeline and bind group already set); indirect:
+/// `args` are in the buffer from the given byte offset.
 pub(crate) fn encode_batch(
     pass: &mut wgpu::RenderPass<'_>,
     arena: &wgpu::Buffer,
     args: &[DrawArgs],
-    indirect: Option<&wgpu::Buffer>,
+    indirect: Option<(&wgpu::Buffer, u64)>,
 ) {
     if args.is_empty() {
         return;
@@ -245,7 +384,7 @@ pub(crate) fn encode_batch(
     pass.set_vertex_buffer(0, arena.slice(..));
     pass.set_index_buffer(arena.slice(..), wgpu::IndexFormat::Uint32);
     match indirect {
-        Some(buffer) => pass.multi_draw_indexed_indirect(buffer, 0, args.len() as u32),
+        Some((buffer, offset)) => pass.multi_draw_indexed_indirect(buffer, offset, args.len() as u32),
         None => {
             for a in args {
                 pass.draw_indexed(a.first_index..a.first_index + a.index_count, a.base_vertex, 0..1);

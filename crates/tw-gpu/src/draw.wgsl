@@ -35,7 +35,9 @@ fn hash_color(id: u32) -> vec3<f32> {
 // depend on uniform-buffer values alone (it "inlines" those values) every time the pipeline is
 // bound, and never frees the copies — ~0.3 MB of process memory a render pass (docs/RUNTIME.md,
 // "Memory"). So no branch here may test a uniform alone.
-// The colour mode (ColorMode::code): 0 material, 1 object, 2 level, 3 cluster.
+// The colour mode (ColorMode::code): 0 material, 1 object, 2 level, 3 cluster, 4 shadow mask
+// (SHADOW_LIT / SHADOW_BLOCKED / SHADOW_AWAY, constants generated from tw_core::color by
+// draw.rs `Pipelines::new`).
 override COLOR_MODE: u32 = 0u;
 // Whether the target needs sRGB encoding here (a non-sRGB target format).
 override ENCODE_SRGB: bool = false;
@@ -86,6 +88,22 @@ fn srgb_encode(c: vec3<f32>) -> vec3<f32> {
     return select(hi, lo, c <= vec3<f32>(0.0031308));
 }
 
+// The sRGB transfer function's inverse (IEC 61966-2-1), encoded to linear.
+fn srgb_decode(c: vec3<f32>) -> vec3<f32> {
+    let lo = c / 12.92;
+    let hi = pow((c + 0.055) / 1.055, vec3<f32>(2.4));
+    return select(hi, lo, c <= vec3<f32>(0.04045));
+}
+
+// An sRGB-encoded colour (ColorMode::Shadow's flat mask colours) as the target must receive it:
+// as it is where this shader encodes (ENCODE_SRGB), decoded where the target's format encodes.
+fn flat_srgb(c: vec3<f32>) -> vec3<f32> {
+    if (ENCODE_SRGB) {
+        return c;
+    }
+    return srgb_decode(c);
+}
+
 fn unpack_normal(p: u32) -> vec3<f32> {
     let q = bitcast<vec3<i32>>(vec3<u32>(p << 22u, p << 12u, p << 2u)) >> vec3<u32>(22u);
     return vec3<f32>(q) / 511.0;
@@ -114,6 +132,12 @@ fn vs_shade(
     }
     let head = abs(dot(n, u.headlight.xyz));
     let sun = max(dot(n, u.sun.xyz), 0.0);
+    if (COLOR_MODE == 4u) {
+        // The shadow mask without shadows (Renderer::set_shadows(None)): the fixed sun reaches
+        // every surface facing it.
+        out.color = flat_srgb(select(SHADOW_AWAY, SHADOW_LIT, sun > 0.0));
+        return out;
+    }
     let base = pow(base_color(object, slot), vec3<f32>(2.2));
     var rgb = min(base * (0.18 + 0.62 * head + 0.35 * sun), vec3<f32>(1.0));
     if (ENCODE_SRGB) {

@@ -30,6 +30,8 @@ pub enum GpuError {
     NotOwnTarget { what: &'static str },
     #[error("{what} needs {missing}, which {adapter} does not have; choose another strategy")]
     Unsupported { what: &'static str, missing: &'static str, adapter: String },
+    #[error("shadows: {0}")]
+    Shadow(String),
     #[error("the frame does not fit the GPU budget of {budget} bytes in one pass")]
     OverBudget { budget: u64 },
     #[error("GPU error: {0}")]

@@ -44,9 +44,10 @@ use tw_runtime::hzb::{Hzb, HzbLevel, HzbResult, DEPTH_MARGIN, RECT_SLACK_PX};
 use tw_runtime::Camera;
 use tw_store::PageCluster;
 
+use crate::draw::Shading;
 use crate::error::GpuError;
 use crate::pool::{DrawArgs, Ensure, PoolKey};
-use crate::renderer::{bind_group, Pass};
+use crate::renderer::{bind_group, Eye, Pass};
 use crate::{ClusterKey, Renderer, COLOR_FORMAT};
 
 /// Pixels the GPU test widens a rectangle by beyond [`RECT_SLACK_PX`], and the relative amount
@@ -578,6 +579,7 @@ impl Renderer {
         if gl && self.pool.stats().arena_bytes >= self.pool.budget() {
             self.wait_idle()?; // the GL ordering hazard of draw_pass
         }
+        let shadow_layers = self.shadow_layers()?;
         // 1. Residency.
         let t = Instant::now();
         let mut list = Vec::with_capacity(candidates.len());
@@ -586,7 +588,10 @@ impl Renderer {
         for ((key, cluster), &b) in candidates.iter().zip(boxes) {
             let pk = (key.page, key.index_in_page);
             match self.pool.ensure(&self.device, &self.queue, pk, grid_step, cluster) {
-                Ensure::Ready { args, .. } => {
+                Ensure::Ready { args, slot } => {
+                    if shadow_layers.is_some() {
+                        self.shadow.note_slot(pk, slot);
+                    }
                     list.push(Candidate::new(b, args));
                     keys.push(pk);
                 }
@@ -604,7 +609,7 @@ impl Renderer {
             let view = self.color_view.clone();
             let shade = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
             self.depth_stale = self.samples > 1;
-            self.draw_pass(None, shade, size, camera, grid_step, candidates, None, false)?;
+            self.draw_pass(None, shade, size, Eye::Camera(camera), grid_step, candidates, None, false)?;
             return Ok(GpuCullResult {
                 candidates: vec![HzbResult::Visible; candidates.len()],
                 occluders: vec![HzbResult::Visible; occluder_boxes.len()],
@@ -614,6 +619,9 @@ impl Renderer {
         }
         let encode_start = Instant::now();
         self.write_uniforms(camera, size);
+        if shadow_layers.is_some() {
+            self.shadow.write_uniforms(&self.queue, camera);
+        }
         let compact = self.gpu_cull_compacts();
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
         let occluders: Vec<Candidate> =
@@ -648,7 +656,12 @@ impl Renderer {
         let color_view = self.color_view.clone();
         let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT, own: true };
         let att = self.attachments(&shade, size, self.depth_view.clone());
-        let pipeline = self.pipelines.shaded(&self.device, COLOR_FORMAT, att.samples, self.mode).clone();
+        // One indirect list: every cluster with the lookup pipeline (which honours the classes).
+        let shading = shadow_layers.map_or(Shading::Plain, Shading::Lookup);
+        let (pipeline, shadow_bind) = self.shaded_pipeline(COLOR_FORMAT, att.samples, shading)?;
+        let Some(color) = att.color.clone() else {
+            return Err(GpuError::Gpu("the GPU-culled draw has no colour target".into()));
+        };
         let cull = self.gpu_cull.as_ref().expect("made above");
         let set0 = cull.sets[0].buffers.as_ref().expect("prepared above");
         // Handles, so that the depth resolve below may borrow the renderer.
@@ -657,7 +670,7 @@ impl Renderer {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("gpu hzb draw"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &att.color,
+                    view: &color,
                     depth_slice: None,
                     resolve_target: att.resolve.as_ref(),
                     ops: wgpu::Operations { load: wgpu::LoadOp::Load, store: wgpu::StoreOp::Store },
@@ -676,6 +689,9 @@ impl Renderer {
             });
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &self.bind_group, &[]);
+            if let Some(bind) = &shadow_bind {
+                pass.set_bind_group(1, bind, &[]);
+            }
             pass.set_vertex_buffer(0, arena.slice(..));
             pass.set_index_buffer(arena.slice(..), wgpu::IndexFormat::Uint32);
             if compact {

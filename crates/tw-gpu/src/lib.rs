@@ -20,6 +20,8 @@
 //!   for `tw-collide`).
 //! - [`gpu_cull`]: the GPU hierarchical Z-buffer built in compute shaders, the cull of
 //!   candidate boxes against it feeding indirect draws in the same frame (`gpu-hzb`).
+//! - [`shadow`]: shadow maps (a depth array drawn from the light through the pool) and the
+//!   shading with shadows, following `tw_runtime::shadow`'s lookup rule exactly.
 //! - [`msaa`]: 4× multisampling of the shaded passes, with the farthest-sample depth resolve
 //!   the occlusion strategies read.
 //! - [`image`]: RGBA images, PNG, PSNR and pixel differences.
@@ -30,6 +32,11 @@
 //! [`Renderer::read_color`] / [`Renderer::read_depth`]. [`Renderer::render_clusters`] and
 //! [`Renderer::render_selection`] do the whole single-pass frame and return an [`Image`];
 //! [`Renderer::render_to_view`] draws into a caller's view and does not wait.
+//!
+//! Shadows ([`shadow`]): [`Renderer::set_shadow_map`] once; in a frame, after `begin_frame`,
+//! [`Renderer::draw_shadow_map`] for each layer, [`Renderer::set_shadows`] (and the
+//! cross-culling classes, [`Renderer::set_shadow_classes`]), then the shaded draws as above.
+//! [`Renderer::set_shadows`]`(None)` returns to the unshadowed shading.
 //!
 //! Depth is reverse-Z ([`tw_runtime::Camera::projection_reverse_z`], `Greater`, clear 0).
 //! Images: RGBA8 sRGB, rows from the top; alpha 255 where geometry was drawn, 0 elsewhere.
@@ -44,6 +51,7 @@
 //! | occlusion queries | sample counts | 0/1 |
 //! | GPU HZB cull ([`gpu_cull`]) | compacted, `multi_draw_indexed_indirect_count` | in place (culled draws get 0 instances); needs GL 4.3 compute, known after [`Renderer::set_downlevel`] |
 //! | 4× multisampling ([`Renderer::set_samples`]) | yes | refused (llvmpipe resolved to nothing) |
+//! | shadow maps ([`shadow`]) | yes; layers read back by copy | yes; one spare layer where GL would not make the map a 2D array, layers read back by a compute copy |
 //! | reuse of evicted pool ranges | ordered by wgpu | the renderer waits for earlier GPU work first (see `draw_pass`) |
 
 pub mod color;
@@ -59,6 +67,7 @@ pub mod pool;
 pub mod query;
 mod readback;
 mod renderer;
+pub mod shadow;
 pub mod visibility;
 
 pub use wgpu;
@@ -75,6 +84,7 @@ pub use image::Image;
 pub use msaa::SUPPORTED_SAMPLES;
 pub use pool::{PoolStats, MIN_BUDGET};
 pub use renderer::{FrameStats, Renderer, Target, MAX_RUNS};
+pub use shadow::MAX_SHADOW_LAYERS;
 pub use tw_runtime::SelectionPages;
 
 /// Identifies a cluster: its page, index in the page and group (as selected). The pool keys

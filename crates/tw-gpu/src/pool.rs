@@ -328,7 +328,9 @@ impl ClusterPool {
             slot_buffer: slot_buffer(device, 1024),
             slot_capacity: 1024,
             generation: 0,
-            frame: 0,
+            // Frame 0 is "before any frame": a batch drawn before the first `begin_frame` (a
+            // shadow map drawn first) is released to frame 0, which must exist.
+            frame: 1,
             stats: PoolStats::default(),
             layout: ClusterLayout::new(provoking_last),
             bytes: Vec::new(),

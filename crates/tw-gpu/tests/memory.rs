@@ -1,6 +1,7 @@
 //! The process memory of a renderer does not grow with the frames it draws: after a warm-up,
 //! another 100 frames of every kind of pass the strategies use (two shaded passes, box
-//! queries, the GPU HZB cull, each colour mode) leave the resident set where it was.
+//! queries, the GPU HZB cull, each colour mode, a shadow-map pass and the shading with shadows
+//! every other frame) leave the resident set where it was.
 //!
 //! The regression this guards against: Mesa 22.3's lavapipe compiles a new copy of a shader
 //! whose branches test uniform-buffer values alone each time its pipeline is bound, and never
@@ -16,7 +17,7 @@
 
 use glam::Vec3;
 use tw_gpu::{ColorMode, GpuError, Renderer, Target};
-use tw_runtime::{Camera, ClusterRef};
+use tw_runtime::{Camera, ClusterRef, Light, ShadowClass, ShadowLayer, Shadows};
 use tw_store::PageCluster;
 
 mod common;
@@ -42,12 +43,42 @@ fn camera(frame: usize) -> Camera {
     }
 }
 
+/// The shadows of a sun straight above [0, 100]² (one orthographic layer of `SHADOW_MAP`²).
+fn shadows() -> Shadows {
+    let view =
+        tw_runtime::camera::look_at_rh(Vec3::new(50.0, 50.0, 150.0), Vec3::new(50.0, 50.0, 0.0), Vec3::Y);
+    // Orthographic over ±60 around the centre, depth 0 at 1, 1 at 200.
+    let proj = glam::Mat4::from_cols(
+        glam::Vec4::new(1.0 / 60.0, 0.0, 0.0, 0.0),
+        glam::Vec4::new(0.0, 1.0 / 60.0, 0.0, 0.0),
+        glam::Vec4::new(0.0, 0.0, -1.0 / 199.0, 0.0),
+        glam::Vec4::new(0.0, 0.0, -1.0 / 199.0, 1.0),
+    );
+    Shadows {
+        light: Light::Sun { towards: Vec3::Z },
+        layers: vec![ShadowLayer { view_proj: proj * view, split: [0.0, f32::INFINITY] }],
+        size: SHADOW_MAP,
+        bias: 0.0,
+    }
+}
+
+const SHADOW_MAP: u32 = 128;
+
 /// One frame of each strategy's passes: occluders, box queries, the second pass; then the GPU
-/// HZB cull and its draw where the device has it.
+/// HZB cull and its draw where the device has it. Every other frame draws the shadow map first
+/// and shades with shadows (one cluster classed lit, the others looked up).
 fn frame(r: &mut Renderer, i: usize, scene: &[PageCluster], gpu_cull: bool) {
     let cam = camera(i);
     let list: Vec<(ClusterRef, &PageCluster)> =
         scene.iter().enumerate().map(|(k, c)| (key(k as u32 + 1), c)).collect();
+    if i.is_multiple_of(2) {
+        let s = shadows();
+        r.draw_shadow_map(0, &s.layers[0].view_proj, 1.0, &list, true).unwrap();
+        r.set_shadows(Some(&s));
+        r.set_shadow_classes(&[(list[0].0, ShadowClass::Lit)]);
+    } else {
+        r.set_shadows(None);
+    }
     let (occluders, candidates) = list.split_at(1);
     let boxes: Vec<(Vec3, Vec3)> = candidates
         .iter()
@@ -99,11 +130,15 @@ fn frames_do_not_grow_process_memory_vulkan() {
         quad(60, 60, 70, 70, 60, 4),
     ];
     let gpu_cull = r.gpu_cull_supported().is_ok();
-    // Warm-up: every pipeline made (each colour mode is one), pool and read-back buffers at size.
-    let modes = [ColorMode::Material, ColorMode::Object, ColorMode::Level, ColorMode::Cluster];
+    r.set_shadow_map(SHADOW_MAP, 1).unwrap();
+    // Warm-up: every pipeline made (each colour mode, with and without shadows, is one), pool
+    // and read-back buffers at size.
+    let modes =
+        [ColorMode::Material, ColorMode::Object, ColorMode::Level, ColorMode::Cluster, ColorMode::Shadow];
     for (i, &mode) in modes.iter().enumerate() {
         r.set_color_mode(mode);
-        frame(&mut r, i, &scene, gpu_cull);
+        frame(&mut r, 2 * i, &scene, gpu_cull);
+        frame(&mut r, 2 * i + 1, &scene, gpu_cull);
     }
     for i in 0..10 {
         frame(&mut r, i, &scene, gpu_cull);

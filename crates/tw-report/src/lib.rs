@@ -182,6 +182,45 @@ pub struct FrameRecord {
     /// nothing is needed (no pixel covered, or ε = 0).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub lod_efficiency: Option<f64>,
+    /// `--popping`: share of the pixels (0..1) that differ between the frame's camera drawn with
+    /// the previous frame's cut and with its own (the LOD's own image change; 0 on the first
+    /// frame), and their PSNR in dB (`None` where nothing differs).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub popping_changed_pixels: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub popping_psnr_db: Option<f64>,
+    /// `--light`: the shadow stage's set sizes and times.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub shadow: Option<ShadowRecord>,
+}
+
+/// One frame's shadow stage (Govindaraju's thesis ch. 4 reports the same sets): the light-view
+/// sets drawn into the shadow map, how cross-culling split the receivers (the eye's cut), and the
+/// stage's times (ms; `total_ms` is part of `frame_ms`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ShadowRecord {
+    /// Shadow-map layers (sun cascades or cube faces).
+    pub layers: u32,
+    pub light_clusters: u64,
+    pub light_triangles: u64,
+    /// Of `light_triangles`, those drawn after occlusion culling from the light.
+    #[serde(default)]
+    pub light_drawn_triangles: u64,
+    /// Of the light-view clusters, those the light sees (not hidden behind the map).
+    pub light_visible_clusters: u64,
+    /// Of those, the casters: in front of a partly shadowed receiver.
+    pub caster_clusters: u64,
+    pub caster_triangles: u64,
+    pub receiver_clusters: u64,
+    pub lit_triangles: u64,
+    pub shadowed_triangles: u64,
+    pub partial_triangles: u64,
+    pub partial_clusters: u64,
+    pub total_ms: f64,
+    pub select_ms: f64,
+    pub draw_ms: f64,
+    pub readback_ms: f64,
+    pub classify_ms: f64,
 }
 
 impl FrameRecord {

@@ -8,6 +8,9 @@ pub enum RuntimeError {
     /// A camera string (`"x,y,z;x,y,z;x,y,z;fovy"`) could not be parsed.
     #[error("camera {input:?}: {msg}")]
     CameraParse { input: String, msg: String },
+    /// A light string (`sun`, `sun:AZ,EL`, `point:X,Y,Z`) could not be parsed.
+    #[error("light {input:?}: {msg}")]
+    LightParse { input: String, msg: String },
     /// A camera whose parameters cannot give a view (eye = target, up parallel to the view
     /// direction, field of view or clip planes out of range, non-finite values).
     #[error("invalid camera: {0}")]
@@ -21,6 +24,9 @@ pub enum RuntimeError {
     /// The page loader threads could not be started.
     #[error("page loader: {0}")]
     Loader(String),
+    /// Shadow settings out of range, or a light depth map that does not match its layer.
+    #[error("shadows: {0}")]
+    Shadow(String),
     /// A camera path file that cannot be read, parsed or written.
     #[error("camera path {}: {msg}", path.display())]
     Path { path: std::path::PathBuf, msg: String },

@@ -6,7 +6,9 @@
 //! - [`fuzz`]: entry points of the fuzz targets that reach the runtime (path files, stores);
 //! - [`hzb`]: the hierarchical Z-buffer and its conservative box test (GigaWalk's occlusion test);
 //! - [`occlusion`]: two-pass occlusion culling of a cut against an HZB of last frame's visible set;
+//! - [`light`]: the shadow-casting light (sun or point) and its command-line form;
 //! - [`lod_error`]: the pixel error of an object-space error (docs/DESIGN.md, D3);
+//! - [`shadow`]: shadow-map layers, the lookup rule, cross-culling of receivers and casters;
 //! - [`select`]: the LOD cut and frustum culling of one frame over a store;
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
 //! - [`availability`]: the availability rule (what may be drawn while pages are missing);
@@ -50,6 +52,7 @@ pub mod error;
 pub mod frustum;
 pub mod fuzz;
 pub mod hzb;
+pub mod light;
 pub mod lod_error;
 pub mod node_test;
 pub mod occlusion;
@@ -58,6 +61,7 @@ pub mod pathgen;
 pub mod prefetch;
 pub mod resolve;
 pub mod select;
+pub mod shadow;
 pub mod stream;
 pub mod triangle_test;
 
@@ -67,6 +71,7 @@ pub use camera::{Camera, InputCamera};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use hzb::{Hzb, HzbResult};
+pub use light::{InputLight, Light};
 pub use lod_error::LodMetric;
 pub use node_test::{test_hierarchy, NodeTestOptions, NodeTestResult, NodeTestSwitch};
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
@@ -78,6 +83,7 @@ pub use pathgen::{
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use resolve::SelectionPages;
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
+pub use shadow::{ShadowClass, ShadowLayer, Shadows};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};
 pub use triangle_test::{
     full_mask, test_triangles, visible_triangles, visible_triangles_assuming, TriangleMask,

@@ -61,6 +61,14 @@
 //! again by that rule over the settled cache ([`Selector::select_into`]). Only a failed root
 //! page, which has no ancestor, leaves a hole; the commands report every failed page.
 //!
+//! **The light's view** (Govindaraju's thesis ch. 4, "LOD consistency": always the eye's LOD).
+//! The clusters that can cast a shadow into a shadow-map layer are the *eye's* LOD cut culled
+//! by the *layer's* frustum ([`Selector::select_light`], [`Selector::select_light_available`]):
+//! the LOD metric is the eye camera's pixel error and only the culling frustum changes, so a
+//! cluster drawn in both views is drawn at the same level (no false self-shadowing), and its
+//! shadow changes only when the eye's cut does. A traversal takes both as a [`View`]; the eye's
+//! own selection is the view whose frustum is the eye's.
+//!
 //! **Two residency modes.** [`Selector::select`] waits: pages are loaded through
 //! [`PageCache::get`] on a miss, and the cut is exactly the render rule's. [`Selector::select_available`]
 //! never waits: it follows the availability rule of docs/FORMAT.md ([`crate::availability`]):
@@ -74,7 +82,7 @@
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, OnceLock};
 
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use tw_store::Store;
 
 use crate::availability::{Availability, Requests};
@@ -147,6 +155,37 @@ pub struct Selection {
     pub clusters: Vec<ClusterRef>,
     pub triangles: u64,
     pub stats: SelectStats,
+}
+
+/// What one traversal measures and culls by: the LOD metric of the camera whose pixel error
+/// decides the cut (always the eye's), and the frustum that culls (the eye's, or a shadow-map
+/// layer's for the light's view; see the module documentation).
+#[derive(Clone, Copy, Debug)]
+struct View {
+    metric: LodMetric,
+    frustum: Frustum,
+    /// Whether `frustum` culls at all (`--frustum off` turns culling off in every view).
+    cull: bool,
+    tau: f64,
+}
+
+impl View {
+    /// The eye's own view: its LOD metric, culled by its frustum.
+    fn eye(camera: &Camera, options: &SelectOptions) -> View {
+        let [w, h] = options.viewport.map(|v| v.max(1) as f32);
+        View::culled_by(camera, &camera.view_projection(w / h), options)
+    }
+
+    /// The eye's LOD metric, culled by the frustum of `view_proj` (a shadow-map layer's).
+    fn culled_by(eye: &Camera, view_proj: &Mat4, options: &SelectOptions) -> View {
+        let h = options.viewport[1].max(1) as f32;
+        View {
+            metric: LodMetric::new(eye, h),
+            frustum: Frustum::from_view_projection(view_proj),
+            cull: options.frustum_culling,
+            tau: options.tau as f64,
+        }
+    }
 }
 
 /// Per-store data for [`Selector::select`], computed once from the tables.
@@ -346,9 +385,31 @@ impl Selector {
         options: &SelectOptions,
         out: &mut Selection,
     ) {
-        self.traverse(store, &mut Mode::Wait(cache), camera, options, out);
+        self.select_view(store, cache, &View::eye(camera, options), out);
+    }
+
+    /// The light's view of a shadow-map layer, waiting for pages: the cut of the *eye's* LOD
+    /// metric (`eye`, `options.tau`, `options.viewport`) culled by the frustum of
+    /// `layer_view_proj` instead of the eye's (module documentation, "The light's view"). A
+    /// cluster it selects is at the level the eye's cut has it, wherever the eye looks.
+    pub fn select_light(
+        &self,
+        store: &Store,
+        cache: &PageCache,
+        eye: &Camera,
+        layer_view_proj: &Mat4,
+        options: &SelectOptions,
+    ) -> Selection {
+        let mut out = Selection::default();
+        self.select_view(store, cache, &View::culled_by(eye, layer_view_proj, options), &mut out);
+        out
+    }
+
+    /// The waiting mode's selection of `view` (with the failed-page fallback).
+    fn select_view(&self, store: &Store, cache: &PageCache, view: &View, out: &mut Selection) {
+        self.traverse(store, &mut Mode::Wait(cache), view, out);
         if out.stats.groups_failed > 0 {
-            self.select_around_failures(store, cache, camera, options, out);
+            self.select_around_failures(store, cache, view, out);
         }
     }
 
@@ -359,14 +420,7 @@ impl Selector {
     /// is the render rule's exactly; with a failed page the cut is the availability rule's
     /// over a cache that holds every page it could load: crack-free, and complete but for the
     /// failed pages' geometry that no loaded ancestor covers.
-    fn select_around_failures(
-        &self,
-        store: &Store,
-        cache: &PageCache,
-        camera: &Camera,
-        options: &SelectOptions,
-        out: &mut Selection,
-    ) {
+    fn select_around_failures(&self, store: &Store, cache: &PageCache, view: &View, out: &mut Selection) {
         // Each round loads every page the last one wanted; a round wants more only where a
         // newly loaded group exposes finer ones, so the rounds are bounded by the DAG's depth.
         // The cap guards against a cache budget too small to hold a whole cut (loads evicting
@@ -377,7 +431,8 @@ impl Selector {
         for _ in 0..MAX_ROUNDS {
             availability.begin(store);
             let mut requests = Requests::default();
-            self.select_available(store, cache, &mut availability, &mut requests, camera, options, out);
+            let mut mode = Mode::Stream { cache, availability: &mut availability, requests: &mut requests };
+            self.traverse(store, &mut mode, view, out);
             let mut loaded = false;
             for (page, _) in requests.sorted() {
                 loaded |= cache.get(store, page).is_ok();
@@ -407,24 +462,34 @@ impl Selector {
         out: &mut Selection,
     ) {
         let mut mode = Mode::Stream { cache, availability, requests };
-        self.traverse(store, &mut mode, camera, options, out);
+        self.traverse(store, &mut mode, &View::eye(camera, options), out);
     }
 
-    fn traverse(
+    /// [`select_light`](Self::select_light) without waiting: the availability rule over the
+    /// frame's residency snapshot, as [`select_available`](Self::select_available) (the same
+    /// snapshot as the eye's cut of the frame, so both views draw from the same resident set;
+    /// missing pages are added to `requests` with the eye metric's priority).
+    #[allow(clippy::too_many_arguments)]
+    pub fn select_light_available(
         &self,
         store: &Store,
-        mode: &mut Mode<'_>,
-        camera: &Camera,
+        cache: &PageCache,
+        availability: &mut Availability,
+        requests: &mut Requests,
+        eye: &Camera,
+        layer_view_proj: &Mat4,
         options: &SelectOptions,
         out: &mut Selection,
     ) {
+        let mut mode = Mode::Stream { cache, availability, requests };
+        self.traverse(store, &mut mode, &View::culled_by(eye, layer_view_proj, options), out);
+    }
+
+    fn traverse(&self, store: &Store, mode: &mut Mode<'_>, view: &View, out: &mut Selection) {
         out.clusters.clear();
         out.triangles = 0;
         out.stats = SelectStats::default();
-        let [w, h] = options.viewport.map(|v| v.max(1) as f32);
-        let metric = LodMetric::new(camera, h);
-        let frustum = Frustum::from_view_projection(&camera.view_projection(w / h));
-        let tau = options.tau as f64;
+        let (metric, frustum, tau) = (view.metric, &view.frustum, view.tau);
         let nodes = store.nodes();
         let groups = store.groups();
         let stats = &mut out.stats;
@@ -432,7 +497,7 @@ impl Selector {
         let mut verdicts: Vec<(u32, Verdict)> = Vec::new();
         let mut from_steps = 0u64;
         // (node, inside): `inside` = an ancestor's box is entirely inside the frustum.
-        let mut stack: Vec<(u32, bool)> = vec![(0, !options.frustum_culling)];
+        let mut stack: Vec<(u32, bool)> = vec![(0, !view.cull)];
         if nodes.is_empty() {
             stack.clear();
         }

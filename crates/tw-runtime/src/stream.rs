@@ -27,6 +27,12 @@
 //! requested again; its groups fall back to their ancestors. Dropping the [`Streamer`] stops
 //! and joins the threads (a load in progress is finished first).
 //!
+//! **The light's view** ([`Streamer::select_light`]): after [`Streamer::frame`], the shadow-map
+//! layers' selections (the eye's LOD cut culled by each layer's frustum, [`Selector::select_light`])
+//! run over the *same* residency snapshot, so the eye and the light draw from one resident set.
+//! Their missing pages join the frame's own requests (merged, highest priority kept) and the
+//! loaders' queues are replaced by the union: a frame never waits for the light's pages either.
+//!
 //! With `loader_threads = 0` nothing loads in the background: the caller loads with
 //! [`Streamer::load_queued`] (deterministic tests, or a single-threaded program).
 
@@ -42,7 +48,7 @@ use crate::cache::{CacheStats, Eviction, Inserted, PageCache, ResidentPage};
 use crate::camera::Camera;
 use crate::error::RuntimeError;
 use crate::prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
-use crate::select::{SelectOptions, Selection, Selector};
+use crate::select::{ClusterRef, SelectOptions, Selection, Selector};
 
 /// How a [`Streamer`] loads.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -256,6 +262,11 @@ pub struct Streamer {
     prefetch_worker: Option<PrefetchWorker>,
     /// Incremented by [`Streamer::reset_history`]: results of older prefetch jobs are dropped.
     generation: u64,
+    /// The demand and prefetch requests last submitted by [`Streamer::frame`], to which the
+    /// light views of the same frame add theirs ([`Streamer::select_light`]).
+    submitted: (Requests, Requests),
+    /// Whether `availability` holds a frame's snapshot (a [`Streamer::frame`] began one).
+    snapshot_taken: bool,
 }
 
 /// The prefetch views' selection on a thread of its own (module documentation, step 3): the
@@ -393,6 +404,8 @@ impl Streamer {
             prefetch_list: Default::default(),
             prefetch_worker: None,
             generation: 0,
+            submitted: Default::default(),
+            snapshot_taken: false,
         }
     }
 
@@ -430,6 +443,7 @@ impl Streamer {
         let start = std::time::Instant::now();
         self.cache.begin_frame();
         self.availability.begin(&self.store);
+        self.snapshot_taken = true;
         let (store, cache) = (&*self.store, &*self.cache);
         let mut demand = Requests::default();
         let mut selection = Selection::default();
@@ -492,20 +506,84 @@ impl Streamer {
         }
         let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);
+        let pages = self.held_pages(&selection.clusters);
+        let (pending, in_flight) = self.submit(&demand, &prefetch);
+        let queues = (demand.len() as u64, prefetch.len() as u64, pending as u64, in_flight as u64);
+        self.submitted = (demand, prefetch);
+        let stats = self.frame_stats(&selection, queues);
+        StreamFrame { selection, times, pages, stats }
+    }
+
+    /// The pages of `clusters` from the frame's residency snapshot, sorted by page index.
+    fn held_pages(&mut self, clusters: &[ClusterRef]) -> Vec<(u32, Arc<ResidentPage>)> {
         let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
-        for c in &selection.clusters {
+        for c in clusters {
             if pages.last().map(|(p, _)| *p) != Some(c.page) {
-                if let Some(p) = self.availability.page(cache, c.page) {
+                if let Some(p) = self.availability.page(&self.cache, c.page) {
                     pages.push((c.page, p));
                 }
             }
         }
         pages.sort_by_key(|(p, _)| *p);
         pages.dedup_by_key(|(p, _)| *p);
-        let (pending, in_flight) = self.submit(&demand, &prefetch);
-        let queues = (demand.len() as u64, prefetch.len() as u64, pending as u64, in_flight as u64);
-        let stats = self.frame_stats(&selection, queues);
-        StreamFrame { selection, times, pages, stats }
+        pages
+    }
+
+    /// The light's view of one shadow-map layer in the current frame (module documentation):
+    /// the cut of `eye`'s LOD metric culled by `layer_view_proj`, by the availability rule over
+    /// the residency snapshot of the last [`frame`](Self::frame) (call it after `frame`, with
+    /// the same `eye` and `options`), and the pages its clusters draw from (held). Its missing
+    /// pages are requested along with the frame's (never waiting; a frame asks for a missing
+    /// page once, for the first view that meets it, so a page the eye's cut already wants keeps
+    /// the eye's priority, and one that the frame's prefetch views met first — selected on the
+    /// frame thread only without loader threads — stays in the prefetch queue). Called before any
+    /// frame, it selects over an empty snapshot: the root pages only.
+    pub fn select_light(
+        &mut self,
+        eye: &Camera,
+        layer_view_proj: &glam::Mat4,
+        options: &SelectOptions,
+    ) -> (Selection, Vec<(u32, Arc<ResidentPage>)>) {
+        if !self.snapshot_taken {
+            self.availability.begin(&self.store);
+            self.snapshot_taken = true;
+        }
+        let mut light = Requests::default();
+        let mut selection = Selection::default();
+        self.selector.select_light_available(
+            &self.store,
+            &self.cache,
+            &mut self.availability,
+            &mut light,
+            eye,
+            layer_view_proj,
+            options,
+            &mut selection,
+        );
+        let pages = self.held_pages(&selection.clusters);
+        if !light.is_empty() {
+            let (demand, prefetch) = &mut self.submitted;
+            for (&page, &priority) in &light.0 {
+                demand.add(page, priority);
+            }
+            prefetch.0.retain(|p, _| !light.0.contains_key(p));
+            let (demand, prefetch) = std::mem::take(&mut self.submitted);
+            self.submit(&demand, &prefetch);
+            self.submitted = (demand, prefetch);
+        }
+        (selection, pages)
+    }
+
+    /// The waiting mode of [`select_light`](Self::select_light): the light's view of the render
+    /// rule's cut (pages loaded on the caller's thread, as
+    /// [`select_blocking`](Self::select_blocking)).
+    pub fn select_light_blocking(
+        &self,
+        eye: &Camera,
+        layer_view_proj: &glam::Mat4,
+        options: &SelectOptions,
+    ) -> Selection {
+        self.selector.select_light(&self.store, &self.cache, eye, layer_view_proj, options)
     }
 
     /// The statistics of the frame that selected `selection` (the cache's counters since the

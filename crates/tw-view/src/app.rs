@@ -18,6 +18,12 @@
 //! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
 //! tracer's flashlight; while the camera stands still the ray-traced image gathers samples, and
 //! the scene asks for frames until it has them all ([`Scene::wants_redraw`]).
+//!
+//! Shadows of one light ([`crate::settings::ShadowControls`]): J turns them on and off; `[` and
+//! `]` turn the sun around the up axis and Shift+`[` / `]` lower and raise it (held, they keep
+//! turning: key repeats count), U leaves a point light at the eye (again: back to the sun). Each
+//! says the light in the message line; the HUD's "shadows" line and the controls' "Shadows"
+//! section show the last shadow stage's figures.
 
 use std::collections::HashSet;
 use std::sync::Arc;
@@ -42,7 +48,7 @@ use crate::recorder::{Player, Recorder};
 use crate::review::{format_distance, Measure, ObjectFilter, Picked};
 use crate::scene::{FrameInfo, Scene};
 use crate::script::{ScriptRunner, Step};
-use crate::settings::{Coloring, RendererKind, Settings};
+use crate::settings::{Coloring, LightKey, LightKind, RendererKind, Settings, SUN_STEP_DEG};
 use crate::ui::{self, Action, Line};
 use crate::viewpoints::{Preset, Viewpoint, Viewpoints};
 use crate::ViewOptions;
@@ -380,11 +386,53 @@ impl App {
                 };
                 self.say(format!("flashlight {state}{note}"));
             }
+            Action::ToggleShadows => self.light_key(LightKey::Toggle),
+            Action::TogglePointLight => self.light_key(LightKey::PointAtEye(self.controller.eye)),
+            Action::MovePointLight => {
+                self.settings.shadows.point = self.controller.eye;
+                self.say(format!("shadows: {}", self.light_text()));
+            }
             Action::ToggleFullscreen => {
                 if let Some(w) = &self.win {
                     let full = w.window.fullscreen().is_some();
                     w.window.set_fullscreen((!full).then_some(winit::window::Fullscreen::Borderless(None)));
                 }
+            }
+        }
+    }
+
+    /// Carries out a light key and says what the light is now.
+    fn light_key(&mut self, key: LightKey) {
+        self.settings.shadows.press(key);
+        // A frozen cut is drawn again without the shadow stage: its maps stay the last
+        // selected frame's.
+        let frozen = self.settings.lod_freeze && self.settings.renderer == RendererKind::Raster;
+        let note =
+            if frozen { "; the LOD cut is frozen: the shadows follow when L unfreezes it" } else { "" };
+        let m = if self.settings.shadows.enabled {
+            let keys = match self.settings.shadows.kind {
+                LightKind::Sun => "[ ] turn, Shift+[ ] raise, U point light",
+                LightKind::Point => "U back to the sun",
+            };
+            format!("shadows: {} ({keys}, J off){note}", self.light_text())
+        } else {
+            format!("shadows off (J on){note}")
+        };
+        self.say(m);
+    }
+
+    /// The light in words: the sun's angles, or the point light's position in input
+    /// coordinates and the store's units.
+    fn light_text(&self) -> String {
+        let s = &self.settings.shadows;
+        match s.kind {
+            LightKind::Sun => {
+                format!("sun at azimuth {:.0}°, elevation {:.0}°", s.azimuth_deg, s.elevation_deg)
+            }
+            LightKind::Point => {
+                let [x, y, z] = self.scene.input_position(s.point).map(tw_runtime::pathgen::format_length);
+                let units = tw_store::units::unit_suffix(self.scene.units());
+                format!("point light at ({x}, {y}, {z}) {units}")
             }
         }
     }
@@ -651,10 +699,17 @@ impl App {
             return;
         }
         self.keys.insert(code);
+        let shift = self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight);
+        // The sun keys repeat while held: the shadows sweep as the sun turns.
+        if let KeyCode::BracketLeft | KeyCode::BracketRight = code {
+            let step = if code == KeyCode::BracketLeft { -SUN_STEP_DEG } else { SUN_STEP_DEG };
+            let (azimuth_deg, elevation_deg) = if shift { (0.0, step) } else { (step, 0.0) };
+            self.light_key(LightKey::TurnSun { azimuth_deg, elevation_deg });
+            return;
+        }
         if repeat {
             return;
         }
-        let shift = self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight);
         match code {
             KeyCode::Escape if self.measuring || self.picked.is_some() => {
                 self.measuring = false;
@@ -701,6 +756,8 @@ impl App {
             KeyCode::KeyR => self.act(Action::ToggleRecording),
             KeyCode::KeyG => self.act(Action::ToggleRenderer),
             KeyCode::KeyT => self.act(Action::ToggleFlashlight),
+            KeyCode::KeyJ => self.act(Action::ToggleShadows),
+            KeyCode::KeyU => self.act(Action::TogglePointLight),
             KeyCode::KeyP => self.act(Action::TogglePlayback),
             KeyCode::Home => self.act(Action::ResetView),
             KeyCode::Tab => {
@@ -1105,6 +1162,9 @@ impl App {
                 RendererKind::Raster => 0,
                 RendererKind::Rt => crate::accumulate::MAX_SAMPLES,
             },
+            light: if self.settings.shadows.enabled { self.light_text() } else { String::new() },
+            shadow: (self.settings.renderer == RendererKind::Raster).then_some(info.shadow),
+            cross_culling: self.settings.shadows.cross_culling,
         }
     }
 

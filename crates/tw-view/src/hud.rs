@@ -3,7 +3,9 @@
 //! the figures of one frame turned into labelled lines. [`crate::ui`] draws them.
 
 use std::collections::VecDeque;
+use std::time::Duration;
 
+use tw_frame::ShadowInfo;
 use tw_runtime::pathgen::format_length;
 use tw_store::units::unit_suffix;
 
@@ -138,6 +140,12 @@ pub struct HudFrame {
     pub renderer: String,
     pub samples: u32,
     pub max_samples: u32,
+    /// The light casting shadows, in words (empty while shadows are off); rasterized, the
+    /// last shadow stage's figures and whether it cross-culled (ray traced: `None`, the
+    /// shadows are shadow rays inside the trace).
+    pub light: String,
+    pub shadow: Option<ShadowInfo>,
+    pub cross_culling: bool,
 }
 
 impl HudFrame {
@@ -152,6 +160,7 @@ impl HudFrame {
             ),
             ("triangles drawn", count(self.triangles)),
             ("clusters drawn", count(self.clusters)),
+            ("shadows", self.shadow_summary()),
             ("nodes visible", count(self.nodes_visible)),
             ("frustum-culled", count(self.nodes_frustum_culled)),
             ("LOD-culled", count(self.nodes_lod_culled)),
@@ -193,12 +202,66 @@ impl HudFrame {
         lines
     }
 
+    /// The HUD's one shadow line, short to keep the HUD narrow: off, or the stage's time and
+    /// layers (shadow rays when ray traced). The light is in the "Shadows" section.
+    fn shadow_summary(&self) -> String {
+        match (&self.shadow, self.light.is_empty()) {
+            (_, true) => "off (J)".to_string(),
+            (Some(s), false) => format!("{:.1} ms, {} layers", ms(s.total), s.layers),
+            (None, false) => "shadow rays".to_string(),
+        }
+    }
+
+    /// The shadow stage's figures for the "Shadows" section (Govindaraju's thesis ch. 4's set
+    /// sizes: light-view sets, casters, receivers by class), empty while shadows are off.
+    pub fn shadow_lines(&self) -> Vec<(&'static str, String)> {
+        if self.light.is_empty() {
+            return Vec::new();
+        }
+        let Some(s) = &self.shadow else {
+            return vec![
+                ("light", self.light.clone()),
+                ("shadows", "shadow rays of the ray tracer".to_string()),
+            ];
+        };
+        let set = |clusters: u64, triangles: u64| {
+            format!("{} clusters, {} triangles", count(clusters), count(triangles))
+        };
+        let mut lines = vec![
+            ("light", self.light.clone()),
+            ("stage", format!("{:.1} ms", ms(s.total))),
+            ("fit / select / draw", format!("{:.1} / {:.1} / {:.1} ms", ms(s.fit), ms(s.select), ms(s.draw))),
+            ("read back / classify", format!("{:.1} / {:.1} ms", ms(s.readback), ms(s.classify))),
+            ("layers", s.layers.to_string()),
+            ("light-view sets", set(s.sets.light_cut, s.light_triangles)),
+        ];
+        if self.cross_culling {
+            lines.extend([
+                ("light-visible", format!("{} clusters", count(s.sets.light_visible))),
+                ("casters", set(s.sets.casters, s.caster_triangles)),
+                ("receivers lit", set(s.sets.receivers_lit, s.sets.triangles_lit)),
+                ("shadowed", set(s.sets.receivers_shadowed, s.sets.triangles_shadowed)),
+                ("partly shadowed", set(s.sets.receivers_partial, s.sets.triangles_partial)),
+            ]);
+        } else {
+            lines.push((
+                "receivers",
+                format!("{} (all look the map up)", set(s.sets.receivers_partial, s.sets.triangles_partial)),
+            ));
+        }
+        lines
+    }
+
     /// The eye's input coordinates with the store's unit (`"12.5, -3.20, 1.70 m"`), to three
     /// significant digits at any scale.
     fn position_text(&self) -> String {
         let [x, y, z] = self.position.map(format_length);
         format!("{x}, {y}, {z} {}", unit_suffix(&self.units))
     }
+}
+
+fn ms(d: Duration) -> f32 {
+    d.as_secs_f32() * 1e3
 }
 
 /// `1234567` → `"1.23 M"`.
@@ -230,6 +293,7 @@ pub fn bytes(n: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tw_runtime::shadow::ShadowSetStats;
 
     #[test]
     fn fps_over_the_last_second() {
@@ -318,5 +382,50 @@ mod tests {
         assert!(lines.iter().any(|l| l.0 == "occlusion-culled"));
         assert_eq!(bytes(10), "10 B");
         assert_eq!(count(12_345), "12.3 k");
+    }
+
+    #[test]
+    fn shadow_lines_show_the_stages_figures() {
+        let off = HudFrame::default();
+        assert!(off.shadow_lines().is_empty());
+        assert!(off.lines().contains(&("shadows", "off (J)".to_string())));
+        let sets = ShadowSetStats {
+            receivers_lit: 5,
+            receivers_shadowed: 6,
+            receivers_partial: 7,
+            triangles_lit: 500,
+            triangles_shadowed: 600,
+            triangles_partial: 700,
+            light_cut: 40,
+            light_visible: 30,
+            casters: 12,
+        };
+        let info = ShadowInfo {
+            layers: 3,
+            light_triangles: 12_000,
+            sets,
+            caster_triangles: 3_000,
+            total: Duration::from_micros(4_300),
+            ..Default::default()
+        };
+        let h =
+            HudFrame { light: "sun".into(), shadow: Some(info), cross_culling: true, ..Default::default() };
+        assert!(h.lines().contains(&("shadows", "4.3 ms, 3 layers".to_string())));
+        let lines = h.shadow_lines();
+        let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
+        assert_eq!(get("light-view sets"), "40 clusters, 12.0 k triangles");
+        assert_eq!(get("casters"), "12 clusters, 3000 triangles");
+        assert_eq!(get("receivers lit"), "5 clusters, 500 triangles");
+        assert_eq!(get("shadowed"), "6 clusters, 600 triangles");
+        assert_eq!(get("partly shadowed"), "7 clusters, 700 triangles");
+        assert_eq!(get("stage"), "4.3 ms");
+        assert_eq!(get("light"), "sun");
+        let h = HudFrame { cross_culling: false, ..h };
+        let lines = h.shadow_lines();
+        assert!(lines.iter().all(|l| l.0 != "casters"), "no classes without cross-culling");
+        assert!(lines.iter().any(|l| l.0 == "receivers"));
+        let rt = HudFrame { light: "sun".into(), shadow: None, ..Default::default() };
+        assert!(rt.lines().contains(&("shadows", "shadow rays".to_string())));
+        assert_eq!(rt.shadow_lines().len(), 2);
     }
 }

@@ -4,7 +4,7 @@
 //!
 //! Modules, one concern each:
 //! - [`settings`]: every control as plain data (pixel error, occlusion strategy, culling, LOD
-//!   freeze, memory budget, colourings, debug view);
+//!   freeze, memory budget, colourings, debug view, shadows of one light and its keys);
 //! - [`controller`]: fly / walk / orbit camera controllers (plain data, unit-tested);
 //! - [`collision`]: walk mode's capsule against the resident geometry (`tw-collide`);
 //! - [`hud`]: fps, frame-time graph, disk throughput and the HUD's figures;

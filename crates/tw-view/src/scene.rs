@@ -27,6 +27,14 @@
 //!   debug view's path, [`tw_gpu::Renderer::draw_masked`]): a cluster mixes objects, so the
 //!   filter works per triangle, and costs nothing while every object is shown. The picked
 //!   object is tinted through the renderer's object colour table (the material colouring).
+//! - **Shadows** ([`Settings::shadows`], [`crate::settings::ShadowControls`]): each frame's
+//!   `FrameSettings::shadows` is built from the controls — the sun's azimuth and elevation
+//!   around the scene's up axis (the store's or `--up`'s) turned into a scene-space direction the
+//!   way `--light sun:AZ,EL` is, a point light as it is — and tw-frame draws the shadow maps of
+//!   the light-view sets before the eye's pass. The light is not part of what the cut is
+//!   selected from: moving it draws the frame again without resetting the occlusion history or
+//!   asking for a settling frame. With the LOD cut frozen the maps of the last selected frame
+//!   stay. Ray traced, the same light goes to the tracer's shadow rays.
 //! - **Ray tracing** ([`Settings::renderer`] `Rt`): [`crate::traced::TracedScene`] selects,
 //!   streams and traces the frame on the CPU and keeps the running mean of its samples while
 //!   the camera stands still; the mean is written into the scene texture
@@ -68,6 +76,9 @@ pub struct FrameInfo {
     pub gpu: PoolStats,
     /// Ray traced: samples per pixel in the image shown (0 when rasterized).
     pub samples: u32,
+    /// The shadow stage (all zero without shadows, and when ray traced: shadow rays are part
+    /// of `render_ms`); its time is not in the other stages' times.
+    pub shadow: tw_frame::ShadowInfo,
 }
 
 /// What the current selection was made from.
@@ -468,6 +479,7 @@ impl Scene {
             occlusion,
             filtered,
         };
+        let shadows = settings.shadows.frame_settings(self.store.header(), self.up_axis, cull);
         let frozen = settings.lod_freeze && self.key.is_some();
         let mut info = if frozen { FrameInfo { selected: false, ..self.last } } else { FrameInfo::default() };
         if !frozen {
@@ -476,15 +488,18 @@ impl Scene {
                 frustum_culling: settings.frustum_culling,
                 occlusion,
                 wait_for_pages: false,
+                shadows,
                 ..Default::default()
             };
             let d = walk.draw_frame(cull, &fs)?;
             let t = &d.info.times;
+            // The shadow stage is in the total only: drawing is what the other stages leave.
+            let other_stages = t.select + t.cull + d.info.shadow.total;
             info = FrameInfo {
                 selected: true,
                 select_ms: t.select.as_secs_f32() * 1e3,
                 cull_ms: t.cull.as_secs_f32() * 1e3,
-                render_ms: t.total.saturating_sub(t.select + t.cull).as_secs_f32() * 1e3,
+                render_ms: t.total.saturating_sub(other_stages).as_secs_f32() * 1e3,
                 triangles: d.info.triangles,
                 clusters: d.info.clusters,
                 stats: d.info.select,
@@ -492,6 +507,7 @@ impl Scene {
                 occlusion: d.info.occlusion,
                 gpu: d.info.gpu,
                 samples: 0,
+                shadow: d.info.shadow,
             };
             self.bytes_read += d.info.stream.bytes_read;
             self.drawn = d.drawn;
@@ -579,8 +595,9 @@ impl Scene {
             self.key = None;
             self.traced = Some(TracedScene::new(self.store.clone(), size, self.memory_budget)?);
         }
+        let light = settings.shadows.frame_settings(self.store.header(), self.up_axis, draw).map(|s| s.light);
         let traced = self.traced.as_mut().expect("made above");
-        let out = traced.frame(draw, settings, size, self.highlight)?;
+        let out = traced.frame(draw, settings, light, size, self.highlight)?;
         let t = &out.info.times;
         let info = FrameInfo {
             selected: true,

@@ -10,6 +10,7 @@
 //! hold W 20            # hold a key for 20 frames (W A S D Q E, Up Down Left Right, Shift…)
 //! press F1             # press and release a key (any key the viewer knows: F1, L, C, 2, …)
 //! press Shift+H        # … with Shift held (show all objects)
+//! press ]              # the sun keys: ] [ turn it, Shift+] Shift+[ raise and lower it
 //! look 120 -40         # move the mouse-look by (dx, dy) pixels
 //! scroll 3             # the wheel: +3 lines (speed)
 //! click 240 160        # left click at window pixel (x, y): pick (or measure, after `press M`)
@@ -82,7 +83,7 @@ pub enum ScriptError {
 }
 
 /// The key names a script may use (winit's `KeyCode` without the prefix, case-insensitive:
-/// `W`, `F1`, `Up`, `Shift`, `Escape`, `Home`, `2`).
+/// `W`, `F1`, `Up`, `Shift`, `Escape`, `Home`, `2`, `[`, `]`).
 pub fn parse_key(name: &str) -> Option<KeyCode> {
     let n = name.to_ascii_lowercase();
     let letter = |c: char| -> Option<KeyCode> {
@@ -117,6 +118,8 @@ pub fn parse_key(name: &str) -> Option<KeyCode> {
         "escape" | "esc" => Escape,
         "home" => Home,
         "tab" => Tab,
+        "[" | "bracketleft" => BracketLeft,
+        "]" | "bracketright" => BracketRight,
         _ => return None,
     })
 }
@@ -439,6 +442,8 @@ mod tests {
         assert_eq!(parse_key("Up"), Some(KeyCode::ArrowUp));
         assert_eq!(parse_key("3"), Some(KeyCode::Digit3));
         assert_eq!(parse_key("shift"), Some(KeyCode::ShiftLeft));
+        assert_eq!(parse_key("["), Some(KeyCode::BracketLeft));
+        assert_eq!(parse_key("BracketRight"), Some(KeyCode::BracketRight));
         assert_eq!(parse_key("xyz"), None);
     }
 

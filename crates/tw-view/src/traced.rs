@@ -7,9 +7,14 @@
 //!
 //! The accumulation starts again at one sample (the pixel centre) when anything the image
 //! depends on changes: the camera, the pixel error, frustum culling, the colouring, the
-//! flashlight, the size, the highlighted object — and the traced cut itself, which changes while
-//! streamed pages replace their coarser stand-ins (mixing samples of two cuts would blur the
-//! refinement into a ghost).
+//! flashlight, the shadows' light, the size, the highlighted object — and the traced cut
+//! itself, which changes while streamed pages replace their coarser stand-ins (mixing samples
+//! of two cuts would blur the refinement into a ghost).
+//!
+//! Shadows: the light the rasterizer's shadow maps use ([`crate::settings::ShadowControls`])
+//! goes to tw-rt's shadow rays ([`TraceSettings::light`]), so switching renderers (G) keeps the
+//! shadows; the traced cut then also holds the casters outside the view (tw-frame's traced
+//! walkthrough), and the shadow-map options (size, cascades, cross-culling) do not apply.
 //!
 //! What the rasterized mode does on top of drawing is not all here: hidden and isolated objects
 //! are still traced (a ray cannot skip a triangle of a hidden object without a per-triangle
@@ -22,7 +27,7 @@ use std::sync::Arc;
 use tw_frame::traced::TracedWalkthrough;
 use tw_frame::FrameSettings;
 use tw_rt::scene::TraceSettings;
-use tw_runtime::{Camera, Selection, StreamOptions, Streamer};
+use tw_runtime::{Camera, Light, Selection, StreamOptions, Streamer};
 use tw_store::Store;
 
 use crate::accumulate::{sample_position, Accumulator, MAX_SAMPLES};
@@ -38,6 +43,7 @@ struct TraceKey {
     frustum: bool,
     coloring: Coloring,
     flashlight: bool,
+    light: Option<Light>,
     size: [u32; 2],
     highlight: Option<u32>,
 }
@@ -77,11 +83,13 @@ impl TracedScene {
 
     /// Traces one frame from `camera` at `size` (one more sample of the image while nothing
     /// changed, until [`MAX_SAMPLES`]; then only the cut is selected again, to see whether
-    /// streamed pages changed it), tinting `highlight`'s pixels.
+    /// streamed pages changed it), tinting `highlight`'s pixels; `light`, if any, casts shadows
+    /// (shadow rays).
     pub fn frame(
         &mut self,
         camera: &Camera,
         settings: &Settings,
+        light: Option<Light>,
         size: [u32; 2],
         highlight: Option<u32>,
     ) -> Result<Traced, ViewError> {
@@ -91,6 +99,7 @@ impl TracedScene {
             frustum: settings.frustum_culling,
             coloring: settings.coloring,
             flashlight: settings.flashlight,
+            light,
             size,
             highlight,
         };
@@ -109,6 +118,7 @@ impl TracedScene {
             coloring: settings.coloring.to_gpu(),
             flashlight: settings.flashlight,
             subpixel: sample_position(position),
+            light,
         };
         let fs = FrameSettings {
             tau: settings.pixel_error,

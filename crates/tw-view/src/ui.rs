@@ -1,6 +1,7 @@
 //! The egui user interface: the scene image in the background layer with the debug view's
 //! lines over it, the HUD window (figures and the frame-time graph), the controls window (every
-//! technique's switch, camera mode, recording and playback) and the F1 help overlay. It edits
+//! technique's switch, camera mode, recording and playback, and the "Shadows" section: the
+//! light and the shadow stage's figures) and the F1 help overlay. It edits
 //! [`Settings`] in place and returns the buttons pressed as [`Action`]s for the app to carry out.
 
 use egui::{Color32, Pos2, Rect, Stroke};
@@ -8,7 +9,8 @@ use egui::{Color32, Pos2, Rect, Stroke};
 use crate::controller::Mode;
 use crate::hud::{FrameTimes, HudFrame};
 use crate::settings::{
-    Coloring, Occlusion, RendererKind, Settings, GPU_MEMORY_RANGE, MEMORY_RANGE, PIXEL_ERROR_RANGE,
+    Coloring, LightKind, Occlusion, RendererKind, Settings, ShadowControls, CASCADE_RANGE, GPU_MEMORY_RANGE,
+    MAP_SIZES, MAX_ELEVATION_DEG, MEMORY_RANGE, MIN_ELEVATION_DEG, PIXEL_ERROR_RANGE,
 };
 use crate::viewpoints::Preset;
 
@@ -37,6 +39,12 @@ pub enum Action {
     /// Raster ↔ ray traced, and the ray tracer's flashlight.
     ToggleRenderer,
     ToggleFlashlight,
+    /// J: shadows on / off.
+    ToggleShadows,
+    /// U: a point light at the eye, or (a point light casting shadows) back to the sun.
+    TogglePointLight,
+    /// The point light moved to the eye.
+    MovePointLight,
 }
 
 /// A 2D line in window points with its colour.
@@ -92,6 +100,10 @@ pub const HELP: &[(&str, &str)] = &[
     ("C", "next debug colouring"),
     ("G", "renderer: raster / rt (CPU ray tracer; supersamples while the camera stands still)"),
     ("T", "rt: flashlight with hard shadows / headlight"),
+    ("J", "shadows of one light on / off (shadow maps; rt: shadow rays)"),
+    ("[ / ]", "turn the sun around the up axis, 5° a press (turns shadows on)"),
+    ("Shift+[ / ]", "lower / raise the sun, 5° a press (1° to 90°)"),
+    ("U", "point light at the eye, left there (walk away to see its shadows) / back to the sun"),
     ("", "rt: hide, isolate, LOD freeze and the debug view's culling camera act in raster only"),
     ("R", "start / stop recording a path"),
     ("P", "play / stop the loaded path"),
@@ -245,6 +257,9 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
         }
     });
     ui.add(egui::Slider::new(&mut s.render_scale, 0.25..=1.0).text("render scale"));
+    egui::CollapsingHeader::new("Shadows (J)")
+        .default_open(s.shadows.enabled)
+        .show(ui, |ui| shadows(ui, &mut s.shadows, s.renderer, view, actions));
     ui.separator();
     let mut debug = s.debug_view;
     if ui.checkbox(&mut debug, "third-person debug view (F)").changed() {
@@ -275,6 +290,71 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
     });
     ui.separator();
     review(ui, view, actions);
+}
+
+/// The shadow controls (J, `[` `]`, U) and the last frame's shadow figures.
+fn shadows(
+    ui: &mut egui::Ui,
+    s: &mut ShadowControls,
+    renderer: RendererKind,
+    view: &View,
+    actions: &mut Vec<Action>,
+) {
+    let mut enabled = s.enabled;
+    if ui.checkbox(&mut enabled, "shadows (J)").changed() {
+        actions.push(Action::ToggleShadows);
+    }
+    ui.horizontal(|ui| {
+        ui.label("light");
+        if ui.selectable_label(s.kind == LightKind::Sun, "sun").clicked() {
+            s.kind = LightKind::Sun;
+        }
+        let point = ui.selectable_label(s.kind == LightKind::Point, "point at the eye (U)");
+        if point.clicked() && s.kind == LightKind::Sun {
+            actions.push(Action::TogglePointLight);
+        }
+        if s.kind == LightKind::Point && ui.small_button("move to the eye").clicked() {
+            actions.push(Action::MovePointLight);
+        }
+    });
+    match s.kind {
+        LightKind::Sun => {
+            ui.add(egui::Slider::new(&mut s.azimuth_deg, 0.0..=360.0).suffix("°").text("sun azimuth ([ ])"));
+            ui.add(
+                egui::Slider::new(&mut s.elevation_deg, MIN_ELEVATION_DEG..=MAX_ELEVATION_DEG)
+                    .suffix("°")
+                    .text("sun elevation (Shift+[ ])"),
+            );
+        }
+        LightKind::Point => {
+            ui.label(&view.hud.light);
+        }
+    }
+    if renderer == RendererKind::Rt {
+        ui.label("ray traced: shadow rays (the map options apply to the rasterizer)");
+    }
+    ui.checkbox(&mut s.cross_culling, "cross-culling (lit / shadowed receivers skip the map)");
+    ui.horizontal(|ui| {
+        egui::ComboBox::from_label("map texels").selected_text(s.map_size.to_string()).show_ui(ui, |ui| {
+            for n in MAP_SIZES {
+                ui.selectable_value(&mut s.map_size, n, n.to_string());
+            }
+        });
+        ui.add_enabled(
+            s.kind == LightKind::Sun,
+            egui::Slider::new(&mut s.cascades, CASCADE_RANGE).text("cascades"),
+        );
+    });
+    let lines = view.hud.shadow_lines();
+    if !lines.is_empty() {
+        egui::Grid::new("shadow figures").num_columns(2).show(ui, |ui| {
+            for (k, v) in lines {
+                ui.label(k);
+                ui.monospace(v);
+                ui.end_row();
+            }
+        });
+    }
 }
 
 /// The design-review controls: hide / isolate / show all, measuring, preset and named views.

@@ -46,6 +46,15 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     if args.compare == Some(0) {
         bail!("--compare K needs K ≥ 1 (every K-th frame)");
     }
+    if args.shadows.light.is_some() && (args.reference || args.compare.is_some() || args.exact) {
+        // The references are unshadowed full-detail frames: a PSNR against them would measure
+        // the shadows, not the culling. The shadows' own check is the ray-traced mask
+        // (tw-frame's `shadow_check` example).
+        bail!("--light cannot be combined with --reference, --compare or --exact");
+    }
+    if args.shadows.light.is_some() && args.cull_server.is_some() {
+        bail!("--light cannot be combined with --cull-server (the server culls the eye's view only)");
+    }
     let inputs: Vec<&std::path::Path> =
         [Some(args.store.as_path()), args.path.as_deref()].into_iter().flatten().collect();
     for file in tw_report::ReportFiles::in_folder(&args.out).all() {
@@ -113,6 +122,17 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     } else {
         args.occlusion.iter().map(|o| o.resolve(walk.renderer())).collect()
     };
+    let header = walk.store().header().clone();
+    let shadows = args.shadows.settings(&header, header.up_axis, &cameras[0])?;
+    // With --light every strategy runs with shadows, then without: their ratio is the shadows'
+    // cost, measured in the same process on the same frames.
+    let runs_wanted: Vec<(Occlusion, bool)> = strategies
+        .iter()
+        .flat_map(|&s| {
+            let both: &[bool] = if shadows.is_some() && traced.is_none() { &[true, false] } else { &[false] };
+            both.iter().map(move |&shadowed| (s, shadowed))
+        })
+        .collect();
     let mut remote = args.cull_server.as_deref().map(|addr| {
         let wait = std::time::Duration::from_millis(args.cull_timeout_ms);
         crate::commands::cull_client::RemoteCulling::start(addr, walk.store(), wait)
@@ -146,15 +166,17 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         }
         bar.finish_and_clear();
     }
-    for (ri, &strategy) in strategies.iter().enumerate() {
+    for (ri, &(strategy, shadowed)) in runs_wanted.iter().enumerate() {
         // A strategy given again (`--occlusion none,queries,none`: does memory come back down?)
         // is a run of its own: "none #2" (the report's runs have distinct names).
-        let repeat = strategies[..ri].iter().filter(|&&s| s == strategy).count();
+        let repeat = runs_wanted[..ri].iter().filter(|&&r| r == (strategy, shadowed)).count();
+        let base =
+            if shadowed { format!("{}+shadows", strategy.name()) } else { strategy.name().to_string() };
         let name = match (args.reference, repeat) {
             _ if traced.is_some() => "rt".to_string(),
             (true, _) => "reference".to_string(),
-            (false, 0) => strategy.name().to_string(),
-            (false, k) => format!("{} #{}", strategy.name(), k + 1),
+            (false, 0) => base,
+            (false, k) => format!("{base} #{}", k + 1),
         };
         let settings = FrameSettings {
             tau: args.error,
@@ -163,6 +185,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             wait_for_pages: args.wait,
             visible_pixels: args.visible_pixels,
             triangle_culling: !args.whole_clusters,
+            shadows: if shadowed { shadows } else { None },
         };
         walk.reset();
         if let Some(t) = traced.as_mut() {
@@ -178,6 +201,7 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         let mut records = Vec::with_capacity(cameras.len());
         let bar = crate::progress::count(cameras.len() as u64, name.clone());
         for (i, camera) in cameras.iter().enumerate() {
+            let previous = (args.popping && i > 0).then(|| walk.selection().clone());
             let (image, info) =
                 frame(&mut walk, traced.as_mut(), remote.as_mut(), camera, &settings, args.reference)?;
             if let (0, Some(cold)) = (i, &cold_start) {
@@ -208,6 +232,14 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                     rec.test_efficiency = Some(info.masked_triangles as f64 / exact.triangles.max(1) as f64);
                 }
             }
+            if args.popping {
+                let change = match &previous {
+                    Some(previous) => Some(walk.lod_change(camera, previous)?),
+                    None => None,
+                };
+                rec.popping_changed_pixels = Some(change.map_or(0.0, |c| c.changed_pixels));
+                rec.popping_psnr_db = change.and_then(|c| c.psnr_db).map(|p| p.min(99.0));
+            }
             records.push(rec);
             if tracing::enabled!(tracing::Level::DEBUG) {
                 tracing::debug!("{name} frame {i}: {}", memory_now());
@@ -232,8 +264,17 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             } else {
                 String::new()
             };
+            let shadows = match (shadowed, &shadows) {
+                (true, Some(s)) => format!(
+                    ", shadows: {} ({} texels, cross-culling {})",
+                    light_name(&s.light),
+                    s.options.size,
+                    if s.cross_culling { "on" } else { "off" }
+                ),
+                _ => String::new(),
+            };
             format!(
-                "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}",
+                "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}{shadows}",
                 args.error,
                 strategy.name()
             )
@@ -410,7 +451,44 @@ fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         pages_evicted: st.pages_evicted,
         stalls_avoided: st.stalls_avoided,
         groups_failed: info.select.groups_failed,
+        shadow: (info.shadow.layers > 0).then(|| shadow_record(&info.shadow)),
         ..Default::default()
+    }
+}
+
+/// The shadow stage's figures of a frame (set sizes as the thesis reports them, stage times).
+fn shadow_record(s: &tw_frame::ShadowInfo) -> tw_report::ShadowRecord {
+    let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
+    tw_report::ShadowRecord {
+        layers: s.layers,
+        light_clusters: s.sets.light_cut,
+        light_triangles: s.light_triangles,
+        light_drawn_triangles: s.light_drawn_triangles,
+        light_visible_clusters: s.sets.light_visible,
+        caster_clusters: s.sets.casters,
+        caster_triangles: s.caster_triangles,
+        lit_triangles: s.sets.triangles_lit,
+        shadowed_triangles: s.sets.triangles_shadowed,
+        partial_triangles: s.sets.triangles_partial,
+        partial_clusters: s.sets.receivers_partial,
+        receiver_clusters: s.sets.receivers_lit + s.sets.receivers_shadowed + s.sets.receivers_partial,
+        total_ms: ms(s.total),
+        select_ms: ms(s.select),
+        draw_ms: ms(s.draw),
+        readback_ms: ms(s.readback),
+        classify_ms: ms(s.classify),
+    }
+}
+
+/// How a report names a light.
+fn light_name(light: &tw_runtime::Light) -> String {
+    match light {
+        tw_runtime::Light::Sun { towards } => {
+            format!("sun towards ({:.2}, {:.2}, {:.2})", towards.x, towards.y, towards.z)
+        }
+        tw_runtime::Light::Point { position } => {
+            format!("point light at ({:.1}, {:.1}, {:.1}) scene", position.x, position.y, position.z)
+        }
     }
 }
 
@@ -440,6 +518,18 @@ fn print_comparison(report: &BenchReport) {
                 run.name,
                 first.summary.median_ms / run.summary.median_ms.max(1e-9),
                 first.name
+            );
+        }
+    }
+    for shadowed in report.runs.iter().filter(|r| r.name.contains("+shadows")) {
+        let plain = shadowed.name.replacen("+shadows", "", 1);
+        if let Some(run) = report.runs.iter().find(|r| r.name == plain) {
+            outln!(
+                "{:>10}: {} runs at {:.2}x the frame rate of {} (median frame time, same frames)",
+                "shadows",
+                shadowed.name,
+                run.summary.median_ms / shadowed.summary.median_ms.max(1e-9),
+                run.name
             );
         }
     }
@@ -500,6 +590,63 @@ fn print_run(run: &Run) {
             "nodes", run.name, node_tests, hidden
         );
     }
+    print_shadows(run);
+    print_popping(run);
+}
+
+/// `--popping`: the LOD-only image change of a run's frames.
+fn print_popping(run: &Run) {
+    let changed: Vec<f64> = run.frames.iter().filter_map(|f| f.popping_changed_pixels).collect();
+    if changed.is_empty() {
+        return;
+    }
+    let psnr: Vec<f64> = run.frames.iter().filter_map(|f| f.popping_psnr_db).collect();
+    let worst_changed = changed.iter().cloned().fold(0.0, f64::max);
+    outln!(
+        "{:>10}: {}: pixels the LOD alone changes: median {:.3} %, worst {:.3} %; PSNR of the change: median {}, \
+         worst {} ({} of {} frames changed)",
+        "popping",
+        run.name,
+        100.0 * tw_report::stats::median(&changed).unwrap_or(0.0),
+        100.0 * worst_changed,
+        tw_report::stats::median(&psnr).map_or("-".into(), |p| format!("{p:.1} dB")),
+        psnr.iter().cloned().reduce(f64::min).map_or("-".into(), |p| format!("{p:.1} dB")),
+        psnr.len(),
+        changed.len()
+    );
+}
+
+/// `--light`: the shadow stage's medians (set sizes and times) of a run.
+fn print_shadows(run: &Run) {
+    let shadows: Vec<&tw_report::ShadowRecord> =
+        run.frames.iter().filter_map(|f| f.shadow.as_ref()).collect();
+    if shadows.is_empty() {
+        return;
+    }
+    let med = |f: &dyn Fn(&tw_report::ShadowRecord) -> f64| {
+        tw_report::stats::median(&shadows.iter().map(|s| f(s)).collect::<Vec<f64>>()).unwrap_or(0.0)
+    };
+    outln!(
+        "{:>10}: {}: median {:.1} ms (select {:.1}, map {:.1}, read-back {:.1}, classify {:.1}); light-view set {} \
+         triangles ({} drawn) in {:.0} layers, {:.0} of {:.0} clusters seen by the light, casters {} triangles; receivers lit {} / \
+         shadowed {} / partly {} triangles",
+        "shadows",
+        run.name,
+        med(&|s| s.total_ms),
+        med(&|s| s.select_ms),
+        med(&|s| s.draw_ms),
+        med(&|s| s.readback_ms),
+        med(&|s| s.classify_ms),
+        fmt_count(med(&|s| s.light_triangles as f64) as u64),
+        fmt_count(med(&|s| s.light_drawn_triangles as f64) as u64),
+        med(&|s| s.layers as f64),
+        med(&|s| s.light_visible_clusters as f64),
+        med(&|s| s.light_clusters as f64),
+        fmt_count(med(&|s| s.caster_triangles as f64) as u64),
+        fmt_count(med(&|s| s.lit_triangles as f64) as u64),
+        fmt_count(med(&|s| s.shadowed_triangles as f64) as u64),
+        fmt_count(med(&|s| s.partial_triangles as f64) as u64),
+    );
 }
 
 /// Up to `n` frames spread evenly over `len`.

@@ -157,6 +157,7 @@ pub fn frame_of(r: &CameraRequest, server_occlusion: Occlusion) -> Result<(Camer
         wait_for_pages: r.flags & CameraRequest::WAIT_FOR_PAGES != 0,
         visible_pixels: r.visible_pixels,
         triangle_culling: r.flags & CameraRequest::TRIANGLE_CULLING != 0,
+        shadows: None,
     };
     Ok((camera, settings))
 }
@@ -214,6 +215,7 @@ mod tests {
                 wait_for_pages: true,
                 visible_pixels: 3,
                 triangle_culling: false,
+                shadows: None,
             };
             let r = request_of(5, &camera, &settings, (640, 480));
             assert_eq!(frame_of(&r, Occlusion::None).unwrap(), (camera, settings));

@@ -117,6 +117,8 @@ pub fn run(args: DemoArgs) -> Result<()> {
         cull_timeout_ms: 250,
         renderer: crate::cli::RendererChoice::Raster,
         flashlight: false,
+        popping: false,
+        shadows: crate::cli::ShadowArgs::default(),
     };
     let outcome = crate::commands::bench::run(bench)?;
 

@@ -5,19 +5,23 @@
 //! (`commands::open`).
 
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use tw_core::Aabb;
+use tw_frame::traced::TracedWalkthrough;
+use tw_frame::{FrameSettings, ShadowInfo, Walkthrough};
 use tw_gpu::{Image, Renderer};
 use tw_rt::scene::{StoreTracer, TraceSettings, TraceStats};
 use tw_runtime::{
     Camera, CameraPath, InputCamera, PageCache, SelectOptions, Selection, SelectionPages, Selector,
+    StreamOptions,
 };
 use tw_store::{Header, Store};
 
-use crate::cli::{RenderArgs, RendererChoice, View};
+use crate::cli::{RenderArgs, RendererChoice, ShadowArgs, View};
 use crate::commands::preview::preset_direction;
 use crate::commands::{open, video};
 use crate::progress;
@@ -57,13 +61,19 @@ pub fn run(args: RenderArgs, quiet: bool) -> Result<()> {
     let ffmpeg = args.video.as_ref().map(|_| video::find_ffmpeg()).transpose()?;
     let path = args.path.as_deref().map(CameraPath::load).transpose()?;
     let (store_path, store) = open::open(&args.store, args.up, &args.open, quiet)?;
+    let store = Arc::new(store);
     let mut frame = FrameRenderer::new(&store, &args)?;
     match (&path, &args.output) {
         (Some(p), _) => render_sequence(&mut frame, p, &args, ffmpeg.as_deref(), quiet)?,
         (None, Some(output)) => render_one(&mut frame, output, &args)?,
         (None, None) => anyhow::bail!("give -o FILE.png, or --path with --frames-dir or --video"),
     }
-    crate::commands::damage::check(&store_path, &frame.cache.failed_pages(), args.allow_damaged)
+    let failed = match &frame.backend {
+        Backend::Shadowed(walk, _) => walk.streamer().cache().failed_pages(),
+        Backend::TracedShadowed(traced, _) => traced.streamer().cache().failed_pages(),
+        _ => frame.cache.failed_pages(),
+    };
+    crate::commands::damage::check(&store_path, &failed, args.allow_damaged)
 }
 
 /// The headless renderer, page cache and LOD selector of a store, reused from frame to frame.
@@ -74,11 +84,19 @@ struct FrameRenderer<'s> {
     cache: PageCache,
     selector: Selector,
     options: SelectOptions,
+    /// `--up`, for `--light sun:AZ,EL`.
+    up: Option<u8>,
 }
 
-/// What draws the cut: the rasterizer or the ray tracer (`--renderer`).
+/// What draws the cut: the rasterizer or the ray tracer (`--renderer`); with `--light` the
+/// rasterizer draws through the frame pipeline (tw-frame), whose shadow stage draws the shadow
+/// map from the light-view sets.
 enum Backend {
     Raster(Box<Renderer>),
+    Shadowed(Box<Walkthrough>, ShadowArgs),
+    /// The ray tracer with `--light`: the traced frame pipeline, whose cut also holds the
+    /// casters outside the eye's frustum.
+    TracedShadowed(Box<TracedWalkthrough>, ShadowArgs),
     Rt(Box<StoreTracer>, TraceSettings),
 }
 
@@ -89,11 +107,22 @@ struct Frame {
     select_time: Duration,
     /// The ray tracer's figures (`--renderer rt`).
     traced: Option<TraceStats>,
+    /// The shadow stage's figures (`--light`, rasterized).
+    shadow: Option<ShadowInfo>,
 }
 
 impl<'s> FrameRenderer<'s> {
-    fn new(store: &'s Store, args: &RenderArgs) -> Result<Self> {
+    fn new(store: &'s Arc<Store>, args: &RenderArgs) -> Result<Self> {
         let backend = match args.renderer {
+            RendererChoice::Raster if args.shadows.light.is_some() => {
+                let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+                outln!("adapter: {}", renderer.adapter_summary());
+                renderer.set_samples(args.samples.resolve(&renderer))?;
+                renderer.set_color_mode(args.color.mode());
+                let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
+                let walk = Walkthrough::new(store.clone(), renderer, stream)?;
+                Backend::Shadowed(Box::new(walk), args.shadows.clone())
+            }
             RendererChoice::Raster => {
                 let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
                 outln!("adapter: {}", renderer.adapter_summary());
@@ -101,6 +130,17 @@ impl<'s> FrameRenderer<'s> {
                 renderer.set_store_colors(store);
                 renderer.set_color_mode(args.color.mode());
                 Backend::Raster(Box::new(renderer))
+            }
+            RendererChoice::Rt if args.shadows.light.is_some() => {
+                outln!("renderer: CPU ray tracer, {} threads", StoreTracer::threads());
+                let trace = TraceSettings {
+                    coloring: args.color.mode(),
+                    flashlight: args.flashlight,
+                    ..Default::default()
+                };
+                let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
+                let traced = TracedWalkthrough::new(store.clone(), args.size, stream, trace)?;
+                Backend::TracedShadowed(Box::new(traced), args.shadows.clone())
             }
             RendererChoice::Rt => {
                 outln!("renderer: CPU ray tracer, {} threads", StoreTracer::threads());
@@ -121,32 +161,71 @@ impl<'s> FrameRenderer<'s> {
             RendererChoice::Raster => args.memory,
             RendererChoice::Rt => StoreTracer::budget_split(args.memory).0,
         };
+        // The frame pipeline has a page cache of its own: this one holds the root pages only.
+        let pages =
+            if matches!(backend, Backend::Shadowed(..) | Backend::TracedShadowed(..)) { 1 } else { pages };
         let cache = PageCache::new(store, pages);
         cache.load_root_pages(store);
         let selector = Selector::new(store);
         let options =
             SelectOptions { tau: args.error, viewport: [args.size.0, args.size.1], frustum_culling: true };
-        Ok(FrameRenderer { store, backend, size: args.size, cache, selector, options })
+        Ok(FrameRenderer { store, backend, size: args.size, cache, selector, options, up: args.up })
     }
 
     /// The LOD cut for `camera`, drawn and read back.
     fn draw(&mut self, camera: &Camera) -> Result<Frame> {
-        let t = Instant::now();
-        let selection = self.selector.select(self.store, &self.cache, camera, &self.options);
-        let select_time = t.elapsed();
-        let (image, traced) = match &mut self.backend {
+        let header = self.store.header();
+        let up = up_axis(header, self.up) as u8;
+        let select = |selector: &Selector, cache: &PageCache| {
+            let t = Instant::now();
+            let selection = selector.select(self.store, cache, camera, &self.options);
+            (selection, t.elapsed())
+        };
+        Ok(match &mut self.backend {
             Backend::Raster(renderer) => {
-                (renderer.render_selection(self.store, &self.cache, camera, &selection)?, None)
+                let (selection, select_time) = select(&self.selector, &self.cache);
+                let image = renderer.render_selection(self.store, &self.cache, camera, &selection)?;
+                Frame { image, selection, select_time, traced: None, shadow: None }
             }
             Backend::Rt(tracer, settings) => {
+                let (selection, select_time) = select(&self.selector, &self.cache);
                 let pages = SelectionPages::resolve(self.store, &self.cache, &selection.clusters);
                 let frame = tracer.trace(&pages, camera, self.size, settings);
                 let image = Image { width: frame.width, height: frame.height, rgba: frame.rgba };
-                (image, Some(frame.stats))
+                Frame { image, selection, select_time, traced: Some(frame.stats), shadow: None }
             }
-        };
-        Ok(Frame { image, selection, select_time, traced })
+            Backend::Shadowed(walk, shadows) => {
+                let settings = frame_settings(&self.options, shadows.settings(header, up, camera)?);
+                let (image, info) = walk.frame(camera, &settings)?;
+                let selection = walk.selection().clone();
+                Frame {
+                    image,
+                    selection,
+                    select_time: info.times.select,
+                    traced: None,
+                    shadow: Some(info.shadow),
+                }
+            }
+            Backend::TracedShadowed(traced, shadows) => {
+                let settings = frame_settings(&self.options, shadows.settings(header, up, camera)?);
+                let (image, info, frame) = traced.frame(camera, &settings)?;
+                let selection = traced.selection().clone();
+                Frame {
+                    image,
+                    selection,
+                    select_time: info.times.select,
+                    traced: Some(frame.stats),
+                    shadow: None,
+                }
+            }
+        })
     }
+}
+
+/// The frame pipeline's settings of `render` with `--light`: the cut at `--error`, every page
+/// loaded first, no occlusion culling (as the direct draws), with `shadows`.
+fn frame_settings(options: &SelectOptions, shadows: Option<tw_frame::ShadowSettings>) -> FrameSettings {
+    FrameSettings { tau: options.tau, wait_for_pages: true, shadows, ..Default::default() }
 }
 
 /// `-o FILE`: one frame from `--camera` (or the default overview), with the figures of its cut.
@@ -156,7 +235,7 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
         None => default_camera(header, args.size, up_axis(header, args.up))?,
     };
-    let Frame { image, selection, select_time, traced } = frame.draw(&camera)?;
+    let Frame { image, selection, select_time, traced, shadow } = frame.draw(&camera)?;
     image.save_png(output)?;
     let cs = frame.cache.stats();
     outln!(
@@ -173,11 +252,42 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
     );
     match (&frame.backend, traced) {
         (Backend::Raster(renderer), _) => print_raster_stats(renderer),
+        (Backend::Shadowed(walk, _), _) => {
+            print_raster_stats(walk.renderer());
+            if let Some(s) = shadow {
+                print_shadow_stats(&s);
+            }
+        }
         (Backend::Rt(tracer, _), Some(t)) => print_trace_stats(&t, tracer.bytes()),
-        (Backend::Rt(..), None) => {}
+        (Backend::TracedShadowed(traced, _), Some(t)) => print_trace_stats(&t, traced.tracer().bytes()),
+        (Backend::Rt(..) | Backend::TracedShadowed(..), None) => {}
     }
     outln!("wrote {} ({}x{})", output.display(), args.size.0, args.size.1);
     Ok(())
+}
+
+/// What the shadow stage did (`--light`).
+fn print_shadow_stats(s: &ShadowInfo) {
+    let ms = |d: Duration| d.as_secs_f64() * 1e3;
+    outln!(
+        "shadows: {} layers in {:.1} ms (select {:.1}, map {:.1}, read-back {:.1}, classify {:.1}); light-view \
+         set {} triangles ({} drawn; {} clusters, {} seen by the light), casters {} triangles; receivers: lit {}, \
+         shadowed {}, partly {} triangles",
+        s.layers,
+        ms(s.total),
+        ms(s.select),
+        ms(s.draw),
+        ms(s.readback),
+        ms(s.classify),
+        fmt_count(s.light_triangles),
+        fmt_count(s.light_drawn_triangles),
+        fmt_count(s.sets.light_cut),
+        fmt_count(s.sets.light_visible),
+        fmt_count(s.caster_triangles),
+        fmt_count(s.sets.triangles_lit),
+        fmt_count(s.sets.triangles_shadowed),
+        fmt_count(s.sets.triangles_partial),
+    );
 }
 
 /// What the rasterizer did for the last frame.

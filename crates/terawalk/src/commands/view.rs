@@ -4,6 +4,7 @@
 
 use anyhow::{Context, Result};
 use tw_runtime::{CameraPath, InputCamera};
+use tw_view::settings::ShadowControls;
 use tw_view::{Coloring, Occlusion, RendererKind, Scene, Settings, ViewOptions};
 
 use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, RendererChoice, ViewArgs};
@@ -66,6 +67,7 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
             f.to_scene(header).with_context(|| format!("path frame {i}"))?;
         }
     }
+    let shadows = shadow_controls(&args, header, &camera)?;
     let settings = Settings {
         pixel_error: args.error,
         occlusion,
@@ -76,6 +78,7 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
             RenderColoring::Object => Coloring::Object,
             RenderColoring::Level => Coloring::Level,
             RenderColoring::Cluster => Coloring::Cluster,
+            RenderColoring::Shadow => Coloring::Shadow,
         },
         render_scale: args.render_scale,
         debug_view: args.debug_view,
@@ -84,6 +87,7 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
             RendererChoice::Rt => RendererKind::Rt,
         },
         flashlight: args.flashlight,
+        shadows,
         ..Settings::default()
     };
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -129,4 +133,21 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The viewer's shadow controls at the start: `--light` and its options turn shadows on with
+/// that light; without it they start off, ready to be turned on (J) with the shading's own sun
+/// ([`tw_runtime::Light::default_sun`]).
+fn shadow_controls(
+    args: &ViewArgs,
+    header: &tw_store::Header,
+    camera: &tw_runtime::Camera,
+) -> Result<ShadowControls> {
+    let up = up_axis(header, args.up) as u8;
+    Ok(match args.shadows.settings(header, up, camera)? {
+        Some(s) => ShadowControls::from_settings(&s, true, up),
+        // The shading's sun depends only on the camera's up, which the viewer keeps on the
+        // store's up axis (or --up's).
+        None => ShadowControls::for_up_axis(up),
+    })
 }

@@ -202,6 +202,7 @@ impl Renderer {
             depth_resolve: None,
             depth_stale: false,
             color_stale: false,
+            shadow: crate::shadow::ShadowState::new(&device),
             device,
             queue,
             info,

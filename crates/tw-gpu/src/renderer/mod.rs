@@ -7,6 +7,7 @@ mod device;
 mod passes;
 mod targets;
 
+pub(crate) use passes::Eye;
 pub use passes::MAX_RUNS;
 
 use std::time::Duration;
@@ -37,8 +38,19 @@ pub struct FrameStats {
     pub upload: Duration,
     /// Encoding, submitting and, for the headless calls, waiting and reading back.
     pub render: Duration,
-    /// The cluster pool: uploads, evictions, resident bytes, batches.
+    /// The cluster pool: uploads, evictions, resident bytes, batches (the shadow-map passes'
+    /// too: they share the pool).
     pub pool: PoolStats,
+    /// Clusters drawn into the shadow map ([`Renderer::draw_shadow_map`]). The shadow-map
+    /// passes count apart from the figures above, which are the eye's; their uploads count in
+    /// `upload` and `pool` (the GPU copy of a cluster serves both).
+    pub shadow_clusters: u64,
+    /// Triangles drawn into the shadow map.
+    pub shadow_triangles: u64,
+    /// Draw calls of the shadow-map passes.
+    pub shadow_draw_calls: u64,
+    /// Encoding and submitting the shadow-map passes, and reading layers back.
+    pub shadow_render: Duration,
 }
 
 /// Where a [`Renderer::draw`] goes.
@@ -60,13 +72,17 @@ pub(crate) enum Pass<'a> {
         own: bool,
     },
     Items,
+    /// A depth-only pass into layer `layer` of the shadow map ([`crate::shadow`]).
+    ShadowMap {
+        layer: u32,
+    },
 }
 
-/// The views one pass draws into: `color` (multisampled when `resolve` is set: resolved into
-/// it at the end of each render pass) and `depth`, at `samples` per pixel.
+/// The views one pass draws into: `color` (none for a shadow map; multisampled when `resolve`
+/// is set: resolved into it at the end of each render pass) and `depth`, at `samples` per pixel.
 #[derive(Clone)]
 pub(crate) struct Attachments {
-    pub(crate) color: wgpu::TextureView,
+    pub(crate) color: Option<wgpu::TextureView>,
     pub(crate) resolve: Option<wgpu::TextureView>,
     pub(crate) depth: wgpu::TextureView,
     pub(crate) samples: u32,
@@ -126,6 +142,8 @@ pub struct Renderer {
     /// costs ~6 ms. It is resolved once, when read ([`Renderer::read_color`],
     /// [`Renderer::color_texture`]) or before another target reuses the multisampled one.
     color_stale: bool,
+    /// The shadow map, the shadows of the shaded passes and their per-slot classes.
+    pub(crate) shadow: crate::shadow::ShadowState,
 }
 
 impl Renderer {

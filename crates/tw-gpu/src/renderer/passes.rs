@@ -4,12 +4,12 @@
 
 use std::time::{Duration, Instant};
 
-use glam::Vec3;
+use glam::{Mat4, Vec3};
 use tw_runtime::{full_mask, Camera, PageCache, Selection, TriangleMask};
 use tw_store::{PageCluster, Store};
 
 use super::{bind_group, Attachments, Pass, Renderer, Target};
-use crate::draw::{self, Uniforms, DEPTH_FORMAT};
+use crate::draw::{self, Shading, Uniforms, DEPTH_FORMAT};
 use crate::pool::{DrawArgs, Ensure, PoolKey};
 use crate::{
     color, query, ClusterKey, DrawMode, FrameStats, GpuError, Image, ItemBuffer, COLOR_FORMAT, DEFAULT_COLOR,
@@ -24,11 +24,35 @@ use tw_runtime::SelectionPages;
 /// the cache, pool, skeleton and fixed parts. Ordinary frames upload far less and are not split.
 const UPLOADS_PER_BATCH: u64 = 4;
 
+/// Where a pass looks from: the eye's camera (shaded passes, the item buffer), or a shadow-map
+/// layer's scene-to-clip transform ([`Renderer::draw_shadow_map`]).
+#[derive(Clone, Copy)]
+pub(crate) enum Eye<'a> {
+    Camera(&'a Camera),
+    Light(&'a Mat4),
+}
+
+/// What a pass draws, as [`Renderer::flush`] encodes it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Kind {
+    /// Shaded colour into `format`, with shadows of `shadow_layers` map layers (`None`: the
+    /// unshadowed shading).
+    Shade {
+        format: wgpu::TextureFormat,
+        shadow_layers: Option<u32>,
+    },
+    Items,
+    /// Depth only, into a shadow-map layer (cleared to 1, standard depth).
+    ShadowMap,
+}
+
+/// A run's pipeline and, when it shades with shadows, the shadows' bind group.
+type RunPipeline = (wgpu::RenderPipeline, Option<wgpu::BindGroup>);
+
 /// The draws of one pass being gathered ([`Renderer::draw_pass`]), submitted in parts.
 struct PassBatch {
     att: Attachments,
-    /// The colour format of a shaded pass; `None` for the item buffer.
-    format: Option<wgpu::TextureFormat>,
+    kind: Kind,
     /// Whether the pass clears its target (only its first part does).
     clear: bool,
     /// Whether the pass records into a caller's encoder (then in one part).
@@ -36,6 +60,9 @@ struct PassBatch {
     /// Whether the pass draws the item buffer (each cluster's number goes to its slot).
     items: bool,
     draws: Vec<DrawArgs>,
+    /// With shadows, the runs of `draws` of clusters that need lookups (`Partial`) or not
+    /// (classified): (first draw, lookups), in order.
+    runs: Vec<(usize, bool)>,
     /// The pool keys of the clusters in `draws`, released once the part is submitted.
     keys: Vec<PoolKey>,
     /// Whether no part was submitted yet.
@@ -92,7 +119,7 @@ impl Renderer {
                 let size = (self.width, self.height);
                 let pass = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
                 self.depth_stale = self.samples > 1;
-                self.draw_pass(None, pass, size, camera, grid_step, clusters, masks, clear)
+                self.draw_pass(None, pass, size, Eye::Camera(camera), grid_step, clusters, masks, clear)
             }
             Target::View { view, format, size } => {
                 self.last_own = false;
@@ -100,7 +127,7 @@ impl Renderer {
                     None,
                     Pass::Shade { view, format, own: false },
                     size,
-                    camera,
+                    Eye::Camera(camera),
                     grid_step,
                     clusters,
                     masks,
@@ -202,7 +229,7 @@ impl Renderer {
             Some(encoder),
             Pass::Shade { view, format, own: false },
             size,
-            camera,
+            Eye::Camera(camera),
             grid_step,
             clusters,
             None,
@@ -254,7 +281,7 @@ impl Renderer {
         let size = (self.width, self.height);
         self.item_base = first_number;
         self.depth_stale = false;
-        self.draw_pass(None, Pass::Items, size, camera, grid_step, clusters, None, clear)
+        self.draw_pass(None, Pass::Items, size, Eye::Camera(camera), grid_step, clusters, None, clear)
     }
 
     /// Reads the item buffer back after [`draw_items`](Self::draw_items); `clusters` are the
@@ -301,7 +328,20 @@ impl Renderer {
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
     }
 
-    /// Draws `clusters` (with `masks`) from `camera` into `pass`'s target of `size`: makes each
+    /// The draw shaders' uniforms for a shadow-map pass: only the transform matters to its
+    /// vertex stage (shadow.wgsl `vs_depth`).
+    fn write_light_uniforms(&self, view_proj: &Mat4) {
+        let u = Uniforms {
+            view_proj: view_proj.to_cols_array_2d(),
+            eye: [0.0; 4],
+            sun: [0.0; 4],
+            params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
+            headlight: [0.0; 4],
+        };
+        self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// Draws `clusters` (with `masks`) from `eye` into `pass`'s target of `size`: makes each
     /// resident in the pool and gathers its draws, submitting the gathered part when the pool
     /// is full or the part's uploads reach the staging bound, and the rest at the end (into
     /// `external` when given: then the whole pass must fit the pool at once).
@@ -311,7 +351,7 @@ impl Renderer {
         mut external: Option<&mut wgpu::CommandEncoder>,
         pass: Pass<'_>,
         size: (u32, u32),
-        camera: &Camera,
+        eye: Eye<'_>,
         grid_step: f64,
         clusters: &[(ClusterKey, &PageCluster)],
         masks: Option<&[TriangleMask]>,
@@ -321,12 +361,12 @@ impl Renderer {
         if size.0 == 0 || size.1 == 0 || size.0 > max || size.1 > max {
             return Err(GpuError::Size { width: size.0, height: size.1, max });
         }
-        let mut b = self.begin_pass(pass, size, camera, clear, external.is_some())?;
+        let mut b = self.begin_pass(pass, size, eye, clear, external.is_some())?;
         for (i, (key, cluster)) in clusters.iter().enumerate() {
             let mask = masks.and_then(|m| m.get(i).copied()).unwrap_or(u128::MAX);
             self.add_cluster(&mut b, i, *key, cluster, grid_step, mask)?;
         }
-        self.flush(external.take(), &b.att, b.format, &b.draws, b.clear && b.first)?;
+        self.flush(external.take(), &b.att, b.kind, &b.draws, &b.runs, b.clear && b.first)?;
         // Submitted: a later draw of the same frame (the second pass of occlusion culling, the
         // next chunk of a reference frame) may evict these if it needs the room.
         self.pool.release_batch(&b.keys);
@@ -334,27 +374,40 @@ impl Renderer {
         Ok(())
     }
 
-    /// Sets a pass up: the uniforms for `camera`, the depth, item and multisampled targets it
-    /// draws into, and on GL a wait for earlier GPU work when the pool may evict.
+    /// Sets a pass up: the uniforms for `eye` (and the shadows' for a shaded pass with
+    /// shadows), the depth, item and multisampled targets it draws into, and on GL a wait for
+    /// earlier GPU work when the pool may evict.
     fn begin_pass(
         &mut self,
         pass: Pass<'_>,
         size: (u32, u32),
-        camera: &Camera,
+        eye: Eye<'_>,
         clear: bool,
         external: bool,
     ) -> Result<PassBatch, GpuError> {
         let items = matches!(pass, Pass::Items);
-        self.write_uniforms(camera, size);
-        let depth_view = self.depth_view_for(size);
+        let kind = match pass {
+            Pass::Shade { format, .. } => Kind::Shade { format, shadow_layers: self.shadow_layers()? },
+            Pass::Items => Kind::Items,
+            Pass::ShadowMap { .. } => Kind::ShadowMap,
+        };
+        match eye {
+            Eye::Camera(camera) => {
+                self.write_uniforms(camera, size);
+                if let Kind::Shade { shadow_layers: Some(_), .. } = kind {
+                    self.shadow.write_uniforms(&self.queue, camera);
+                }
+            }
+            Eye::Light(view_proj) => self.write_light_uniforms(view_proj),
+        }
+        let depth_view = match pass {
+            Pass::ShadowMap { layer } => self.shadow.layer_view(layer)?,
+            _ => self.depth_view_for(size),
+        };
         if items {
             self.make_item_target();
         }
         let att = self.attachments(&pass, size, depth_view);
-        let format = match pass {
-            Pass::Shade { format, .. } => Some(format),
-            Pass::Items => None,
-        };
         // GL (llvmpipe) hazard, seen in tests: a queued write into an arena range that an
         // earlier, still running submission draws from is not always ordered after it. On GL,
         // wait for earlier work before any eviction can happen (the arena is full) and after
@@ -365,11 +418,12 @@ impl Renderer {
         }
         Ok(PassBatch {
             att,
-            format,
+            kind,
             clear,
             external,
             items,
             draws: Vec::new(),
+            runs: Vec::new(),
             keys: Vec::new(),
             first: true,
             upload: Duration::ZERO,
@@ -401,13 +455,24 @@ impl Renderer {
                     if b.items {
                         self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
                     }
+                    let lookups = match b.kind {
+                        Kind::Shade { shadow_layers: Some(_), .. } => self.shadow.note_slot(pk, slot),
+                        _ => false,
+                    };
                     let before = b.draws.len();
                     let (drawn, masked) = push_runs(&mut b.draws, args, cluster, mask);
-                    if b.draws.len() > before {
-                        self.stats.clusters += 1;
+                    let cluster_drawn = (b.draws.len() > before) as u64;
+                    if cluster_drawn > 0 && b.runs.last().is_none_or(|r| r.1 != lookups) {
+                        b.runs.push((before, lookups));
                     }
-                    self.stats.triangles += drawn;
-                    self.stats.masked_triangles += masked;
+                    if b.kind == Kind::ShadowMap {
+                        self.stats.shadow_clusters += cluster_drawn;
+                        self.stats.shadow_triangles += drawn;
+                    } else {
+                        self.stats.clusters += cluster_drawn;
+                        self.stats.triangles += drawn;
+                        self.stats.masked_triangles += masked;
+                    }
                     b.keys.push(pk);
                     // Bound the staging memory of one batch (see `UPLOADS_PER_BATCH`).
                     let uploaded = self.pool.stats().uploaded_bytes - b.uploads_from;
@@ -443,10 +508,11 @@ impl Renderer {
     /// noted in `begin_pass`); its clusters may then be evicted. The next part's uploads are
     /// counted from here, and it does not clear.
     fn flush_part(&mut self, b: &mut PassBatch) -> Result<(), GpuError> {
-        self.flush(None, &b.att, b.format, &b.draws, b.clear && b.first)?;
+        self.flush(None, &b.att, b.kind, &b.draws, &b.runs, b.clear && b.first)?;
         self.wait_idle()?;
         self.pool.release_batch(&b.keys);
         b.draws.clear();
+        b.runs.clear();
         b.keys.clear();
         b.uploads_from = self.pool.stats().uploaded_bytes;
         b.first = false;
@@ -460,13 +526,16 @@ impl Renderer {
             .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))
     }
 
-    /// Encodes and submits one batch. `format` is `None` for the item buffer.
+    /// Encodes and submits one batch of a pass of `kind`. With shadows, each of `runs` (first
+    /// draw, whether its clusters need lookups) is drawn with its pipeline, in order: the order
+    /// of the draws, and so the image where depths tie, is that of one pipeline.
     fn flush(
         &mut self,
         external: Option<&mut wgpu::CommandEncoder>,
         att: &Attachments,
-        format: Option<wgpu::TextureFormat>,
+        kind: Kind,
         batch: &[DrawArgs],
+        runs: &[(usize, bool)],
         clear: bool,
     ) -> Result<(), GpuError> {
         let start = Instant::now();
@@ -481,10 +550,33 @@ impl Renderer {
             }
             _ => None,
         };
-        let pipeline = match format {
-            Some(f) => self.pipelines.shaded(&self.device, f, att.samples, self.mode).clone(),
-            None => self.pipelines.item(&self.device).clone(),
+        // The pipeline of each run of draws `[from, to)`, with the shadows' bind group where it
+        // shades with shadows.
+        let (plain, classified, lookup) = match kind {
+            Kind::Shade { format, shadow_layers: None } => {
+                (self.shaded_pipeline(format, att.samples, Shading::Plain)?, None, None)
+            }
+            Kind::Shade { format, shadow_layers: Some(layers) } => {
+                let classified = self.shaded_pipeline(format, att.samples, Shading::Classified)?;
+                let lookup = self.shaded_pipeline(format, att.samples, Shading::Lookup(layers))?;
+                (classified.clone(), Some(classified), Some(lookup))
+            }
+            Kind::Items => ((self.pipelines.item(&self.device).clone(), None), None, None),
+            Kind::ShadowMap => ((self.pipelines.shadow_depth(&self.device).clone(), None), None, None),
         };
+        let groups: Vec<(&RunPipeline, std::ops::Range<usize>)> = match (&classified, &lookup) {
+            (Some(classified), Some(lookup)) => runs
+                .iter()
+                .enumerate()
+                .map(|(i, &(from, lookups))| {
+                    let to = runs.get(i + 1).map_or(batch.len(), |r| r.0);
+                    (if lookups { lookup } else { classified }, from..to)
+                })
+                .collect(),
+            _ => vec![(&plain, 0..batch.len())],
+        };
+        // Standard depth for the shadow map (0 nearest the light), reverse-Z elsewhere.
+        let clear_depth = if kind == Kind::ShadowMap { 1.0 } else { 0.0 };
         let mut own = None;
         let encoder = match external {
             Some(e) => e,
@@ -496,18 +588,19 @@ impl Renderer {
         {
             let load_color =
                 if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
+            let color = att.color.as_ref().map(|view| wgpu::RenderPassColorAttachment {
+                view,
+                depth_slice: None,
+                resolve_target: att.resolve.as_ref(),
+                ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
+            });
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("clusters"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &att.color,
-                    depth_slice: None,
-                    resolve_target: att.resolve.as_ref(),
-                    ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
-                })],
+                color_attachments: if color.is_some() { std::slice::from_ref(&color) } else { &[] },
                 depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
                     view: &att.depth,
                     depth_ops: Some(wgpu::Operations {
-                        load: if clear { wgpu::LoadOp::Clear(0.0) } else { wgpu::LoadOp::Load },
+                        load: if clear { wgpu::LoadOp::Clear(clear_depth) } else { wgpu::LoadOp::Load },
                         store: wgpu::StoreOp::Store,
                     }),
                     stencil_ops: None,
@@ -516,10 +609,17 @@ impl Renderer {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &self.bind_group, &[]);
-            if let Some(arena) = self.pool.arena() {
-                draw::encode_batch(&mut pass, arena, batch, indirect.as_ref());
+            for ((pipeline, shadow_bind), range) in &groups {
+                pass.set_pipeline(pipeline);
+                pass.set_bind_group(0, &self.bind_group, &[]);
+                if let Some(bind) = shadow_bind {
+                    pass.set_bind_group(1, bind, &[]);
+                }
+                if let Some(arena) = self.pool.arena() {
+                    let offset = (range.start * std::mem::size_of::<DrawArgs>()) as u64;
+                    let args = &batch[range.clone()];
+                    draw::encode_batch(&mut pass, arena, args, indirect.as_ref().map(|b| (b, offset)));
+                }
             }
         }
         if let Some(e) = own {
@@ -536,12 +636,21 @@ impl Renderer {
             }
         }
         self.pool.note_batch();
-        self.stats.draw_calls += match (self.draw_mode, batch.is_empty()) {
-            (_, true) => 0,
-            (DrawMode::Indirect, false) => 1,
-            (DrawMode::Direct, false) => batch.len() as u64,
-        };
-        self.stats.render += start.elapsed();
+        let calls: u64 = groups
+            .iter()
+            .map(|(_, range)| match (self.draw_mode, range.is_empty()) {
+                (_, true) => 0,
+                (DrawMode::Indirect, false) => 1,
+                (DrawMode::Direct, false) => range.len() as u64,
+            })
+            .sum();
+        if kind == Kind::ShadowMap {
+            self.stats.shadow_draw_calls += calls;
+            self.stats.shadow_render += start.elapsed();
+        } else {
+            self.stats.draw_calls += calls;
+            self.stats.render += start.elapsed();
+        }
         Ok(())
     }
 }

@@ -135,14 +135,17 @@ impl Renderer {
         depth_view: wgpu::TextureView,
     ) -> Attachments {
         match *pass {
+            Pass::ShadowMap { .. } => {
+                Attachments { color: None, resolve: None, depth: depth_view, samples: 1 }
+            }
             Pass::Items => Attachments {
-                color: self.items.as_ref().expect("made before").1.clone(),
+                color: Some(self.items.as_ref().expect("made before").1.clone()),
                 resolve: None,
                 depth: depth_view,
                 samples: 1,
             },
             Pass::Shade { view, .. } if self.samples == 1 => {
-                Attachments { color: view.clone(), resolve: None, depth: depth_view, samples: 1 }
+                Attachments { color: Some(view.clone()), resolve: None, depth: depth_view, samples: 1 }
             }
             Pass::Shade { view, format, own } => {
                 let own_size = size == (self.width, self.height) && format == COLOR_FORMAT;
@@ -157,7 +160,7 @@ impl Renderer {
                 }
                 let t = slot.as_ref().expect("made above");
                 let att = Attachments {
-                    color: t.color.clone(),
+                    color: Some(t.color.clone()),
                     resolve: (!own).then(|| view.clone()),
                     depth: t.depth.clone(),
                     samples,

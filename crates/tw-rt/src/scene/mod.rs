@@ -3,7 +3,13 @@
 //! over the resident pages — becomes a two-level scene ([`cut::CutScene`]) over cluster BVHs
 //! cached with their decoded pages ([`blas::BlasCache`]); primary rays through the pixel
 //! centres find the visible triangle, which is shaded as the rasterizer shades it
-//! ([`shade::Shader`]), optionally lit by a flashlight with hard shadows.
+//! ([`shade::Shader`]), optionally lit by a flashlight and by a shadow-casting light
+//! (`tw_runtime::Light`), both with hard shadows by shadow rays ([`shadow`]).
+//!
+//! With a shadow-casting light the traced cut must hold the casters outside the eye's view too:
+//! the caller selects it without frustum culling (or with the light's side included) at the
+//! eye's LOD — tw-frame's `TracedWalkthrough` does — and primary rays, limited by the clip
+//! planes, still see only what the eye's cut shows.
 //!
 //! Out-of-core behaviour comes from the cut: a page that is not resident yet is drawn by its
 //! best resident ancestors (the availability rule, docs/FORMAT.md), i.e. the page's coarser LOD
@@ -11,21 +17,24 @@
 //! never touch a page that is not in memory.
 
 pub mod blas;
+pub mod casters;
 pub mod cut;
 pub mod shade;
+pub mod shadow;
 
 use std::time::{Duration, Instant};
 
 use glam::Vec3;
 use rayon::prelude::*;
 use tw_core::color::ColorMode;
-use tw_runtime::{Camera, ClusterRef, SelectionPages};
+use tw_runtime::{Camera, ClusterRef, Light, SelectionPages};
 use tw_store::{PageCluster, Store};
 
 use self::blas::{scene_position, BlasCache, BlasStats};
 use self::cut::{split_prim, Clip, CutScene};
 use self::shade::Shader;
-use crate::{trace_image, Ray};
+use self::shadow::{visibility, SurfacePoint};
+use crate::trace_image;
 
 /// What a traced frame shows besides the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -37,11 +46,15 @@ pub struct TraceSettings {
     /// Where in each pixel the primary ray passes (`crate::Camera::subpixel`): the centre by
     /// default; successive positions are the samples of progressive supersampling.
     pub subpixel: [f32; 2],
+    /// The shadow-casting light (`--light`): the shading's sun term takes its direction and is
+    /// multiplied by a shadow ray's verdict (the reference the rasterized shadow maps are
+    /// checked against); `None`: the fixed, unshadowed sun.
+    pub light: Option<Light>,
 }
 
 impl Default for TraceSettings {
     fn default() -> Self {
-        TraceSettings { coloring: ColorMode::Material, flashlight: false, subpixel: [0.5, 0.5] }
+        TraceSettings { coloring: ColorMode::Material, flashlight: false, subpixel: [0.5, 0.5], light: None }
     }
 }
 
@@ -188,12 +201,17 @@ impl StoreTracer {
             headlight: camera.headlight(),
             sun: camera.sun_direction(),
         };
-        let light = settings.flashlight.then(|| flashlight_position(camera, &rt_camera));
-        let frame = shade_pixels(
+        let lights = Lights {
+            flashlight: settings
+                .flashlight
+                .then(|| Light::Point { position: flashlight_position(camera, &rt_camera) }),
+            light: settings.light,
+        };
+        let (frame, shadow_rays) = shade_pixels(
             &scene,
             &entries,
             &shader,
-            light,
+            &lights,
             self.grid_step,
             &rt_camera,
             (width, height),
@@ -201,9 +219,7 @@ impl StoreTracer {
             distance,
         );
         stats.shade_time = t.elapsed();
-        if light.is_some() {
-            stats.rays += frame.objects.iter().filter(|&&o| o != u32::MAX).count() as u64;
-        }
+        stats.rays += shadow_rays;
         self.last = Some((keys, scene));
         stats.total = start.elapsed();
         TracedFrame { stats, ..frame }
@@ -216,33 +232,84 @@ fn flashlight_position(camera: &Camera, rays: &crate::Camera) -> Vec3 {
     camera.eye + rays.up * (FLASHLIGHT_UP * d) + rays.right * (FLASHLIGHT_RIGHT * d)
 }
 
-/// Colours every pixel from its hit (and, with a flashlight, a shadow ray), in parallel rows.
+/// The lights whose shadows a frame traces.
+#[derive(Clone, Copy, Debug, Default)]
+struct Lights {
+    /// Replaces the headlight ([`TraceSettings::flashlight`]).
+    flashlight: Option<Light>,
+    /// Replaces the fixed sun ([`TraceSettings::light`]).
+    light: Option<Light>,
+}
+
+impl Lights {
+    /// Whether a triangle's colour depends on the point (else it is flat: computed once).
+    fn per_point(&self) -> bool {
+        self.flashlight.is_some() || self.light.is_some()
+    }
+
+    /// The flashlight's and the light's visibility and direction at `point`; counts the shadow
+    /// rays cast in `rays`. The flashlight lights both sides (its term takes `|n · l|`), so it
+    /// always casts; the light casts only where it faces the surface (`n · l > 0`), since
+    /// elsewhere its term is 0 whatever blocks it.
+    fn at(&self, scene: &CutScene, point: &SurfacePoint, rays: &mut u64) -> [Option<(f32, Vec3)>; 2] {
+        let mut cast = |light: &Light| {
+            *rays += 1;
+            visibility(scene, point, light)
+        };
+        let flashlight = self.flashlight.map(|l| cast(&l));
+        let light = self.light.map(|l| {
+            let towards = l.towards_from(point.position);
+            if point.normal.dot(towards) > 0.0 {
+                cast(&l)
+            } else {
+                (0.0, towards)
+            }
+        });
+        [flashlight, light]
+    }
+}
+
+/// The last shaded pixel of a row: its triangle, normal, lights and colour.
+#[derive(Clone, Copy)]
+struct Shaded {
+    prim: u32,
+    normal: Vec3,
+    lit: [Option<(f32, Vec3)>; 2],
+    color: [u8; 4],
+}
+
+/// Colours every pixel from its hit (and, with a flashlight or a light, its shadow rays), in
+/// parallel rows; returns the frame and the number of shadow rays.
 #[allow(clippy::too_many_arguments)]
 fn shade_pixels(
     scene: &CutScene,
     entries: &[(ClusterRef, &PageCluster)],
     shader: &Shader,
-    light: Option<Vec3>,
+    lights: &Lights,
     grid_step: f64,
     camera: &crate::Camera,
     (width, height): (u32, u32),
     prims: Vec<u32>,
     distance: Vec<f32>,
-) -> TracedFrame {
+) -> (TracedFrame, u64) {
     let w = width as usize;
     let mut rgba = vec![0u8; w * height as usize * 4];
     let mut objects = vec![u32::MAX; prims.len()];
     let mut clusters = vec![u32::MAX; prims.len()];
     let mut triangles = vec![u32::MAX; prims.len()];
-    rgba.par_chunks_mut(w * 4)
+    let shadow_rays = rgba
+        .par_chunks_mut(w * 4)
         .zip(objects.par_chunks_mut(w))
         .zip(clusters.par_chunks_mut(w))
         .zip(triangles.par_chunks_mut(w))
         .enumerate()
-        .for_each(|(y, (((rgba, objects), clusters), triangles))| {
-            // Without a flashlight a triangle has one colour (flat shading, as the rasterizer's):
-            // neighbouring pixels on the same triangle reuse it.
-            let mut last: Option<(u32, [u8; 4])> = None;
+        .map(|(y, (((rgba, objects), clusters), triangles))| {
+            // Flat shading (as the rasterizer's): a triangle's colour depends only on how the
+            // lights reach it, so neighbouring pixels on the same triangle reuse its normal, and
+            // its colour where the lights reach them alike (always without shadow rays; a sun's
+            // lit and blocked pixels take one of two colours).
+            let mut last: Option<Shaded> = None;
+            let mut rays = 0;
             for x in 0..w {
                 let i = y * w + x;
                 if prims[i] == u32::MAX {
@@ -250,40 +317,51 @@ fn shade_pixels(
                 }
                 let (c, t) = split_prim(prims[i]);
                 let Some(&(key, cluster)) = entries.get(c as usize) else { continue };
+                let normal = match last {
+                    Some(s) if s.prim == prims[i] => s.normal,
+                    _ => match corners(cluster, t as usize, grid_step) {
+                        Some(corners) => shader.normal(corners),
+                        None => continue,
+                    },
+                };
+                let lit = if lights.per_point() {
+                    let ray = camera.pixel_ray(x as u32, y as u32, width, height);
+                    let point = SurfacePoint {
+                        position: ray.at(distance[i]),
+                        normal,
+                        distance: distance[i] * ray.dir.length(),
+                    };
+                    lights.at(scene, &point, &mut rays)
+                } else {
+                    [None, None]
+                };
                 let color = match last {
-                    Some((prim, color)) if prim == prims[i] && light.is_none() => color,
+                    Some(s) if s.prim == prims[i] && s.lit == lit => s.color,
                     _ => {
-                        let Some(corners) = corners(cluster, t as usize, grid_step) else { continue };
-                        let headlight = light.map(|l| {
-                            let p = camera.pixel_ray(x as u32, y as u32, width, height).at(distance[i]);
-                            flashlight(scene, p, l)
-                        });
-                        let color = shader.shade(key, cluster, t as usize, corners, headlight);
-                        last = Some((prims[i], color));
-                        color
+                        let [flashlight, light] = lit;
+                        shader.shade(key, cluster, t as usize, normal, flashlight, light)
                     }
                 };
+                last = Some(Shaded { prim: prims[i], normal, lit, color });
                 rgba[x * 4..x * 4 + 4].copy_from_slice(&color);
                 objects[x] = cluster.objects.get(t as usize).copied().unwrap_or(u32::MAX);
                 clusters[x] = c;
                 triangles[x] = t;
             }
-        });
-    TracedFrame { width, height, rgba, objects, clusters, triangles, distance, stats: TraceStats::default() }
-}
-
-/// How much of the flashlight at `light` reaches `p` (1 or 0: a shadow ray) and the direction
-/// towards it.
-fn flashlight(scene: &CutScene, p: Vec3, light: Vec3) -> (f32, Vec3) {
-    let to_light = light - p;
-    let d = to_light.length();
-    let dir = to_light / d.max(f32::MIN_POSITIVE);
-    // Leave the surface by a small distance relative to the point's magnitude (f32 positions):
-    // no self-shadowing from rounding, no light leaking through thin walls.
-    let offset = 1e-4 * (p.abs().max_element() + d).max(1e-3);
-    let ray = Ray { origin: p, dir, t_min: offset, t_max: d - offset };
-    let lit = if ray.t_min < ray.t_max && scene.occluded(&ray) { 0.0 } else { 1.0 };
-    (lit, dir)
+            rays
+        })
+        .sum();
+    let frame = TracedFrame {
+        width,
+        height,
+        rgba,
+        objects,
+        clusters,
+        triangles,
+        distance,
+        stats: TraceStats::default(),
+    };
+    (frame, shadow_rays)
 }
 
 /// The scene-space corners of triangle `t` of `cluster`.
@@ -302,7 +380,7 @@ mod tests {
 
     use super::blas::{BlasCache, ClusterBlas};
     use super::*;
-    use crate::Trace;
+    use crate::{Ray, Trace};
 
     /// A square of side `size` at height `z` with its corner at `(x, y)` (grid units), two
     /// triangles of object `object`.
@@ -325,15 +403,38 @@ mod tests {
     fn a_blocker_between_the_flashlight_and_a_point_shadows_it() {
         // A floor at z = 0 and a small roof at z = 5 over the floor's middle.
         let scene = scene(&[square(0, 0, 0, 100, 0), square(40, 40, 5, 20, 1)]);
-        let light = Vec3::new(50.0, 50.0, 20.0);
-        let (under, dir) = flashlight(&scene, Vec3::new(50.0, 50.0, 0.0), light);
-        assert_eq!(under, 0.0, "the point under the roof is lit");
+        let lights =
+            Lights { flashlight: Some(Light::Point { position: Vec3::new(50.0, 50.0, 20.0) }), light: None };
+        let at = |x: f32, y: f32, z: f32| SurfacePoint {
+            position: Vec3::new(x, y, z),
+            normal: Vec3::Z,
+            distance: 20.0,
+        };
+        let mut rays = 0;
+        let [under, light] = lights.at(&scene, &at(50.0, 50.0, 0.0), &mut rays);
+        let (under, dir) = under.unwrap();
+        assert_eq!((under, light), (0.0, None), "the point under the roof is lit");
         assert!((dir - Vec3::Z).length() < 1e-6);
-        let (beside, _) = flashlight(&scene, Vec3::new(5.0, 5.0, 0.0), light);
-        assert_eq!(beside, 1.0, "a point in the open is in shadow");
+        let [beside, _] = lights.at(&scene, &at(5.0, 5.0, 0.0), &mut rays);
+        assert_eq!(beside.unwrap().0, 1.0, "a point in the open is in shadow");
         // The roof's top is lit: no self-shadowing from the surface it leaves.
-        let (roof, _) = flashlight(&scene, Vec3::new(50.0, 50.0, 5.0), light);
-        assert_eq!(roof, 1.0, "the roof shadows itself");
+        let [roof, _] = lights.at(&scene, &at(50.0, 50.0, 5.0), &mut rays);
+        assert_eq!(roof.unwrap().0, 1.0, "the roof shadows itself");
+        assert_eq!(rays, 3);
+    }
+
+    #[test]
+    fn the_light_casts_only_where_it_faces_the_surface() {
+        let scene = scene(&[square(0, 0, 0, 100, 0), square(40, 40, 5, 20, 1)]);
+        let lights = Lights { flashlight: None, light: Some(Light::Sun { towards: Vec3::Z }) };
+        let mut rays = 0;
+        let under = SurfacePoint { position: Vec3::new(50.0, 50.0, 0.0), normal: Vec3::Z, distance: 20.0 };
+        assert_eq!(lights.at(&scene, &under, &mut rays), [None, Some((0.0, Vec3::Z))]);
+        assert_eq!(rays, 1);
+        // The floor seen from below faces away from the sun: no ray, no light.
+        let below = SurfacePoint { normal: -Vec3::Z, position: Vec3::new(5.0, 5.0, 0.0), ..under };
+        assert_eq!(lights.at(&scene, &below, &mut rays), [None, Some((0.0, Vec3::Z))]);
+        assert_eq!(rays, 1);
     }
 
     #[test]

@@ -2,9 +2,16 @@
 //! colour per triangle from its base colour, a headlight along the view direction and a fixed
 //! sun, both sides lit; the result encoded to sRGB. The same formula on both sides is what lets
 //! a ray-traced frame be compared with a rasterized one pixel by pixel (PSNR).
+//!
+//! With a shadow-casting light (`tw_runtime::Light`) the sun's term takes the light's direction
+//! at the point and is multiplied by its visibility (1 lit, 0 blocked: a shadow ray,
+//! [`super::shadow`]); nothing else changes. [`ColorMode::Shadow`] shows that decision as a flat
+//! mask instead of a colour.
 
 use glam::Vec3;
-use tw_core::color::{cluster_color, hash_color, level_color, ColorMode, DEFAULT_COLOR};
+use tw_core::color::{
+    cluster_color, hash_color, level_color, ColorMode, DEFAULT_COLOR, SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT,
+};
 use tw_runtime::ClusterRef;
 use tw_store::PageCluster;
 
@@ -22,32 +29,51 @@ pub struct Shader<'a> {
 }
 
 impl Shader<'_> {
-    /// The sRGB colour of triangle `triangle` of `cluster` (selected as `key`), given its three
-    /// scene-space corners; `headlight`: how much of the headlight reaches it (1 lit, 0 in
-    /// shadow), with the light's direction at the point.
+    /// The unit normal of the triangle with scene-space `corners`, turned towards the eye: both
+    /// sides are lit, as inputs are not consistently wound (a degenerate triangle faces the eye).
+    pub fn normal(&self, corners: [Vec3; 3]) -> Vec3 {
+        let [p0, p1, p2] = corners;
+        let to_eye = (self.eye - p0).normalize_or_zero();
+        let n = (p1 - p0).cross(p2 - p0).normalize_or(to_eye);
+        if n.dot(to_eye) < 0.0 {
+            -n
+        } else {
+            n
+        }
+    }
+
+    /// The sRGB colour of triangle `triangle` of `cluster` (selected as `key`) with normal `n`
+    /// ([`Shader::normal`]). `headlight`: how much of the flashlight reaches the point (1 lit,
+    /// 0 in shadow) and the direction towards it, replacing the headlight; `sun`: the same for
+    /// the shadow-casting light, replacing the fixed sun.
     pub fn shade(
         &self,
         key: ClusterRef,
         cluster: &PageCluster,
         triangle: usize,
-        corners: [Vec3; 3],
+        n: Vec3,
         headlight: Option<(f32, Vec3)>,
+        sun: Option<(f32, Vec3)>,
     ) -> [u8; 4] {
-        let object = cluster.objects.get(triangle).copied().unwrap_or(u32::MAX);
-        let base = self.base_color(key, cluster, object);
-        let [p0, p1, p2] = corners;
-        let to_eye = (self.eye - p0).normalize_or_zero();
-        let mut n = (p1 - p0).cross(p2 - p0).normalize_or(to_eye);
-        // Both sides are lit (inputs are not consistently wound): face the viewer.
-        if n.dot(to_eye) < 0.0 {
-            n = -n;
-        }
         let head = match headlight {
             None => n.dot(self.headlight).abs(),
             Some((lit, towards_light)) => lit * n.dot(towards_light).abs(),
         };
-        let sun = n.dot(self.sun).max(0.0);
-        let light = 0.18 + 0.62 * head + 0.35 * sun;
+        let (visible, facing) = match sun {
+            None => (1.0, n.dot(self.sun).max(0.0)),
+            Some((lit, towards_light)) => (lit, n.dot(towards_light).max(0.0)),
+        };
+        if self.mode == ColorMode::Shadow {
+            return match (facing > 0.0, visible > 0.0) {
+                (false, _) => SHADOW_AWAY,
+                (true, true) => SHADOW_LIT,
+                (true, false) => SHADOW_BLOCKED,
+            };
+        }
+        let object = cluster.objects.get(triangle).copied().unwrap_or(u32::MAX);
+        let base = self.base_color(key, cluster, object);
+        // `facing * 1.0` is exact: an unshadowed frame is bit-identical to one without a light.
+        let light = 0.18 + 0.62 * head + 0.35 * (facing * visible);
         let rgb = base.map(|c| srgb_encode((srgb_decode(c) * light).min(1.0)));
         [rgb[0], rgb[1], rgb[2], 255]
     }
@@ -60,6 +86,7 @@ impl Shader<'_> {
             ColorMode::Object => hash_color(object),
             ColorMode::Level => level_color(cluster.level),
             ColorMode::Cluster => cluster_color(key.page, key.index_in_page),
+            ColorMode::Shadow => SHADOW_LIT,
         };
         [c[0], c[1], c[2]]
     }

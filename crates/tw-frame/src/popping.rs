@@ -1,0 +1,82 @@
+//! Popping: the image change a frame's LOD cut causes on its own (`bench --popping`).
+//!
+//! Along a camera path, a cluster-DAG cut switches whole groups at once when their error crosses
+//! τ, and the image jumps there (Yoon et al. 2003 §1 call it popping; Govindaraju's thesis lists
+//! it among the limits of static LODs). The camera moves too, so two consecutive frames differ for
+//! both reasons; to separate them, the frame's camera draws both the previous frame's cut and its
+//! own, with the same renderer state and without occlusion culling: whatever differs between the
+//! two images is the LOD's doing alone. A still camera keeps its cut, so its change is 0.
+
+use tw_gpu::{GpuError, Image};
+use tw_runtime::{Camera, Selection};
+
+use crate::{FrameError, Walkthrough};
+
+/// The LOD-only change of one frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LodChange {
+    /// Share of the pixels that differ between the two cuts' images (0..1).
+    pub changed_pixels: f64,
+    /// PSNR of the frame's own cut against the previous cut, dB; `None` when the images are
+    /// identical.
+    pub psnr_db: Option<f64>,
+    /// Triangles of the previous and of the frame's own cut.
+    pub triangles_before: u64,
+    pub triangles_now: u64,
+}
+
+impl LodChange {
+    /// The change between two images of the same camera.
+    fn between(before: &Image, now: &Image, triangles: (u64, u64)) -> Result<LodChange, GpuError> {
+        let changed = now.differing_share(before)?;
+        let psnr = if changed > 0.0 { Some(now.psnr(before)?) } else { None };
+        Ok(LodChange {
+            changed_pixels: changed,
+            psnr_db: psnr,
+            triangles_before: triangles.0,
+            triangles_now: triangles.1,
+        })
+    }
+}
+
+impl Walkthrough {
+    /// The LOD-only change at `camera` between `previous` (the cut of the frame before) and the
+    /// cut of the frame just drawn ([`Walkthrough::selection`]): both drawn whole, unshadowed,
+    /// pages loaded as needed. Leaves the renderer's own target holding the frame's own cut.
+    pub fn lod_change(&mut self, camera: &Camera, previous: &Selection) -> Result<LodChange, FrameError> {
+        let store = self.streamer.store().clone();
+        let cache = self.streamer.cache().clone();
+        crate::shadow::clear(&mut self.renderer);
+        let before = self.renderer.render_selection(&store, &cache, camera, previous)?;
+        let now = self.renderer.render_selection(&store, &cache, camera, &self.selection)?;
+        let triangles = (previous.triangles, self.selection.triangles);
+        Ok(LodChange::between(&before, &now, triangles)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(pixels: &[[u8; 4]]) -> Image {
+        Image { width: pixels.len() as u32, height: 1, rgba: pixels.iter().flatten().copied().collect() }
+    }
+
+    #[test]
+    fn identical_images_change_nothing() {
+        let a = image(&[[10, 20, 30, 255], [0, 0, 0, 0]]);
+        let c = LodChange::between(&a, &a, (5, 5)).unwrap();
+        assert_eq!(c.changed_pixels, 0.0);
+        assert_eq!(c.psnr_db, None);
+    }
+
+    #[test]
+    fn a_changed_pixel_is_counted_with_its_psnr() {
+        let a = image(&[[10, 20, 30, 255], [0, 0, 0, 255], [1, 1, 1, 255], [9, 9, 9, 255]]);
+        let b = image(&[[10, 20, 30, 255], [255, 255, 255, 255], [1, 1, 1, 255], [9, 9, 9, 255]]);
+        let c = LodChange::between(&a, &b, (4, 6)).unwrap();
+        assert_eq!(c.changed_pixels, 0.25);
+        assert!(c.psnr_db.is_some_and(|p| p.is_finite() && p > 0.0 && p < 20.0), "{c:?}");
+        assert_eq!((c.triangles_before, c.triangles_now), (4, 6));
+    }
+}

