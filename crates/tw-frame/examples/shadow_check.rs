@@ -4,8 +4,8 @@
 //! LOD cut), compared away from shadow edges (`tw_frame::mask`). Pages are loaded before each
 //! frame, so both draw the complete cut.
 //!
-//! `cargo run --release -p tw-frame --example shadow_check -- STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP]`
-//! (defaults: every 10th frame, `sun`, 640x360, 1024-texel layers).
+//! `cargo run --release -p tw-frame --example shadow_check -- STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES]`
+//! (defaults: every 10th frame, `sun`, 640x360, the default layers of `ShadowOptions`).
 
 use std::sync::Arc;
 
@@ -24,7 +24,7 @@ const EDGE_PX: u32 = 2;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: shadow_check STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP]");
+        eprintln!("usage: shadow_check STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES]");
         std::process::exit(2);
     }
     let store = Arc::new(Store::open(&args[1])?);
@@ -35,7 +35,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some((a, b)) => (a.parse()?, b.parse()?),
         None => (640u32, 360u32),
     };
-    let size: u32 = args.get(6).map(|s| s.parse()).transpose()?.unwrap_or(1024);
+    let defaults = ShadowOptions::default();
+    let size: u32 = args.get(6).map(|s| s.parse()).transpose()?.unwrap_or(defaults.size);
+    let cascades: u32 = args.get(7).map(|s| s.parse()).transpose()?.unwrap_or(defaults.cascades);
     let stream = StreamOptions { budget_bytes: 1 << 30, ..Default::default() };
     let mut renderer = Renderer::new_headless(w, h)?;
     renderer.set_color_mode(ColorMode::Shadow);
@@ -47,7 +49,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (i, f) in path.frames.iter().enumerate().step_by(every) {
         let camera = f.to_scene(store.header())?;
         let light = light.to_scene(store.header(), store.header().up_axis, &camera);
-        let options = ShadowOptions { size, ..Default::default() };
+        let options = ShadowOptions { size, cascades, ..defaults };
+        options.validate()?;
         let settings = FrameSettings {
             occlusion: Occlusion::Hzb,
             wait_for_pages: true,
