@@ -66,7 +66,7 @@
 //! by the *layer's* frustum ([`Selector::select_light`], [`Selector::select_light_available`]):
 //! the LOD metric is the eye camera's pixel error and only the culling frustum changes, so a
 //! cluster drawn in both views is drawn at the same level (no false self-shadowing), and its
-//! shadow changes only when the eye's cut does. A traversal takes both as a [`View`]; the eye's
+//! shadow changes only when the eye's cut does. A traversal takes both as a `View`; the eye's
 //! own selection is the view whose frustum is the eye's.
 //!
 //! **Two residency modes.** [`Selector::select`] waits: pages are loaded through

@@ -386,7 +386,7 @@ pub fn light_visible(
 /// light-visible (`visible`, from [`light_visible`]), those whose footprint meets the footprint
 /// of a `Partial` receiver (`receivers` with their `classes`) in this layer and which lie in
 /// front of it (their nearest depth nearer than the receiver's farthest). Footprints meet on a
-/// grid of at most [`CASTER_GRID`]² cells, so the set may hold a few more than the exact one.
+/// grid of at most `CASTER_GRID` (128)² cells, so the set may hold a few more than the exact one.
 #[allow(clippy::too_many_arguments)]
 pub fn casters(
     shadows: &Shadows,
