@@ -109,6 +109,24 @@ fn unpack_normal(p: u32) -> vec3<f32> {
     return vec3<f32>(q) / 511.0;
 }
 
+// The triangle's unit normal (`normal` packed as pool.rs writes it), turned towards the eye:
+// both sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
+// eye.
+fn viewer_normal(normal: u32, position: vec3<f32>) -> vec3<f32> {
+    let to_eye = normalize(u.eye.xyz - position);
+    var n = unpack_normal(normal);
+    let len = length(n);
+    if (len > 0.0) {
+        n = n / len;
+    } else {
+        n = to_eye;
+    }
+    if (dot(n, to_eye) < 0.0) {
+        n = -n;
+    }
+    return n;
+}
+
 @vertex
 fn vs_shade(
     @location(0) position: vec3<f32>,
@@ -118,18 +136,7 @@ fn vs_shade(
 ) -> ShadeOut {
     var out: ShadeOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
-    let to_eye = normalize(u.eye.xyz - position);
-    var n = unpack_normal(normal);
-    let len = length(n);
-    if (len > 0.0) {
-        n = n / len;
-    } else {
-        n = to_eye;
-    }
-    // Both sides are drawn (inputs are not consistently wound): face the viewer.
-    if (dot(n, to_eye) < 0.0) {
-        n = -n;
-    }
+    let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let sun = max(dot(n, u.sun.xyz), 0.0);
     if (COLOR_MODE == 4u) {

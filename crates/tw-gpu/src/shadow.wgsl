@@ -73,18 +73,7 @@ fn vs_shadowed(
     var out: ShadowedOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
     out.world = position;
-    let to_eye = normalize(u.eye.xyz - position);
-    var n = unpack_normal(normal);
-    let len = length(n);
-    if (len > 0.0) {
-        n = n / len;
-    } else {
-        n = to_eye;
-    }
-    // Both sides are drawn (inputs are not consistently wound): face the viewer.
-    if (dot(n, to_eye) < 0.0) {
-        n = -n;
-    }
+    let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let facing = max(dot(n, towards_light(position)), 0.0);
     // Facing away, the light's term is 0 either way: no lookup.

@@ -572,12 +572,16 @@ mod tests {
         (Vec3::new(x, y, 0.0), Vec3::new(x + 2.0, y + 2.0, 0.05))
     }
 
-    /// A block (top at z = 4 over −3..3) on a floor, the sun straight above: tiles far from the
-    /// block are lit, tiles well under it shadowed, tiles across its edge partly shadowed, and the
-    /// block itself (its top is its own occluder) partly.
-    #[test]
-    fn a_block_on_a_floor_under_the_sun() {
-        let cam = eye();
+    /// A block (top at z = 4 over −3..3) on a 40×40 floor: the block's box, the receivers (the
+    /// floor's tiles and the block), the scene's box and what the light's map holds.
+    struct BlockScene {
+        block: (Vec3, Vec3),
+        receivers: Vec<(Vec3, Vec3)>,
+        scene: (Vec3, Vec3),
+        occluders: [Rect; 2],
+    }
+
+    fn block_scene() -> BlockScene {
         let block = (Vec3::new(-3.0, -3.0, 0.0), Vec3::new(3.0, 3.0, 4.0));
         let mut receivers = tiles();
         receivers.push(block);
@@ -586,6 +590,16 @@ mod tests {
             Rect { h: 0.0, lo: [-20.0, -20.0], hi: [20.0, 20.0] },
             Rect { h: 4.0, lo: [-3.0, -3.0], hi: [3.0, 3.0] },
         ];
+        BlockScene { block, receivers, scene, occluders }
+    }
+
+    /// A block (top at z = 4 over −3..3) on a floor, the sun straight above: tiles far from the
+    /// block are lit, tiles well under it shadowed, tiles across its edge partly shadowed, and the
+    /// block itself (its top is its own occluder) partly.
+    #[test]
+    fn a_block_on_a_floor_under_the_sun() {
+        let cam = eye();
+        let BlockScene { block, receivers, scene, occluders } = block_scene();
         for cascades in [1, 3] {
             let options = ShadowOptions { size: 256, cascades, bias_texels: 1.5 };
             let shadows =
@@ -632,14 +646,7 @@ mod tests {
     #[test]
     fn light_visible_set_and_casters() {
         let cam = eye();
-        let block = (Vec3::new(-3.0, -3.0, 0.0), Vec3::new(3.0, 3.0, 4.0));
-        let mut receivers = tiles();
-        receivers.push(block);
-        let scene = (Vec3::new(-20.0, -20.0, 0.0), Vec3::new(20.0, 20.0, 4.0));
-        let occluders = [
-            Rect { h: 0.0, lo: [-20.0, -20.0], hi: [20.0, 20.0] },
-            Rect { h: 4.0, lo: [-3.0, -3.0], hi: [3.0, 3.0] },
-        ];
+        let BlockScene { block, receivers, scene, occluders } = block_scene();
         let options = ShadowOptions { size: 256, cascades: 1, bias_texels: 1.5 };
         let shadows = fit_layers(&Light::Sun { towards: Vec3::Z }, &cam, 1.5, &receivers, scene, &options);
         let depth = rasterize(&shadows, 0, &occluders);
