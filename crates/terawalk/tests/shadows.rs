@@ -130,4 +130,28 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
         report.contains("\"shadow\"") && report.contains("caster_triangles"),
         "no shadow figures in the report"
     );
+
+    // The ray tracer's bench run casts shadow rays of the light (one run, no strategies).
+    let o = terawalk(
+        &[
+            "bench",
+            "p.tw",
+            "--frames",
+            "3",
+            "--warmup",
+            "0",
+            "--renderer",
+            "rt",
+            "--light",
+            "sun",
+            "--out",
+            "rt",
+            "--size",
+            "160x100",
+        ],
+        d,
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let report = std::fs::read_to_string(d.join("rt/report.json")).unwrap();
+    assert!(report.contains("shadow rays of the sun"), "the traced run ignored the light");
 }

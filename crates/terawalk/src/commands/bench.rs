@@ -129,7 +129,13 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     let runs_wanted: Vec<(Occlusion, bool)> = strategies
         .iter()
         .flat_map(|&s| {
-            let both: &[bool] = if shadows.is_some() && traced.is_none() { &[true, false] } else { &[false] };
+            // The ray tracer's run casts shadow rays when there is a light (one run: it has no
+            // occlusion strategies to compare).
+            let both: &[bool] = match (shadows.is_some(), traced.is_some()) {
+                (true, false) => &[true, false],
+                (true, true) => &[true],
+                (false, _) => &[false],
+            };
             both.iter().map(move |&shadowed| (s, shadowed))
         })
         .collect();
@@ -248,8 +254,12 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
         }
         bar.finish_and_clear();
         let description = if let Some(t) = &traced {
+            let light = match (shadowed, &shadows) {
+                (true, Some(s)) => format!(", shadow rays of the {}", light_name(&s.light)),
+                _ => String::new(),
+            };
             format!(
-                "ray traced on the CPU (tw-rt, {} threads{}), LOD cut at {} px, frustum culling",
+                "ray traced on the CPU (tw-rt, {} threads{}{light}), LOD cut at {} px, frustum culling",
                 tw_rt::scene::StoreTracer::threads(),
                 if t.trace.flashlight { ", flashlight with hard shadows" } else { "" },
                 args.error
