@@ -487,6 +487,12 @@ fn resident_pages(streamer: &Streamer, clusters: &[ClusterRef]) -> Vec<(u32, Arc
     pages
 }
 
+/// The grid box of cluster `c` from `pages` (sorted by page), `None` when its page is not there.
+fn page_bounds(pages: &[(u32, Arc<ResidentPage>)], c: &ClusterRef) -> Option<([u32; 3], [u32; 3])> {
+    let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+    pages[i].1.bounds.get(c.index_in_page as usize).copied()
+}
+
 /// The decoded clusters of `clusters`, in order, from `pages` (sorted by page); clusters whose
 /// page is not there (failed) are skipped.
 fn lookup<'a>(
@@ -560,10 +566,7 @@ impl Walkthrough {
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
         let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
-        let bounds = |c: &ClusterRef| {
-            let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
-            pages[i].1.bounds.get(c.index_in_page as usize).copied()
-        };
+        let bounds = |c: &ClusterRef| page_bounds(&pages, c);
         let shadow = match &settings.shadows {
             Some(shadows) => {
                 let (w, h) = self.renderer.size();

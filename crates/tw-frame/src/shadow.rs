@@ -34,7 +34,7 @@ use tw_runtime::shadow::{
 use tw_runtime::{Camera, ClusterRef, Light, ResidentPage, SelectOptions, ShadowClass, Shadows, Streamer};
 use tw_store::PageCluster;
 
-use crate::{lookup, resident_pages, FrameError};
+use crate::{lookup, page_bounds, resident_pages, FrameError};
 pub use tw_runtime::shadow::ShadowOptions;
 
 /// Shadows of a frame (`--light`, `--shadows`).
@@ -57,13 +57,9 @@ pub struct ShadowInfo {
     /// Triangles drawn into the layers (the light-view sets at the eye's LOD; a cluster in two
     /// layers counts twice); their clusters are `sets.light_cut`.
     pub light_triangles: u64,
-    /// Of `light_triangles`, those drawn: with cross-culling the layers are occlusion culled
-    /// from the light (the light-visible clusters of the last frame first, the rest tested
-    /// against them), without it the whole light-view sets are drawn.
+    /// Of `light_triangles`, those drawn: the layers are occlusion culled from the light (the
+    /// light-visible clusters of the last frame first, the rest tested against them).
     pub light_drawn_triangles: u64,
-    /// The store's grid step (scene units per grid unit) the layers were drawn with.
-    #[serde(skip)]
-    pub grid_step: f64,
     /// The receivers by class and the light-view sets (cross-culling; without it every receiver
     /// counts as partly shadowed and only the light cut is counted).
     pub sets: ShadowSetStats,
@@ -102,7 +98,6 @@ pub(crate) fn prepare(
     let mut info = ShadowInfo::default();
     let header = streamer.store().header().clone();
     let step = header.grid_step;
-    info.grid_step = step;
     let boxes: Vec<(Vec3, Vec3)> = receivers
         .iter()
         .map(|(k, _)| bounds(k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step)))
@@ -140,11 +135,12 @@ pub(crate) fn prepare(
         info.sets.light_cut += set.len() as u64;
         info.light_triangles += triangles(&set);
         let set_boxes = light_boxes(&set, &pages, step);
-        let seen = draw_layer_culled(&mut info, renderer, &shadows, i, camera, &set, &set_boxes, light_seen)?;
+        let seen =
+            draw_layer_culled(&mut info, renderer, &shadows, i, camera, step, &set, &set_boxes, light_seen)?;
         seen_now.extend(seen);
         info.draw += t.elapsed();
         if settings.cross_culling {
-            light_sets.push((set.iter().map(|(k, _)| *k).collect(), set_boxes));
+            light_sets.push(set_boxes);
         }
     }
     *light_seen = seen_now;
@@ -183,7 +179,7 @@ fn cross_cull(
     let mut sets = ShadowSetStats::default();
     let receiver_triangles: Vec<u32> = receivers.iter().map(|(_, c)| (c.indices.len() / 3) as u32).collect();
     sets.add_receivers(&classes, &receiver_triangles);
-    for (i, (_, set)) in light_sets.iter().enumerate() {
+    for (i, set) in light_sets.iter().enumerate() {
         let set_boxes: Vec<(Vec3, Vec3)> = set.iter().map(|(b, _)| *b).collect();
         let visible = light_visible(shadows, i, &depths[i], camera, &set_boxes);
         let casters = casters(shadows, i, camera, boxes, &classes, &set_boxes, &visible);
@@ -198,8 +194,8 @@ fn cross_cull(
     Ok(())
 }
 
-/// A layer's light-view set for cross-culling: its clusters, and their boxes and triangles.
-type LightSet = (Vec<ClusterRef>, Vec<((Vec3, Vec3), u64)>);
+/// A layer's light-view set for cross-culling: its clusters' boxes and triangles.
+type LightSet = Vec<((Vec3, Vec3), u64)>;
 
 /// Draws layer `layer`'s light-view set `set` with occlusion culling from the light, two-pass
 /// as the eye's hzb (crate::occlude): the clusters the light saw last frame (`light_seen`)
@@ -218,6 +214,7 @@ fn draw_layer_culled(
     shadows: &Shadows,
     layer: usize,
     camera: &Camera,
+    grid_step: f64,
     set: &[(ClusterRef, &PageCluster)],
     set_boxes: &[((Vec3, Vec3), u64)],
     light_seen: &HashSet<ClusterRef>,
@@ -230,7 +227,7 @@ fn draw_layer_culled(
     };
     let pick = |ids: &[usize]| -> Vec<(ClusterRef, &PageCluster)> { ids.iter().map(|&i| set[i]).collect() };
     let occluders = pick(&first);
-    renderer.draw_shadow_map(layer as u32, view_proj, info.grid_step, &occluders, true)?;
+    renderer.draw_shadow_map(layer as u32, view_proj, grid_step, &occluders, true)?;
     let t = Instant::now();
     let depth = renderer.read_shadow_map(layer as u32)?;
     info.readback += t.elapsed();
@@ -242,7 +239,7 @@ fn draw_layer_culled(
     let shown: Vec<usize> = rest.iter().copied().filter(|&i| visible[i]).collect();
     let second = pick(&shown);
     if !second.is_empty() {
-        renderer.draw_shadow_map(layer as u32, view_proj, info.grid_step, &second, false)?;
+        renderer.draw_shadow_map(layer as u32, view_proj, grid_step, &second, false)?;
     }
     info.light_drawn_triangles += triangles(&occluders) + triangles(&second);
     Ok(first.iter().chain(&shown).filter(|&&i| visible[i]).map(|&i| set[i].0).collect())
@@ -256,11 +253,7 @@ fn light_boxes(
 ) -> Vec<((Vec3, Vec3), u64)> {
     set.iter()
         .map(|(k, c)| {
-            let b = pages
-                .binary_search_by_key(&k.page, |(p, _)| *p)
-                .ok()
-                .and_then(|i| pages[i].1.bounds.get(k.index_in_page as usize))
-                .map_or((Vec3::ZERO, Vec3::ZERO), |&(lo, hi)| grid_box(lo, hi, step));
+            let b = page_bounds(pages, k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step));
             (b, (c.indices.len() / 3) as u64)
         })
         .collect()
@@ -285,9 +278,7 @@ pub(crate) fn receivers<'a>(
     if occlusion == crate::Occlusion::None || history.is_empty() {
         return cut.to_vec();
     }
-    let refs: Vec<ClusterRef> = cut.iter().map(|(k, _)| *k).collect();
-    let seen: std::collections::HashSet<ClusterRef> = history.split(&refs).occluders.into_iter().collect();
-    let visible: Vec<_> = cut.iter().filter(|(k, _)| seen.contains(k)).copied().collect();
+    let visible: Vec<_> = cut.iter().filter(|(k, _)| history.contains(k)).copied().collect();
     if visible.is_empty() {
         cut.to_vec()
     } else {

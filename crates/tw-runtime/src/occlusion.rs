@@ -112,6 +112,11 @@ impl OcclusionHistory {
         s
     }
 
+    /// Whether `c` is in the visible set.
+    pub fn contains(&self, c: &ClusterRef) -> bool {
+        self.get(c).is_some()
+    }
+
     /// The triangles of `c` in the visible set, if it is there.
     fn get(&self, c: &ClusterRef) -> Option<TriangleMask> {
         let i = self.visible.binary_search_by_key(&key(c), |e| e.0).ok()?;
