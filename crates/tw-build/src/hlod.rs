@@ -47,7 +47,7 @@ use crate::lod::{
     MAX_CLUSTER_TRIANGLES, MAX_CLUSTER_VERTICES, MIN_ERROR,
 };
 use crate::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
-use meshopt::SimplifyOptions;
+use meshopt::{SimplifyOptions, VertexDataAdapter};
 
 /// Most simplifications of one node, each locking more vertices around the edges the last broke.
 const REPAIR_ROUNDS: usize = 8;
@@ -188,32 +188,82 @@ pub fn build_hlod(
     params: &HlodParams,
     external: &dyn Fn([u32; 3]) -> bool,
 ) -> HlodNode {
-    let max_triangles = (params.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4;
-    let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
-
-    // 1. Merge: positions deduplicated by grid point, numbered in grid-point order.
-    // Every cluster vertex is a slot (clusters in order); slots sorted by their point packed into
-    // a u128 key (which sorts like the [u32; 3] point), so each slot's merged index comes from
-    // one sort rather than a search per triangle corner.
-    let key = |p: &[u32; 3]| (p[0] as u128) << 64 | (p[1] as u128) << 32 | p[2] as u128;
-    let mut slots: Vec<(u128, u32)> = children
-        .iter()
-        .flat_map(|r| r.dag.clusters.iter().flat_map(|c| c.positions.iter().map(key)))
-        .enumerate()
-        .map(|(slot, k)| (k, slot as u32))
-        .collect();
-    slots.sort_unstable();
-    let mut merged_index = vec![0u32; slots.len()];
-    let mut positions: Vec<[u32; 3]> = Vec::new();
-    let mut last = None;
-    for &(k, slot) in &slots {
-        if last != Some(k) {
-            positions.push(unpack_triangle(k));
-            last = Some(k);
-        }
-        merged_index[slot as usize] = positions.len() as u32 - 1;
+    // 1. Merge.
+    let Merged { positions, indices, objects, child_error, level, replaced, sphere } =
+        merge_children(children);
+    if indices.is_empty() {
+        let error = child_error.max(MIN_ERROR);
+        let stats = HlodStats { error, child_error, ..HlodStats::default() };
+        return HlodNode { dag: LodDag::default(), replaced, error, sphere, stats };
     }
-    drop(slots);
+
+    // 2. Simplify across borders.
+    let frame = Frame::new(&positions, grid);
+    let local = frame.local_positions(&positions);
+    let vertices = adapter(&local);
+    let tri_count = indices.len() / 3;
+    let target = ((tri_count as f64 * params.ratio.clamp(0.0, 1.0) as f64).ceil() as usize)
+        .min(params.max_node_triangles)
+        .max(1);
+    let locks: Vec<bool> = crate::lod::open_boundary_vertices(positions.len(), &indices)
+        .into_iter()
+        .zip(&positions)
+        .map(|(open, &p)| open && external(p))
+        .collect();
+    let input = SimplifyInput {
+        indices: &indices,
+        local: &local,
+        vertices: &vertices,
+        locks: &locks,
+        target,
+        check: EdgeCheck::new(positions.len(), &indices, &locks),
+        area_in: mesh_area(&local, &indices),
+    };
+    let s = if target < tri_count { input.simplify() } else { Simplified::unchanged(&indices) };
+    // Accumulated from the input, as in the cells (crate::lod, "Accumulated errors"): the
+    // children's largest error plus this simplification's own, measured against their clusters.
+    let error = accumulate(child_error, round_up(s.error_local as f64 * frame.step)).max(MIN_ERROR);
+
+    // 3. Re-cluster and group.
+    let vertex_object = vertex_objects(positions.len(), &indices, &objects);
+    let groups = NodeGroups { error, sphere, level: level.saturating_add(1), replaced: &replaced };
+    let dag = recluster(&s.indices, &vertices, &positions, &vertex_object, params, &groups);
+    let stats = HlodStats {
+        triangles_in: tri_count,
+        target,
+        triangles_out: s.indices.len() / 3,
+        outcome: s.outcome,
+        rounds: s.rounds,
+        pruned: s.pruned,
+        error,
+        child_error,
+        area_ratio: (mesh_area(&local, &s.indices) / input.area_in.max(f64::MIN_POSITIVE)) as f32,
+    };
+    tracing::debug!(?stats, "hlod node");
+    HlodNode { dag, replaced, error, sphere, stats }
+}
+
+/// The children's roots merged into one mesh ([`merge_children`]).
+struct Merged {
+    /// Grid points, deduplicated, in grid-point order.
+    positions: Vec<[u32; 3]>,
+    /// Triangles into `positions` (those that collapsed in the merge left out).
+    indices: Vec<u32>,
+    /// Each triangle's object.
+    objects: Vec<u32>,
+    /// The largest error and level of the children's clusters.
+    child_error: f32,
+    level: u8,
+    /// The children's root groups (caller's ids), which the node replaces.
+    replaced: Vec<u32>,
+    /// A sphere around the replaced groups' spheres.
+    sphere: Sphere,
+}
+
+/// Step 1, merge: the children's clusters as one mesh, positions deduplicated by grid point,
+/// with the groups they replace.
+fn merge_children(children: &[Roots]) -> Merged {
+    let (merged_index, positions) = merge_positions(children);
     let mut indices: Vec<u32> = Vec::new();
     let mut objects: Vec<u32> = Vec::new();
     let mut child_error = 0.0f32;
@@ -244,152 +294,252 @@ pub fn build_hlod(
         }
     }
     let sphere = enclosing_sphere(&spheres);
-    if indices.is_empty() {
-        let error = child_error.max(MIN_ERROR);
-        let stats = HlodStats { error, child_error, ..HlodStats::default() };
-        return HlodNode { dag: LodDag::default(), replaced, error, sphere, stats };
+    Merged { positions, indices, objects, child_error, level, replaced, sphere }
+}
+
+/// The merged positions, numbered in grid-point order, and the merged index of every cluster
+/// vertex (a slot; clusters in order). Slots are sorted by their point packed into a u128 key
+/// (which sorts like the [u32; 3] point), so each slot's merged index comes from one sort
+/// rather than a search per triangle corner.
+fn merge_positions(children: &[Roots]) -> (Vec<u32>, Vec<[u32; 3]>) {
+    let key = |p: &[u32; 3]| (p[0] as u128) << 64 | (p[1] as u128) << 32 | p[2] as u128;
+    let mut slots: Vec<(u128, u32)> = children
+        .iter()
+        .flat_map(|r| r.dag.clusters.iter().flat_map(|c| c.positions.iter().map(key)))
+        .enumerate()
+        .map(|(slot, k)| (k, slot as u32))
+        .collect();
+    slots.sort_unstable();
+    let mut merged_index = vec![0u32; slots.len()];
+    let mut positions: Vec<[u32; 3]> = Vec::new();
+    let mut last = None;
+    for &(k, slot) in &slots {
+        if last != Some(k) {
+            positions.push(unpack_triangle(k));
+            last = Some(k);
+        }
+        merged_index[slot as usize] = positions.len() as u32 - 1;
+    }
+    (merged_index, positions)
+}
+
+/// The merged mesh of step 2 and what its results are checked against.
+struct SimplifyInput<'a> {
+    indices: &'a [u32],
+    /// Positions in the node's local frame, and meshopt's view of them.
+    local: &'a [[f32; 3]],
+    vertices: &'a VertexDataAdapter<'a>,
+    /// Vertices on open edges shared with a cell outside the node.
+    locks: &'a [bool],
+    /// Triangles to reach.
+    target: usize,
+    check: EdgeCheck<'a>,
+    /// The merged mesh's surface area.
+    area_in: f64,
+}
+
+/// The result of step 2.
+struct Simplified {
+    indices: Vec<u32>,
+    /// Its error in local units.
+    error_local: f32,
+    outcome: HlodOutcome,
+    rounds: usize,
+    /// Triangles of the whole parts dropped.
+    pruned: usize,
+}
+
+impl Simplified {
+    /// The merged mesh itself, at or below the target already.
+    fn unchanged(indices: &[u32]) -> Simplified {
+        Simplified {
+            indices: indices.to_vec(),
+            error_local: 0.0,
+            outcome: HlodOutcome::Unchanged,
+            rounds: 0,
+            pruned: 0,
+        }
+    }
+}
+
+impl SimplifyInput<'_> {
+    /// Step 2, for a mesh above the target: the regular simplifier with repair rounds, then
+    /// the sloppy one if that stalls above the target, then whole small parts dropped if still
+    /// above it. A result is kept only if it breaks no edge ([`EdgeCheck::broken`]: seams kept
+    /// open, no holes) and does not grow the area (a fold or a bridge over a gap, module
+    /// comment, step 2); the last resort is the merged mesh itself (a lossless step: the parent
+    /// tries again with more room).
+    fn simplify(&self) -> Simplified {
+        let mut s = Simplified { outcome: HlodOutcome::Merged, ..Simplified::unchanged(self.indices) };
+        let sim_locks = self.regular_rounds(&mut s);
+        self.sloppy_if_stalled(&sim_locks, &mut s);
+        self.prune_if_above_target(&mut s);
+        s
     }
 
-    // 2. Simplify across borders.
-    let frame = Frame::new(&positions, grid);
-    let local = frame.local_positions(&positions);
-    let vertices = adapter(&local);
-    let tri_count = indices.len() / 3;
-    let target = ((tri_count as f64 * params.ratio.clamp(0.0, 1.0) as f64).ceil() as usize)
-        .min(params.max_node_triangles)
-        .max(1);
-    let mut error_local = 0.0f32;
-    let locks: Vec<bool> = crate::lod::open_boundary_vertices(positions.len(), &indices)
-        .into_iter()
-        .zip(&positions)
-        .map(|(open, &p)| open && external(p))
-        .collect();
-    // A result is kept only if it breaks no edge (`broken_edges`: seams kept open, no holes).
-    // If the regular simplifier breaks some, the neighbourhood of those edges is locked too and
-    // it runs again (a few rounds); the last resort is the merged mesh itself (a lossless step:
-    // the parent tries again with more room).
-    let check = EdgeCheck::new(positions.len(), &indices, &locks);
-    let broken = |out: &[u32]| check.broken(out);
-    // A result whose area grew folded or bridged parts over gaps (module comment, step 2).
-    let area_in = mesh_area(&local, &indices);
-    let grows = |out: &[u32]| mesh_area(&local, out) > area_in * MAX_AREA_GROWTH;
-    let mut simplified = indices.clone();
-    let mut sim_locks = locks.clone();
-    let mut outcome = HlodOutcome::Unchanged;
-    let mut rounds = 0;
-    let mut pruned = 0;
-    if target < tri_count {
-        outcome = HlodOutcome::Merged;
+    /// Whether `out` breaks no edge and does not grow the area.
+    fn acceptable(&self, out: &[u32]) -> bool {
+        self.check.broken(out).is_empty() && !self.grows(out)
+    }
+
+    /// A result whose area grew folded or bridged parts over gaps (module comment, step 2).
+    fn grows(&self, out: &[u32]) -> bool {
+        mesh_area(self.local, out) > self.area_in * MAX_AREA_GROWTH
+    }
+
+    /// The regular simplifier. If it breaks some edges, the neighbourhood of those edges is
+    /// locked too and it runs again (at most [`REPAIR_ROUNDS`]); the first result that passes
+    /// goes to `s`. Returns the locks it ended with, for the sloppy simplifier.
+    fn regular_rounds(&self, s: &mut Simplified) -> Vec<bool> {
+        let mut sim_locks = self.locks.to_vec();
         for _ in 0..REPAIR_ROUNDS {
-            rounds += 1;
-            let simplify = |options: SimplifyOptions, error: &mut f32| {
-                meshopt::simplify_with_locks(
-                    &indices,
-                    &vertices,
-                    &sim_locks,
-                    target * 3,
-                    f32::MAX,
-                    options,
-                    Some(error),
-                )
-            };
-            // Pruning removes whole components, locked vertices included: a pruned component
-            // on a seam would leave the finer neighbour's border open (a crack), and pruning
-            // everything would leave nothing. So it is tried only while no vertex is locked
-            // (with locks it broke a seam in 79 % of the 10^7 plant's rounds, and each then
-            // ran twice); if it still breaks something, simplify again without it.
-            let mut err = 0.0f32;
-            let mut out = Vec::new();
-            if !sim_locks.contains(&true) {
-                out = simplify(SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune, &mut err);
-            }
-            if out.is_empty() || !broken(&out).is_empty() {
-                err = 0.0;
-                out = simplify(SimplifyOptions::ErrorAbsolute, &mut err);
-            }
-            let bad = broken(&out);
-            if !out.is_empty() && bad.is_empty() && !grows(&out) {
-                simplified = out;
-                error_local = err;
-                outcome = HlodOutcome::Regular;
+            s.rounds += 1;
+            let (out, err) = self.simplify_regular(&sim_locks);
+            let bad = self.check.broken(&out);
+            if !out.is_empty() && bad.is_empty() && !self.grows(&out) {
+                s.indices = out;
+                s.error_local = err;
+                s.outcome = HlodOutcome::Regular;
                 break;
             }
-            // The vertices that collapsed to break an edge are among its ends' neighbours.
-            let mut ends: Vec<u32> = bad.into_iter().flat_map(|(a, b)| [a, b]).collect();
-            ends.sort_unstable();
-            ends.dedup();
-            let mut grew = false;
-            for t in indices.chunks_exact(3) {
-                if t.iter().any(|v| ends.binary_search(v).is_ok()) {
-                    for &v in t {
-                        if let Some(l) = sim_locks.get_mut(v as usize) {
-                            grew |= !*l;
-                            *l = true;
-                        }
+            if !self.lock_around(&bad, &mut sim_locks) {
+                break;
+            }
+        }
+        sim_locks
+    }
+
+    /// One run of the regular simplifier under `sim_locks`, with its error. Pruning removes
+    /// whole components, locked vertices included: a pruned component on a seam would leave the
+    /// finer neighbour's border open (a crack), and pruning everything would leave nothing. So
+    /// it is tried only while no vertex is locked (with locks it broke a seam in 79 % of the
+    /// 10^7 plant's rounds, and each then ran twice); if it still breaks something, simplify
+    /// again without it.
+    fn simplify_regular(&self, sim_locks: &[bool]) -> (Vec<u32>, f32) {
+        let simplify = |options: SimplifyOptions, error: &mut f32| {
+            meshopt::simplify_with_locks(
+                self.indices,
+                self.vertices,
+                sim_locks,
+                self.target * 3,
+                f32::MAX,
+                options,
+                Some(error),
+            )
+        };
+        let mut err = 0.0f32;
+        let mut out = Vec::new();
+        if !sim_locks.contains(&true) {
+            out = simplify(SimplifyOptions::ErrorAbsolute | SimplifyOptions::Prune, &mut err);
+        }
+        if out.is_empty() || !self.check.broken(&out).is_empty() {
+            err = 0.0;
+            out = simplify(SimplifyOptions::ErrorAbsolute, &mut err);
+        }
+        (out, err)
+    }
+
+    /// Locks every vertex of the triangles that touch an end of a broken edge: the vertices
+    /// that collapsed to break it are among its ends' neighbours. Returns whether any lock
+    /// was added (if none, another round would repeat this one).
+    fn lock_around(&self, bad: &[(u32, u32)], sim_locks: &mut [bool]) -> bool {
+        let mut ends: Vec<u32> = bad.iter().flat_map(|&(a, b)| [a, b]).collect();
+        ends.sort_unstable();
+        ends.dedup();
+        let mut grew = false;
+        for t in self.indices.chunks_exact(3) {
+            if t.iter().any(|v| ends.binary_search(v).is_ok()) {
+                for &v in t {
+                    if let Some(l) = sim_locks.get_mut(v as usize) {
+                        grew |= !*l;
+                        *l = true;
                     }
                 }
             }
-            if !grew {
-                break;
-            }
         }
-        // The sloppy simplifier ignores topology: only when the regular one stalls above the
-        // target, and only if its result passes the same checks.
-        if simplified.len() / 3 > target + target / 8 {
-            let mut rel = 0.0f32;
-            let sloppy = meshopt::simplify_sloppy_with_locks(
-                &indices,
-                &vertices,
-                &sim_locks,
-                target * 3,
-                f32::MAX,
-                Some(&mut rel),
-            );
-            if !sloppy.is_empty()
-                && sloppy.len() < simplified.len()
-                && broken(&sloppy).is_empty()
-                && !grows(&sloppy)
-            {
-                simplified = sloppy;
-                error_local = error_local.max(rel * meshopt::simplify_scale(&vertices) * 2.0);
-                outcome = HlodOutcome::Sloppy;
-            }
+        grew
+    }
+
+    /// Whether `s` is still more than 1/8 above the target.
+    fn above_target(&self, s: &Simplified) -> bool {
+        s.indices.len() / 3 > self.target + self.target / 8
+    }
+
+    /// The sloppy simplifier ignores topology: only when the regular one stalls above the
+    /// target, and only if its result passes the same checks.
+    fn sloppy_if_stalled(&self, sim_locks: &[bool], s: &mut Simplified) {
+        if !self.above_target(s) {
+            return;
         }
-        // Still above the target: the rest is many small disjoint parts (bolts, pipe pieces, each
-        // already at the few triangles a closed part keeps). Drop whole parts, smallest first.
-        if simplified.len() / 3 > target + target / 8 {
-            // Pinned: a part with an open edge on a seam with a cell outside the node (the
-            // locks). A seam position inside the node is closed in the merged mesh (both halves
-            // of the part are here), so it no longer pins the part.
-            let (radius, removed) = prune_components(&mut simplified, &local, &locks, target);
-            if removed > 0 {
-                error_local = error_local.max(radius);
-                pruned = removed;
-            }
+        let mut rel = 0.0f32;
+        let sloppy = meshopt::simplify_sloppy_with_locks(
+            self.indices,
+            self.vertices,
+            sim_locks,
+            self.target * 3,
+            f32::MAX,
+            Some(&mut rel),
+        );
+        if !sloppy.is_empty() && sloppy.len() < s.indices.len() && self.acceptable(&sloppy) {
+            s.indices = sloppy;
+            s.error_local = s.error_local.max(rel * meshopt::simplify_scale(self.vertices) * 2.0);
+            s.outcome = HlodOutcome::Sloppy;
         }
     }
-    // Accumulated from the input, as in the cells (crate::lod, "Accumulated errors"): the
-    // children's largest error plus this simplification's own, measured against their clusters.
-    let error = accumulate(child_error, round_up(error_local as f64 * frame.step)).max(MIN_ERROR);
 
-    // 3. Re-cluster and group.
-    let vertex_object = vertex_objects(positions.len(), &indices, &objects);
-    // meshopt's spatial clusterizer, as in the cells (crate::lod): on the 10^7 plant it takes
-    // 10–18 % less of HLOD's time than the adjacency-driven one, for the same page bytes.
+    /// Still above the target: the rest is many small disjoint parts (bolts, pipe pieces, each
+    /// already at the few triangles a closed part keeps). Drop whole parts, smallest first.
+    /// Pinned: a part with an open edge on a seam with a cell outside the node (the locks). A
+    /// seam position inside the node is closed in the merged mesh (both halves of the part are
+    /// here), so it no longer pins the part.
+    fn prune_if_above_target(&self, s: &mut Simplified) {
+        if !self.above_target(s) {
+            return;
+        }
+        let (radius, removed) = prune_components(&mut s.indices, self.local, self.locks, self.target);
+        if removed > 0 {
+            s.error_local = s.error_local.max(radius);
+            s.pruned = removed;
+        }
+    }
+}
+
+/// What every group and cluster of a node shares: its error, sphere, level and the groups it
+/// replaces.
+struct NodeGroups<'a> {
+    error: f32,
+    sphere: Sphere,
+    level: u8,
+    replaced: &'a [u32],
+}
+
+/// Step 3, re-cluster and group: the simplified triangles as clusters, `group_clusters` to a
+/// root group. meshopt's spatial clusterizer, as in the cells (crate::lod): on the 10^7 plant
+/// it takes 10–18 % less of HLOD's time than the adjacency-driven one, for the same page bytes.
+fn recluster(
+    simplified: &[u32],
+    vertices: &VertexDataAdapter,
+    positions: &[[u32; 3]],
+    vertex_object: &[u32],
+    params: &HlodParams,
+    node: &NodeGroups,
+) -> LodDag {
+    let max_triangles = (params.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4;
+    let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
     let min_triangles = (max_triangles / 3).max(1);
     let meshlets = meshopt::build_meshlets_spatial(
-        &simplified,
-        &vertices,
+        simplified,
+        vertices,
         max_vertices,
         min_triangles,
         max_triangles,
         1.0,
     );
     let mut dag = LodDag::default();
-    let level = level.saturating_add(1);
     for m in meshlets.iter() {
         let group_clusters = params.group_clusters.max(1);
         if dag.groups.last().is_none_or(|g: &LodGroup| g.clusters.len() >= group_clusters) {
+            let (sphere, level) = (node.sphere, node.level);
             dag.groups.push(LodGroup { error: f32::INFINITY, sphere, clusters: Vec::new(), level });
         }
         let gi = dag.groups.len() - 1;
@@ -401,31 +551,19 @@ pub fn build_hlod(
                 .chunks_exact(3)
                 .map(|t| {
                     let tri = [t[0], t[1], t[2]].map(|k| m.vertices[k as usize]);
-                    triangle_object(&vertex_object, tri)
+                    triangle_object(vertex_object, tri)
                 })
                 .collect(),
-            self_error: error,
-            self_sphere: sphere,
+            self_error: node.error,
+            self_sphere: node.sphere,
             group: gi as u32,
-            level,
-            refined_from: replaced.clone(),
+            level: node.level,
+            refined_from: node.replaced.to_vec(),
         };
         dag.groups[gi].clusters.push(dag.clusters.len() as u32);
         dag.clusters.push(cluster);
     }
-    let stats = HlodStats {
-        triangles_in: tri_count,
-        target,
-        triangles_out: simplified.len() / 3,
-        outcome,
-        rounds,
-        pruned,
-        error,
-        child_error,
-        area_ratio: (mesh_area(&local, &simplified) / area_in.max(f64::MIN_POSITIVE)) as f32,
-    };
-    tracing::debug!(?stats, "hlod node");
-    HlodNode { dag, replaced, error, sphere, stats }
+    dag
 }
 
 /// Total area of the triangles `indices` over `positions`.

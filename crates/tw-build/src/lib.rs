@@ -9,6 +9,7 @@
 //! 5. [`pages`]: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically; [`pipeline::build`] runs all phases.
 
+mod bucket_queue;
 pub mod cells;
 mod clusterlod;
 pub mod cut;
@@ -16,6 +17,7 @@ pub mod error;
 pub mod hierarchy;
 pub mod hlod;
 mod hlod_jobs;
+mod in_order;
 pub mod ingest;
 pub mod lod;
 pub mod pages;

@@ -67,7 +67,7 @@
 //! Degenerate triangles (an index repeated; the mesh is deduplicated by grid position, so this
 //! is also a repeated position) and triangles with out-of-range indices are dropped.
 
-use crate::clusterlod::{build_dag, DagConfig};
+use crate::clusterlod::{build_dag, DagBounds, DagCluster, DagConfig};
 use crate::types::{CellMesh, Grid, GridBox, LodCluster, LodDag, LodGroup, Sphere};
 use meshopt::{SimplifyVertex, VertexDataAdapter};
 
@@ -126,110 +126,171 @@ pub fn build_cell_lod_with_seams(
     }
     let frame = Frame::new(&mesh.positions, grid);
     let local = frame.local_positions(&mesh.positions);
-    let vertex_object = vertex_objects(n, &indices, &objects);
-    let (open, tangled) = boundary_kinds(n, &indices);
-    let anchors: Vec<bool> = (0..n).map(|v| open[v] && seam(mesh.positions[v])).collect();
-    let locks: Vec<SimplifyVertex> = (0..n)
-        .map(|v| if tangled[v] || anchors[v] { SimplifyVertex::Lock } else { SimplifyVertex::None })
-        .collect();
-    let mut originals = OriginalTriangles::new(n, &indices, &objects);
+    let (anchors, locks) = seam_locks(mesh, &indices, seam);
+    let mut raw = RawDag {
+        mesh,
+        frame: &frame,
+        params: &params,
+        vertex_object: vertex_objects(n, &indices, &objects),
+        originals: OriginalTriangles::new(n, &indices, &objects),
+        groups: Vec::new(),
+        refined: Vec::new(),
+        clusters: Vec::new(),
+    };
 
     // The build loop (crate::clusterlod): clusterlod's, with small disconnected parts removed
     // once the error allows it. No sloppy fallback: its vertex clustering can open holes inside a
     // group (cracks in a cut; see plant_cell_dag_is_valid_complete_and_crack_free). A stuck group
     // becomes a root instead, which HLOD simplifies further.
     let config = DagConfig::new(params.max_triangles, params.max_vertices);
-    // Raw output, in meshopt's local units; converted, accumulated and made monotone below.
-    struct RawGroup {
-        /// The error of this group's own simplification (against its clusters), scene units.
-        error: f32,
-        sphere: Sphere,
-        clusters: Vec<u32>,
-    }
-    let mut raw_groups: Vec<RawGroup> = Vec::new();
-    let mut refined: Vec<i32> = Vec::new();
-    let mut clusters: Vec<LodCluster> = Vec::new();
-    let dag_stats = build_dag(&config, &local, &indices, &locks, &anchors, |s, out| {
-        let id = raw_groups.len() as u32;
+    let dag_stats = build_dag(&config, &local, &indices, &locks, &anchors, |s, out| raw.add_group(s, out));
+    tracing::debug!(?dag_stats, "cell dag");
+    debug_assert!(raw.originals.all_taken());
+    raw.onto_model()
+}
+
+/// The cell's anchors (open-border vertices that `seam` says are shared with another cell) and
+/// the simplifier's locks: the anchors and every vertex on a non-manifold or inconsistently
+/// wound edge.
+fn seam_locks(
+    mesh: &CellMesh,
+    indices: &[u32],
+    seam: &dyn Fn([u32; 3]) -> bool,
+) -> (Vec<bool>, Vec<SimplifyVertex>) {
+    let n = mesh.positions.len();
+    let (open, tangled) = boundary_kinds(n, indices);
+    let anchors: Vec<bool> = (0..n).map(|v| open[v] && seam(mesh.positions[v])).collect();
+    let locks: Vec<SimplifyVertex> = (0..n)
+        .map(|v| if tangled[v] || anchors[v] { SimplifyVertex::Lock } else { SimplifyVertex::None })
+        .collect();
+    (anchors, locks)
+}
+
+/// One group as the build loop hands it out, in meshopt's local units; converted, accumulated
+/// and made monotone by [`RawDag::onto_model`].
+struct RawGroup {
+    /// The error of this group's own simplification (against its clusters), scene units.
+    error: f32,
+    sphere: Sphere,
+    clusters: Vec<u32>,
+}
+
+/// The build loop's output as it comes, and what is needed to turn its clusters into the
+/// cell's: the grid points, the frame, and each triangle's object.
+struct RawDag<'a> {
+    mesh: &'a CellMesh,
+    frame: &'a Frame,
+    params: &'a LodParams,
+    vertex_object: Vec<u32>,
+    /// The input triangles' objects, each taken by the level-0 cluster that keeps it.
+    originals: OriginalTriangles,
+    groups: Vec<RawGroup>,
+    /// Each cluster's source group (−1 at level 0).
+    refined: Vec<i32>,
+    clusters: Vec<LodCluster>,
+}
+
+impl RawDag<'_> {
+    /// The build loop's output callback: records group `s` and its clusters `out` (grid
+    /// points, local triangles, objects, bounds) and returns the group's id.
+    fn add_group(&mut self, s: DagBounds, out: &[DagCluster<'_>]) -> i32 {
+        let id = self.groups.len() as u32;
         let mut members = Vec::with_capacity(out.len());
         for c in out {
-            let (verts, tris) = meshopt::clod_local_indices(c.indices);
-            debug_assert!(tris.len() / 3 <= params.max_triangles && verts.len() <= params.max_vertices);
-            let positions: Vec<[u32; 3]> = verts.iter().map(|&v| mesh.positions[v as usize]).collect();
-            let objects: Vec<u32> = tris
-                .chunks_exact(3)
-                .map(|t| {
-                    let tri = [verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]];
-                    if c.refined < 0 {
-                        originals.take(tri).unwrap_or_else(|| triangle_object(&vertex_object, tri))
-                    } else {
-                        triangle_object(&vertex_object, tri)
-                    }
-                })
-                .collect();
-            let b = c.bounds;
-            members.push(clusters.len() as u32);
-            refined.push(c.refined);
-            clusters.push(LodCluster {
-                positions,
-                indices: tris,
-                objects,
-                self_error: b.error,
-                self_sphere: frame.sphere(b.center, b.radius),
-                group: id,
-                ..LodCluster::default()
-            });
+            members.push(self.clusters.len() as u32);
+            self.refined.push(c.refined);
+            let cluster = self.cluster(c, id);
+            self.clusters.push(cluster);
         }
-        raw_groups.push(RawGroup {
-            error: if s.error >= f32::MAX { f32::INFINITY } else { s.error * frame.step as f32 },
-            sphere: frame.sphere(s.center, s.radius),
+        self.groups.push(RawGroup {
+            error: if s.error >= f32::MAX { f32::INFINITY } else { s.error * self.frame.step as f32 },
+            sphere: self.frame.sphere(s.center, s.radius),
             clusters: members,
         });
         id as i32
-    });
-
-    // Map onto the model, in group order (a cluster's source group precedes its own group).
-    let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
-    let mut steps: rustc_hash::FxHashSet<(u32, [u32; 4])> = rustc_hash::FxHashSet::default();
-    for raw in raw_groups {
-        let mut g = LodGroup { error: 0.0, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
-        for &ci in &g.clusters {
-            let c = &mut clusters[ci as usize];
-            match u32::try_from(refined[ci as usize]) {
-                Ok(r) if (r as usize) < groups.len() => {
-                    let src = &groups[r as usize];
-                    c.self_error = src.error;
-                    c.self_sphere = src.sphere;
-                    c.refined_from = vec![r];
-                    c.level = src.level.saturating_add(1);
-                }
-                _ => {
-                    c.self_error = 0.0;
-                    c.refined_from.clear();
-                    c.level = 0;
-                    for &p in &c.positions {
-                        grow_sphere(&mut c.self_sphere, frame.scene64(p), 0.0);
-                    }
-                }
-            }
-            g.error = g.error.max(c.self_error);
-            g.level = g.level.max(c.level);
-            grow_sphere(&mut g.sphere, sphere_center64(&c.self_sphere), c.self_sphere.radius as f64);
-        }
-        // g.error is now the largest member self error (≥ 0, finite).
-        g.error = accumulate(g.error, raw.error);
-        if g.error.is_finite() {
-            g.error = g.error.max(MIN_ERROR);
-            // One step, one (error, sphere): see the module comment ("Step identity").
-            while !steps.insert(step_key(&g)) {
-                g.error = g.error.next_up();
-            }
-        }
-        groups.push(g);
     }
-    tracing::debug!(?dag_stats, "cell dag");
-    debug_assert!(originals.all_taken());
-    LodDag { clusters, groups }
+
+    /// One cluster of group `group`: its vertices as grid points, its triangles in local
+    /// indices, and each triangle's object (a level-0 triangle's own, else by its vertices).
+    fn cluster(&mut self, c: &DagCluster<'_>, group: u32) -> LodCluster {
+        let (verts, tris) = meshopt::clod_local_indices(c.indices);
+        debug_assert!(tris.len() / 3 <= self.params.max_triangles && verts.len() <= self.params.max_vertices);
+        let positions: Vec<[u32; 3]> = verts.iter().map(|&v| self.mesh.positions[v as usize]).collect();
+        let objects: Vec<u32> = tris
+            .chunks_exact(3)
+            .map(|t| {
+                let tri = [verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]];
+                if c.refined < 0 {
+                    self.originals.take(tri).unwrap_or_else(|| triangle_object(&self.vertex_object, tri))
+                } else {
+                    triangle_object(&self.vertex_object, tri)
+                }
+            })
+            .collect();
+        let b = c.bounds;
+        LodCluster {
+            positions,
+            indices: tris,
+            objects,
+            self_error: b.error,
+            self_sphere: self.frame.sphere(b.center, b.radius),
+            group,
+            ..LodCluster::default()
+        }
+    }
+
+    /// Maps the output onto the model, in group order (a cluster's source group precedes its
+    /// own group): each cluster takes its source group's error, sphere and level; each group's
+    /// error accumulates its members' and its own, made unique per step.
+    fn onto_model(self) -> LodDag {
+        let RawDag { frame, groups: raw_groups, refined, mut clusters, .. } = self;
+        let mut groups: Vec<LodGroup> = Vec::with_capacity(raw_groups.len());
+        let mut steps: rustc_hash::FxHashSet<(u32, [u32; 4])> = rustc_hash::FxHashSet::default();
+        for raw in raw_groups {
+            let mut g = LodGroup { error: 0.0, sphere: raw.sphere, clusters: raw.clusters, level: 0 };
+            for &ci in &g.clusters {
+                let c = &mut clusters[ci as usize];
+                link_to_source(c, refined[ci as usize], &groups, frame);
+                g.error = g.error.max(c.self_error);
+                g.level = g.level.max(c.level);
+                grow_sphere(&mut g.sphere, sphere_center64(&c.self_sphere), c.self_sphere.radius as f64);
+            }
+            // g.error is now the largest member self error (≥ 0, finite).
+            g.error = accumulate(g.error, raw.error);
+            if g.error.is_finite() {
+                g.error = g.error.max(MIN_ERROR);
+                // One step, one (error, sphere): see the module comment ("Step identity").
+                while !steps.insert(step_key(&g)) {
+                    g.error = g.error.next_up();
+                }
+            }
+            groups.push(g);
+        }
+        LodDag { clusters, groups }
+    }
+}
+
+/// Gives cluster `c` the error, sphere and level of the group it was simplified from
+/// (`refined`, an index into `groups`); a level-0 cluster gets error 0 and a sphere around its
+/// own points.
+fn link_to_source(c: &mut LodCluster, refined: i32, groups: &[LodGroup], frame: &Frame) {
+    match u32::try_from(refined) {
+        Ok(r) if (r as usize) < groups.len() => {
+            let src = &groups[r as usize];
+            c.self_error = src.error;
+            c.self_sphere = src.sphere;
+            c.refined_from = vec![r];
+            c.level = src.level.saturating_add(1);
+        }
+        _ => {
+            c.self_error = 0.0;
+            c.refined_from.clear();
+            c.level = 0;
+            for &p in &c.positions {
+                grow_sphere(&mut c.self_sphere, frame.scene64(p), 0.0);
+            }
+        }
+    }
 }
 
 /// The error of a simplification step's output measured from the input: its inputs' largest

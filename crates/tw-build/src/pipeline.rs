@@ -31,14 +31,17 @@ use tw_io::up::{UpChoice, UpRequest};
 use tw_io::Scene;
 use tw_store::{EncodedCluster, StoreInfo, StoreWriter};
 
+use crate::bucket_queue::{BucketQueue, LoadedBucket};
 use crate::cells::CellFiles;
 use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
 use crate::hlod::{roots_of, HlodOutcome, HlodParams, Roots};
 use crate::hlod_jobs::{HlodBuilt, HlodInput, HlodJob, HlodJobs};
+use crate::in_order::{for_each_in_order, Window};
+use crate::ingest::Ingested;
 use crate::lod::{build_cell_lod_with_seams, LodParams};
 use crate::pages::{encode_clusters, PagePacker, PageParams};
-use crate::redefine::{redefine, RedefineParams, RedefineReport};
+use crate::redefine::{redefine, RedefineParams, RedefineReport, Redefined};
 use crate::seams::{SeamFiles, SeamTable};
 use crate::types::{LodDag, LodGroup};
 
@@ -275,16 +278,57 @@ fn build_with_pool(
     let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
     let mut t = Timer { report: &mut report, start: Instant::now() };
 
-    // 1. Ingest.
+    let (ing, up) = ingest_phase(scene, work.path(), options, progress, pool)?;
+    t.lap("ingest");
+    let (red, hierarchy) = redefine_phase(&ing, options, progress, pool)?;
+    t.lap("redefine+hierarchy");
+    let cells = distribute_phase(&ing, &red, work.path(), options, progress, pool)?;
+    t.lap("distribute");
+    let seams = seams_phase(&cells, work.path(), options, progress, pool)?;
+    t.lap("seams");
+    let lod = LodInputs { hierarchy: &hierarchy, ing: &ing, red: &red, cells: &cells, seams: &seams };
+    let (state, duplicates) = lod_phase(&lod, options, &mut writer, progress, pool)?;
+    t.lap("lod+hlod+pages");
+    log_lod_figures(&state);
+    let written = write_phase(state, &ing, up.axis, options, writer, progress)?;
+    t.lap("write");
+
+    report.input_triangles = ing.triangles;
+    report.up = up;
+    report.degenerate_dropped = ing.summary.degenerate;
+    report.duplicate_dropped = duplicates;
+    report.objects = ing.objects.len() as u64;
+    report.redefine = red.report.clone();
+    report.nodes = written.nodes;
+    report.depth = hierarchy.depth() as u64;
+    report.groups = written.groups;
+    report.clusters = written.clusters;
+    report.stored_triangles = written.stored_triangles;
+    report.pages = written.pages;
+    report.root_pages = written.root_pages;
+    report.file_bytes = written.file_bytes;
+    report.peak_rss = tw_core::mem::peak_rss_bytes();
+    report.hlod = written.hlod;
+    Ok(report)
+}
+
+/// Phase 1: reads the scene into the working file, taking redefinition's samples on the way
+/// (no pass over the working file for them) in an eighth of the budget (the importers'
+/// vertices take a quarter), and settles the up axis (voted on the way when asked for `auto`).
+fn ingest_phase(
+    scene: Scene,
+    work_dir: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<(Ingested, UpChoice), BuildError> {
     progress.phase("ingest", 0, "bytes");
-    // Redefinition's samples are taken on the way (no pass over the working file for them), in
-    // an eighth of the budget (the importers' vertices take a quarter).
     let sampler = crate::sampling::OnlineSampler::new(options.redefine.sample_rule(), options.memory / 8);
     let formats = scene.formats().to_vec();
     let auto_up = options.up == UpRequest::Auto;
     let ing = crate::ingest::ingest_voting(
         scene,
-        work.path(),
+        work_dir,
         Some(pool),
         Some(sampler),
         auto_up,
@@ -295,31 +339,56 @@ fn build_with_pool(
     let votes = ing.up_votes.unwrap_or_default();
     let up = tw_io::up::resolve(options.up, &formats, &votes, ing.min, ing.max);
     progress.end_phase();
-    t.lap("ingest");
+    Ok((ing, up))
+}
 
-    // 2. Redefine objects and build the hierarchy.
+/// Phase 2: redefines the objects into cells and builds the hierarchy over them (the cells
+/// renumbered in leaf order).
+fn redefine_phase(
+    ing: &Ingested,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<(Redefined, Hierarchy), BuildError> {
     progress.phase("redefine", 0, "");
-    let mut red = pool.install(|| redefine(&ing, &options.redefine))?;
+    let mut red = pool.install(|| redefine(ing, &options.redefine))?;
     let mut lap = crate::types::StepTimer::new("redefine");
     let hierarchy = red.order_by_hierarchy();
     lap.step("hierarchy");
     progress.end_phase();
-    t.lap("redefine+hierarchy");
+    Ok((red, hierarchy))
+}
 
-    // 3. Distribute triangles to cells. A sixth of the budget for one bucket: the LOD phase
-    // holds two (the one being built and the next, read ahead), and the LOD of the cells in
-    // flight holds about as much again as one.
+/// Phase 3: distributes the triangles to the cells' bucket files, then drops the working file.
+/// A sixth of the budget for one bucket: the LOD phase holds two (the one being built and the
+/// next, read ahead), and the LOD of the cells in flight holds about as much again as one.
+fn distribute_phase(
+    ing: &Ingested,
+    red: &Redefined,
+    work_dir: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<CellFiles, BuildError> {
     progress.phase("distribute", 0, "");
-    let budget = (options.memory / 4).max(16 << 20);
     let bucket_budget = (options.memory / 6).max(16 << 20);
-    let cells = pool.install(|| CellFiles::distribute(&ing, &red, work.path(), bucket_budget))?;
+    let cells = pool.install(|| CellFiles::distribute(ing, red, work_dir, bucket_budget))?;
     drop(std::fs::remove_file(ing.work.path()));
     progress.end_phase();
-    t.lap("distribute");
+    Ok(cells)
+}
 
-    // 4. Seams between cells, out of core: a quarter of the budget of records at a time.
+/// Phase 4: the seams between cells, out of core, a quarter of the budget of records at a time.
+fn seams_phase(
+    cells: &CellFiles,
+    work_dir: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<SeamFiles, BuildError> {
     progress.phase("seams", cells.cell_count() as u64, "cells");
-    let seams = SeamFiles::find(&cells, work.path(), budget, pool, &mut |done| progress.advance(done))?;
+    let budget = (options.memory / 4).max(16 << 20);
+    let seams = SeamFiles::find(cells, work_dir, budget, pool, &mut |done| progress.advance(done))?;
     tracing::info!(
         open_positions = seams.open_positions,
         seams = seams.seams,
@@ -327,109 +396,181 @@ fn build_with_pool(
         "seams"
     );
     progress.end_phase();
-    t.lap("seams");
+    Ok(seams)
+}
 
-    // 5. LOD, HLOD and pages.
-    progress.phase("lod", ing.triangles, "triangles");
-    let mut state = LodState::new(&hierarchy, options);
-    let grid = ing.grid;
-    let mut done_triangles = 0u64;
-    // The consumer's working time: the floor of this phase however many cores the pool has.
-    let mut consumer_busy = std::time::Duration::ZERO;
-    // One pass over every cell (cells are numbered in bucket order): the pool builds the cells'
-    // DAGs, taking cells in order, and the HLOD nodes this thread starts; this thread consumes
-    // the DAGs in cell order (pages; HLOD nodes started and emitted) as they come, so the
-    // sequential part overlaps the parallel one. A loader thread reads the next
-    // bucket and its seams while the current one is built, so the pool neither waits for the
-    // read nor drains at a bucket's end (at most two buckets are held).
+/// What phase 5 reads: the results of phases 1–4.
+struct LodInputs<'a> {
+    hierarchy: &'a Hierarchy,
+    ing: &'a Ingested,
+    red: &'a Redefined,
+    cells: &'a CellFiles,
+    seams: &'a SeamFiles,
+}
+
+/// A cell's DAG and its encoded clusters, built on the pool (`None`: its bucket failed to load).
+type BuiltCell = Option<(LodDag, Result<Vec<EncodedCluster>, String>)>;
+
+/// Phase 5: LOD, HLOD and pages in one pass over every cell (cells are numbered in bucket
+/// order). The pool builds the cells' DAGs, taking cells in order, and the HLOD nodes this
+/// thread starts; this thread consumes the DAGs in cell order ([`CellConsumer`]: pages; HLOD
+/// nodes started and emitted) as they come, so the sequential part overlaps the parallel one.
+/// A loader thread reads the next bucket and its seams while the current one is built, so the
+/// pool neither waits for the read nor drains at a bucket's end (at most two buckets are held).
+/// Returns the bottom-up state, for the tables, and the duplicate triangles the cells dropped.
+fn lod_phase<'h>(
+    lod: &LodInputs<'h>,
+    options: &BuildOptions,
+    writer: &mut StoreWriter,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+) -> Result<(LodState<'h>, u64), BuildError> {
+    progress.phase("lod", lod.ing.triangles, "triangles");
+    let cells = lod.cells;
     let queue = BucketQueue::new(cells.bucket_count());
-    let jobs = HlodJobs::new(&grid, &options.hlod);
+    let jobs = HlodJobs::new(&lod.ing.grid, &options.hlod);
     // Summed on the pool: the total does not depend on the order.
     let duplicates = std::sync::atomic::AtomicU64::new(0);
+    let mut consumer = CellConsumer {
+        state: LodState::new(lod.hierarchy, options),
+        writer,
+        progress: &mut *progress,
+        queue: &queue,
+        jobs: &jobs,
+        cells,
+        red: lod.red,
+        done_triangles: 0,
+        busy: std::time::Duration::ZERO,
+    };
     std::thread::scope(|scope| -> Result<(), BuildError> {
         let loader = scope.spawn(|| {
             queue.load_all(|b| {
-                Ok(LoadedBucket { bucket: cells.read_bucket(b)?, seams: seams.read_bucket(b)? })
+                Ok(LoadedBucket { bucket: cells.read_bucket(b)?, seams: lod.seams.read_bucket(b)? })
             })
         });
         let result = for_each_in_order(
             pool,
             cells.cell_count(),
             lod_window(options.memory),
-            |i| {
-                let b = cells.bucket_of_cell(i as u32);
-                let loaded = queue.get(b)?;
-                let external = |p: [u32; 3]| loaded.seams.contains(p);
-                let mesh = loaded.bucket.mesh(i as u32);
-                duplicates.fetch_add(mesh.duplicates, std::sync::atomic::Ordering::Relaxed);
-                let dag = build_cell_lod_with_seams(&mesh, &grid, &options.lod, &external);
-                // The cell's clusters are encoded here, on the pool: the consumer only sets
-                // their group ids and concatenates them into pages.
-                let encoded = encode_clusters(&dag);
-                Some((dag, encoded))
-            },
+            |i| build_cell(i, cells, &queue, &lod.ing.grid, &options.lod, &duplicates),
             &|| jobs.run_one(),
-            |cell| {
-                cell.as_ref().map_or(0, |(dag, encoded)| {
-                    let encoded_bytes =
-                        encoded.as_ref().map_or(0, |e| e.iter().map(|c| c.bytes.capacity()).sum());
-                    dag.heap_bytes() + encoded_bytes
-                })
-            },
-            |i, cell| {
-                let cell_index = i as u32;
-                let b = cells.bucket_of_cell(cell_index);
-                let (Some((dag, encoded)), Some(loaded)) = (cell, queue.get(b)) else {
-                    queue.stop();
-                    return Err(queue.take_error());
-                };
-                let leaf = state.leaf_of_cell[cell_index as usize];
-                let busy_since = Instant::now();
-                let r = encoded
-                    .map_err(|m| invalid_cluster(leaf, m))
-                    .and_then(|encoded| state.add_cell(&mut writer, leaf, dag, encoded, &loaded.seams))
-                    .and_then(|()| {
-                        state.start_parent(leaf, i + HLOD_LAG, &jobs);
-                        state.emit_due(&mut writer, Some(i), &jobs)
-                    });
-                consumer_busy += busy_since.elapsed();
-                if r.is_err() {
-                    // Workers waiting for a bucket the loader will not read must wake up.
-                    queue.stop();
-                    return r;
-                }
-                done_triangles += red.cells[cell_index as usize].triangles;
-                progress.advance(done_triangles);
-                if cell_index + 1 == cells.bucket_cells(b).end {
-                    drop(loaded);
-                    queue.release(b);
-                    // A bucket's meshes and DAGs are freed: give their pages back, or the
-                    // fragments between live blocks stay resident (one heap for all threads).
-                    tw_core::mem::return_free_heap_pages();
-                }
-                Ok(())
-            },
+            built_cell_bytes,
+            |i, cell| consumer.take(i, cell),
         );
         queue.stop();
         let loaded = loader.join().map_err(|_| BuildError::Internal("the bucket loader panicked".into()))?;
         let held = result?;
-        // The nodes still pending: the top of the hierarchy, above the last cells.
+        consumer.finish(held)?;
+        loaded
+    })?;
+    let state = consumer.state;
+    progress.end_phase();
+    Ok((state, duplicates.into_inner()))
+}
+
+/// Builds cell `i`'s DAG (its seams locked) and encodes its clusters, on the pool: the
+/// consumer only sets their group ids and concatenates them into pages.
+fn build_cell(
+    i: usize,
+    cells: &CellFiles,
+    queue: &BucketQueue,
+    grid: &crate::types::Grid,
+    params: &LodParams,
+    duplicates: &std::sync::atomic::AtomicU64,
+) -> BuiltCell {
+    let b = cells.bucket_of_cell(i as u32);
+    let loaded = queue.get(b)?;
+    let external = |p: [u32; 3]| loaded.seams.contains(p);
+    let mesh = loaded.bucket.mesh(i as u32);
+    duplicates.fetch_add(mesh.duplicates, std::sync::atomic::Ordering::Relaxed);
+    let dag = build_cell_lod_with_seams(&mesh, grid, params, &external);
+    let encoded = encode_clusters(&dag);
+    Some((dag, encoded))
+}
+
+/// The heap a built cell holds while it waits for the consumer: its DAG and encoded clusters.
+fn built_cell_bytes(cell: &BuiltCell) -> usize {
+    cell.as_ref().map_or(0, |(dag, encoded)| {
+        let encoded_bytes = encoded.as_ref().map_or(0, |e| e.iter().map(|c| c.bytes.capacity()).sum());
+        dag.heap_bytes() + encoded_bytes
+    })
+}
+
+/// Phase 5's consumer, on the calling thread: takes the built cells in cell order.
+struct CellConsumer<'a, 'h> {
+    state: LodState<'h>,
+    writer: &'a mut StoreWriter,
+    progress: &'a mut dyn BuildProgress,
+    queue: &'a BucketQueue,
+    jobs: &'a HlodJobs<'a>,
+    cells: &'a CellFiles,
+    red: &'a Redefined,
+    /// Input triangles of the cells taken so far (the phase's progress).
+    done_triangles: u64,
+    /// The consumer's working time: the floor of this phase however many cores the pool has.
+    busy: std::time::Duration,
+}
+
+impl CellConsumer<'_, '_> {
+    /// Takes cell `i`: its groups to pages, its roots up the tree, the HLOD nodes it completes
+    /// started and those due emitted; frees its bucket after the bucket's last cell. On an
+    /// error (or a bucket that failed to load) stops the loader, so that workers waiting for a
+    /// bucket it will not read wake up.
+    fn take(&mut self, i: usize, cell: BuiltCell) -> Result<(), BuildError> {
+        let cell_index = i as u32;
+        let b = self.cells.bucket_of_cell(cell_index);
+        let (Some((dag, encoded)), Some(loaded)) = (cell, self.queue.get(b)) else {
+            self.queue.stop();
+            return Err(self.queue.take_error());
+        };
+        let state = &mut self.state;
+        let leaf = state.leaf_of_cell[cell_index as usize];
         let busy_since = Instant::now();
-        state.emit_due(&mut writer, None, &jobs)?;
-        consumer_busy += busy_since.elapsed();
+        let r = encoded
+            .map_err(|m| invalid_cluster(leaf, m))
+            .and_then(|encoded| state.add_cell(self.writer, leaf, dag, encoded, &loaded.seams))
+            .and_then(|()| {
+                state.start_parent(leaf, i + HLOD_LAG, self.jobs);
+                state.emit_due(self.writer, Some(i), self.jobs)
+            });
+        self.busy += busy_since.elapsed();
+        if r.is_err() {
+            self.queue.stop();
+            return r;
+        }
+        self.done_triangles += self.red.cells[cell_index as usize].triangles;
+        self.progress.advance(self.done_triangles);
+        if cell_index + 1 == self.cells.bucket_cells(b).end {
+            drop(loaded);
+            self.queue.release(b);
+            // A bucket's meshes and DAGs are freed: give their pages back, or the
+            // fragments between live blocks stay resident (one heap for all threads).
+            tw_core::mem::return_free_heap_pages();
+        }
+        Ok(())
+    }
+
+    /// After the last cell: emits the nodes still pending (the top of the hierarchy, above
+    /// the last cells) and logs what the pass held and how busy the consumer was.
+    fn finish(&mut self, held: Window) -> Result<(), BuildError> {
+        let busy_since = Instant::now();
+        self.state.emit_due(self.writer, None, self.jobs)?;
+        self.busy += busy_since.elapsed();
         tracing::debug!(
             results = held.results,
             bytes = held.bytes,
             "lod: most cell DAGs held ahead of the consumer"
         );
         tracing::debug!(
-            seconds = consumer_busy.as_secs_f64(),
+            seconds = self.busy.as_secs_f64(),
             "lod: consumer busy (pages, HLOD nodes emitted, or built when due)"
         );
-        loaded
-    })?;
-    progress.end_phase();
-    t.lap("lod+hlod+pages");
+        Ok(())
+    }
+}
+
+/// Logs phase 5's figures (`-v`): the cells' LOD roots and what HLOD did at each depth.
+fn log_lod_figures(state: &LodState) {
     let (cell_count, cell_triangles, cell_root_triangles) = state.cell_counts;
     tracing::info!(cells = cell_count, cell_triangles, cell_root_triangles, "cell lod roots");
     for (depth, d) in state.hlod.iter().enumerate().filter(|(_, d)| d.nodes > 0) {
@@ -449,10 +590,34 @@ fn build_with_pool(
             "hlod depth"
         );
     }
+}
 
-    // 6. Tables and the file.
+/// What phase 6 wrote, for the report.
+struct Written {
+    nodes: u64,
+    groups: u64,
+    clusters: u64,
+    stored_triangles: u64,
+    pages: u32,
+    root_pages: u32,
+    file_bytes: u64,
+    hlod: Vec<HlodDepthStats>,
+}
+
+/// Phase 6: the last pages, the group table with each group's page, the node and object
+/// tables and the header's scene description, then the file, atomically.
+fn write_phase(
+    state: LodState,
+    ing: &Ingested,
+    up_axis: u8,
+    options: &BuildOptions,
+    mut writer: StoreWriter,
+    progress: &mut dyn BuildProgress,
+) -> Result<Written, BuildError> {
     progress.phase("write", 0, "");
-    let LodState { packer, groups, sources, node_groups, clusters, stored_triangles, hlod, .. } = state;
+    let LodState {
+        hierarchy, packer, groups, sources, node_groups, clusters, stored_triangles, hlod, ..
+    } = state;
     let (placements, pages, root_pages) = packer.finish(&mut writer)?;
     let mut table: Vec<tw_store::Group> = groups;
     for p in placements {
@@ -460,7 +625,7 @@ fn build_with_pool(
         g.page = p.page;
         g.first_cluster = p.first_cluster;
     }
-    let nodes = store_nodes(&hierarchy, &node_groups, &table);
+    let nodes = store_nodes(hierarchy, &node_groups, &table);
     let objects: Vec<tw_store::Object> = ing
         .objects
         .iter()
@@ -469,150 +634,25 @@ fn build_with_pool(
     let info = StoreInfo {
         bounds_min: ing.min,
         bounds_max: ing.max,
-        grid_origin: grid.origin,
-        grid_step: grid.step,
+        grid_origin: ing.grid.origin,
+        grid_step: ing.grid.step,
         units: options.units.clone(),
-        up_axis: up.axis,
+        up_axis,
         build_options: options.describe(),
         input_triangles: ing.triangles,
     };
     let summary = writer.finish(&info, &objects, &nodes, &table, &sources).map_err(BuildError::store)?;
     progress.end_phase();
-    t.lap("write");
-
-    report.input_triangles = ing.triangles;
-    report.up = up;
-    report.degenerate_dropped = ing.summary.degenerate;
-    report.duplicate_dropped = duplicates.into_inner();
-    report.objects = ing.objects.len() as u64;
-    report.redefine = red.report.clone();
-    report.nodes = nodes.len() as u64;
-    report.depth = hierarchy.depth() as u64;
-    report.groups = table.len() as u64;
-    report.clusters = clusters;
-    report.stored_triangles = stored_triangles;
-    report.pages = pages;
-    report.root_pages = root_pages;
-    report.file_bytes = summary.file_bytes;
-    report.peak_rss = tw_core::mem::peak_rss_bytes();
-    report.hlod = hlod;
-    Ok(report)
-}
-
-/// A bucket of cells and its seams, read ahead of the cells that need them.
-struct LoadedBucket {
-    bucket: crate::cells::Bucket,
-    seams: SeamTable,
-}
-
-/// Buckets read in order by one loader thread, at most [`BUCKETS_AHEAD`] + 1 held at a time:
-/// the consumer's current bucket and the next ones.
-struct BucketQueue {
-    state: std::sync::Mutex<QueueState>,
-    cond: std::sync::Condvar,
-}
-
-/// Buckets the loader may read beyond the one the consumer is in.
-const BUCKETS_AHEAD: usize = 1;
-
-struct QueueState {
-    slots: Vec<Option<std::sync::Arc<LoadedBucket>>>,
-    /// Buckets `0..loaded` have been read (or failed: `error`).
-    loaded: usize,
-    /// Buckets `0..released` are done with.
-    released: usize,
-    error: Option<BuildError>,
-    stop: bool,
-}
-
-impl BucketQueue {
-    fn new(buckets: usize) -> BucketQueue {
-        BucketQueue {
-            state: std::sync::Mutex::new(QueueState {
-                slots: vec![None; buckets],
-                loaded: 0,
-                released: 0,
-                error: None,
-                stop: false,
-            }),
-            cond: std::sync::Condvar::new(),
-        }
-    }
-
-    fn lock(&self) -> std::sync::MutexGuard<'_, QueueState> {
-        self.state.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// The loader: reads every bucket in order, waiting while [`BUCKETS_AHEAD`] are ahead of the
-    /// consumer; stops at the first error (kept for the consumer) or at [`BucketQueue::stop`].
-    fn load_all(&self, load: impl Fn(usize) -> Result<LoadedBucket, BuildError>) -> Result<(), BuildError> {
-        let n = self.lock().slots.len();
-        for b in 0..n {
-            {
-                let mut st = self.lock();
-                while !st.stop && b > st.released + BUCKETS_AHEAD {
-                    st = self.cond.wait(st).unwrap_or_else(|e| e.into_inner());
-                }
-                if st.stop {
-                    return Ok(());
-                }
-            }
-            let r = load(b);
-            let mut st = self.lock();
-            st.loaded = b + 1;
-            match r {
-                Ok(l) => st.slots[b] = Some(std::sync::Arc::new(l)),
-                Err(e) => {
-                    st.error = Some(e);
-                    st.loaded = n;
-                    drop(st);
-                    self.cond.notify_all();
-                    return Ok(());
-                }
-            }
-            drop(st);
-            self.cond.notify_all();
-        }
-        Ok(())
-    }
-
-    /// Bucket `b` once it is read; None if it could not be (see [`BucketQueue::take_error`]) or
-    /// the queue stopped.
-    fn get(&self, b: usize) -> Option<std::sync::Arc<LoadedBucket>> {
-        let mut st = self.lock();
-        while st.loaded <= b && !st.stop {
-            st = self.cond.wait(st).unwrap_or_else(|e| e.into_inner());
-        }
-        st.slots.get(b).cloned().flatten()
-    }
-
-    /// The consumer is done with bucket `b` (and every one before it).
-    fn release(&self, b: usize) {
-        let mut st = self.lock();
-        st.slots[b] = None;
-        st.released = b + 1;
-        drop(st);
-        self.cond.notify_all();
-    }
-
-    /// Why a bucket could not be had.
-    fn take_error(&self) -> BuildError {
-        self.lock().error.take().unwrap_or_else(|| BuildError::Param("bucket loading stopped".into()))
-    }
-
-    fn stop(&self) {
-        self.lock().stop = true;
-        self.cond.notify_all();
-    }
-}
-
-/// How far [`for_each_in_order`] may run ahead of its consumer: at most `results` indices past
-/// the one the consumer waits for, and, past that one, no new index while the results produced
-/// and not yet consumed weigh more than `bytes`. Also what it held at most, as it returns.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-struct Window {
-    results: usize,
-    bytes: usize,
+    Ok(Written {
+        nodes: nodes.len() as u64,
+        groups: table.len() as u64,
+        clusters,
+        stored_triangles,
+        pages,
+        root_pages,
+        file_bytes: summary.file_bytes,
+        hlod,
+    })
 }
 
 /// Cell DAGs the LOD phase may hold ahead of its consumer: 16, and a sixteenth of the budget.
@@ -621,126 +661,6 @@ struct Window {
 /// would be 40 MB of a 268 MB budget.
 fn lod_window(memory: u64) -> Window {
     Window { results: 16, bytes: (memory / 16).min(usize::MAX as u64) as usize }
-}
-
-/// Runs `produce(i)` for `i` in `0..n` on `pool` (workers take indices in increasing order) and
-/// hands the results to `consume` on the calling thread in index order, as soon as each is
-/// ready. A worker does not start index `i` while it is `window.results` or more past the next
-/// index to consume, nor, unless `i` is that index, while the produced results waiting for the
-/// consumer weigh (`weigh`) more than `window.bytes`. So at most `window.results` + one per
-/// worker results are held, and past `window.bytes` only one more per worker, however slow
-/// `consume` is (without a window, a consumer slower than the pool let a whole bucket's cell
-/// DAGs pile up: ~250 MB on the 10^8-triangle plant). The consumer always gets its next index:
-/// the worker that took it does not wait. Workers call `side` (until it returns false: it ran
-/// nothing) before taking an index and while the window holds them back: work that `consume`
-/// queues for the pool. On the first error of `consume` the workers stop taking new indices
-/// and the error is returned. Returns the most it held.
-fn for_each_in_order<T, P, W, C>(
-    pool: &rayon::ThreadPool,
-    n: usize,
-    window: Window,
-    produce: P,
-    side: &(dyn Fn() -> bool + Sync),
-    weigh: W,
-    mut consume: C,
-) -> Result<Window, BuildError>
-where
-    T: Send,
-    P: Fn(usize) -> T + Sync,
-    W: Fn(&T) -> usize + Sync,
-    C: FnMut(usize, T) -> Result<(), BuildError>,
-{
-    use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-    let next = AtomicUsize::new(0);
-    let stop = AtomicBool::new(false);
-    /// Results produced and consumed so far, the weight of those not yet consumed, and the
-    /// most held.
-    #[derive(Default)]
-    struct Ahead {
-        produced: usize,
-        consumed: usize,
-        bytes: usize,
-        most: Window,
-    }
-    fn lock(m: &std::sync::Mutex<Ahead>) -> std::sync::MutexGuard<'_, Ahead> {
-        m.lock().unwrap_or_else(|e| e.into_inner())
-    }
-    // And a condition to wait for the consumer.
-    let state = (std::sync::Mutex::new(Ahead::default()), std::sync::Condvar::new());
-    let (tx, rx) = std::sync::mpsc::channel::<(usize, T, usize)>();
-    std::thread::scope(|scope| {
-        let (next, stop, produce, weigh, state) = (&next, &stop, &produce, &weigh, &state);
-        scope.spawn(move || {
-            pool.scope(|s| {
-                for _ in 0..pool.current_num_threads() {
-                    let tx = tx.clone();
-                    s.spawn(move |_| loop {
-                        // Side jobs first: the consumer will need them before the next index.
-                        while !stop.load(Ordering::Relaxed) && side() {}
-                        if stop.load(Ordering::Relaxed) {
-                            return;
-                        }
-                        let i = next.fetch_add(1, Ordering::Relaxed);
-                        if i >= n {
-                            return;
-                        }
-                        let fits = |st: &Ahead| {
-                            i < st.consumed + window.results && (i == st.consumed || st.bytes <= window.bytes)
-                        };
-                        let mut st = lock(&state.0);
-                        while !stop.load(Ordering::Relaxed) && !fits(&st) {
-                            // Held up by the window: do side jobs meanwhile (the consumer starts
-                            // them, and wakes the workers after every result it takes).
-                            drop(st);
-                            let ran = side();
-                            st = lock(&state.0);
-                            if !ran && !fits(&st) {
-                                st = state.1.wait(st).unwrap_or_else(|e| e.into_inner());
-                            }
-                        }
-                        drop(st);
-                        if stop.load(Ordering::Relaxed) {
-                            return;
-                        }
-                        let result = produce(i);
-                        let weight = weigh(&result);
-                        {
-                            let mut st = lock(&state.0);
-                            st.produced += 1;
-                            st.bytes += weight;
-                            st.most.results = st.most.results.max(st.produced - st.consumed);
-                            st.most.bytes = st.most.bytes.max(st.bytes);
-                        }
-                        if tx.send((i, result, weight)).is_err() {
-                            return;
-                        }
-                    });
-                }
-            });
-            drop(tx);
-        });
-        // Results that came before their turn, with their weights.
-        let mut waiting: std::collections::BTreeMap<usize, (T, usize)> = std::collections::BTreeMap::new();
-        let mut expected = 0usize;
-        for (i, item, weight) in rx.iter() {
-            waiting.insert(i, (item, weight));
-            while let Some((item, weight)) = waiting.remove(&expected) {
-                let result = consume(expected, item);
-                if result.is_err() {
-                    stop.store(true, Ordering::Relaxed);
-                }
-                expected += 1;
-                {
-                    let mut st = lock(&state.0);
-                    st.consumed = expected;
-                    st.bytes -= weight;
-                }
-                state.1.notify_all();
-                result?;
-            }
-        }
-        Ok(lock(&state.0).most)
-    })
 }
 
 /// Cells the consumer takes between starting an HLOD node and emitting it: the time the pool
@@ -1035,147 +955,6 @@ mod tests {
     use super::*;
     use crate::types::LodCluster;
 
-    fn pool(n: usize) -> rayon::ThreadPool {
-        rayon::ThreadPoolBuilder::new().num_threads(n).build().unwrap()
-    }
-
-    #[test]
-    fn for_each_in_order_consumes_every_result_in_order() {
-        for threads in [1, 2, 4] {
-            let mut got = Vec::new();
-            // Uneven work so that results arrive out of order.
-            let produce = |i: usize| {
-                std::thread::sleep(std::time::Duration::from_micros(((i * 7919) % 13) as u64 * 50));
-                i * i
-            };
-            let window = Window { results: 16, bytes: usize::MAX };
-            for_each_in_order(
-                &pool(threads),
-                100,
-                window,
-                produce,
-                &|| false,
-                |_| 0,
-                |i, v| {
-                    got.push((i, v));
-                    Ok(())
-                },
-            )
-            .unwrap();
-            assert_eq!(got, (0..100).map(|i| (i, i * i)).collect::<Vec<_>>(), "{threads} threads");
-        }
-    }
-
-    #[test]
-    fn for_each_in_order_holds_a_bounded_number_of_results_for_a_slow_consumer() {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        let produced = AtomicUsize::new(0);
-        let mut most_ahead = 0;
-        let window = Window { results: 16, bytes: usize::MAX };
-        let held = for_each_in_order(
-            &pool(4),
-            200,
-            window,
-            |i| {
-                produced.fetch_add(1, Ordering::SeqCst);
-                i
-            },
-            &|| false,
-            |_| 0,
-            |i, _| {
-                std::thread::sleep(std::time::Duration::from_micros(200));
-                most_ahead = most_ahead.max(produced.load(Ordering::SeqCst) - i);
-                Ok(())
-            },
-        )
-        .unwrap();
-        assert!(most_ahead <= window.results + 4, "{most_ahead} results held");
-        assert!(held.results <= window.results + 4 && held.results >= 2, "{held:?}");
-    }
-
-    #[test]
-    fn for_each_in_order_holds_a_bounded_weight_for_a_slow_consumer() {
-        // Results of 1,000 bytes, at most 2,500 held: the count window (16) never binds, the
-        // weight does, and every result still arrives in order.
-        let window = Window { results: 16, bytes: 2_500 };
-        for threads in [1, 2, 4] {
-            let mut got = Vec::new();
-            let held = for_each_in_order(
-                &pool(threads),
-                200,
-                window,
-                |i| vec![i as u8; 1_000],
-                &|| false,
-                |v| v.len(),
-                |i, v| {
-                    std::thread::sleep(std::time::Duration::from_micros(100));
-                    got.push((i, v[0]));
-                    Ok(())
-                },
-            )
-            .unwrap();
-            assert_eq!(got, (0..200).map(|i| (i, i as u8)).collect::<Vec<_>>(), "{threads} threads");
-            // Past the weight, one more result per worker (and the consumer's next one).
-            assert!(held.bytes <= 2_500 + 1_000 * (threads + 1), "{threads} threads: {held:?}");
-        }
-    }
-
-    #[test]
-    fn for_each_in_order_makes_progress_when_one_result_outweighs_the_window() {
-        let window = Window { results: 4, bytes: 10 };
-        let mut got = 0;
-        for_each_in_order(
-            &pool(3),
-            50,
-            window,
-            |i| vec![0u8; 100 + i],
-            &|| false,
-            |v| v.len(),
-            |_, _| {
-                got += 1;
-                Ok(())
-            },
-        )
-        .unwrap();
-        assert_eq!(got, 50);
-    }
-
-    #[test]
-    fn for_each_in_order_runs_side_jobs_on_the_workers() {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        // The consumer queues a side job with every result; workers take them between indices.
-        let queued = AtomicUsize::new(0);
-        let ran = AtomicUsize::new(0);
-        let side = || {
-            let take = queued.fetch_update(Ordering::SeqCst, Ordering::SeqCst, |q| q.checked_sub(1)).is_ok();
-            if take {
-                ran.fetch_add(1, Ordering::SeqCst);
-            }
-            take
-        };
-        let mut got = 0;
-        for_each_in_order(
-            &pool(2),
-            300,
-            Window { results: 4, bytes: usize::MAX },
-            |i| {
-                std::thread::sleep(std::time::Duration::from_micros(50));
-                i
-            },
-            &side,
-            |_| 0,
-            |i, v| {
-                assert_eq!(i, v);
-                got += 1;
-                queued.fetch_add(1, Ordering::SeqCst);
-                Ok(())
-            },
-        )
-        .unwrap();
-        assert_eq!(got, 300);
-        assert!(ran.load(Ordering::SeqCst) > 0, "no side job ran on a worker");
-    }
-
     #[test]
     fn lod_window_is_a_sixteenth_of_the_budget() {
         assert_eq!(lod_window(256 << 20), Window { results: 16, bytes: 16 << 20 });
@@ -1197,41 +976,5 @@ mod tests {
         let own = 3 * 12 + 3 + 4 + 4;
         let structs = std::mem::size_of::<LodCluster>() + std::mem::size_of::<LodGroup>();
         assert_eq!(dag.heap_bytes(), own + structs);
-    }
-
-    #[test]
-    fn for_each_in_order_handles_nothing() {
-        let window = Window { results: 16, bytes: usize::MAX };
-        for_each_in_order(&pool(2), 0, window, |i| i, &|| false, |_| 0, |_, _| panic!("nothing to consume"))
-            .unwrap();
-    }
-
-    #[test]
-    fn for_each_in_order_stops_at_the_first_error() {
-        let produced = std::sync::atomic::AtomicUsize::new(0);
-        let mut consumed = Vec::new();
-        let r = for_each_in_order(
-            &pool(2),
-            100_000,
-            Window { results: 16, bytes: usize::MAX },
-            |i| {
-                produced.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                std::thread::sleep(std::time::Duration::from_micros(20));
-                i
-            },
-            &|| false,
-            |_| 0,
-            |i, _| {
-                consumed.push(i);
-                if i == 5 {
-                    Err(BuildError::Param("stop".into()))
-                } else {
-                    Ok(())
-                }
-            },
-        );
-        assert!(matches!(r, Err(BuildError::Param(m)) if m == "stop"));
-        assert_eq!(consumed, (0..=5).collect::<Vec<_>>());
-        assert!(produced.load(std::sync::atomic::Ordering::Relaxed) < 100_000, "workers stopped early");
     }
 }

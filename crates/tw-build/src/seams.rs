@@ -120,11 +120,7 @@ impl SeamFiles {
         pool: &rayon::ThreadPool,
         advance: &mut dyn FnMut(u64),
     ) -> Result<SeamFiles, BuildError> {
-        // A cell has at most 3 open positions per triangle; the partition count assumes that
-        // bound, so a partition never exceeds the budget (most hold far less).
-        let triangles: u64 = (0..cells.bucket_count()).map(|b| cells.bucket_triangles(b)).sum();
-        let worst = triangles * 3 * OPEN_RECORD_BYTES as u64;
-        let partitions = worst.div_ceil(budget.max(1 << 20)).clamp(1, 512) as usize;
+        let partitions = partition_count(cells, budget);
         let part_paths: Vec<TempPath> =
             (0..partitions).map(|_| temp_path(work_dir, "tw-open-")).collect::<Result<_, _>>()?;
         let mut parts =
@@ -132,58 +128,18 @@ impl SeamFiles {
 
         let mut lap = crate::types::StepTimer::new("seams");
         // 1. Open positions of every cell, by partition.
-        let mut open_positions = 0u64;
-        let mut done = 0u64;
-        // The next bucket is read on a helper thread while the pool works on this one (two
-        // buckets held; the LOD phase holds as many).
-        std::thread::scope(|scope| -> Result<(), BuildError> {
-            let n = cells.bucket_count();
-            let mut next = (n > 0).then(|| scope.spawn(|| cells.read_bucket(0)));
-            for b in 0..n {
-                let bucket = match next.take().map(|h| h.join()) {
-                    Some(Ok(r)) => r?,
-                    _ => return Err(BuildError::Internal("the bucket reader panicked".into())),
-                };
-                if b + 1 < n {
-                    next = Some(scope.spawn(move || cells.read_bucket(b + 1)));
-                }
-                let ids: Vec<u32> = bucket.cells().collect();
-                // The pool finds each cell's open positions and encodes their records, grouped
-                // by partition (in position order within each); this thread appends them, cell
-                // by cell, so every partition file gets its records in the serial order.
-                let per_cell: Vec<(Vec<u8>, Vec<usize>)> = pool.install(|| {
-                    ids.par_iter()
-                        .map(|&c| {
-                            let open = crate::hlod::open_positions(&bucket.mesh(c));
-                            open_records(&open, c, partitions)
-                        })
-                        .collect()
-                });
-                drop(bucket);
-                for (bytes, start) in &per_cell {
-                    for (k, w) in start.windows(2).enumerate() {
-                        if w[1] > w[0] {
-                            parts.write(k, &bytes[w[0] * OPEN_RECORD_BYTES..w[1] * OPEN_RECORD_BYTES])?;
-                        }
-                    }
-                    open_positions += (bytes.len() / OPEN_RECORD_BYTES) as u64;
-                }
-                done += ids.len() as u64;
-                advance(done);
-            }
-            Ok(())
-        })?;
+        let open_positions = write_open_positions(cells, pool, partitions, &mut parts, advance)?;
 
         // 2. Seams of each partition, to the seam files of their cells' buckets.
         drop(parts.finish()?);
         lap.step("open positions");
         let out_paths: Vec<TempPath> =
             (0..cells.bucket_count()).map(|_| temp_path(work_dir, "tw-seams-")).collect::<Result<_, _>>()?;
-        let mut outs =
-            SpillWriter::direct(out_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?;
-        let mut counts = vec![0u64; out_paths.len()];
-        let mut seams = 0u64;
-        let mut seam_record = [0u8; SEAM_RECORD_BYTES];
+        let mut outs = BucketSeams {
+            files: SpillWriter::direct(out_paths.iter().map(|p| p.to_path_buf()).collect(), WRITE_BUFFER)?,
+            counts: vec![0u64; out_paths.len()],
+            seams: 0,
+        };
         for path in part_paths {
             let mut records = read_records(&path, OPEN_RECORD_BYTES, |b| {
                 let v = get_u32s::<4>(b);
@@ -191,31 +147,10 @@ impl SeamFiles {
             })?;
             drop(path); // deletes the partition file
             pool.install(|| records.par_sort_unstable());
-            let mut i = 0;
-            while i < records.len() {
-                let mut j = i + 1;
-                while j < records.len() && records[j].0 == records[i].0 {
-                    j += 1;
-                }
-                if j - i > 1 {
-                    seams += 1;
-                    let p = records[i].0;
-                    let (first, last) = (records[i].1, records[j - 1].1);
-                    put_u32s(&mut seam_record, &[p[0], p[1], p[2], first, last]);
-                    let mut last_bucket = usize::MAX;
-                    for &(_, cell) in &records[i..j] {
-                        let b = cells.bucket_of_cell(cell);
-                        if b != last_bucket {
-                            outs.write(b, &seam_record)?;
-                            counts[b] += 1;
-                            last_bucket = b;
-                        }
-                    }
-                }
-                i = j;
-            }
+            outs.write_partition(&records, cells)?;
         }
-        drop(outs.finish()?);
+        let BucketSeams { files, counts, seams } = outs;
+        drop(files.finish()?);
         lap.step("partitions");
         let buckets = out_paths.into_iter().zip(counts).collect();
         Ok(SeamFiles { buckets, open_positions, seams, partitions })
@@ -235,6 +170,127 @@ impl SeamFiles {
             });
         }
         Ok(SeamTable::from_unsorted(records))
+    }
+}
+
+/// The partition count of [`SeamFiles::find`]'s first pass. A cell has at most 3 open positions
+/// per triangle; the count assumes that bound, so a partition never exceeds the budget (most
+/// hold far less).
+fn partition_count(cells: &CellFiles, budget: u64) -> usize {
+    let triangles: u64 = (0..cells.bucket_count()).map(|b| cells.bucket_triangles(b)).sum();
+    let worst = triangles * 3 * OPEN_RECORD_BYTES as u64;
+    worst.div_ceil(budget.max(1 << 20)).clamp(1, 512) as usize
+}
+
+/// Pass 1 of [`SeamFiles::find`]: the open positions of every cell, bucket by bucket, to the
+/// partition files `parts`. The next bucket is read on a helper thread while the pool works on
+/// this one (two buckets held; the LOD phase holds as many). Returns the open positions
+/// written; `advance(cells done)` reports progress.
+fn write_open_positions(
+    cells: &CellFiles,
+    pool: &rayon::ThreadPool,
+    partitions: usize,
+    parts: &mut SpillWriter,
+    advance: &mut dyn FnMut(u64),
+) -> Result<u64, BuildError> {
+    let mut open_positions = 0u64;
+    let mut done = 0u64;
+    std::thread::scope(|scope| -> Result<(), BuildError> {
+        let n = cells.bucket_count();
+        let mut next = (n > 0).then(|| scope.spawn(|| cells.read_bucket(0)));
+        for b in 0..n {
+            let bucket = match next.take().map(|h| h.join()) {
+                Some(Ok(r)) => r?,
+                _ => return Err(BuildError::Internal("the bucket reader panicked".into())),
+            };
+            if b + 1 < n {
+                next = Some(scope.spawn(move || cells.read_bucket(b + 1)));
+            }
+            let per_cell = bucket_open_records(&bucket, pool, partitions);
+            drop(bucket);
+            open_positions += append_open_records(parts, &per_cell)?;
+            done += per_cell.len() as u64;
+            advance(done);
+        }
+        Ok(())
+    })?;
+    Ok(open_positions)
+}
+
+/// The pool finds each cell's open positions and encodes their records, grouped by partition
+/// (in position order within each; see [`open_records`]), cell by cell.
+fn bucket_open_records(
+    bucket: &crate::cells::Bucket,
+    pool: &rayon::ThreadPool,
+    partitions: usize,
+) -> Vec<(Vec<u8>, Vec<usize>)> {
+    let ids: Vec<u32> = bucket.cells().collect();
+    pool.install(|| {
+        ids.par_iter()
+            .map(|&c| {
+                let open = crate::hlod::open_positions(&bucket.mesh(c));
+                open_records(&open, c, partitions)
+            })
+            .collect()
+    })
+}
+
+/// Appends the cells' records to their partitions, cell by cell on this thread, so every
+/// partition file gets its records in the serial order. Returns the records appended.
+fn append_open_records(
+    parts: &mut SpillWriter,
+    per_cell: &[(Vec<u8>, Vec<usize>)],
+) -> Result<u64, BuildError> {
+    let mut records = 0u64;
+    for (bytes, start) in per_cell {
+        for (k, w) in start.windows(2).enumerate() {
+            if w[1] > w[0] {
+                parts.write(k, &bytes[w[0] * OPEN_RECORD_BYTES..w[1] * OPEN_RECORD_BYTES])?;
+            }
+        }
+        records += (bytes.len() / OPEN_RECORD_BYTES) as u64;
+    }
+    Ok(records)
+}
+
+/// Pass 2 of [`SeamFiles::find`]: the seam files of the buckets being filled, the seams
+/// written to each, and the seams over the scene (a seam counts once).
+struct BucketSeams {
+    files: SpillWriter,
+    counts: Vec<u64>,
+    seams: u64,
+}
+
+impl BucketSeams {
+    /// The seams of one partition's sorted (position, cell) records: each position of two or
+    /// more records is a seam, with its first and last cell, written once to each bucket that
+    /// has one of its cells.
+    fn write_partition(&mut self, records: &[([u32; 3], u32)], cells: &CellFiles) -> Result<(), BuildError> {
+        let mut seam_record = [0u8; SEAM_RECORD_BYTES];
+        let mut i = 0;
+        while i < records.len() {
+            let mut j = i + 1;
+            while j < records.len() && records[j].0 == records[i].0 {
+                j += 1;
+            }
+            if j - i > 1 {
+                self.seams += 1;
+                let p = records[i].0;
+                let (first, last) = (records[i].1, records[j - 1].1);
+                put_u32s(&mut seam_record, &[p[0], p[1], p[2], first, last]);
+                let mut last_bucket = usize::MAX;
+                for &(_, cell) in &records[i..j] {
+                    let b = cells.bucket_of_cell(cell);
+                    if b != last_bucket {
+                        self.files.write(b, &seam_record)?;
+                        self.counts[b] += 1;
+                        last_bucket = b;
+                    }
+                }
+            }
+            i = j;
+        }
+        Ok(())
     }
 }
 

@@ -50,7 +50,7 @@ use tw_runtime::node_test::parents;
 use tw_runtime::occlusion::{test_boxes, test_clusters_hierarchically, HierarchyOptions, Skeleton};
 use tw_runtime::{
     test_hierarchy, test_triangles, Camera, ClusterRef, Hzb, HzbResult, NodeTestOptions, NodeTestResult,
-    NodeTestSwitch, OcclusionHistory, TriangleMask,
+    NodeTestSwitch, OcclusionHistory, OcclusionSplit, OcclusionTest, TriangleMask,
 };
 use tw_store::{PageCluster, Store};
 
@@ -245,188 +245,298 @@ pub fn draw_culled(
     let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
     let split = state.history.split(&refs);
     let by_key = ClusterIndex::new(clusters);
-    // Every reference below comes from `clusters`, so `decoded` keeps them all (and per-cluster
-    // masks stay aligned with the list they were made for).
-    let decoded = |list: &[ClusterRef]| -> Vec<(ClusterRef, &PageCluster)> {
-        list.par_iter().with_min_len(1024).filter_map(|k| by_key.get(k).map(|c| (*k, c))).collect()
-    };
     let cluster_box =
         |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
+    let f = CullFrame { store, camera, grid_step, split: &split, by_key: &by_key, cluster_box: &cluster_box };
 
     // Only `hzb` with triangle tests draws partial occluders (its second pass draws the rest
     // that is visible); the others, and `hzb` after its triangle tests were turned off, draw
     // their occluders whole whatever masks the history holds.
     let partial_occluders = strategy == Occlusion::Hzb && state.triangle_culling;
     let pass_one_masks = partial_occluders.then_some(&split.occluder_masks[..]);
-    renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&split.occluders), pass_one_masks, true)?;
+    renderer.draw_masked(
+        Target::Own,
+        camera,
+        grid_step,
+        &by_key.decoded(&split.occluders),
+        pass_one_masks,
+        true,
+    )?;
     let mut stats = OcclusionStats {
         occluders: split.occluders.len() as u64,
         tested: split.candidates.len() as u64,
         ..Default::default()
     };
-    let (w, h) = renderer.size();
     let cull_start = Instant::now();
-    let (mut box_test_time, mut triangle_test_time) = (Duration::ZERO, Duration::ZERO);
-    let mut readback_time = Duration::ZERO;
-    // The visible candidates; what the second pass draws (cluster, triangles; `u128::MAX`:
-    // all): the visible candidates and, with triangle tests, the occluders' visible triangles
-    // their first pass left out; next frame's history (cluster, visible triangles).
-    let (visible, second, history, occluded) = match strategy {
+    let mut times = TestTimes::default();
+    let tested = match strategy {
         Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
-        Occlusion::Hzb => {
-            let readback_start = Instant::now();
-            let depth = renderer.read_depth()?;
-            readback_time = readback_start.elapsed();
-            // With multisampling the depth is each pixel's farthest sample, and a pixel is
-            // its samples to the tests (tw_gpu::msaa).
-            let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
-                .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?
-                .with_samples(renderer.sample_positions());
-            let view_proj = camera.projection_reverse_z(w as f32 / h as f32) * camera.view();
-            let box_tests_start = Instant::now();
-            // The candidates top-down (skeleton nodes, groups, clusters): a hidden node culls
-            // its subtree's candidates with one test.
-            if state.parents.len() != store.nodes().len() {
-                state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
-            }
-            let skeleton =
-                Skeleton { parents: &state.parents, nodes: store.nodes(), groups: store.groups(), grid_step };
-            // Probe frames and frames where they paid test nodes; the others go flat.
-            let test_nodes = (state.hierarchy_forced || state.hzb_switch.test_nodes())
-                && state.hierarchy != HierarchyOptions::FLAT;
-            let hierarchy = if test_nodes { state.hierarchy } else { HierarchyOptions::FLAT };
-            let tested = test_clusters_hierarchically(
-                &split.candidates,
-                &skeleton,
-                &hzb,
-                &view_proj,
-                cluster_box,
-                &hierarchy,
-            );
-            let by_nodes = split.candidates.len() as u64 - tested.clusters_tested;
-            state.hzb_switch.update(
-                tested.clusters_tested,
-                tested.clusters_time,
-                test_nodes.then_some((tested.hierarchy_time, by_nodes)),
-            );
-            (stats.node_tests, stats.nodes_hidden) = (tested.nodes_tested, tested.nodes_hidden);
-            (stats.group_tests, stats.groups_hidden) = (tested.groups_tested, tested.groups_hidden);
-            let t = tested.clusters;
-            // The occluders flat: they were visible last frame, so nodes above them mostly are.
-            let o_results = test_boxes(&split.occluders, &hzb, &view_proj, cluster_box);
-            let o_still: Vec<usize> =
-                (0..o_results.len()).filter(|&i| o_results[i] == HzbResult::Visible).collect();
-            let o_visible: Vec<ClusterRef> = o_still.iter().map(|&i| split.occluders[i]).collect();
-            box_test_time = box_tests_start.elapsed();
-            stats.culled = t.occluded.len() as u64;
-            stats.no_pixels = t.no_pixels.len() as u64;
-            if state.triangle_culling {
-                // The visible clusters' triangles against the same pyramid: the candidates draw
-                // theirs, the occluders the ones their first pass left out.
-                let triangles = |list: &[ClusterRef], assumed: Option<&[TriangleMask]>| {
-                    let clusters: Vec<&PageCluster> = decoded(list).into_iter().map(|(_, c)| c).collect();
-                    let rounding = renderer.depth_rounding() as f64;
-                    test_triangles(&clusters, assumed, grid_step, &hzb, &view_proj, rounding)
-                };
-                // What each still visible occluder drew in the first pass.
-                let drawn: Vec<TriangleMask> = o_still.iter().map(|&i| split.occluder_masks[i]).collect();
-                // The triangles an occluder drew in the first pass are in the image whatever
-                // their test says, so only the history would learn from it (which of them to
-                // draw first next frame): they are assumed visible, and tested again only every
-                // RETEST_PERIOD-th frame per cluster (staggered), which drops those that became
-                // hidden from the history.
-                let frame = state.frames;
-                let assumed: Vec<TriangleMask> = o_visible
-                    .iter()
-                    .zip(&drawn)
-                    .map(|(k, &d)| if retest(k, frame) { 0 } else { d })
-                    .collect();
-                let triangles_start = Instant::now();
-                let (t_masks, o_masks) = (triangles(&t.visible, None), triangles(&o_visible, Some(&assumed)));
-                triangle_test_time = triangles_start.elapsed();
-                let candidates = t.visible.iter().copied().zip(t_masks);
-                let occluders = o_visible.iter().copied().zip(o_masks);
-                let rest = occluders
-                    .clone()
-                    .zip(&drawn)
-                    .filter_map(|((k, m), &drawn)| (m & !drawn != 0).then_some((k, m & !drawn)));
-                let second: Vec<(ClusterRef, TriangleMask)> = candidates.clone().chain(rest).collect();
-                let history: Vec<(ClusterRef, TriangleMask)> = candidates.chain(occluders).collect();
-                (t.visible, second, history, t.occluded)
-            } else {
-                let second = t.visible.iter().map(|k| (*k, u128::MAX)).collect();
-                let history = t.visible.iter().chain(&o_visible).map(|k| (*k, u128::MAX)).collect();
-                (t.visible, second, history, t.occluded)
-            }
-        }
-        Occlusion::Queries => {
-            // GL's queries are booleans (1 = some sample passed): no cut-off there.
-            let cutoff = if renderer.queries_count_samples() { state.visible_pixels as u64 } else { 0 };
-            // Node boxes first, breadth-first by level (Alg. 3.4.1): a hidden node culls the
-            // candidates under it without a query each.
-            if state.parents.len() != store.nodes().len() {
-                state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
-            }
-            let (nodes, groups) = (store.nodes(), store.groups());
-            let test_nodes = state.node_switch.test_nodes();
-            let node_start = Instant::now();
-            let tree = if test_nodes {
-                let candidate_nodes: Vec<u32> = split
-                    .candidates
-                    .iter()
-                    .map(|k| groups.get(k.group as usize).map_or(u32::MAX, |g| g.node))
-                    .collect();
-                test_hierarchy(&state.parents, &candidate_nodes, &NodeTestOptions::default(), |batch| {
-                    let boxes: Vec<(Vec3, Vec3)> = batch
-                        .iter()
-                        .map(|&n| grid_box(nodes[n as usize].min, nodes[n as usize].max, grid_step))
-                        .collect();
-                    let samples = renderer.query_boxes(camera, &boxes)?;
-                    Ok::<_, FrameError>(samples.iter().map(|&s| s > cutoff).collect())
-                })?
-            } else {
-                NodeTestResult { culled: vec![false; split.candidates.len()], ..Default::default() }
-            };
-            let node_time = node_start.elapsed();
-            stats.node_tests = tree.nodes_tested;
-            stats.nodes_hidden = tree.nodes_hidden;
-            let (survivors, by_nodes): (Vec<_>, Vec<_>) =
-                split.candidates.iter().zip(&tree.culled).partition(|(_, &culled)| !culled);
-            let survivors: Vec<ClusterRef> = survivors.into_iter().map(|(k, _)| *k).collect();
-            let mut occluded: Vec<ClusterRef> = by_nodes.into_iter().map(|(k, _)| *k).collect();
-            let boxes: Vec<(Vec3, Vec3)> = survivors
-                .iter()
-                .map(|k| cluster_box(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
-                .collect();
-            let query_start = Instant::now();
-            let samples = renderer.query_boxes(camera, &boxes)?;
-            // `occluded` holds, so far, the candidates the node tests culled.
-            state.node_switch.update(
-                boxes.len() as u64,
-                query_start.elapsed(),
-                test_nodes.then_some((node_time, occluded.len() as u64)),
-            );
-            stats.queries = tree.nodes_tested + boxes.len() as u64;
-            let (visible, hidden): (Vec<_>, Vec<_>) =
-                survivors.iter().zip(&samples).partition(|(_, &s)| s > cutoff);
-            let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
-            occluded.extend(hidden.into_iter().map(|(k, _)| *k));
-            stats.culled = occluded.len() as u64;
-            let second = visible.iter().map(|k| (*k, u128::MAX)).collect();
-            let history = split.occluders.iter().chain(&visible).map(|k| (*k, u128::MAX)).collect();
-            (visible, second, history, occluded)
-        }
+        Occlusion::Hzb => hzb_tests(&f, state, renderer, &mut stats, &mut times)?,
+        Occlusion::Queries => query_tests(&f, state, renderer, &mut stats)?,
     };
     let mut cull_time = cull_start.elapsed();
-    let (second, second_masks): (Vec<ClusterRef>, Vec<TriangleMask>) = second.into_iter().unzip();
-    renderer.draw_masked(Target::Own, camera, grid_step, &decoded(&second), Some(&second_masks), false)?;
+    let (second, second_masks): (Vec<ClusterRef>, Vec<TriangleMask>) = tested.second.into_iter().unzip();
+    renderer.draw_masked(
+        Target::Own,
+        camera,
+        grid_step,
+        &by_key.decoded(&second),
+        Some(&second_masks),
+        false,
+    )?;
     let t = Instant::now();
-    state.history.update_masked(history);
+    state.history.update_masked(tested.history);
     state.frames = state.frames.wrapping_add(1);
     cull_time += t.elapsed();
     let mut drawn = split.occluders;
-    drawn.extend_from_slice(&visible);
-    Ok(Culled { stats, cull_time, box_test_time, triangle_test_time, readback_time, drawn, occluded })
+    drawn.extend_from_slice(&tested.visible);
+    Ok(Culled {
+        stats,
+        cull_time,
+        box_test_time: times.box_tests,
+        triangle_test_time: times.triangle_tests,
+        readback_time: times.readback,
+        drawn,
+        occluded: tested.occluded,
+    })
+}
+
+/// What [`draw_culled`]'s tests read: the frame's store, camera, first and second pass split,
+/// decoded clusters and each cluster's scene-space box.
+struct CullFrame<'a, B> {
+    store: &'a Store,
+    camera: &'a Camera,
+    grid_step: f64,
+    split: &'a OcclusionSplit,
+    by_key: &'a ClusterIndex<'a>,
+    cluster_box: &'a B,
+}
+
+/// What a strategy's tests found: the visible candidates; what the second pass draws
+/// (cluster, triangles; `u128::MAX`: all): the visible candidates and, with triangle tests,
+/// the occluders' visible triangles their first pass left out; next frame's history (cluster,
+/// visible triangles); and the candidates found hidden.
+struct Tested {
+    visible: Vec<ClusterRef>,
+    second: Vec<(ClusterRef, TriangleMask)>,
+    history: Vec<(ClusterRef, TriangleMask)>,
+    occluded: Vec<ClusterRef>,
+}
+
+/// The parts of the `hzb` strategy's time that [`Culled`] reports.
+#[derive(Default)]
+struct TestTimes {
+    readback: Duration,
+    box_tests: Duration,
+    triangle_tests: Duration,
+}
+
+/// The `hzb` strategy: the first pass's depth read back into a pyramid, the candidates tested
+/// against it top-down and the occluders flat, then, with triangle tests, the visible clusters'
+/// triangles.
+fn hzb_tests<B>(
+    f: &CullFrame<B>,
+    state: &mut OcclusionState,
+    renderer: &mut Renderer,
+    stats: &mut OcclusionStats,
+    times: &mut TestTimes,
+) -> Result<Tested, FrameError>
+where
+    B: Fn(&ClusterRef) -> Option<(Vec3, Vec3)> + Sync,
+{
+    let readback_start = Instant::now();
+    let depth = renderer.read_depth()?;
+    times.readback = readback_start.elapsed();
+    // With multisampling the depth is each pixel's farthest sample, and a pixel is its
+    // samples to the tests (tw_gpu::msaa).
+    let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
+        .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?
+        .with_samples(renderer.sample_positions());
+    let (w, h) = renderer.size();
+    let view_proj = f.camera.projection_reverse_z(w as f32 / h as f32) * f.camera.view();
+    let box_tests_start = Instant::now();
+    let t = hzb_candidates(f, state, &hzb, &view_proj, stats);
+    // The occluders flat: they were visible last frame, so nodes above them mostly are.
+    let o_results = test_boxes(&f.split.occluders, &hzb, &view_proj, f.cluster_box);
+    let o_still: Vec<usize> = (0..o_results.len()).filter(|&i| o_results[i] == HzbResult::Visible).collect();
+    let o_visible: Vec<ClusterRef> = o_still.iter().map(|&i| f.split.occluders[i]).collect();
+    times.box_tests = box_tests_start.elapsed();
+    stats.culled = t.occluded.len() as u64;
+    stats.no_pixels = t.no_pixels.len() as u64;
+    if state.triangle_culling {
+        let hzb_view = (&hzb, &view_proj);
+        Ok(hzb_triangle_tests(f, state.frames, renderer, hzb_view, t, &o_still, o_visible, times))
+    } else {
+        let second = t.visible.iter().map(|k| (*k, u128::MAX)).collect();
+        let history = t.visible.iter().chain(&o_visible).map(|k| (*k, u128::MAX)).collect();
+        Ok(Tested { visible: t.visible, second, history, occluded: t.occluded })
+    }
+}
+
+/// The candidates against the pyramid top-down (skeleton nodes, groups, clusters): a hidden
+/// node culls its subtree's candidates with one test. Probe frames and frames where they paid
+/// test nodes; the others go flat. Counts the node and group tests in `stats`.
+fn hzb_candidates<B>(
+    f: &CullFrame<B>,
+    state: &mut OcclusionState,
+    hzb: &Hzb,
+    view_proj: &glam::Mat4,
+    stats: &mut OcclusionStats,
+) -> OcclusionTest
+where
+    B: Fn(&ClusterRef) -> Option<(Vec3, Vec3)> + Sync,
+{
+    let store = f.store;
+    if state.parents.len() != store.nodes().len() {
+        state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
+    }
+    let skeleton = Skeleton {
+        parents: &state.parents,
+        nodes: store.nodes(),
+        groups: store.groups(),
+        grid_step: f.grid_step,
+    };
+    let test_nodes = (state.hierarchy_forced || state.hzb_switch.test_nodes())
+        && state.hierarchy != HierarchyOptions::FLAT;
+    let hierarchy = if test_nodes { state.hierarchy } else { HierarchyOptions::FLAT };
+    let tested = test_clusters_hierarchically(
+        &f.split.candidates,
+        &skeleton,
+        hzb,
+        view_proj,
+        f.cluster_box,
+        &hierarchy,
+    );
+    let by_nodes = f.split.candidates.len() as u64 - tested.clusters_tested;
+    state.hzb_switch.update(
+        tested.clusters_tested,
+        tested.clusters_time,
+        test_nodes.then_some((tested.hierarchy_time, by_nodes)),
+    );
+    (stats.node_tests, stats.nodes_hidden) = (tested.nodes_tested, tested.nodes_hidden);
+    (stats.group_tests, stats.groups_hidden) = (tested.groups_tested, tested.groups_hidden);
+    tested.clusters
+}
+
+/// The visible clusters' triangles against the same pyramid (`hzb_view`: the pyramid and the
+/// view-projection): the candidates (`t`) draw theirs, the still visible occluders
+/// (`o_visible`, at `o_still` in the split) the ones their first pass left out.
+#[allow(clippy::too_many_arguments)]
+fn hzb_triangle_tests<B>(
+    f: &CullFrame<B>,
+    frame: u64,
+    renderer: &Renderer,
+    (hzb, view_proj): (&Hzb, &glam::Mat4),
+    t: OcclusionTest,
+    o_still: &[usize],
+    o_visible: Vec<ClusterRef>,
+    times: &mut TestTimes,
+) -> Tested {
+    let triangles = |list: &[ClusterRef], assumed: Option<&[TriangleMask]>| {
+        let clusters: Vec<&PageCluster> = f.by_key.decoded(list).into_iter().map(|(_, c)| c).collect();
+        let rounding = renderer.depth_rounding() as f64;
+        test_triangles(&clusters, assumed, f.grid_step, hzb, view_proj, rounding)
+    };
+    // What each still visible occluder drew in the first pass.
+    let drawn: Vec<TriangleMask> = o_still.iter().map(|&i| f.split.occluder_masks[i]).collect();
+    // The triangles an occluder drew in the first pass are in the image whatever their test
+    // says, so only the history would learn from it (which of them to draw first next frame):
+    // they are assumed visible, and tested again only every RETEST_PERIOD-th frame per cluster
+    // (staggered), which drops those that became hidden from the history.
+    let assumed: Vec<TriangleMask> =
+        o_visible.iter().zip(&drawn).map(|(k, &d)| if retest(k, frame) { 0 } else { d }).collect();
+    let triangles_start = Instant::now();
+    let (t_masks, o_masks) = (triangles(&t.visible, None), triangles(&o_visible, Some(&assumed)));
+    times.triangle_tests = triangles_start.elapsed();
+    let candidates = t.visible.iter().copied().zip(t_masks);
+    let occluders = o_visible.iter().copied().zip(o_masks);
+    let rest = occluders
+        .clone()
+        .zip(&drawn)
+        .filter_map(|((k, m), &drawn)| (m & !drawn != 0).then_some((k, m & !drawn)));
+    let second: Vec<(ClusterRef, TriangleMask)> = candidates.clone().chain(rest).collect();
+    let history: Vec<(ClusterRef, TriangleMask)> = candidates.chain(occluders).collect();
+    Tested { visible: t.visible, second, history, occluded: t.occluded }
+}
+
+/// The `queries` strategy: node boxes first, breadth-first by level (Alg. 3.4.1), where they
+/// paid; a hidden node culls the candidates under it without a query each; then a query per
+/// remaining candidate's box. GL's queries are booleans (1 = some sample passed): no cut-off
+/// there.
+fn query_tests<B>(
+    f: &CullFrame<B>,
+    state: &mut OcclusionState,
+    renderer: &mut Renderer,
+    stats: &mut OcclusionStats,
+) -> Result<Tested, FrameError>
+where
+    B: Fn(&ClusterRef) -> Option<(Vec3, Vec3)> + Sync,
+{
+    let cutoff = if renderer.queries_count_samples() { state.visible_pixels as u64 } else { 0 };
+    let store = f.store;
+    if state.parents.len() != store.nodes().len() {
+        state.parents = parents(store.nodes().iter().map(|n| (n.first_child, n.child_count)));
+    }
+    let test_nodes = state.node_switch.test_nodes();
+    let node_start = Instant::now();
+    let tree = query_nodes(f, state, renderer, cutoff, test_nodes)?;
+    let node_time = node_start.elapsed();
+    stats.node_tests = tree.nodes_tested;
+    stats.nodes_hidden = tree.nodes_hidden;
+    let (survivors, by_nodes): (Vec<_>, Vec<_>) =
+        f.split.candidates.iter().zip(&tree.culled).partition(|(_, &culled)| !culled);
+    let survivors: Vec<ClusterRef> = survivors.into_iter().map(|(k, _)| *k).collect();
+    let mut occluded: Vec<ClusterRef> = by_nodes.into_iter().map(|(k, _)| *k).collect();
+    let boxes: Vec<(Vec3, Vec3)> = survivors
+        .iter()
+        .map(|k| (f.cluster_box)(k).unwrap_or((Vec3::splat(f32::MIN), Vec3::splat(f32::MAX))))
+        .collect();
+    let query_start = Instant::now();
+    let samples = renderer.query_boxes(f.camera, &boxes)?;
+    // `occluded` holds, so far, the candidates the node tests culled.
+    state.node_switch.update(
+        boxes.len() as u64,
+        query_start.elapsed(),
+        test_nodes.then_some((node_time, occluded.len() as u64)),
+    );
+    stats.queries = tree.nodes_tested + boxes.len() as u64;
+    let (visible, hidden): (Vec<_>, Vec<_>) = survivors.iter().zip(&samples).partition(|(_, &s)| s > cutoff);
+    let visible: Vec<ClusterRef> = visible.into_iter().map(|(k, _)| *k).collect();
+    occluded.extend(hidden.into_iter().map(|(k, _)| *k));
+    stats.culled = occluded.len() as u64;
+    let second = visible.iter().map(|k| (*k, u128::MAX)).collect();
+    let history = f.split.occluders.iter().chain(&visible).map(|k| (*k, u128::MAX)).collect();
+    Ok(Tested { visible, second, history, occluded })
+}
+
+/// The `queries` strategy's node tests (when `test_nodes`): the candidates' skeleton nodes
+/// (`state.parents` made for the store) queried level by level, visible with more than
+/// `cutoff` samples; else nothing culled.
+fn query_nodes<B>(
+    f: &CullFrame<B>,
+    state: &OcclusionState,
+    renderer: &mut Renderer,
+    cutoff: u64,
+    test_nodes: bool,
+) -> Result<NodeTestResult, FrameError> {
+    if !test_nodes {
+        return Ok(NodeTestResult { culled: vec![false; f.split.candidates.len()], ..Default::default() });
+    }
+    let (nodes, groups) = (f.store.nodes(), f.store.groups());
+    let candidate_nodes: Vec<u32> = f
+        .split
+        .candidates
+        .iter()
+        .map(|k| groups.get(k.group as usize).map_or(u32::MAX, |g| g.node))
+        .collect();
+    test_hierarchy(&state.parents, &candidate_nodes, &NodeTestOptions::default(), |batch| {
+        let boxes: Vec<(Vec3, Vec3)> = batch
+            .iter()
+            .map(|&n| grid_box(nodes[n as usize].min, nodes[n as usize].max, f.grid_step))
+            .collect();
+        let samples = renderer.query_boxes(f.camera, &boxes)?;
+        Ok::<_, FrameError>(samples.iter().map(|&s| s > cutoff).collect())
+    })
 }
 
 /// The decoded clusters of a frame by (page, index in page): sorted in parallel and searched,
@@ -446,6 +556,13 @@ impl<'a> ClusterIndex<'a> {
     fn get(&self, k: &ClusterRef) -> Option<&'a PageCluster> {
         let i = self.sorted.binary_search_by_key(&(k.page, k.index_in_page), |e| e.0).ok()?;
         Some(self.sorted[i].1)
+    }
+
+    /// The decoded clusters of `list`, in order. Every reference [`draw_culled`] looks up comes
+    /// from the frame's clusters, so none is left out (and per-cluster masks stay aligned with
+    /// the list they were made for).
+    fn decoded(&self, list: &[ClusterRef]) -> Vec<(ClusterRef, &'a PageCluster)> {
+        list.par_iter().with_min_len(1024).filter_map(|k| self.get(k).map(|c| (*k, c))).collect()
     }
 }
 

@@ -257,11 +257,13 @@ impl TriangleSource for AsciiStl {
     fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
         let AsciiStl { path, mut rd, counter, .. } = *self;
         let mut line_no = 0u64;
-        let mut state = State::Outside;
-        let mut objects = 0u32;
-        let mut triangles = 0u64;
-        let mut normals = None;
-        let mut corners = [[0.0; 3]; 3];
+        let mut p = AsciiParse {
+            state: State::Outside,
+            objects: 0,
+            triangles: 0,
+            normals: None,
+            corners: [[0.0; 3]; 3],
+        };
         loop {
             line_no += 1;
             let err = |msg: String| ImportError::parse(&path, Position::Line(line_no), msg);
@@ -276,75 +278,8 @@ impl TriangleSource for AsciiStl {
             let line = rd.bytes(range);
             let mut tokens = Tokens::new(line);
             let Some(word) = tokens.next() else { continue };
-            match state {
-                State::Outside if keyword(word, "solid") => {
-                    let name = line.trim_ascii_start()[5..].trim_ascii();
-                    sink.object(
-                        objects,
-                        &ObjectInfo { name: String::from_utf8_lossy(name).into_owned(), color: None },
-                    )?;
-                    objects += 1;
-                    state = State::Solid;
-                    continue;
-                }
-                State::Solid if keyword(word, "endsolid") => {
-                    state = State::Outside;
-                    continue;
-                }
-                State::Solid if keyword(word, "facet") => {
-                    normals = match tokens.next() {
-                        None => None,
-                        Some(t) if keyword(t, "normal") => {
-                            let n = three(&mut tokens, "the facet normal").map_err(err)?;
-                            facet_normals(n.map(|c| c as f32))
-                        }
-                        Some(t) => {
-                            return Err(err(format!(
-                                "expected \"normal\" after \"facet\", found \"{}\"",
-                                show(t)
-                            )))
-                        }
-                    };
-                    state = State::Facet;
-                }
-                State::Facet if keyword(word, "outer") => {
-                    match tokens.next() {
-                        Some(t) if keyword(t, "loop") => {}
-                        _ => return Err(err("expected \"outer loop\"".into())),
-                    }
-                    state = State::Loop(0);
-                }
-                State::Loop(n) if keyword(word, "vertex") => {
-                    if n == 3 {
-                        return Err(err(
-                            "a facet with more than 3 vertices (STL facets are triangles)".into()
-                        ));
-                    }
-                    let v = three(&mut tokens, "the vertex").map_err(err)?;
-                    if !v.iter().all(|c| c.is_finite()) {
-                        return Err(err(format!("non-finite coordinate {v:?}")));
-                    }
-                    corners[n] = v;
-                    state = State::Loop(n + 1);
-                    continue;
-                }
-                State::Loop(n) if keyword(word, "endloop") => {
-                    if n != 3 {
-                        return Err(err(format!("a facet with {n} vertices (STL facets are triangles)")));
-                    }
-                    state = State::EndLoop;
-                }
-                State::EndLoop if keyword(word, "endfacet") => {
-                    sink.triangle(&Triangle {
-                        positions: corners,
-                        normals,
-                        colors: None,
-                        object: objects - 1,
-                    })?;
-                    triangles += 1;
-                    state = State::Solid;
-                }
-                _ => return Err(err(format!("expected {}, found \"{}\"", state.expected(), show(word)))),
+            if !p.line(line, word, &mut tokens, sink, &err)? {
+                continue;
             }
             if let Some(t) = tokens.next() {
                 return Err(err(format!("unexpected \"{}\" at the end of the line", show(t))));
@@ -353,19 +288,129 @@ impl TriangleSource for AsciiStl {
                 sink.progress(counter.get());
             }
         }
-        if state != State::Outside {
+        if p.state != State::Outside {
             return Err(ImportError::parse(
                 &path,
                 Position::Line(line_no),
-                format!("the file is truncated: it ends where {} was expected", state.expected()),
+                format!("the file is truncated: it ends where {} was expected", p.state.expected()),
             ));
         }
-        if objects == 0 {
+        if p.objects == 0 {
             return Err(ImportError::parse(&path, Position::File, "empty file: no \"solid\""));
         }
         sink.progress(counter.get());
-        Ok(SourceSummary { objects, vertices: 3 * triangles, bytes: counter.get() })
+        Ok(SourceSummary { objects: p.objects, vertices: 3 * p.triangles, bytes: counter.get() })
     }
+}
+
+/// The ASCII reader's state between lines: where it is in the grammar, the solids and
+/// triangles so far, and the facet being read.
+struct AsciiParse {
+    state: State,
+    objects: u32,
+    triangles: u64,
+    normals: Option<[[f32; 3]; 3]>,
+    corners: [[f64; 3]; 3],
+}
+
+impl AsciiParse {
+    /// Takes one non-empty line (`line`, its first word `word`, the rest in `tokens`): a
+    /// solid starts or ends, a facet's parts are read, a finished facet goes to `sink`. Returns
+    /// whether the caller checks that nothing follows on the line and reports progress (not
+    /// after `solid`, `endsolid` and `vertex`, which read the line themselves). `err` makes an
+    /// error at this line.
+    fn line(
+        &mut self,
+        line: &[u8],
+        word: &[u8],
+        tokens: &mut Tokens,
+        sink: &mut dyn TriangleSink,
+        err: &dyn Fn(String) -> ImportError,
+    ) -> Result<bool, ImportError> {
+        match self.state {
+            State::Outside if keyword(word, "solid") => {
+                let name = line.trim_ascii_start()[5..].trim_ascii();
+                let info = ObjectInfo { name: String::from_utf8_lossy(name).into_owned(), color: None };
+                sink.object(self.objects, &info)?;
+                self.objects += 1;
+                self.state = State::Solid;
+                return Ok(false);
+            }
+            State::Solid if keyword(word, "endsolid") => {
+                self.state = State::Outside;
+                return Ok(false);
+            }
+            State::Solid if keyword(word, "facet") => {
+                self.normals = facet_normal(tokens, err)?;
+                self.state = State::Facet;
+            }
+            State::Facet if keyword(word, "outer") => {
+                match tokens.next() {
+                    Some(t) if keyword(t, "loop") => {}
+                    _ => return Err(err("expected \"outer loop\"".into())),
+                }
+                self.state = State::Loop(0);
+            }
+            State::Loop(n) if keyword(word, "vertex") => {
+                let v = vertex(n, tokens, err)?;
+                self.corners[n] = v;
+                self.state = State::Loop(n + 1);
+                return Ok(false);
+            }
+            State::Loop(n) if keyword(word, "endloop") => {
+                if n != 3 {
+                    return Err(err(format!("a facet with {n} vertices (STL facets are triangles)")));
+                }
+                self.state = State::EndLoop;
+            }
+            State::EndLoop if keyword(word, "endfacet") => {
+                let t = Triangle {
+                    positions: self.corners,
+                    normals: self.normals,
+                    colors: None,
+                    object: self.objects - 1,
+                };
+                sink.triangle(&t)?;
+                self.triangles += 1;
+                self.state = State::Solid;
+            }
+            _ => return Err(err(format!("expected {}, found \"{}\"", self.state.expected(), show(word)))),
+        }
+        Ok(true)
+    }
+}
+
+/// The rest of a `facet` line: nothing, or `normal` and three numbers (the facet's normal for
+/// each corner, when usable).
+fn facet_normal(
+    tokens: &mut Tokens,
+    err: &dyn Fn(String) -> ImportError,
+) -> Result<Option<[[f32; 3]; 3]>, ImportError> {
+    match tokens.next() {
+        None => Ok(None),
+        Some(t) if keyword(t, "normal") => {
+            let n = three(tokens, "the facet normal").map_err(err)?;
+            Ok(facet_normals(n.map(|c| c as f32)))
+        }
+        Some(t) => Err(err(format!("expected \"normal\" after \"facet\", found \"{}\"", show(t)))),
+    }
+}
+
+/// The rest of the line of a facet's vertex `n` (counting from 0): three finite numbers, and
+/// no fourth vertex.
+fn vertex(
+    n: usize,
+    tokens: &mut Tokens,
+    err: &dyn Fn(String) -> ImportError,
+) -> Result<[f64; 3], ImportError> {
+    if n == 3 {
+        return Err(err("a facet with more than 3 vertices (STL facets are triangles)".into()));
+    }
+    let v = three(tokens, "the vertex").map_err(err)?;
+    if !v.iter().all(|c| c.is_finite()) {
+        return Err(err(format!("non-finite coordinate {v:?}")));
+    }
+    Ok(v)
 }
 
 #[cfg(test)]

@@ -2,24 +2,25 @@
 //! BVH structure, and every traversal path (single, packet; AVX2 and portable).
 
 use glam::Vec3;
+use tw_core::rng::Rng;
 use tw_rt::{
     intersect_triangle, trace_image_with, Aabb, BuildOptions, Bvh, Camera, Hit, MeshError, Ray, Simd,
     TraceMode, TriangleBvh,
 };
 
-/// xorshift64*: deterministic test randomness without a dependency.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-    }
+/// Test randomness from the shared generator, as `f32`s and vectors.
+trait TestRng {
     /// Uniform in [lo, hi).
+    fn f(&mut self, lo: f32, hi: f32) -> f32;
+    /// Each coordinate uniform in [lo, hi).
+    fn v(&mut self, lo: f32, hi: f32) -> Vec3;
+    /// A uniformly distributed unit direction (by rejection from the cube).
+    fn dir(&mut self) -> Vec3;
+}
+
+impl TestRng for Rng {
     fn f(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (self.next() >> 40) as f32 / (1u64 << 24) as f32 * (hi - lo)
+        lo + (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32 * (hi - lo)
     }
     fn v(&mut self, lo: f32, hi: f32) -> Vec3 {
         Vec3::new(self.f(lo, hi), self.f(lo, hi), self.f(lo, hi))
@@ -95,13 +96,13 @@ const PATHS: [Simd; 2] = [Simd::Avx2, Simd::Portable];
 
 #[test]
 fn ray_box_agrees_with_f64_slabs() {
-    let mut rng = Rng(7);
+    let mut rng = Rng::new(7);
     for _ in 0..20_000 {
         let b = Aabb::from_points(&[rng.v(-1.0, 1.0), rng.v(-1.0, 1.0)]);
         let mut dir = rng.dir();
         // Zero components (both signs) are the robustness cases.
         for a in 0..3 {
-            match rng.next() % 8 {
+            match rng.next_u64() % 8 {
                 0 => dir[a] = 0.0,
                 1 => dir[a] = -0.0,
                 _ => {}
@@ -149,7 +150,7 @@ fn ray_box_on_faces_with_zero_directions() {
 
 #[test]
 fn ray_triangle_agrees_with_f64_reference() {
-    let mut rng = Rng(11);
+    let mut rng = Rng::new(11);
     let mut hits = 0;
     for _ in 0..20_000 {
         let p = [rng.v(-1.0, 1.0), rng.v(-1.0, 1.0), rng.v(-1.0, 1.0)];
@@ -221,7 +222,7 @@ fn subdivided_cube(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
 fn closed_cube_is_watertight_at_edges_and_vertices() {
     let (pos, tris) = subdivided_cube(7);
     let bvh = TriangleBvh::build(&pos, &tris).unwrap();
-    let mut rng = Rng(3);
+    let mut rng = Rng::new(3);
     let mut rays = Vec::new();
     // Rays from inside and outside through every vertex and every edge midpoint.
     for t in &tris {
@@ -251,7 +252,7 @@ fn closed_cube_is_watertight_at_edges_and_vertices() {
 
 #[test]
 fn validate_accepts_random_and_degenerate_inputs() {
-    let mut rng = Rng(5);
+    let mut rng = Rng::new(5);
     let random: Vec<Aabb> = (0..5000)
         .map(|_| {
             let c = rng.v(-10.0, 10.0);
@@ -323,7 +324,7 @@ fn coherent_rays(rng: &mut Rng, packets: usize) -> Vec<Ray> {
     for _ in 0..packets {
         let eye = rng.dir() * 3.0;
         let cam = Camera::look_at(eye, rng.v(-0.5, 0.5), Vec3::Z, 0.8, 1.5);
-        let (x0, y0) = ((rng.next() % 60) as u32, (rng.next() % 40) as u32);
+        let (x0, y0) = ((rng.next_u64() % 60) as u32, (rng.next_u64() % 40) as u32);
         for k in 0..8 {
             rays.push(cam.pixel_ray(x0 + k % 4, y0 + k / 4, 64, 48));
         }
@@ -333,7 +334,7 @@ fn coherent_rays(rng: &mut Rng, packets: usize) -> Vec<Ray> {
 
 #[test]
 fn bvh_matches_brute_force_single_and_packet() {
-    let mut rng = Rng(9);
+    let mut rng = Rng::new(9);
     let (pos, tris) = soup(&mut rng, 1500);
     let bvh = TriangleBvh::build(&pos, &tris).unwrap();
     bvh.bvh()
@@ -360,7 +361,7 @@ fn bvh_matches_brute_force_single_and_packet() {
 /// shared-origin shortcut.
 #[test]
 fn packets_with_distinct_origins_match_brute_force() {
-    let mut rng = Rng(17);
+    let mut rng = Rng::new(17);
     let (pos, tris) = soup(&mut rng, 1200);
     let bvh = TriangleBvh::build(&pos, &tris).unwrap();
     let mut rays = Vec::new();
@@ -393,7 +394,7 @@ fn packet_hits(bvh: &TriangleBvh, rays: &[Ray]) -> usize {
 /// group should be nearly full instead of holding 1.8 triangles on average.
 #[test]
 fn triangle_leaves_fill_their_groups() {
-    let mut rng = Rng(19);
+    let mut rng = Rng::new(19);
     let (pos, tris) = soup(&mut rng, 4000);
     let bvh = TriangleBvh::build(&pos, &tris).unwrap();
     let per_leaf = tris.len() as f64 / bvh.bvh().leaf_count() as f64;
@@ -405,7 +406,7 @@ fn triangle_leaves_fill_their_groups() {
 
 #[test]
 fn generic_traverse_visits_what_brute_force_hits() {
-    let mut rng = Rng(13);
+    let mut rng = Rng::new(13);
     let (pos, tris) = soup(&mut rng, 800);
     let boxes: Vec<Aabb> = tris.iter().map(|t| Aabb::from_points(&corners(&pos, t))).collect();
     let bvh = Bvh::build_with(&boxes, &BuildOptions { max_leaf_size: 1, ..BuildOptions::default() });

@@ -296,6 +296,7 @@ impl App {
         input
     }
 
+    /// Carries out a UI or key action.
     fn act(&mut self, a: Action) {
         match a {
             Action::Screenshot => {
@@ -303,54 +304,17 @@ impl App {
                 self.screenshot(&p);
             }
             Action::ToggleRecording => self.toggle_recording(),
-            Action::TogglePlayback => {
-                if self.playing {
-                    self.playing = false;
-                } else if let Some(p) = self.player.as_mut() {
-                    p.rewind();
-                    self.playing = true;
-                }
-            }
+            Action::TogglePlayback => self.toggle_playback(),
             Action::SetMode(m) => self.controller.set_mode(m, None),
-            Action::ToggleDebugView => {
-                if let Some(f) = self.frozen.take() {
-                    self.settings.debug_view = false;
-                    self.controller = Controller::new(&f, &self.scene.scene_frame());
-                } else {
-                    let f = self.controller.camera();
-                    self.frozen = Some(f);
-                    self.settings.debug_view = true;
-                    let mode = self.controller.mode;
-                    let third = debug_view::third_person(&f, self.controller.scene_size);
-                    self.controller = Controller::new(&third, &self.scene.scene_frame());
-                    if mode == Mode::Orbit {
-                        self.controller.set_mode(Mode::Orbit, Some(f.eye));
-                    }
-                }
-            }
+            Action::ToggleDebugView => self.toggle_debug_view(),
             Action::ResetView => {
                 self.ortho = None;
                 self.frozen = None;
                 self.settings.debug_view = false;
                 self.controller = Controller::new(&self.start_camera, &self.scene.scene_frame());
             }
-            Action::Hide => match self.picked.take() {
-                Some(p) => {
-                    self.pick_lines.clear();
-                    self.filter.hide(p.object);
-                    let note = self.raster_only_note();
-                    self.say(format!("hidden: {} (Shift+H shows all){note}", self.object_name(p.object)));
-                }
-                None => self.say("nothing picked to hide (click an object first)".into()),
-            },
-            Action::Isolate => match self.picked {
-                Some(p) => {
-                    self.filter.isolate(p.object);
-                    let note = self.raster_only_note();
-                    self.say(format!("isolated: {} (Shift+H shows all){note}", self.object_name(p.object)));
-                }
-                None => self.say("nothing picked to isolate (click an object first)".into()),
-            },
+            Action::Hide => self.hide_picked(),
+            Action::Isolate => self.isolate_picked(),
             Action::ShowAll => {
                 self.filter.show_all();
                 self.say("showing every object".into());
@@ -369,23 +333,8 @@ impl App {
             Action::SaveView(name) => self.save_view(&name),
             Action::LoadView(name) => self.load_view(&name),
             Action::ToggleOrtho => self.toggle_ortho(),
-            Action::ToggleRenderer => {
-                let r = match self.settings.renderer {
-                    RendererKind::Raster => RendererKind::Rt,
-                    RendererKind::Rt => RendererKind::Raster,
-                };
-                self.settings.renderer = r;
-                self.say(format!("renderer: {}", r.name()));
-            }
-            Action::ToggleFlashlight => {
-                self.settings.flashlight = !self.settings.flashlight;
-                let state = if self.settings.flashlight { "on" } else { "off" };
-                let note = match self.settings.renderer {
-                    RendererKind::Rt => "",
-                    RendererKind::Raster => " (it lights the ray-traced image: G switches to rt)",
-                };
-                self.say(format!("flashlight {state}{note}"));
-            }
+            Action::ToggleRenderer => self.toggle_renderer(),
+            Action::ToggleFlashlight => self.toggle_flashlight(),
             Action::ToggleShadows => self.light_key(LightKey::Toggle),
             Action::TogglePointLight => self.light_key(LightKey::PointAtEye(self.controller.eye)),
             Action::MovePointLight => {
@@ -399,6 +348,82 @@ impl App {
                 }
             }
         }
+    }
+
+    /// Stops the recorded path playing, or plays it from its start.
+    fn toggle_playback(&mut self) {
+        if self.playing {
+            self.playing = false;
+        } else if let Some(p) = self.player.as_mut() {
+            p.rewind();
+            self.playing = true;
+        }
+    }
+
+    /// The debug view on: the camera frozen where it is (the cut is still selected and culled
+    /// from it) and a third-person camera behind it, in the same mode; off: back to the frozen
+    /// camera.
+    fn toggle_debug_view(&mut self) {
+        if let Some(f) = self.frozen.take() {
+            self.settings.debug_view = false;
+            self.controller = Controller::new(&f, &self.scene.scene_frame());
+        } else {
+            let f = self.controller.camera();
+            self.frozen = Some(f);
+            self.settings.debug_view = true;
+            let mode = self.controller.mode;
+            let third = debug_view::third_person(&f, self.controller.scene_size);
+            self.controller = Controller::new(&third, &self.scene.scene_frame());
+            if mode == Mode::Orbit {
+                self.controller.set_mode(Mode::Orbit, Some(f.eye));
+            }
+        }
+    }
+
+    /// Hides the picked object (and forgets the pick).
+    fn hide_picked(&mut self) {
+        match self.picked.take() {
+            Some(p) => {
+                self.pick_lines.clear();
+                self.filter.hide(p.object);
+                let note = self.raster_only_note();
+                self.say(format!("hidden: {} (Shift+H shows all){note}", self.object_name(p.object)));
+            }
+            None => self.say("nothing picked to hide (click an object first)".into()),
+        }
+    }
+
+    /// Shows the picked object alone.
+    fn isolate_picked(&mut self) {
+        match self.picked {
+            Some(p) => {
+                self.filter.isolate(p.object);
+                let note = self.raster_only_note();
+                self.say(format!("isolated: {} (Shift+H shows all){note}", self.object_name(p.object)));
+            }
+            None => self.say("nothing picked to isolate (click an object first)".into()),
+        }
+    }
+
+    /// Switches between the rasterizer and the ray tracer.
+    fn toggle_renderer(&mut self) {
+        let r = match self.settings.renderer {
+            RendererKind::Raster => RendererKind::Rt,
+            RendererKind::Rt => RendererKind::Raster,
+        };
+        self.settings.renderer = r;
+        self.say(format!("renderer: {}", r.name()));
+    }
+
+    /// The flashlight on or off (it lights the ray-traced image only, which the message says).
+    fn toggle_flashlight(&mut self) {
+        self.settings.flashlight = !self.settings.flashlight;
+        let state = if self.settings.flashlight { "on" } else { "off" };
+        let note = match self.settings.renderer {
+            RendererKind::Rt => "",
+            RendererKind::Raster => " (it lights the ray-traced image: G switches to rt)",
+        };
+        self.say(format!("flashlight {state}{note}"));
     }
 
     /// Carries out a light key and says what the light is now.

@@ -199,6 +199,22 @@ pub struct Scene {
     views_file: std::path::PathBuf,
 }
 
+/// The resident pages of the `drawn` clusters, sorted by page number (pages no longer in
+/// `cache` left out): a frame redrawn from another camera draws what it can of them.
+fn resident_pages(drawn: &[ClusterRef], cache: &tw_runtime::PageCache) -> Vec<(u32, Arc<ResidentPage>)> {
+    let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
+    for c in drawn {
+        if pages.last().is_none_or(|(p, _)| *p != c.page) {
+            if let Some(p) = cache.try_get(c.page) {
+                pages.push((c.page, p));
+            }
+        }
+    }
+    pages.sort_by_key(|(p, _)| *p);
+    pages.dedup_by_key(|(p, _)| *p);
+    pages
+}
+
 impl Scene {
     /// A scene over an opened store whose decoded pages stay within `memory_budget` bytes
     /// (the streamer starts with the first frame).
@@ -432,6 +448,35 @@ impl Scene {
             return self.frame_traced(draw, settings, size);
         }
         self.traced = None;
+        self.prepare_walk(settings, size)?;
+        let filtered = !self.filter.is_all();
+        // Hidden objects must not occlude: no occlusion culling while any is hidden.
+        let occlusion = if filtered { tw_frame::Occlusion::None } else { settings.occlusion };
+        let frozen = settings.lod_freeze && self.key.is_some();
+        let mut info = if frozen {
+            FrameInfo { selected: false, ..self.last }
+        } else {
+            self.select_and_draw(cull, settings, size, occlusion, filtered)?
+        };
+        self.gfx_mut()?.ensure_target(size);
+        if frozen || cull != draw || filtered {
+            self.redraw_drawn(draw, size, frozen, filtered, &mut info)?;
+        } else {
+            self.copy_own_target(size)?;
+        }
+        self.last = info;
+        Ok(info)
+    }
+
+    /// The GPU context, or an error before a renderer is attached.
+    fn gfx_mut(&mut self) -> Result<&mut SceneGfx, ViewError> {
+        self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))
+    }
+
+    /// Makes the walkthrough ready for a frame at `size`: made on the first frame, its renderer
+    /// made again at a new size, the object colours (with the highlight), GPU budget and colour
+    /// mode brought up to date.
+    fn prepare_walk(&mut self, settings: &Settings, size: [u32; 2]) -> Result<(), ViewError> {
         let g = self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
         // The walkthrough, its own target at the frame's size.
         if self.walk.is_none() {
@@ -468,9 +513,20 @@ impl Scene {
             self.gpu_request = settings.gpu_budget;
         }
         walk.set_color_mode(settings.coloring.to_gpu());
-        let filtered = !self.filter.is_all();
-        // Hidden objects must not occlude: no occlusion culling while any is hidden.
-        let occlusion = if filtered { tw_frame::Occlusion::None } else { settings.occlusion };
+        Ok(())
+    }
+
+    /// Selects the cut from `cull`, culls and draws it into the walkthrough's own target, and
+    /// keeps what was drawn and occluded; notes whether one more frame is needed for the
+    /// occlusion counts to settle. Returns the frame's figures.
+    fn select_and_draw(
+        &mut self,
+        cull: &Camera,
+        settings: &Settings,
+        size: [u32; 2],
+        occlusion: tw_frame::Occlusion,
+        filtered: bool,
+    ) -> Result<FrameInfo, ViewError> {
         let key = SelectKey {
             camera: *cull,
             tau: settings.pixel_error,
@@ -480,104 +536,106 @@ impl Scene {
             filtered,
         };
         let shadows = settings.shadows.frame_settings(self.store.header(), self.up_axis, cull);
-        let frozen = settings.lod_freeze && self.key.is_some();
-        let mut info = if frozen { FrameInfo { selected: false, ..self.last } } else { FrameInfo::default() };
-        if !frozen {
-            let fs = FrameSettings {
-                tau: settings.pixel_error,
-                frustum_culling: settings.frustum_culling,
-                occlusion,
-                wait_for_pages: false,
-                shadows,
-                ..Default::default()
-            };
-            let d = walk.draw_frame(cull, &fs)?;
-            let t = &d.info.times;
-            // The shadow stage is in the total only: drawing is what the other stages leave.
-            let other_stages = t.select + t.cull + d.info.shadow.total;
-            info = FrameInfo {
-                selected: true,
-                select_ms: t.select.as_secs_f32() * 1e3,
-                cull_ms: t.cull.as_secs_f32() * 1e3,
-                render_ms: t.total.saturating_sub(other_stages).as_secs_f32() * 1e3,
-                triangles: d.info.triangles,
-                clusters: d.info.clusters,
-                stats: d.info.select,
-                stream: d.info.stream,
-                occlusion: d.info.occlusion,
-                gpu: d.info.gpu,
-                samples: 0,
-                shadow: d.info.shadow,
-            };
-            self.bytes_read += d.info.stream.bytes_read;
-            self.drawn = d.drawn;
-            self.occluded = d.occluded;
-            // Occlusion culling tests what was not visible last frame: after a change of the camera
-            // or of the cut (pages arrived), one more frame gives the settled counts.
-            let cut = &walk.selection().clusters;
-            let cut_changed = *cut != self.prev_cut;
-            if cut_changed {
-                self.prev_cut.clone_from(cut);
-            }
-            self.settle =
-                occlusion != tw_frame::Occlusion::None && (self.key.as_ref() != Some(&key) || cut_changed);
-            self.key = Some(key);
+        let walk = self.walk.as_mut().ok_or_else(|| ViewError::Gpu("no walkthrough".into()))?;
+        let fs = FrameSettings {
+            tau: settings.pixel_error,
+            frustum_culling: settings.frustum_culling,
+            occlusion,
+            wait_for_pages: false,
+            shadows,
+            ..Default::default()
+        };
+        let d = walk.draw_frame(cull, &fs)?;
+        let t = &d.info.times;
+        // The shadow stage is in the total only: drawing is what the other stages leave.
+        let other_stages = t.select + t.cull + d.info.shadow.total;
+        let info = FrameInfo {
+            selected: true,
+            select_ms: t.select.as_secs_f32() * 1e3,
+            cull_ms: t.cull.as_secs_f32() * 1e3,
+            render_ms: t.total.saturating_sub(other_stages).as_secs_f32() * 1e3,
+            triangles: d.info.triangles,
+            clusters: d.info.clusters,
+            stats: d.info.select,
+            stream: d.info.stream,
+            occlusion: d.info.occlusion,
+            gpu: d.info.gpu,
+            samples: 0,
+            shadow: d.info.shadow,
+        };
+        self.bytes_read += d.info.stream.bytes_read;
+        self.drawn = d.drawn;
+        self.occluded = d.occluded;
+        // Occlusion culling tests what was not visible last frame: after a change of the camera
+        // or of the cut (pages arrived), one more frame gives the settled counts.
+        let cut = &walk.selection().clusters;
+        let cut_changed = *cut != self.prev_cut;
+        if cut_changed {
+            self.prev_cut.clone_from(cut);
         }
-        g.ensure_target(size);
-        let target = g.target.as_ref().expect("made above");
-        if frozen || cull != draw || filtered {
-            // The clusters the culling camera drew, seen from the drawing camera, without the
-            // hidden objects' triangles.
-            let t = Instant::now();
-            let cache = walk.streamer().cache().clone();
-            let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
-            for c in &self.drawn {
-                if pages.last().is_none_or(|(p, _)| *p != c.page) {
-                    if let Some(p) = cache.try_get(c.page) {
-                        pages.push((c.page, p));
-                    }
-                }
-            }
-            pages.sort_by_key(|(p, _)| *p);
-            pages.dedup_by_key(|(p, _)| *p);
-            let filter = &self.filter;
-            let (clusters, masks): (Vec<_>, Vec<_>) = self
-                .drawn
-                .iter()
-                .filter_map(|c| {
-                    let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
-                    let pc = pages[i].1.clusters.get(c.index_in_page as usize)?;
-                    let mask = if filtered { filter.mask(&pc.objects) } else { u128::MAX };
-                    (mask != 0).then_some(((*c, pc), mask))
-                })
-                .unzip();
-            let grid_step = self.store.header().grid_step;
-            let r = walk.renderer_mut();
-            r.begin_frame();
-            let view = Target::View { view: &target.view, format: SCENE_FORMAT, size: (size[0], size[1]) };
-            r.draw_masked(view, draw, grid_step, &clusters, filtered.then_some(&masks[..]), true)?;
-            let ms = t.elapsed().as_secs_f32() * 1e3;
-            info.render_ms = if frozen { ms } else { info.render_ms + ms };
-            info.gpu = r.stats().pool;
-            if frozen || filtered {
-                info.triangles = r.stats().triangles;
-                info.clusters = r.stats().clusters;
-            }
-        } else {
-            // The own target's colour into the scene texture (no wait).
-            let own = walk.renderer_mut().color_texture();
-            let mut encoder = g
-                .device
-                .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scene copy") });
-            encoder.copy_texture_to_texture(
-                own.as_image_copy(),
-                target.texture.as_image_copy(),
-                wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
-            );
-            g.queue.submit([encoder.finish()]);
-        }
-        self.last = info;
+        self.settle =
+            occlusion != tw_frame::Occlusion::None && (self.key.as_ref() != Some(&key) || cut_changed);
+        self.key = Some(key);
         Ok(info)
+    }
+
+    /// Draws the clusters the culling camera drew, seen from the drawing camera `draw`, without
+    /// the hidden objects' triangles, into the scene texture; `info` takes the draw's time and
+    /// (for a frozen cut or hidden objects) its counts.
+    fn redraw_drawn(
+        &mut self,
+        draw: &Camera,
+        size: [u32; 2],
+        frozen: bool,
+        filtered: bool,
+        info: &mut FrameInfo,
+    ) -> Result<(), ViewError> {
+        let t = Instant::now();
+        let g = self.gfx.as_ref().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
+        let target = g.target.as_ref().expect("made by ensure_target");
+        let walk = self.walk.as_mut().ok_or_else(|| ViewError::Gpu("no walkthrough".into()))?;
+        let pages = resident_pages(&self.drawn, walk.streamer().cache());
+        let filter = &self.filter;
+        let (clusters, masks): (Vec<_>, Vec<_>) = self
+            .drawn
+            .iter()
+            .filter_map(|c| {
+                let i = pages.binary_search_by_key(&c.page, |(p, _)| *p).ok()?;
+                let pc = pages[i].1.clusters.get(c.index_in_page as usize)?;
+                let mask = if filtered { filter.mask(&pc.objects) } else { u128::MAX };
+                (mask != 0).then_some(((*c, pc), mask))
+            })
+            .unzip();
+        let grid_step = self.store.header().grid_step;
+        let r = walk.renderer_mut();
+        r.begin_frame();
+        let view = Target::View { view: &target.view, format: SCENE_FORMAT, size: (size[0], size[1]) };
+        r.draw_masked(view, draw, grid_step, &clusters, filtered.then_some(&masks[..]), true)?;
+        let ms = t.elapsed().as_secs_f32() * 1e3;
+        info.render_ms = if frozen { ms } else { info.render_ms + ms };
+        info.gpu = r.stats().pool;
+        if frozen || filtered {
+            info.triangles = r.stats().triangles;
+            info.clusters = r.stats().clusters;
+        }
+        Ok(())
+    }
+
+    /// The walkthrough's own target's colour into the scene texture (no wait).
+    fn copy_own_target(&mut self, size: [u32; 2]) -> Result<(), ViewError> {
+        let g = self.gfx.as_ref().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
+        let target = g.target.as_ref().expect("made by ensure_target");
+        let walk = self.walk.as_mut().ok_or_else(|| ViewError::Gpu("no walkthrough".into()))?;
+        let own = walk.renderer_mut().color_texture();
+        let mut encoder =
+            g.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scene copy") });
+        encoder.copy_texture_to_texture(
+            own.as_image_copy(),
+            target.texture.as_image_copy(),
+            wgpu::Extent3d { width: size[0], height: size[1], depth_or_array_layers: 1 },
+        );
+        g.queue.submit([encoder.finish()]);
+        Ok(())
     }
 
     /// Ray traces the frame from `draw` (the cut selected from it too) and shows the mean of

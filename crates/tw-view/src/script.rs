@@ -136,120 +136,13 @@ impl Script {
     pub fn parse(text: &str, path: &Path) -> Result<Script, ScriptError> {
         let mut steps = Vec::new();
         for (i, raw) in text.lines().enumerate() {
-            let err = |msg: String| ScriptError::Syntax { path: path.to_path_buf(), line: i + 1, msg };
             let line = raw.split('#').next().unwrap_or_default().trim();
             if line.is_empty() {
                 continue;
             }
             let words: Vec<&str> = line.split_whitespace().collect();
-            let (cmd, args) = (words[0].to_ascii_lowercase(), &words[1..]);
-            let want = |n: usize| -> Result<(), ScriptError> {
-                if args.len() == n {
-                    Ok(())
-                } else {
-                    Err(err(format!("`{cmd}` takes {n} argument(s), found {}", args.len())))
-                }
-            };
-            let count = |s: &str| -> Result<u32, ScriptError> {
-                s.parse::<u32>()
-                    .ok()
-                    .filter(|&n| n <= 1_000_000)
-                    .ok_or_else(|| err(format!("`{s}` is not a frame count (0..=1000000)")))
-            };
-            let number = |s: &str| -> Result<f32, ScriptError> {
-                s.parse::<f32>()
-                    .ok()
-                    .filter(|v| v.is_finite() && v.abs() <= 1e6)
-                    .ok_or_else(|| err(format!("`{s}` is not a number")))
-            };
-            let key = |s: &str| parse_key(s).ok_or_else(|| err(format!("unknown key `{s}`")));
-            let pixel = |s: &str| {
-                number(s)?;
-                s.parse::<f32>()
-                    .ok()
-                    .filter(|v| *v >= 0.0)
-                    .ok_or_else(|| err(format!("`{s}` is not a pixel coordinate (>= 0)")))
-            };
-            let preset = |s: &str| {
-                Preset::parse(s).ok_or_else(|| err(format!("unknown view `{s}` (+x -x +y -y +z -z iso)")))
-            };
-            let step = match cmd.as_str() {
-                "wait" => {
-                    want(1)?;
-                    Step::Wait(count(args[0])?)
-                }
-                "hold" => {
-                    want(2)?;
-                    Step::Hold(key(args[0])?, count(args[1])?)
-                }
-                "press" => {
-                    want(1)?;
-                    let lower = args[0].to_ascii_lowercase();
-                    match lower.strip_prefix("shift+") {
-                        Some(k) => Step::PressShifted(key(k)?),
-                        None => Step::Press(key(args[0])?),
-                    }
-                }
-                "click" => {
-                    want(2)?;
-                    Step::Click(pixel(args[0])?, pixel(args[1])?)
-                }
-                "view" => {
-                    want(1)?;
-                    Step::View(preset(args[0])?)
-                }
-                "save-view" => {
-                    want(1)?;
-                    Step::SaveView(args[0].to_string())
-                }
-                "load-view" => {
-                    want(1)?;
-                    Step::LoadView(args[0].to_string())
-                }
-                "look" => {
-                    want(2)?;
-                    Step::Look(number(args[0])?, number(args[1])?)
-                }
-                "scroll" => {
-                    want(1)?;
-                    Step::Scroll(number(args[0])?)
-                }
-                "resize" => {
-                    want(1)?;
-                    let size = args[0]
-                        .split_once(['x', 'X'])
-                        .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
-                        .filter(|&(w, h)| (1..=16384).contains(&w) && (1..=16384).contains(&h))
-                        .ok_or_else(|| {
-                            err(format!("`{}` is not a size WIDTHxHEIGHT (1..=16384)", args[0]))
-                        })?;
-                    Step::Resize(size.0, size.1)
-                }
-                "minimize" | "minimise" => {
-                    want(0)?;
-                    Step::Minimize
-                }
-                "restore" => {
-                    want(0)?;
-                    Step::Restore
-                }
-                "screenshot" => {
-                    want(1)?;
-                    Step::Screenshot(PathBuf::from(args[0]))
-                }
-                "screenshot-window" => {
-                    want(1)?;
-                    Step::WindowScreenshot(PathBuf::from(args[0]))
-                }
-                other => {
-                    return Err(err(format!(
-                        "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
-                         save-view, load-view, resize, minimize, restore, screenshot, \
-                         screenshot-window)"
-                    )))
-                }
-            };
-            steps.push(step);
+            let line = StepLine { path, line: i + 1, cmd: words[0].to_ascii_lowercase(), args: &words[1..] };
+            steps.push(line.step()?);
         }
         Ok(Script { steps })
     }
@@ -258,6 +151,146 @@ impl Script {
     /// which the steps after them happen and the viewer quits.
     pub fn frames(&self) -> u64 {
         self.steps.iter().map(|s| s.frames() as u64).sum::<u64>() + 1
+    }
+}
+
+/// One step's line of a script: its command (lower case) and arguments, and where it is for
+/// errors.
+struct StepLine<'a> {
+    path: &'a Path,
+    line: usize,
+    cmd: String,
+    args: &'a [&'a str],
+}
+
+impl StepLine<'_> {
+    /// The step the line says.
+    fn step(&self) -> Result<Step, ScriptError> {
+        let args = self.args;
+        Ok(match self.cmd.as_str() {
+            "wait" => {
+                self.want(1)?;
+                Step::Wait(self.count(args[0])?)
+            }
+            "hold" => {
+                self.want(2)?;
+                Step::Hold(self.key(args[0])?, self.count(args[1])?)
+            }
+            "press" => {
+                self.want(1)?;
+                let lower = args[0].to_ascii_lowercase();
+                match lower.strip_prefix("shift+") {
+                    Some(k) => Step::PressShifted(self.key(k)?),
+                    None => Step::Press(self.key(args[0])?),
+                }
+            }
+            "click" => {
+                self.want(2)?;
+                Step::Click(self.pixel(args[0])?, self.pixel(args[1])?)
+            }
+            "view" => {
+                self.want(1)?;
+                Step::View(self.preset(args[0])?)
+            }
+            "save-view" => {
+                self.want(1)?;
+                Step::SaveView(args[0].to_string())
+            }
+            "load-view" => {
+                self.want(1)?;
+                Step::LoadView(args[0].to_string())
+            }
+            "look" => {
+                self.want(2)?;
+                Step::Look(self.number(args[0])?, self.number(args[1])?)
+            }
+            "scroll" => {
+                self.want(1)?;
+                Step::Scroll(self.number(args[0])?)
+            }
+            "resize" => {
+                self.want(1)?;
+                let (w, h) = self.size(args[0])?;
+                Step::Resize(w, h)
+            }
+            "minimize" | "minimise" => {
+                self.want(0)?;
+                Step::Minimize
+            }
+            "restore" => {
+                self.want(0)?;
+                Step::Restore
+            }
+            "screenshot" => {
+                self.want(1)?;
+                Step::Screenshot(PathBuf::from(args[0]))
+            }
+            "screenshot-window" => {
+                self.want(1)?;
+                Step::WindowScreenshot(PathBuf::from(args[0]))
+            }
+            other => {
+                return Err(self.err(format!(
+                    "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
+                     save-view, load-view, resize, minimize, restore, screenshot, \
+                     screenshot-window)"
+                )))
+            }
+        })
+    }
+
+    fn err(&self, msg: String) -> ScriptError {
+        ScriptError::Syntax { path: self.path.to_path_buf(), line: self.line, msg }
+    }
+
+    /// Exactly `n` arguments.
+    fn want(&self, n: usize) -> Result<(), ScriptError> {
+        if self.args.len() == n {
+            Ok(())
+        } else {
+            Err(self.err(format!("`{}` takes {n} argument(s), found {}", self.cmd, self.args.len())))
+        }
+    }
+
+    /// A frame count, 0..=1000000.
+    fn count(&self, s: &str) -> Result<u32, ScriptError> {
+        s.parse::<u32>()
+            .ok()
+            .filter(|&n| n <= 1_000_000)
+            .ok_or_else(|| self.err(format!("`{s}` is not a frame count (0..=1000000)")))
+    }
+
+    /// A finite number of magnitude at most 10^6.
+    fn number(&self, s: &str) -> Result<f32, ScriptError> {
+        s.parse::<f32>()
+            .ok()
+            .filter(|v| v.is_finite() && v.abs() <= 1e6)
+            .ok_or_else(|| self.err(format!("`{s}` is not a number")))
+    }
+
+    fn key(&self, s: &str) -> Result<KeyCode, ScriptError> {
+        parse_key(s).ok_or_else(|| self.err(format!("unknown key `{s}`")))
+    }
+
+    /// A number (see [`Self::number`]) that is not negative.
+    fn pixel(&self, s: &str) -> Result<f32, ScriptError> {
+        self.number(s)?;
+        s.parse::<f32>()
+            .ok()
+            .filter(|v| *v >= 0.0)
+            .ok_or_else(|| self.err(format!("`{s}` is not a pixel coordinate (>= 0)")))
+    }
+
+    fn preset(&self, s: &str) -> Result<Preset, ScriptError> {
+        Preset::parse(s).ok_or_else(|| self.err(format!("unknown view `{s}` (+x -x +y -y +z -z iso)")))
+    }
+
+    /// A window size `WIDTHxHEIGHT`, each 1..=16384.
+    fn size(&self, s: &str) -> Result<(u32, u32), ScriptError> {
+        s.split_once(['x', 'X'])
+            .and_then(|(w, h)| Some((w.parse::<u32>().ok()?, h.parse::<u32>().ok()?)))
+            .filter(|&(w, h)| (1..=16384).contains(&w) && (1..=16384).contains(&h))
+            .ok_or_else(|| self.err(format!("`{s}` is not a size WIDTHxHEIGHT (1..=16384)")))
     }
 }
 

@@ -61,60 +61,9 @@ struct Row {
 }
 
 pub fn run(a: CollideArgs) -> anyhow::Result<()> {
-    let kind = SceneKind::from_name(&a.scene).with_context(|| {
-        let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
-        format!("unknown scene {:?}: one of {}", a.scene, names.join(", "))
-    })?;
-    if a.steps == 0 {
-        bail!("--steps must be at least 1");
-    }
-    if a.resolution.iter().any(|&r| !(8..=8192).contains(&r)) {
-        bail!("--resolution must be 8 to 8192 pixels");
-    }
-    if a.groups.contains(&0) {
-        bail!("--groups: a sub-object has at least 1 triangle");
-    }
-    let methods = a
-        .method
-        .iter()
-        .map(|m| match m.as_str() {
-            "cullide" => Ok(Method::Cullide),
-            "far" => Ok(Method::Far),
-            "reference" => Ok(Method::Reference),
-            other => bail!("unknown method {other:?}: cullide, far or reference"),
-        })
-        .collect::<anyhow::Result<Vec<Method>>>()?;
+    let (kind, methods) = check_args(&a)?;
     let scene = Scene::new(kind, &SceneOptions { scale: a.scale, data_dir: a.data.clone() })?;
-    let mut rows: Vec<(Row, Collider)> = Vec::new();
-    for &method in &methods {
-        let resolutions: Vec<Option<u32>> = match method {
-            Method::Reference => vec![None],
-            _ => a.resolution.iter().map(|&r| Some(r)).collect(),
-        };
-        for resolution in resolutions {
-            let options = Options {
-                method,
-                resolution: resolution.unwrap_or(512),
-                groups: a.groups.clone(),
-                within: a.within,
-                ..Default::default()
-            };
-            let collider = Collider::new(options)?;
-            let row = Row {
-                method,
-                resolution,
-                times: Vec::new(),
-                gpu: Vec::new(),
-                cpu: Vec::new(),
-                pairs: 0,
-                missed: 0,
-                extra: 0,
-                pcs: 0,
-                queries: 0,
-            };
-            rows.push((row, collider));
-        }
-    }
+    let mut rows = colliders(&a, &methods)?;
     if let Some(adapter) = rows.iter().find_map(|(_, c)| c.adapter()) {
         println!("GPU: {adapter}");
     }
@@ -143,6 +92,82 @@ pub fn run(a: CollideArgs) -> anyhow::Result<()> {
             row.extra += s.pairs.iter().filter(|p| reference.binary_search(p).is_err()).count();
         }
     }
+    print_table(&rows, a.steps);
+    if let Some((r, _)) = rows.iter().find(|(r, _)| r.extra > 0) {
+        bail!("{} reported {} pairs the exact reference does not have", r.method.name(), r.extra);
+    }
+    if let Some((r, _)) = rows.iter().find(|(r, _)| r.method != Method::Cullide && r.missed > 0) {
+        bail!("{} missed {} pairs; only cullide may miss", r.method.name(), r.missed);
+    }
+    Ok(())
+}
+
+/// The scene and methods named by the arguments, once the other arguments are checked.
+fn check_args(a: &CollideArgs) -> anyhow::Result<(SceneKind, Vec<Method>)> {
+    let kind = SceneKind::from_name(&a.scene).with_context(|| {
+        let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
+        format!("unknown scene {:?}: one of {}", a.scene, names.join(", "))
+    })?;
+    if a.steps == 0 {
+        bail!("--steps must be at least 1");
+    }
+    if a.resolution.iter().any(|&r| !(8..=8192).contains(&r)) {
+        bail!("--resolution must be 8 to 8192 pixels");
+    }
+    if a.groups.contains(&0) {
+        bail!("--groups: a sub-object has at least 1 triangle");
+    }
+    let methods = a
+        .method
+        .iter()
+        .map(|m| match m.as_str() {
+            "cullide" => Ok(Method::Cullide),
+            "far" => Ok(Method::Far),
+            "reference" => Ok(Method::Reference),
+            other => bail!("unknown method {other:?}: cullide, far or reference"),
+        })
+        .collect::<anyhow::Result<Vec<Method>>>()?;
+    Ok((kind, methods))
+}
+
+/// A collider and an empty row per method and resolution (the reference has no resolution).
+fn colliders(a: &CollideArgs, methods: &[Method]) -> anyhow::Result<Vec<(Row, Collider)>> {
+    let mut rows: Vec<(Row, Collider)> = Vec::new();
+    for &method in methods {
+        let resolutions: Vec<Option<u32>> = match method {
+            Method::Reference => vec![None],
+            _ => a.resolution.iter().map(|&r| Some(r)).collect(),
+        };
+        for resolution in resolutions {
+            let options = Options {
+                method,
+                resolution: resolution.unwrap_or(512),
+                groups: a.groups.clone(),
+                within: a.within,
+                ..Default::default()
+            };
+            let collider = Collider::new(options)?;
+            let row = Row {
+                method,
+                resolution,
+                times: Vec::new(),
+                gpu: Vec::new(),
+                cpu: Vec::new(),
+                pairs: 0,
+                missed: 0,
+                extra: 0,
+                pcs: 0,
+                queries: 0,
+            };
+            rows.push((row, collider));
+        }
+    }
+    Ok(rows)
+}
+
+/// Prints the summary: a row per method and resolution over `steps` steps, and what the
+/// columns mean.
+fn print_table(rows: &[(Row, Collider)], steps: usize) {
     println!();
     println!(
         "{:<10} {:>10} {:>10} {:>9} {:>9} {:>11} {:>8} {:>11} {:>13}",
@@ -156,8 +181,8 @@ pub fn run(a: CollideArgs) -> anyhow::Result<()> {
         "PCS tris",
         "queries/step"
     );
-    for (r, _) in &rows {
-        let per = |v: usize| v as f64 / a.steps as f64;
+    for (r, _) in rows {
+        let per = |v: usize| v as f64 / steps as f64;
         let gpu = r.method != Method::Reference;
         println!(
             "{:<10} {:>10} {:>10.1} {:>9} {:>9} {:>11.1} {:>8} {:>11} {:>13}",
@@ -177,13 +202,6 @@ pub fn run(a: CollideArgs) -> anyhow::Result<()> {
          exact tests; missed: reference pairs not found, over all steps; PCS tris: triangles left \
          for the exact tests per step)"
     );
-    if let Some((r, _)) = rows.iter().find(|(r, _)| r.extra > 0) {
-        bail!("{} reported {} pairs the exact reference does not have", r.method.name(), r.extra);
-    }
-    if let Some((r, _)) = rows.iter().find(|(r, _)| r.method != Method::Cullide && r.missed > 0) {
-        bail!("{} missed {} pairs; only cullide may miss", r.method.name(), r.missed);
-    }
-    Ok(())
 }
 
 fn median(v: &[f64]) -> f64 {

@@ -11,36 +11,12 @@ use crate::cli::{CameraModeArg, OcclusionChoice, RenderColoring, RendererChoice,
 use crate::commands::render::{default_camera, up_axis};
 
 pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
-    let inputs: Vec<&std::path::Path> =
-        [Some(args.store.as_path()), args.path.as_deref(), args.script.as_deref()]
-            .into_iter()
-            .flatten()
-            .collect();
-    for out in [&args.screenshot, &args.screenshot_window, &args.record].into_iter().flatten() {
-        tw_core::output::check_output(out, &inputs)?;
-    }
-    if !(args.error.is_finite() && args.error >= 0.0) {
-        anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
-    }
-    if !(0.1..=1.0).contains(&args.render_scale) {
-        anyhow::bail!("--render-scale must be in 0.1..=1, got {}", args.render_scale);
-    }
-    if args.flashlight && args.renderer != RendererChoice::Rt {
-        anyhow::bail!("--flashlight needs --renderer rt (shadows are ray traced)");
-    }
+    check_args(&args)?;
     let occlusion = match args.occlusion {
         OcclusionChoice::Auto => Occlusion::None,
         OcclusionChoice::Is(o) => o,
     };
     let scripted = args.exit_after.is_some() || args.script.is_some();
-    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && !scripted {
-        anyhow::bail!(
-            "--screenshot needs --exit-after N or --script FILE (press F12 for screenshots while viewing)"
-        );
-    }
-    if args.exit_after.is_some() && args.script.is_some() {
-        anyhow::bail!("--exit-after and --script both say when to stop: give one of them");
-    }
     let script = match &args.script {
         Some(p) => Some(tw_view::script::Script::load(p)?),
         None => None,
@@ -54,42 +30,9 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         anyhow::bail!("--play needs --path FILE");
     }
     let header = store.header();
-    let camera = match (&args.camera, &path) {
-        (Some(s), _) => InputCamera::parse(s)?.to_scene(header)?,
-        (None, Some(p)) => p.frames[0]
-            .to_scene(header)
-            .with_context(|| format!("first frame of {}", args.path.as_ref().expect("path").display()))?,
-        (None, None) => default_camera(header, args.size, up_axis(header, args.up))?,
-    };
-    if let Some(p) = &path {
-        // Check every frame now: a bad one is an error before the window opens.
-        for (i, f) in p.frames.iter().enumerate() {
-            f.to_scene(header).with_context(|| format!("path frame {i}"))?;
-        }
-    }
+    let camera = start_camera(&args, header, path.as_ref())?;
     let shadows = shadow_controls(&args, header, &camera)?;
-    let settings = Settings {
-        pixel_error: args.error,
-        occlusion,
-        frustum_culling: !args.no_frustum,
-        memory_budget: args.memory,
-        coloring: match args.color {
-            RenderColoring::Material => Coloring::Material,
-            RenderColoring::Object => Coloring::Object,
-            RenderColoring::Level => Coloring::Level,
-            RenderColoring::Cluster => Coloring::Cluster,
-            RenderColoring::Shadow => Coloring::Shadow,
-        },
-        render_scale: args.render_scale,
-        debug_view: args.debug_view,
-        renderer: match args.renderer {
-            RendererChoice::Raster => RendererKind::Raster,
-            RendererChoice::Rt => RendererKind::Rt,
-        },
-        flashlight: args.flashlight,
-        shadows,
-        ..Settings::default()
-    };
+    let settings = settings(&args, occlusion, shadows);
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut scene = Scene::new(store, args.memory);
     if let Some(axis) = args.up {
@@ -116,6 +59,93 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         occlusion_auto: args.occlusion == OcclusionChoice::Auto,
     };
     let report = tw_view::run(scene, options)?;
+    print_report(&report, scripted);
+    Ok(())
+}
+
+/// Refuses options that cannot work together, and outputs that would overwrite an input,
+/// before anything is read.
+fn check_args(args: &ViewArgs) -> Result<()> {
+    let inputs: Vec<&std::path::Path> =
+        [Some(args.store.as_path()), args.path.as_deref(), args.script.as_deref()]
+            .into_iter()
+            .flatten()
+            .collect();
+    for out in [&args.screenshot, &args.screenshot_window, &args.record].into_iter().flatten() {
+        tw_core::output::check_output(out, &inputs)?;
+    }
+    if !(args.error.is_finite() && args.error >= 0.0) {
+        anyhow::bail!("--error must be a finite number ≥ 0, got {}", args.error);
+    }
+    if !(0.1..=1.0).contains(&args.render_scale) {
+        anyhow::bail!("--render-scale must be in 0.1..=1, got {}", args.render_scale);
+    }
+    if args.flashlight && args.renderer != RendererChoice::Rt {
+        anyhow::bail!("--flashlight needs --renderer rt (shadows are ray traced)");
+    }
+    let scripted = args.exit_after.is_some() || args.script.is_some();
+    if (args.screenshot.is_some() || args.screenshot_window.is_some()) && !scripted {
+        anyhow::bail!(
+            "--screenshot needs --exit-after N or --script FILE (press F12 for screenshots while viewing)"
+        );
+    }
+    if args.exit_after.is_some() && args.script.is_some() {
+        anyhow::bail!("--exit-after and --script both say when to stop: give one of them");
+    }
+    Ok(())
+}
+
+/// The camera to start from: `--camera`, else the path's first frame, else the default view
+/// of the store. Every frame of the path is checked here, so that a bad one is an error before
+/// the window opens.
+fn start_camera(
+    args: &ViewArgs,
+    header: &tw_store::Header,
+    path: Option<&CameraPath>,
+) -> Result<tw_runtime::Camera> {
+    let camera = match (&args.camera, path) {
+        (Some(s), _) => InputCamera::parse(s)?.to_scene(header)?,
+        (None, Some(p)) => p.frames[0]
+            .to_scene(header)
+            .with_context(|| format!("first frame of {}", args.path.as_ref().expect("path").display()))?,
+        (None, None) => default_camera(header, args.size, up_axis(header, args.up))?,
+    };
+    if let Some(p) = path {
+        for (i, f) in p.frames.iter().enumerate() {
+            f.to_scene(header).with_context(|| format!("path frame {i}"))?;
+        }
+    }
+    Ok(camera)
+}
+
+/// The viewer's settings at the start, from the options.
+fn settings(args: &ViewArgs, occlusion: Occlusion, shadows: ShadowControls) -> Settings {
+    Settings {
+        pixel_error: args.error,
+        occlusion,
+        frustum_culling: !args.no_frustum,
+        memory_budget: args.memory,
+        coloring: match args.color {
+            RenderColoring::Material => Coloring::Material,
+            RenderColoring::Object => Coloring::Object,
+            RenderColoring::Level => Coloring::Level,
+            RenderColoring::Cluster => Coloring::Cluster,
+            RenderColoring::Shadow => Coloring::Shadow,
+        },
+        render_scale: args.render_scale,
+        debug_view: args.debug_view,
+        renderer: match args.renderer {
+            RendererChoice::Raster => RendererKind::Raster,
+            RendererChoice::Rt => RendererKind::Rt,
+        },
+        flashlight: args.flashlight,
+        shadows,
+        ..Settings::default()
+    }
+}
+
+/// What a run wrote and, for a scripted run, what its last frame drew.
+fn print_report(report: &tw_view::ViewReport, scripted: bool) {
     if let Some(s) = &report.screenshot {
         outln!("wrote {}", s.display());
     }
@@ -132,7 +162,6 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
             outln!("ray traced: {} samples per pixel in the last frame", report.samples);
         }
     }
-    Ok(())
 }
 
 /// The viewer's shadow controls at the start: `--light` and its options turn shadows on with

@@ -403,10 +403,26 @@ fn inset(v: f64, len: f64) -> f64 {
 /// and the yard tanks' roof nozzles.
 fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (Vec<Item>, Vec<Nozzle>) {
     let mut items = Vec::new();
-    let o = sh.origin;
-    let (bx, by, w, dd) = (sh.bx, sh.by, sh.w, sh.d);
-    let yc = sh.yc();
     let ibeam = d.structure >= 1;
+    ground_and_rack(&mut items, sh, ibeam);
+    let mut rng = Rng::with_stream(site.seed, stream(sh.block as u64, TAG_STRUCT, 0));
+    for k in 0..storeys {
+        let h = STOREY - if k + 1 == storeys { ROOF } else { SLAB };
+        let mut walls = Walls { items: &mut items, height: h, z0: k as f64 * STOREY };
+        exterior_walls(&mut walls, &mut rng, sh, k, ibeam);
+        interior_walls(&mut walls, &mut rng, sh);
+    }
+    floors_and_roof(&mut items, sh, storeys, d, ibeam);
+    steel(&mut items, sh, storeys, d, ibeam);
+    stairs(&mut items, sh, storeys, d);
+    let tanks = yard(&mut items, site, sh, d);
+    (items, tanks)
+}
+
+/// The block's ground, the pipe rack's frames along its south edge, and the building's ground
+/// slab.
+fn ground_and_rack(items: &mut Vec<Item>, sh: &BlockShape, ibeam: bool) {
+    let o = sh.origin;
     items.push(Item::Ground { min: [o[0], o[1], -0.5], max: [o[0] + PITCH, o[1] + PITCH, -0.05] });
     for j in 0..13 {
         items.push(Item::RackFrame(RackFrame {
@@ -419,94 +435,106 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
         }));
     }
     items.push(Item::Slab(Slab {
-        rect: [bx, bx + w, by, by + dd],
+        rect: [sh.bx, sh.bx + sh.w, sh.by, sh.by + sh.d],
         z0: -0.3,
         z1: 0.0,
         hole: None,
         name: "ground slab",
     }));
+}
 
-    let mut rng = Rng::with_stream(site.seed, stream(sh.block as u64, TAG_STRUCT, 0));
-    let jc = sh.ny / 2;
-    let z_axis = [0.0, 0.0, 1.0];
-    let along_y = |o: V3| Frame { o, x: [0.0, 1.0, 0.0], y: [-1.0, 0.0, 0.0], z: z_axis };
-    for k in 0..storeys {
-        let z0 = k as f64 * STOREY;
-        let h = STOREY - if k + 1 == storeys { ROOF } else { SLAB };
-        let windows = |rng: &mut Rng, bays: u32, skip: Option<u32>, shift: f64| -> Vec<[f64; 4]> {
-            (0..bays)
-                .filter(|&i| Some(i) != skip)
-                .filter(|_| rng.chance(0.7))
-                .filter(|_| ibeam)
-                .map(|i| [i as f64 * BAY + 2.0 - shift, i as f64 * BAY + 4.0 - shift, 1.0, 2.2])
-                .collect()
-        };
-        let mut wall = |frame: Frame, len: f64, thick: f64, openings: Vec<[f64; 4]>, name: &'static str| {
-            items.push(Item::Wall(Wall {
-                frame,
-                len,
-                height: h,
-                thick,
-                openings,
-                name,
-                color: color::CONCRETE,
-            }));
-        };
-        // Exterior walls: a truck door south and a door at the corridor's east end on the ground
-        // floor, windows above.
-        let south = if k == 0 {
-            let c = (sh.nx / 2) as f64 * BAY;
-            vec![[c + 1.5, c + 4.5, 0.0, 3.5]]
-        } else {
-            windows(&mut rng, sh.nx, None, 0.0)
-        };
-        wall(Frame::at([bx, by, z0]), w, WALL, south, sh.kind);
-        let north = if k == 0 { Vec::new() } else { windows(&mut rng, sh.nx, None, 0.0) };
-        wall(Frame::at([bx, by + dd - WALL, z0]), w, WALL, north, sh.kind);
-        let west = if k == 0 { Vec::new() } else { windows(&mut rng, sh.ny, Some(jc), WALL) };
-        wall(along_y([bx + WALL, by + WALL, z0]), dd - 2.0 * WALL, WALL, west, sh.kind);
-        let east = if k == 0 {
-            let y = yc - by - WALL;
-            vec![[y - 0.6, y + 0.6, 0.0, 2.2]]
-        } else {
-            windows(&mut rng, sh.ny, None, WALL)
-        };
-        wall(along_y([bx + w, by + WALL, z0]), dd - 2.0 * WALL, WALL, east, sh.kind);
-        // Corridor walls with a door into every room bay but the stair bay.
-        let doors: Vec<[f64; 4]> = (1..sh.nx)
-            .map(|i| [i as f64 * BAY + 2.5 - WALL, i as f64 * BAY + 3.5 - WALL, 0.0, 2.2])
-            .collect();
-        wall(
-            Frame::at([bx + WALL, yc - CORRIDOR - 0.15, z0]),
-            w - 2.0 * WALL,
-            0.15,
-            doors.clone(),
-            "corridor wall",
-        );
-        wall(Frame::at([bx + WALL, yc + CORRIDOR, z0]), w - 2.0 * WALL, 0.15, doors, "corridor wall");
-        // Cross walls between some room bays, each with a door.
-        for i in 1..sh.nx {
-            let x = bx + i as f64 * BAY + 0.075;
-            for (y0, y1, bays) in [
-                (by + WALL, yc - CORRIDOR - 0.15, 0..jc),
-                (yc + CORRIDOR + 0.15, by + dd - WALL, jc + 1..sh.ny),
-            ] {
-                let build = rng.chance(0.45);
-                let j = bays.start + rng.range_u32(0, bays.end - bays.start);
-                if build {
-                    let door = by + j as f64 * BAY + 2.5 - y0;
-                    wall(
-                        along_y([x, y0, z0]),
-                        y1 - y0,
-                        0.15,
-                        vec![[door, door + 1.0, 0.0, 2.2]],
-                        "partition wall",
-                    );
-                }
+/// The walls of one storey as they are made: concrete, `height` high, standing at `z0`.
+struct Walls<'a> {
+    items: &'a mut Vec<Item>,
+    height: f64,
+    z0: f64,
+}
+
+impl Walls<'_> {
+    fn push(&mut self, frame: Frame, len: f64, thick: f64, openings: Vec<[f64; 4]>, name: &'static str) {
+        self.items.push(Item::Wall(Wall {
+            frame,
+            len,
+            height: self.height,
+            thick,
+            openings,
+            name,
+            color: color::CONCRETE,
+        }));
+    }
+}
+
+/// A wall's frame along y (its length along the scene's y) at `o`.
+fn along_y(o: V3) -> Frame {
+    Frame { o, x: [0.0, 1.0, 0.0], y: [-1.0, 0.0, 0.0], z: [0.0, 0.0, 1.0] }
+}
+
+/// Window openings in a wall of `bays` bays: each bay but `skip` by chance (when the detail
+/// has windows at all; the draws are made either way, so the scene's other random choices do
+/// not depend on the detail), shifted back by `shift` (the wall's start).
+fn windows(rng: &mut Rng, bays: u32, skip: Option<u32>, shift: f64, ibeam: bool) -> Vec<[f64; 4]> {
+    (0..bays)
+        .filter(|&i| Some(i) != skip)
+        .filter(|_| rng.chance(0.7))
+        .filter(|_| ibeam)
+        .map(|i| [i as f64 * BAY + 2.0 - shift, i as f64 * BAY + 4.0 - shift, 1.0, 2.2])
+        .collect()
+}
+
+/// Storey `k`'s exterior walls: a truck door south and a door at the corridor's east end on the
+/// ground floor, windows above.
+fn exterior_walls(walls: &mut Walls, rng: &mut Rng, sh: &BlockShape, k: u32, ibeam: bool) {
+    let (bx, by, w, dd, z0) = (sh.bx, sh.by, sh.w, sh.d, walls.z0);
+    let south = if k == 0 {
+        let c = (sh.nx / 2) as f64 * BAY;
+        vec![[c + 1.5, c + 4.5, 0.0, 3.5]]
+    } else {
+        windows(rng, sh.nx, None, 0.0, ibeam)
+    };
+    walls.push(Frame::at([bx, by, z0]), w, WALL, south, sh.kind);
+    let north = if k == 0 { Vec::new() } else { windows(rng, sh.nx, None, 0.0, ibeam) };
+    walls.push(Frame::at([bx, by + dd - WALL, z0]), w, WALL, north, sh.kind);
+    let west = if k == 0 { Vec::new() } else { windows(rng, sh.ny, Some(sh.ny / 2), WALL, ibeam) };
+    walls.push(along_y([bx + WALL, by + WALL, z0]), dd - 2.0 * WALL, WALL, west, sh.kind);
+    let east = if k == 0 {
+        let y = sh.yc() - by - WALL;
+        vec![[y - 0.6, y + 0.6, 0.0, 2.2]]
+    } else {
+        windows(rng, sh.ny, None, WALL, ibeam)
+    };
+    walls.push(along_y([bx + w, by + WALL, z0]), dd - 2.0 * WALL, WALL, east, sh.kind);
+}
+
+/// A storey's interior walls: the corridor walls with a door into every room bay but the stair
+/// bay, and cross walls between some room bays, each with a door.
+fn interior_walls(walls: &mut Walls, rng: &mut Rng, sh: &BlockShape) {
+    let (bx, by, w, dd, z0) = (sh.bx, sh.by, sh.w, sh.d, walls.z0);
+    let (yc, jc) = (sh.yc(), sh.ny / 2);
+    let doors: Vec<[f64; 4]> =
+        (1..sh.nx).map(|i| [i as f64 * BAY + 2.5 - WALL, i as f64 * BAY + 3.5 - WALL, 0.0, 2.2]).collect();
+    let corridor_wall = Frame::at([bx + WALL, yc - CORRIDOR - 0.15, z0]);
+    walls.push(corridor_wall, w - 2.0 * WALL, 0.15, doors.clone(), "corridor wall");
+    walls.push(Frame::at([bx + WALL, yc + CORRIDOR, z0]), w - 2.0 * WALL, 0.15, doors, "corridor wall");
+    for i in 1..sh.nx {
+        let x = bx + i as f64 * BAY + 0.075;
+        for (y0, y1, bays) in
+            [(by + WALL, yc - CORRIDOR - 0.15, 0..jc), (yc + CORRIDOR + 0.15, by + dd - WALL, jc + 1..sh.ny)]
+        {
+            let build = rng.chance(0.45);
+            let j = bays.start + rng.range_u32(0, bays.end - bays.start);
+            if build {
+                let door = by + j as f64 * BAY + 2.5 - y0;
+                let opening = vec![[door, door + 1.0, 0.0, 2.2]];
+                walls.push(along_y([x, y0, z0]), y1 - y0, 0.15, opening, "partition wall");
             }
         }
     }
-    // Floors above the ground: slabs or gratings with the stairwell of the flight below open.
+}
+
+/// Floors above the ground: slabs or gratings with the stairwell of the flight below open and a
+/// railing along it; then the roof.
+fn floors_and_roof(items: &mut Vec<Item>, sh: &BlockShape, storeys: u32, d: &Detail, ibeam: bool) {
+    let (bx, by, w, dd) = (sh.bx, sh.by, sh.w, sh.d);
     for k in 1..storeys {
         let z = k as f64 * STOREY;
         let lane = sh.lane(k - 1);
@@ -532,7 +560,11 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
         hole: None,
         name: "roof",
     }));
-    // Steel: beams under every floor, full-height columns on the grid.
+}
+
+/// Steel: beams under every floor, full-height columns on the grid.
+fn steel(items: &mut Vec<Item>, sh: &BlockShape, storeys: u32, d: &Detail, ibeam: bool) {
+    let (bx, by, w, dd) = (sh.bx, sh.by, sh.w, sh.d);
     for k in 1..=storeys {
         let along_x =
             (0..=sh.ny).map(|j| (by + inset(j as f64 * BAY, dd), bx + WALL, bx + w - WALL)).collect();
@@ -540,6 +572,7 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
             (0..=sh.nx).map(|i| (bx + inset(i as f64 * BAY, w), by + WALL, by + dd - WALL)).collect();
         items.push(Item::Beams(Beams { top: sh.beam_top(k, storeys, d), along_x, along_y, ibeam }));
     }
+    let top = storeys as f64 * STOREY;
     for i in 0..=sh.nx {
         for j in 0..=sh.ny {
             let bolt_levels = if d.structure >= 3 {
@@ -557,7 +590,12 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
             }));
         }
     }
-    // Stairs: flights alternate between the two lanes at the corridor's west end.
+}
+
+/// Stairs: flights alternate between the two lanes at the corridor's west end, each with a
+/// railing.
+fn stairs(items: &mut Vec<Item>, sh: &BlockShape, storeys: u32, d: &Detail) {
+    let bx = sh.bx;
     for k in 0..storeys.saturating_sub(1) {
         let lane = sh.lane(k);
         let y = 0.5 * (lane[0] + lane[1]);
@@ -570,10 +608,15 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
             sides: d.small,
         }));
     }
-    // Yard: the chimney (block 0) and storage tanks north of the building.
+}
+
+/// Yard: the chimney (block 0) and storage tanks north of the building. Returns the tanks'
+/// roof nozzles.
+fn yard(items: &mut Vec<Item>, site: &SitePlan, sh: &BlockShape, d: &Detail) -> Vec<Nozzle> {
+    let o = sh.origin;
     let mut tanks = Vec::new();
     let mut rng = Rng::with_stream(site.seed, stream(sh.block as u64, TAG_YARD, 0));
-    let y_lo = by + dd + 4.0;
+    let y_lo = sh.by + sh.d + 4.0;
     let y_hi = o[1] + PITCH - 1.0;
     let yt = 0.5 * (y_lo + y_hi);
     let r_max = ((y_hi - y_lo - 1.0) / 2.0).min(6.0);
@@ -585,7 +628,7 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
     for _ in 0..4 {
         let r = rng.range_f64(3.0, r_max.max(3.0 + 1e-9));
         let h = rng.range_f64(8.0, 14.0);
-        if x + 2.0 * r > bx + w {
+        if x + 2.0 * r > sh.bx + sh.w {
             break;
         }
         let t = StorageTank::new(Frame::at([x + r, yt, 0.0]), r, h, d);
@@ -593,7 +636,7 @@ fn fixed_items(site: &SitePlan, sh: &BlockShape, storeys: u32, d: &Detail) -> (V
         items.push(Item::StorageTank(t));
         x += 2.0 * r + 3.0;
     }
-    (items, tanks)
+    tanks
 }
 
 #[cfg(test)]

@@ -615,9 +615,41 @@ impl Emitter<'_> {
         let attr = |s: Semantic| prim.attributes.get(&Checked::Valid(s)).map(|a| a.value());
         let pos =
             attr(Semantic::Positions).ok_or_else(|| self.err(format!("{at}: no POSITION attribute")))?;
+        self.refuse_draco_only(prim, pos, &at)?;
+        let positions = self.read_positions(store, pos, &at)?;
+        let n = positions.len() / 3;
+        let normals = match attr(Semantic::Normals) {
+            None => None,
+            Some(a) => self.read_normals(store, a, n, &at)?,
+        };
+        let colors = match attr(Semantic::Colors(0)) {
+            None => None,
+            Some(a) => Some(self.read_colors(store, a, n, &at)?),
+        };
+        let indices = match prim.indices {
+            None => None,
+            Some(a) => Some(self.read_indices(store, a.value(), n, &at)?),
+        };
+        let loaded = Rc::new(Loaded { positions, normals, colors, indices, mode });
+        if cache {
+            self.remember((mesh, p), &loaded);
+        }
+        Ok(loaded)
+    }
+
+    /// Refuses a Draco-compressed primitive whose POSITION accessor (`pos`) has no data of its
+    /// own: there is no uncompressed fallback to read.
+    fn refuse_draco_only(
+        &self,
+        prim: &json::mesh::Primitive,
+        pos: usize,
+        at: &str,
+    ) -> Result<(), ImportError> {
         let draco =
             prim.extensions.as_ref().is_some_and(|e| e.others.contains_key("KHR_draco_mesh_compression"));
-        if draco && root.accessors.get(pos).is_some_and(|a| a.buffer_view.is_none() && a.sparse.is_none()) {
+        if draco
+            && self.root.accessors.get(pos).is_some_and(|a| a.buffer_view.is_none() && a.sparse.is_none())
+        {
             return Err(ImportError::unsupported(
                 self.path,
                 format!(
@@ -625,10 +657,14 @@ impl Emitter<'_> {
                 ),
             ));
         }
-        let raw = store.read_accessor(root, pos, &[Type::Vec3], &format!("{at} POSITION"))?;
+        Ok(())
+    }
+
+    /// The POSITION accessor `pos` as floats, every one finite.
+    fn read_positions(&self, store: &mut Store, pos: usize, at: &str) -> Result<Vec<f32>, ImportError> {
+        let raw = store.read_accessor(self.root, pos, &[Type::Vec3], &format!("{at} POSITION"))?;
         let positions = raw.to_f32();
         drop(raw);
-        let n = positions.len() / 3;
         if let Some(k) = positions.iter().position(|v| !v.is_finite()) {
             let v = k / 3;
             return Err(self.err(format!(
@@ -636,78 +672,82 @@ impl Emitter<'_> {
                 &positions[v * 3..v * 3 + 3]
             )));
         }
-        let normals = match attr(Semantic::Normals) {
-            None => None,
-            Some(a) => {
-                let raw = store.read_accessor(root, a, &[Type::Vec3], &format!("{at} NORMAL"))?;
-                if raw.count != n {
-                    return Err(self.err(format!(
-                        "{at}: NORMAL (accessors[{a}]) has {} elements but POSITION has {n}",
-                        raw.count
-                    )));
-                }
-                let v = raw.to_f32();
-                if v.iter().all(|c| c.is_finite()) {
-                    Some(v)
-                } else {
-                    tracing::warn!(
-                        "{}: {at}: NORMAL has non-finite values; normals ignored",
-                        self.path.display()
-                    );
-                    None
-                }
-            }
-        };
-        let colors = match attr(Semantic::Colors(0)) {
-            None => None,
-            Some(a) => {
-                let raw =
-                    store.read_accessor(root, a, &[Type::Vec3, Type::Vec4], &format!("{at} COLOR_0"))?;
-                if raw.count != n {
-                    return Err(self.err(format!(
-                        "{at}: COLOR_0 (accessors[{a}]) has {} elements but POSITION has {n}",
-                        raw.count
-                    )));
-                }
-                let c = raw.components;
-                let v = raw.to_f32();
-                Some(
-                    v.chunks_exact(c)
-                        .map(|x| srgb8([x[0], x[1], x[2], if c == 4 { x[3] } else { 1.0 }]))
-                        .collect(),
-                )
-            }
-        };
-        let indices = match prim.indices {
-            None => None,
-            Some(a) => {
-                let a = a.value();
-                let raw = store.read_accessor(root, a, &[Type::Scalar], &format!("{at} indices"))?;
-                let ix = raw.to_u32().ok_or_else(|| {
-                    self.err(format!("{at}: indices (accessors[{a}]) must be unsigned integers"))
-                })?;
-                if let Some(k) = ix.iter().position(|&i| i as usize >= n) {
-                    return Err(self.err(format!(
-                        "{at}: indices (accessors[{a}]) element {k} = {} is out of range ({n} vertices)",
-                        ix[k]
-                    )));
-                }
-                Some(ix)
-            }
-        };
-        let loaded = Rc::new(Loaded { positions, normals, colors, indices, mode });
-        if cache {
-            let b = loaded.bytes();
-            if self.cache_bytes + b > self.cache_budget {
-                self.cache.clear();
-                self.cache_bytes = 0;
-            }
-            if b <= self.cache_budget {
-                self.cache_bytes += b;
-                self.cache.insert((mesh, p), loaded.clone());
-            }
+        Ok(positions)
+    }
+
+    /// The NORMAL accessor `a`, one per vertex of the `n`; `None` (with a warning) if some
+    /// value is not finite.
+    fn read_normals(
+        &self,
+        store: &mut Store,
+        a: usize,
+        n: usize,
+        at: &str,
+    ) -> Result<Option<Vec<f32>>, ImportError> {
+        let raw = store.read_accessor(self.root, a, &[Type::Vec3], &format!("{at} NORMAL"))?;
+        if raw.count != n {
+            return Err(self.err(format!(
+                "{at}: NORMAL (accessors[{a}]) has {} elements but POSITION has {n}",
+                raw.count
+            )));
         }
-        Ok(loaded)
+        let v = raw.to_f32();
+        if v.iter().all(|c| c.is_finite()) {
+            Ok(Some(v))
+        } else {
+            tracing::warn!("{}: {at}: NORMAL has non-finite values; normals ignored", self.path.display());
+            Ok(None)
+        }
+    }
+
+    /// The COLOR_0 accessor `a` (RGB or RGBA, linear), one per vertex of the `n`, as sRGB
+    /// 8-bit colours.
+    fn read_colors(
+        &self,
+        store: &mut Store,
+        a: usize,
+        n: usize,
+        at: &str,
+    ) -> Result<Vec<Rgba8>, ImportError> {
+        let raw = store.read_accessor(self.root, a, &[Type::Vec3, Type::Vec4], &format!("{at} COLOR_0"))?;
+        if raw.count != n {
+            return Err(self.err(format!(
+                "{at}: COLOR_0 (accessors[{a}]) has {} elements but POSITION has {n}",
+                raw.count
+            )));
+        }
+        let c = raw.components;
+        let v = raw.to_f32();
+        Ok(v.chunks_exact(c).map(|x| srgb8([x[0], x[1], x[2], if c == 4 { x[3] } else { 1.0 }])).collect())
+    }
+
+    /// The indices accessor `a`: unsigned integers, each below the vertex count `n`.
+    fn read_indices(&self, store: &mut Store, a: usize, n: usize, at: &str) -> Result<Vec<u32>, ImportError> {
+        let raw = store.read_accessor(self.root, a, &[Type::Scalar], &format!("{at} indices"))?;
+        let ix = raw
+            .to_u32()
+            .ok_or_else(|| self.err(format!("{at}: indices (accessors[{a}]) must be unsigned integers")))?;
+        if let Some(k) = ix.iter().position(|&i| i as usize >= n) {
+            return Err(self.err(format!(
+                "{at}: indices (accessors[{a}]) element {k} = {} is out of range ({n} vertices)",
+                ix[k]
+            )));
+        }
+        Ok(ix)
+    }
+
+    /// Caches a loaded primitive of a mesh drawn more than once, within the cache's budget
+    /// (emptied when the next one would not fit; one larger than the whole budget is not kept).
+    fn remember(&mut self, key: (usize, usize), loaded: &Rc<Loaded>) {
+        let b = loaded.bytes();
+        if self.cache_bytes + b > self.cache_budget {
+            self.cache.clear();
+            self.cache_bytes = 0;
+        }
+        if b <= self.cache_budget {
+            self.cache_bytes += b;
+            self.cache.insert(key, loaded.clone());
+        }
     }
 
     /// Sends the triangles of one loaded primitive.

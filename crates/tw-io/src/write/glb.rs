@@ -219,26 +219,8 @@ impl Layout<'_> {
     /// Serialises the JSON chunk's text (unpadded).
     fn write_json(&self, w: &mut impl Write) -> io::Result<()> {
         let infos = &self.objects.infos;
-        // Runs grouped by object, in stream order within each object.
-        let mut order: Vec<u32> = (0..self.runs.len() as u32).collect();
-        order.sort_by_key(|&r| self.runs[r as usize].object);
-        let mut first_run = vec![0u32; infos.len() + 1];
-        for r in self.runs {
-            first_run[r.object as usize + 1] += 1;
-        }
-        for i in 0..infos.len() {
-            first_run[i + 1] += first_run[i];
-        }
-        let runs_of = |o: usize| &order[first_run[o] as usize..first_run[o + 1] as usize];
-        // Materials in order of first use by an object with triangles.
-        let mut materials: HashMap<Option<Rgba8>, u32> = HashMap::new();
-        let mut material_list: Vec<Option<Rgba8>> = Vec::new();
-        for (o, (_, info)) in infos.iter().enumerate() {
-            if !runs_of(o).is_empty() && !materials.contains_key(&info.color) {
-                materials.insert(info.color, material_list.len() as u32);
-                material_list.push(info.color);
-            }
-        }
+        let runs = self.runs_by_object();
+        let (materials, material_list) = self.materials(&runs);
 
         w.write_all(br#"{"asset":{"version":"2.0","generator":"terawalk"}"#)?;
         // Arrays must not be empty in glTF: without objects there is no scene at all. The
@@ -246,112 +228,180 @@ impl Layout<'_> {
         if !infos.is_empty() {
             write!(w, r#","scene":0,"scenes":[{{"nodes":[{}]}}]"#, infos.len())?;
         }
-
         if !infos.is_empty() {
-            w.write_all(br#","nodes":["#)?;
-            let mut mesh = 0u32;
-            for (o, (_, info)) in infos.iter().enumerate() {
-                w.write_all(if o > 0 { b",{" } else { b"{" })?;
-                let mut sep = "";
-                if !info.name.is_empty() {
-                    w.write_all(br#""name":"#)?;
-                    serde_json::to_writer(&mut *w, &info.name)?;
-                    sep = ",";
-                }
-                if !runs_of(o).is_empty() {
-                    write!(w, r#"{sep}"mesh":{mesh}"#)?;
-                    mesh += 1;
-                }
-                w.write_all(b"}")?;
-            }
-            let (name, matrix) = self.root_matrix();
-            write!(w, r#",{{"name":"{name}","matrix":{matrix},"children":["#)?;
-            for o in 0..infos.len() {
-                write!(w, "{}{o}", if o > 0 { "," } else { "" })?;
-            }
-            w.write_all(b"]}]")?;
+            self.write_nodes(w, &runs)?;
         }
-
         if !self.runs.is_empty() {
-            w.write_all(br#","meshes":["#)?;
-            let mut first = true;
-            for (o, (_, info)) in infos.iter().enumerate() {
-                let runs = runs_of(o);
-                if runs.is_empty() {
-                    continue;
-                }
-                w.write_all(if first { b"{" } else { b",{" })?;
-                first = false;
-                if !info.name.is_empty() {
-                    w.write_all(br#""name":"#)?;
-                    serde_json::to_writer(&mut *w, &info.name)?;
-                    w.write_all(b",")?;
-                }
-                w.write_all(br#""primitives":["#)?;
-                let material = materials[&info.color];
-                for (k, &r) in runs.iter().enumerate() {
-                    write!(
-                        w,
-                        r#"{}{{"attributes":{{"POSITION":{}}},"indices":{},"material":{material}}}"#,
-                        if k > 0 { "," } else { "" },
-                        2 * r,
-                        2 * r + 1
-                    )?;
-                }
-                w.write_all(b"]}")?;
-            }
-            w.write_all(b"]")?;
-
-            w.write_all(br#","materials":["#)?;
-            for (k, color) in material_list.iter().enumerate() {
-                let c = color.unwrap_or(Rgba8::GREY);
-                let l = c.0.map(|v| srgb_to_linear(v as f32 / 255.0));
-                let alpha = c.0[3] as f32 / 255.0;
-                write!(
-                    w,
-                    r#"{}{{"name":"{}","pbrMetallicRoughness":{{"baseColorFactor":[{},{},{},{alpha}],"metallicFactor":0,"roughnessFactor":0.8}},"doubleSided":true{}}}"#,
-                    if k > 0 { "," } else { "" },
-                    super::obj::material_name(*color),
-                    l[0],
-                    l[1],
-                    l[2],
-                    if c.0[3] < 255 { r#","alphaMode":"BLEND""# } else { "" }
-                )?;
-            }
-            w.write_all(b"]")?;
-
-            w.write_all(br#","accessors":["#)?;
-            for (k, r) in self.runs.iter().enumerate() {
-                write!(
-                    w,
-                    r#"{}{{"bufferView":0,"byteOffset":{},"componentType":5126,"count":{},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}},"#,
-                    if k > 0 { "," } else { "" },
-                    r.first_vertex * 12,
-                    r.vertices,
-                    r.min[0],
-                    r.min[1],
-                    r.min[2],
-                    r.max[0],
-                    r.max[1],
-                    r.max[2]
-                )?;
-                write!(
-                    w,
-                    r#"{{"bufferView":1,"byteOffset":{},"componentType":5125,"count":{},"type":"SCALAR"}}"#,
-                    r.first_index * 4,
-                    r.indices
-                )?;
-            }
-            let p = self.vertices * 12;
-            let i = self.index_count * 4;
-            write!(
-                w,
-                r#"],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{p},"byteStride":12,"target":34962}},{{"buffer":0,"byteOffset":{p},"byteLength":{i},"target":34963}}],"buffers":[{{"byteLength":{}}}]"#,
-                p + i
-            )?;
+            self.write_meshes(w, &runs, &materials)?;
+            write_materials(w, &material_list)?;
+            self.write_accessors_and_buffers(w)?;
         }
         w.write_all(b"}")
     }
+
+    /// The runs grouped by object, in stream order within each object.
+    fn runs_by_object(&self) -> RunsByObject {
+        let objects = self.objects.infos.len();
+        let mut order: Vec<u32> = (0..self.runs.len() as u32).collect();
+        order.sort_by_key(|&r| self.runs[r as usize].object);
+        let mut first_run = vec![0u32; objects + 1];
+        for r in self.runs {
+            first_run[r.object as usize + 1] += 1;
+        }
+        for i in 0..objects {
+            first_run[i + 1] += first_run[i];
+        }
+        RunsByObject { order, first_run }
+    }
+
+    /// The materials, one per colour, in order of first use by an object with triangles, and
+    /// each colour's material index.
+    fn materials(&self, runs: &RunsByObject) -> (HashMap<Option<Rgba8>, u32>, Vec<Option<Rgba8>>) {
+        let mut materials: HashMap<Option<Rgba8>, u32> = HashMap::new();
+        let mut material_list: Vec<Option<Rgba8>> = Vec::new();
+        for (o, (_, info)) in self.objects.infos.iter().enumerate() {
+            if !runs.of(o).is_empty() && !materials.contains_key(&info.color) {
+                materials.insert(info.color, material_list.len() as u32);
+                material_list.push(info.color);
+            }
+        }
+        (materials, material_list)
+    }
+
+    /// The `nodes` array: a node per object (named; with a mesh when it has triangles), then
+    /// the root node that holds them all upright.
+    fn write_nodes(&self, w: &mut impl Write, runs: &RunsByObject) -> io::Result<()> {
+        let infos = &self.objects.infos;
+        w.write_all(br#","nodes":["#)?;
+        let mut mesh = 0u32;
+        for (o, (_, info)) in infos.iter().enumerate() {
+            w.write_all(if o > 0 { b",{" } else { b"{" })?;
+            let mut sep = "";
+            if !info.name.is_empty() {
+                w.write_all(br#""name":"#)?;
+                serde_json::to_writer(&mut *w, &info.name)?;
+                sep = ",";
+            }
+            if !runs.of(o).is_empty() {
+                write!(w, r#"{sep}"mesh":{mesh}"#)?;
+                mesh += 1;
+            }
+            w.write_all(b"}")?;
+        }
+        let (name, matrix) = self.root_matrix();
+        write!(w, r#",{{"name":"{name}","matrix":{matrix},"children":["#)?;
+        for o in 0..infos.len() {
+            write!(w, "{}{o}", if o > 0 { "," } else { "" })?;
+        }
+        w.write_all(b"]}]")
+    }
+
+    /// The `meshes` array: a mesh per object with triangles, a primitive per run (each run's
+    /// accessors are `2 r` and `2 r + 1`).
+    fn write_meshes(
+        &self,
+        w: &mut impl Write,
+        runs: &RunsByObject,
+        materials: &HashMap<Option<Rgba8>, u32>,
+    ) -> io::Result<()> {
+        w.write_all(br#","meshes":["#)?;
+        let mut first = true;
+        for (o, (_, info)) in self.objects.infos.iter().enumerate() {
+            let runs = runs.of(o);
+            if runs.is_empty() {
+                continue;
+            }
+            w.write_all(if first { b"{" } else { b",{" })?;
+            first = false;
+            if !info.name.is_empty() {
+                w.write_all(br#""name":"#)?;
+                serde_json::to_writer(&mut *w, &info.name)?;
+                w.write_all(b",")?;
+            }
+            w.write_all(br#""primitives":["#)?;
+            let material = materials[&info.color];
+            for (k, &r) in runs.iter().enumerate() {
+                write!(
+                    w,
+                    r#"{}{{"attributes":{{"POSITION":{}}},"indices":{},"material":{material}}}"#,
+                    if k > 0 { "," } else { "" },
+                    2 * r,
+                    2 * r + 1
+                )?;
+            }
+            w.write_all(b"]}")?;
+        }
+        w.write_all(b"]")
+    }
+
+    /// The `accessors` array (each run's positions and indices), the two buffer views (all
+    /// positions, then all indices) and the one buffer.
+    fn write_accessors_and_buffers(&self, w: &mut impl Write) -> io::Result<()> {
+        w.write_all(br#","accessors":["#)?;
+        for (k, r) in self.runs.iter().enumerate() {
+            write!(
+                w,
+                r#"{}{{"bufferView":0,"byteOffset":{},"componentType":5126,"count":{},"type":"VEC3","min":[{},{},{}],"max":[{},{},{}]}},"#,
+                if k > 0 { "," } else { "" },
+                r.first_vertex * 12,
+                r.vertices,
+                r.min[0],
+                r.min[1],
+                r.min[2],
+                r.max[0],
+                r.max[1],
+                r.max[2]
+            )?;
+            write!(
+                w,
+                r#"{{"bufferView":1,"byteOffset":{},"componentType":5125,"count":{},"type":"SCALAR"}}"#,
+                r.first_index * 4,
+                r.indices
+            )?;
+        }
+        let p = self.vertices * 12;
+        let i = self.index_count * 4;
+        write!(
+            w,
+            r#"],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{p},"byteStride":12,"target":34962}},{{"buffer":0,"byteOffset":{p},"byteLength":{i},"target":34963}}],"buffers":[{{"byteLength":{}}}]"#,
+            p + i
+        )
+    }
+}
+
+/// The runs grouped by object: object `o`'s runs are `order[first_run[o]..first_run[o + 1]]`.
+struct RunsByObject {
+    order: Vec<u32>,
+    first_run: Vec<u32>,
+}
+
+impl RunsByObject {
+    /// Object `o`'s runs, in stream order.
+    fn of(&self, o: usize) -> &[u32] {
+        &self.order[self.first_run[o] as usize..self.first_run[o + 1] as usize]
+    }
+}
+
+/// The `materials` array: one per colour (grey without one), its base colour in linear RGB,
+/// blended when translucent.
+fn write_materials(w: &mut impl Write, material_list: &[Option<Rgba8>]) -> io::Result<()> {
+    w.write_all(br#","materials":["#)?;
+    for (k, color) in material_list.iter().enumerate() {
+        let c = color.unwrap_or(Rgba8::GREY);
+        let l = c.0.map(|v| srgb_to_linear(v as f32 / 255.0));
+        let alpha = c.0[3] as f32 / 255.0;
+        write!(
+            w,
+            r#"{}{{"name":"{}","pbrMetallicRoughness":{{"baseColorFactor":[{},{},{},{alpha}],"metallicFactor":0,"roughnessFactor":0.8}},"doubleSided":true{}}}"#,
+            if k > 0 { "," } else { "" },
+            super::obj::material_name(*color),
+            l[0],
+            l[1],
+            l[2],
+            if c.0[3] < 255 { r#","alphaMode":"BLEND""# } else { "" }
+        )?;
+    }
+    w.write_all(b"]")
 }
 
 /// The sRGB transfer function inverted (IEC 61966-2-1), as glTF's linear colour factors need.

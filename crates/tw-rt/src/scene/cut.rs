@@ -194,19 +194,19 @@ impl Trace for CutScene {
 mod tests {
     use super::*;
     use crate::{intersect_triangle, trace_image_with, Camera, TraceMode, TriangleBvh};
+    use tw_core::rng::Rng;
 
-    /// xorshift64*: deterministic test randomness.
-    struct Rng(u64);
+    /// Test randomness from the shared generator, as `f32`s and vectors.
+    trait TestRng {
+        /// Uniform in [lo, hi).
+        fn f(&mut self, lo: f32, hi: f32) -> f32;
+        /// Each coordinate uniform in [lo, hi).
+        fn v(&mut self, lo: f32, hi: f32) -> Vec3;
+    }
 
-    impl Rng {
-        fn next(&mut self) -> u64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
-        }
+    impl TestRng for Rng {
         fn f(&mut self, lo: f32, hi: f32) -> f32 {
-            lo + (self.next() >> 40) as f32 / (1u64 << 24) as f32 * (hi - lo)
+            lo + (self.next_u64() >> 40) as f32 / (1u64 << 24) as f32 * (hi - lo)
         }
         fn v(&mut self, lo: f32, hi: f32) -> Vec3 {
             Vec3::new(self.f(lo, hi), self.f(lo, hi), self.f(lo, hi))
@@ -220,7 +220,7 @@ mod tests {
         let mut corners = Vec::new();
         for _ in 0..clusters {
             let centre = rng.v(-1.0, 1.0);
-            let n = 1 + (rng.next() % 128) as usize;
+            let n = 1 + (rng.next_u64() % 128) as usize;
             let mut pos = Vec::new();
             let mut tris = Vec::new();
             let mut tri_corners = Vec::new();
@@ -268,7 +268,7 @@ mod tests {
         for _ in 0..150 {
             let eye = rng.v(-1.0, 1.0).normalize() * 2.5;
             let cam = Camera::look_at(eye, rng.v(-0.5, 0.5), Vec3::Z, 0.9, 1.5);
-            let (x0, y0) = ((rng.next() % 60) as u32, (rng.next() % 40) as u32);
+            let (x0, y0) = ((rng.next_u64() % 60) as u32, (rng.next_u64() % 40) as u32);
             rays.extend((0..8).map(|k| cam.pixel_ray(x0 + k % 4, y0 + k / 4, 64, 48)));
         }
         for _ in 0..400 {
@@ -285,7 +285,7 @@ mod tests {
 
     #[test]
     fn packets_through_the_two_level_scene_equal_single_rays() {
-        let mut rng = Rng(23);
+        let mut rng = Rng::new(23);
         // Clip planes with a forward direction that part of the random rays point away from.
         let clip = Clip { forward: Vec3::new(0.3, -0.2, 0.9).normalize(), near: 0.05, far: 3.0 };
         let (scene, corners) = random_scene(&mut rng, 400, clip);
@@ -295,7 +295,7 @@ mod tests {
             let mut start = 0;
             while start < rays.len() {
                 // Partial packets: chunks of 1 to 16 rays, and a longer run now and then.
-                let len = match rng.next() % 10 {
+                let len = match rng.next_u64() % 10 {
                     0 => 40,
                     n => 1 + (n as usize * 7 % SCENE_PACKET),
                 };
@@ -315,7 +315,7 @@ mod tests {
 
     #[test]
     fn traced_images_of_a_clipped_two_level_scene_equal_single_rays() {
-        let mut rng = Rng(5);
+        let mut rng = Rng::new(5);
         let eye = Vec3::new(0.4, -2.6, 0.7);
         let target = Vec3::ZERO;
         // The far plane cuts through the scene, so clipped lanes sit in packets with others.

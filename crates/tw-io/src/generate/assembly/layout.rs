@@ -170,38 +170,12 @@ const PZ: V3 = [0.0, 0.0, 1.0];
 /// more bolts.
 pub(crate) fn cabinet_parts(plan: &Plan, c: u32, level: u32) -> Vec<Placed> {
     let o = plan.cabinet_origin(c);
-    let at = |x: f64, y: f64, z: f64| Frame::at([o[0] + x, o[1] + y, o[2] + z]);
     let boards = plan.cabinet_boards(c);
     let cages = (boards.end - boards.start).div_ceil(SLOTS);
     let mut out = Vec::new();
-    let mut sheet = |min: V3, max: V3, kind: Sheet| {
-        out.push(Placed { part: Part::Sheet { min, max, kind }, frame: at(0.0, 0.0, 0.0) })
-    };
-    sheet([0.0, 0.0, 0.0], [CAB_W, CAB_D, 100.0], Sheet::Frame);
-    for (x, y) in [(0.0, 0.0), (CAB_W - 40.0, 0.0), (0.0, CAB_D - 40.0), (CAB_W - 40.0, CAB_D - 40.0)] {
-        sheet([x, y, 100.0], [x + 40.0, y + 40.0, CAB_H], Sheet::Frame);
-    }
-    for x in [0.0, CAB_W - 1.5] {
-        sheet([x, 40.0, 100.0], [x + 1.5, CAB_D - 40.0, CAB_H], Sheet::Panel);
-    }
-    sheet([0.0, 0.0, CAB_H], [CAB_W, CAB_D, CAB_H + 2.0], Sheet::Panel);
-    sheet([40.0, CAB_D - 1.5, 100.0], [CAB_W - 40.0, CAB_D, CAB_H], Sheet::Panel);
+    frame_and_panels(&mut out, o);
     for k in 0..cages {
-        let z0 = cage_z(k);
-        for x in [50.0, 548.0] {
-            sheet([x, 25.0, z0], [x + 2.0, BACKPLANE_Y + 2.0, z0 + CAGE_H], Sheet::Guide);
-        }
-        for z in [z0, z0 + CAGE_H - 5.0] {
-            sheet([52.0, 25.0, z], [548.0, 40.0, z + 5.0], Sheet::Frame);
-        }
-        if level >= 1 {
-            for j in 0..SLOTS {
-                let x = slot_x(j);
-                for z in [z0 + 44.0, z0 + 50.0 + BOARD_W] {
-                    sheet([x - 1.5, 40.0, z], [x + BOARD_T + 1.5, 262.0, z + 6.0], Sheet::Guide);
-                }
-            }
-        }
+        cage(&mut out, o, k, level);
     }
     if level >= 1 {
         for k in 0..cages {
@@ -211,66 +185,122 @@ pub(crate) fn cabinet_parts(plan: &Plan, c: u32, level: u32) -> Vec<Placed> {
         }
     }
     if level >= 2 {
-        for b in boards.clone() {
-            let k = b % BOARDS_PER_CABINET;
-            let (z0, x) = (cage_z(k / SLOTS), slot_x(k % SLOTS) + BOARD_T / 2.0);
-            let f = frame([o[0] + x, o[1] + BACKPLANE_Y, z0 + 50.0 + 80.0], PZ, NY);
-            let part = Part::Connector { l: 140.0, w: 8.0, h: 10.0, rows: 4, per_row: 40 };
-            out.push(Placed { part, frame: f });
-        }
-        for k in 0..cages {
-            let z0 = cage_z(k);
-            for x in [80.0, 300.0, 520.0] {
-                for z in [z0 + 30.0, z0 + 236.0] {
-                    let back = frame([o[0] + x, o[1] + BACKPLANE_Y + 1.6, o[2] + z], PX, PY);
-                    out.push(Placed { part: Part::Standoff { a: 6.0, h: 10.0 }, frame: back });
-                    let front = frame([o[0] + x, o[1] + BACKPLANE_Y, o[2] + z], PX, NY);
-                    out.push(Placed { part: Part::Screw { r: 1.5, head: 2.75, len: 8.0 }, frame: front });
-                }
-            }
-        }
-        for x in [40.0, CAB_W - 60.0] {
-            let f = at(0.0, 0.0, 0.0);
-            let part =
-                Part::Sheet { min: [x, 20.0, 100.0], max: [x + 20.0, 25.0, CAB_H], kind: Sheet::Frame };
-            out.push(Placed { part, frame: f });
-        }
-        for k in 0..cages {
-            for x in [50.0, CAB_W - 50.0] {
-                for z in [cage_z(k) + 20.0, cage_z(k) + CAGE_H - 20.0] {
-                    let f = frame([o[0] + x, o[1] + 20.0, o[2] + z], PX, NY);
-                    out.push(Placed { part: Part::Washer { r_in: 3.2, r_out: 6.0, t: 0.8 }, frame: f });
-                    let f = f.moved(0.0, 0.0, 0.8);
-                    out.push(Placed { part: Part::Screw { r: 2.5, head: 5.0, len: 12.0 }, frame: f });
-                }
-            }
-        }
+        backplane_connectors(&mut out, o, boards);
+        backplane_fixings(&mut out, o, cages);
+        front_rails(&mut out, o, cages);
     }
     if level >= 3 {
-        let f = at(0.0, 0.0, 0.0);
-        let part =
-            Part::Sheet { min: [40.0, 40.0, 100.0], max: [CAB_W - 40.0, 300.0, 108.0], kind: Sheet::Panel };
-        out.push(Placed { part, frame: f });
-        for x in [150.0, 300.0, 450.0] {
-            out.push(Placed {
-                part: Part::Fan { size: 120.0, depth: 25.0, blades: 7 },
-                frame: at(x, 170.0, 110.0),
-            });
-        }
-        out.push(Placed {
-            part: Part::Tray { l: CAB_W, w: 200.0, h: 60.0, pitch: 100.0 },
-            frame: at(0.0, 300.0, CAB_H + 2.0),
-        });
+        fans_and_cable_tray(&mut out, o);
     }
     if level >= 4 {
         let pitch = 40.0 / (level - 3) as f64;
         out.push(Placed {
             part: Part::Grating { l: CAB_W, w: PITCH_Y - CAB_D, pitch },
-            frame: at(0.0, CAB_D, 0.0),
+            frame: cabinet_at(o, 0.0, CAB_D, 0.0),
         });
         machinery(&mut out, [o[0], o[1] + CAB_D + 60.0, 60.0], 4 + 2 * (level - 4));
     }
     out
+}
+
+/// The frame at `(x, y, z)` in the cabinet whose origin is `o`.
+fn cabinet_at(o: V3, x: f64, y: f64, z: f64) -> Frame {
+    Frame::at([o[0] + x, o[1] + y, o[2] + z])
+}
+
+/// A sheet part from `min` to `max` in the cabinet's frame.
+fn sheet(out: &mut Vec<Placed>, o: V3, min: V3, max: V3, kind: Sheet) {
+    out.push(Placed { part: Part::Sheet { min, max, kind }, frame: cabinet_at(o, 0.0, 0.0, 0.0) })
+}
+
+/// Level 0's cabinet: plinth, four posts, side panels, roof and back panel.
+fn frame_and_panels(out: &mut Vec<Placed>, o: V3) {
+    sheet(out, o, [0.0, 0.0, 0.0], [CAB_W, CAB_D, 100.0], Sheet::Frame);
+    for (x, y) in [(0.0, 0.0), (CAB_W - 40.0, 0.0), (0.0, CAB_D - 40.0), (CAB_W - 40.0, CAB_D - 40.0)] {
+        sheet(out, o, [x, y, 100.0], [x + 40.0, y + 40.0, CAB_H], Sheet::Frame);
+    }
+    for x in [0.0, CAB_W - 1.5] {
+        sheet(out, o, [x, 40.0, 100.0], [x + 1.5, CAB_D - 40.0, CAB_H], Sheet::Panel);
+    }
+    sheet(out, o, [0.0, 0.0, CAB_H], [CAB_W, CAB_D, CAB_H + 2.0], Sheet::Panel);
+    sheet(out, o, [40.0, CAB_D - 1.5, 100.0], [CAB_W - 40.0, CAB_D, CAB_H], Sheet::Panel);
+}
+
+/// Cage `k`: its side plates and rails (level 0) and, from level 1, two card guides per slot.
+fn cage(out: &mut Vec<Placed>, o: V3, k: u32, level: u32) {
+    let z0 = cage_z(k);
+    for x in [50.0, 548.0] {
+        sheet(out, o, [x, 25.0, z0], [x + 2.0, BACKPLANE_Y + 2.0, z0 + CAGE_H], Sheet::Guide);
+    }
+    for z in [z0, z0 + CAGE_H - 5.0] {
+        sheet(out, o, [52.0, 25.0, z], [548.0, 40.0, z + 5.0], Sheet::Frame);
+    }
+    if level >= 1 {
+        for j in 0..SLOTS {
+            let x = slot_x(j);
+            for z in [z0 + 44.0, z0 + 50.0 + BOARD_W] {
+                sheet(out, o, [x - 1.5, 40.0, z], [x + BOARD_T + 1.5, 262.0, z + 6.0], Sheet::Guide);
+            }
+        }
+    }
+}
+
+/// Level 2: a backplane connector for every board of the cabinet.
+fn backplane_connectors(out: &mut Vec<Placed>, o: V3, boards: std::ops::Range<u32>) {
+    for b in boards {
+        let k = b % BOARDS_PER_CABINET;
+        let (z0, x) = (cage_z(k / SLOTS), slot_x(k % SLOTS) + BOARD_T / 2.0);
+        let f = frame([o[0] + x, o[1] + BACKPLANE_Y, z0 + 50.0 + 80.0], PZ, NY);
+        let part = Part::Connector { l: 140.0, w: 8.0, h: 10.0, rows: 4, per_row: 40 };
+        out.push(Placed { part, frame: f });
+    }
+}
+
+/// Level 2: each backplane's standoffs behind it and screws through it, six per cage.
+fn backplane_fixings(out: &mut Vec<Placed>, o: V3, cages: u32) {
+    for k in 0..cages {
+        let z0 = cage_z(k);
+        for x in [80.0, 300.0, 520.0] {
+            for z in [z0 + 30.0, z0 + 236.0] {
+                let back = frame([o[0] + x, o[1] + BACKPLANE_Y + 1.6, o[2] + z], PX, PY);
+                out.push(Placed { part: Part::Standoff { a: 6.0, h: 10.0 }, frame: back });
+                let front = frame([o[0] + x, o[1] + BACKPLANE_Y, o[2] + z], PX, NY);
+                out.push(Placed { part: Part::Screw { r: 1.5, head: 2.75, len: 8.0 }, frame: front });
+            }
+        }
+    }
+}
+
+/// Level 2: the front mounting rails, and each cage's four screws with washers into them.
+fn front_rails(out: &mut Vec<Placed>, o: V3, cages: u32) {
+    for x in [40.0, CAB_W - 60.0] {
+        sheet(out, o, [x, 20.0, 100.0], [x + 20.0, 25.0, CAB_H], Sheet::Frame);
+    }
+    for k in 0..cages {
+        for x in [50.0, CAB_W - 50.0] {
+            for z in [cage_z(k) + 20.0, cage_z(k) + CAGE_H - 20.0] {
+                let f = frame([o[0] + x, o[1] + 20.0, o[2] + z], PX, NY);
+                out.push(Placed { part: Part::Washer { r_in: 3.2, r_out: 6.0, t: 0.8 }, frame: f });
+                let f = f.moved(0.0, 0.0, 0.8);
+                out.push(Placed { part: Part::Screw { r: 2.5, head: 5.0, len: 12.0 }, frame: f });
+            }
+        }
+    }
+}
+
+/// Level 3: the fan tray with three fans, and the cable tray on the roof.
+fn fans_and_cable_tray(out: &mut Vec<Placed>, o: V3) {
+    sheet(out, o, [40.0, 40.0, 100.0], [CAB_W - 40.0, 300.0, 108.0], Sheet::Panel);
+    for x in [150.0, 300.0, 450.0] {
+        out.push(Placed {
+            part: Part::Fan { size: 120.0, depth: 25.0, blades: 7 },
+            frame: cabinet_at(o, x, 170.0, 110.0),
+        });
+    }
+    out.push(Placed {
+        part: Part::Tray { l: CAB_W, w: 200.0, h: 60.0, pitch: 100.0 },
+        frame: cabinet_at(o, 0.0, 300.0, CAB_H + 2.0),
+    });
 }
 
 /// A cooling water line along x at `p` (the pipe's start, on its axis): two pipes, two supports,

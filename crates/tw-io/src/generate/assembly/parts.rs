@@ -281,112 +281,21 @@ impl Part {
     pub fn emit(&self, e: &mut Emitter<'_>, f: &Frame, d: &Detail) {
         match *self {
             Part::Board { l, w, t, .. } => e.cuboid(f, [0.0, 0.0, 0.0], [l, w, t]),
-            Part::Chip { l, w, h, resistor } => {
-                if (resistor && d.terminations) || (!resistor && d.cap_terminations) {
-                    let c = 0.2 * l;
-                    e.cuboid(f, [-l / 2.0 + c, -w / 2.0, 0.02], [l / 2.0 - c, w / 2.0, h - 0.02]);
-                    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [-l / 2.0 + c, w / 2.0, h]);
-                    e.cuboid(f, [l / 2.0 - c, -w / 2.0, 0.0], [l / 2.0, w / 2.0, h]);
-                } else {
-                    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, h]);
-                }
-            }
-            Part::Sot { l, w, h, legs } => {
-                e.cuboid(f, [-l / 2.0, -w / 2.0, 0.1], [l / 2.0, w / 2.0, h]);
-                let (south, north) = (legs / 2, legs - legs / 2);
-                for (n, side) in [(south, 2), (north, 0)] {
-                    let g = turned(f, side);
-                    for i in 0..n {
-                        let x = (i as f64 + 0.5 - n as f64 / 2.0) * l / n as f64;
-                        gull_leg(e, &g, x, w / 2.0, 0.4, 0.6, h, d);
-                    }
-                }
-            }
+            Part::Chip { l, w, h, resistor } => chip(e, f, d, [l, w, h], resistor),
+            Part::Sot { l, w, h, legs } => sot(e, f, d, [l, w, h], legs),
             Part::LeadedIc { l, w, h, per_side, pitch, quad } => {
-                e.cuboid(f, [-l / 2.0, -w / 2.0, 0.1], [l / 2.0, w / 2.0, h]);
-                // Pin-1 mark: a shallow dimple standing proud of the top (kept closed).
-                let r = 0.08 * w.min(l);
-                tube(
-                    e,
-                    &f.moved(-l / 2.0 + 2.0 * r, -w / 2.0 + 2.0 * r, 0.0),
-                    r,
-                    h,
-                    h + 0.05,
-                    d.round.min(12),
-                );
-                let sides: &[(u32, f64, f64)] = if quad {
-                    &[(0, w, l), (1, l, w), (2, w, l), (3, l, w)]
-                } else {
-                    &[(0, w, l), (2, w, l)]
-                };
-                for &(q, across, along) in sides {
-                    let g = turned(f, q);
-                    for i in 0..per_side {
-                        let x = (i as f64 - (per_side as f64 - 1.0) / 2.0) * pitch;
-                        debug_assert!(x.abs() < along / 2.0);
-                        gull_leg(e, &g, x, across / 2.0, 0.45 * pitch, 1.0, h, d);
-                    }
-                }
+                leaded_ic(e, f, d, [l, w, h], per_side, pitch, quad)
             }
-            Part::Bga { size, h, n, pitch } => {
-                let zb = 0.35 * pitch;
-                let rb = 0.3 * pitch;
-                let half = (n as f64 - 1.0) / 2.0;
-                for i in 0..n {
-                    for j in 0..n {
-                        let g = f.moved((i as f64 - half) * pitch, (j as f64 - half) * pitch, 0.0);
-                        tube(e, &g, rb, 0.0, zb, d.ball);
-                    }
-                }
-                e.cuboid(f, [-size / 2.0, -size / 2.0, zb], [size / 2.0, size / 2.0, zb + 0.4]);
-                let m = 0.9 * size;
-                e.cuboid(f, [-m / 2.0, -m / 2.0, zb + 0.4], [m / 2.0, m / 2.0, h]);
-            }
+            Part::Bga { size, h, n, pitch } => bga(e, f, d, size, h, n, pitch),
             Part::Electrolytic { r, h } => {
                 let b = 2.0 * r + 0.6;
                 e.cuboid(f, [-b / 2.0, -b / 2.0, 0.0], [b / 2.0, b / 2.0, 0.5]);
                 tube(e, f, r, 0.5, h - 0.3, d.round);
                 e.frustum(f, r, 0.9 * r, h - 0.3, h, d.round, true, true);
             }
-            Part::Header { pins, rows } => {
-                let p = 2.54;
-                let (l, w) = (pins as f64 * p, rows as f64 * p);
-                e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 2.5]);
-                for i in 0..pins {
-                    for j in 0..rows {
-                        let x = (i as f64 + 0.5) * p - l / 2.0;
-                        let y = (j as f64 + 0.5) * p - w / 2.0;
-                        tube(e, &f.moved(x, y, 0.0), 0.36, -3.0, 8.5, d.pin);
-                    }
-                }
-            }
-            Part::Connector { l, w, h, rows, per_row } => {
-                let wall = 0.6;
-                e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 0.4 * h]);
-                for (y0, y1) in [(-w / 2.0, -w / 2.0 + wall), (w / 2.0 - wall, w / 2.0)] {
-                    e.cuboid(f, [-l / 2.0, y0, 0.4 * h], [l / 2.0, y1, h]);
-                }
-                for (x0, x1) in [(-l / 2.0, -l / 2.0 + wall), (l / 2.0 - wall, l / 2.0)] {
-                    e.cuboid(f, [x0, -w / 2.0 + wall, 0.4 * h], [x1, w / 2.0 - wall, h]);
-                }
-                let (px, py) = ((l - 2.0 * wall) / per_row as f64, (w - 2.0 * wall) / rows as f64);
-                let r = 0.2 * px.min(py);
-                for i in 0..per_row {
-                    for j in 0..rows {
-                        let x = -l / 2.0 + wall + (i as f64 + 0.5) * px;
-                        let y = -w / 2.0 + wall + (j as f64 + 0.5) * py;
-                        tube(e, &f.moved(x, y, 0.0), r, -2.5, 0.85 * h, d.pin);
-                    }
-                }
-            }
-            Part::Heatsink { l, w, h, fins } => {
-                e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 1.5]);
-                let t = (0.4 * l / fins as f64).min(1.2);
-                for i in 0..fins {
-                    let x = -l / 2.0 + (i as f64 + 0.5) * l / fins as f64;
-                    e.cuboid(f, [x - t / 2.0, -w / 2.0, 1.5], [x + t / 2.0, w / 2.0, h]);
-                }
-            }
+            Part::Header { pins, rows } => header(e, f, d, pins, rows),
+            Part::Connector { l, w, h, rows, per_row } => connector(e, f, d, [l, w, h], rows, per_row),
+            Part::Heatsink { l, w, h, fins } => heatsink(e, f, [l, w, h], fins),
             Part::Crystal { l, w, h } => {
                 let r = w / 2.0;
                 e.cuboid(f, [-l / 2.0 + r, -w / 2.0, 0.0], [l / 2.0 - r, w / 2.0, h]);
@@ -422,46 +331,9 @@ impl Part {
                 let bar = f.moved(-span / 2.0 - r, 0.0, h + r).z_along_x();
                 tube(e, &bar, r, 0.0, span + 2.0 * r, (d.round / 2).max(4));
             }
-            Part::Grating { l, w, pitch } => {
-                let mut y = pitch / 2.0;
-                while y < w {
-                    e.cuboid(f, [0.0, y - 1.5, -30.0], [l, y + 1.5, 0.0]);
-                    y += pitch;
-                }
-                let mut x = 2.0 * pitch;
-                while x < l {
-                    e.cuboid(f, [x - 2.0, 0.0, -10.0], [x + 2.0, w, 0.0]);
-                    x += 4.0 * pitch;
-                }
-            }
-            Part::Tray { l, w, h, pitch } => {
-                for y in [0.0, w - 2.0] {
-                    e.cuboid(f, [0.0, y, 0.0], [l, y + 2.0, h]);
-                }
-                let mut x = pitch / 2.0;
-                while x < l {
-                    e.cuboid(f, [x - 10.0, 2.0, 0.0], [x + 10.0, w - 2.0, 2.0]);
-                    x += pitch;
-                }
-            }
-            Part::Fan { size, depth, blades } => {
-                let bar = 0.08 * size;
-                let s2 = size / 2.0;
-                e.cuboid(f, [-s2, -s2, 0.0], [s2, -s2 + bar, depth]);
-                e.cuboid(f, [-s2, s2 - bar, 0.0], [s2, s2, depth]);
-                e.cuboid(f, [-s2, -s2 + bar, 0.0], [-s2 + bar, s2 - bar, depth]);
-                e.cuboid(f, [s2 - bar, -s2 + bar, 0.0], [s2, s2 - bar, depth]);
-                let hub = 0.18 * size;
-                tube(e, f, hub, 0.1 * depth, 0.9 * depth, d.round);
-                for k in 0..blades {
-                    let g = rotated(f, std::f64::consts::TAU * k as f64 / blades as f64);
-                    e.cuboid(
-                        &g,
-                        [hub * 0.8, -0.09 * size, 0.35 * depth],
-                        [s2 - bar - 1.0, 0.09 * size, 0.45 * depth],
-                    );
-                }
-            }
+            Part::Grating { l, w, pitch } => grating(e, f, l, w, pitch),
+            Part::Tray { l, w, h, pitch } => tray(e, f, [l, w, h], pitch),
+            Part::Fan { size, depth, blades } => fan(e, f, d, size, depth, blades),
             Part::Pipe { r, len } => tube(e, f, r, 0.0, len, 2 * d.round),
             Part::Flange { r, r_out, t } => e.ring_plate(f, r, r_out, 0.0, t, 2 * d.round),
             Part::Bolt { a, len } => {
@@ -477,6 +349,160 @@ impl Part {
             }
             Part::Harness { len, triangles } => harness(e, f, len, triangles),
         }
+    }
+}
+
+/// A chip resistor or capacitor: a body, with its two end terminations at details that show them.
+fn chip(e: &mut Emitter<'_>, f: &Frame, d: &Detail, [l, w, h]: [f64; 3], resistor: bool) {
+    if (resistor && d.terminations) || (!resistor && d.cap_terminations) {
+        let c = 0.2 * l;
+        e.cuboid(f, [-l / 2.0 + c, -w / 2.0, 0.02], [l / 2.0 - c, w / 2.0, h - 0.02]);
+        e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [-l / 2.0 + c, w / 2.0, h]);
+        e.cuboid(f, [l / 2.0 - c, -w / 2.0, 0.0], [l / 2.0, w / 2.0, h]);
+    } else {
+        e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, h]);
+    }
+}
+
+/// A small-outline transistor: a body and its gull-wing legs, split between two sides.
+fn sot(e: &mut Emitter<'_>, f: &Frame, d: &Detail, [l, w, h]: [f64; 3], legs: u32) {
+    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.1], [l / 2.0, w / 2.0, h]);
+    let (south, north) = (legs / 2, legs - legs / 2);
+    for (n, side) in [(south, 2), (north, 0)] {
+        let g = turned(f, side);
+        for i in 0..n {
+            let x = (i as f64 + 0.5 - n as f64 / 2.0) * l / n as f64;
+            gull_leg(e, &g, x, w / 2.0, 0.4, 0.6, h, d);
+        }
+    }
+}
+
+/// A leaded IC (SOIC, QFP): a body with a pin-1 mark and gull-wing legs on two or four sides.
+fn leaded_ic(
+    e: &mut Emitter<'_>,
+    f: &Frame,
+    d: &Detail,
+    [l, w, h]: [f64; 3],
+    per_side: u32,
+    pitch: f64,
+    quad: bool,
+) {
+    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.1], [l / 2.0, w / 2.0, h]);
+    // Pin-1 mark: a shallow dimple standing proud of the top (kept closed).
+    let r = 0.08 * w.min(l);
+    tube(e, &f.moved(-l / 2.0 + 2.0 * r, -w / 2.0 + 2.0 * r, 0.0), r, h, h + 0.05, d.round.min(12));
+    let sides: &[(u32, f64, f64)] =
+        if quad { &[(0, w, l), (1, l, w), (2, w, l), (3, l, w)] } else { &[(0, w, l), (2, w, l)] };
+    for &(q, across, along) in sides {
+        let g = turned(f, q);
+        for i in 0..per_side {
+            let x = (i as f64 - (per_side as f64 - 1.0) / 2.0) * pitch;
+            debug_assert!(x.abs() < along / 2.0);
+            gull_leg(e, &g, x, across / 2.0, 0.45 * pitch, 1.0, h, d);
+        }
+    }
+}
+
+/// A ball grid array: the grid of solder balls, the substrate on them and the mould cap.
+fn bga(e: &mut Emitter<'_>, f: &Frame, d: &Detail, size: f64, h: f64, n: u32, pitch: f64) {
+    let zb = 0.35 * pitch;
+    let rb = 0.3 * pitch;
+    let half = (n as f64 - 1.0) / 2.0;
+    for i in 0..n {
+        for j in 0..n {
+            let g = f.moved((i as f64 - half) * pitch, (j as f64 - half) * pitch, 0.0);
+            tube(e, &g, rb, 0.0, zb, d.ball);
+        }
+    }
+    e.cuboid(f, [-size / 2.0, -size / 2.0, zb], [size / 2.0, size / 2.0, zb + 0.4]);
+    let m = 0.9 * size;
+    e.cuboid(f, [-m / 2.0, -m / 2.0, zb + 0.4], [m / 2.0, m / 2.0, h]);
+}
+
+/// A pin header at 2.54 mm pitch: the plastic base and a pin through it per position.
+fn header(e: &mut Emitter<'_>, f: &Frame, d: &Detail, pins: u32, rows: u32) {
+    let p = 2.54;
+    let (l, w) = (pins as f64 * p, rows as f64 * p);
+    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 2.5]);
+    for i in 0..pins {
+        for j in 0..rows {
+            let x = (i as f64 + 0.5) * p - l / 2.0;
+            let y = (j as f64 + 0.5) * p - w / 2.0;
+            tube(e, &f.moved(x, y, 0.0), 0.36, -3.0, 8.5, d.pin);
+        }
+    }
+}
+
+/// A box connector: a floor, four walls and a contact pin per position.
+fn connector(e: &mut Emitter<'_>, f: &Frame, d: &Detail, [l, w, h]: [f64; 3], rows: u32, per_row: u32) {
+    let wall = 0.6;
+    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 0.4 * h]);
+    for (y0, y1) in [(-w / 2.0, -w / 2.0 + wall), (w / 2.0 - wall, w / 2.0)] {
+        e.cuboid(f, [-l / 2.0, y0, 0.4 * h], [l / 2.0, y1, h]);
+    }
+    for (x0, x1) in [(-l / 2.0, -l / 2.0 + wall), (l / 2.0 - wall, l / 2.0)] {
+        e.cuboid(f, [x0, -w / 2.0 + wall, 0.4 * h], [x1, w / 2.0 - wall, h]);
+    }
+    let (px, py) = ((l - 2.0 * wall) / per_row as f64, (w - 2.0 * wall) / rows as f64);
+    let r = 0.2 * px.min(py);
+    for i in 0..per_row {
+        for j in 0..rows {
+            let x = -l / 2.0 + wall + (i as f64 + 0.5) * px;
+            let y = -w / 2.0 + wall + (j as f64 + 0.5) * py;
+            tube(e, &f.moved(x, y, 0.0), r, -2.5, 0.85 * h, d.pin);
+        }
+    }
+}
+
+/// A heatsink: a base plate and its fins across it.
+fn heatsink(e: &mut Emitter<'_>, f: &Frame, [l, w, h]: [f64; 3], fins: u32) {
+    e.cuboid(f, [-l / 2.0, -w / 2.0, 0.0], [l / 2.0, w / 2.0, 1.5]);
+    let t = (0.4 * l / fins as f64).min(1.2);
+    for i in 0..fins {
+        let x = -l / 2.0 + (i as f64 + 0.5) * l / fins as f64;
+        e.cuboid(f, [x - t / 2.0, -w / 2.0, 1.5], [x + t / 2.0, w / 2.0, h]);
+    }
+}
+
+/// A floor grating: bearing bars at `pitch` and cross bars under them every fourth pitch.
+fn grating(e: &mut Emitter<'_>, f: &Frame, l: f64, w: f64, pitch: f64) {
+    let mut y = pitch / 2.0;
+    while y < w {
+        e.cuboid(f, [0.0, y - 1.5, -30.0], [l, y + 1.5, 0.0]);
+        y += pitch;
+    }
+    let mut x = 2.0 * pitch;
+    while x < l {
+        e.cuboid(f, [x - 2.0, 0.0, -10.0], [x + 2.0, w, 0.0]);
+        x += 4.0 * pitch;
+    }
+}
+
+/// A ladder cable tray: two side rails and rungs at `pitch`.
+fn tray(e: &mut Emitter<'_>, f: &Frame, [l, w, h]: [f64; 3], pitch: f64) {
+    for y in [0.0, w - 2.0] {
+        e.cuboid(f, [0.0, y, 0.0], [l, y + 2.0, h]);
+    }
+    let mut x = pitch / 2.0;
+    while x < l {
+        e.cuboid(f, [x - 10.0, 2.0, 0.0], [x + 10.0, w - 2.0, 2.0]);
+        x += pitch;
+    }
+}
+
+/// A fan: the square frame, the hub and its blades.
+fn fan(e: &mut Emitter<'_>, f: &Frame, d: &Detail, size: f64, depth: f64, blades: u32) {
+    let bar = 0.08 * size;
+    let s2 = size / 2.0;
+    e.cuboid(f, [-s2, -s2, 0.0], [s2, -s2 + bar, depth]);
+    e.cuboid(f, [-s2, s2 - bar, 0.0], [s2, s2, depth]);
+    e.cuboid(f, [-s2, -s2 + bar, 0.0], [-s2 + bar, s2 - bar, depth]);
+    e.cuboid(f, [s2 - bar, -s2 + bar, 0.0], [s2, s2 - bar, depth]);
+    let hub = 0.18 * size;
+    tube(e, f, hub, 0.1 * depth, 0.9 * depth, d.round);
+    for k in 0..blades {
+        let g = rotated(f, std::f64::consts::TAU * k as f64 / blades as f64);
+        e.cuboid(&g, [hub * 0.8, -0.09 * size, 0.35 * depth], [s2 - bar - 1.0, 0.09 * size, 0.45 * depth]);
     }
 }
 
