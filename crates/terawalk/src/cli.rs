@@ -82,6 +82,7 @@ pub enum Command {
     #[command(after_help = "Examples:\n  terawalk bench plant.tw --path path.json --out report/\n  \
                             terawalk bench plant.tw --path walk.json --occlusion hzb --light sun   # shadows on vs off\n  \
                             terawalk bench plant.tw --path path.json --occlusion none,hzb --compare 10 --exact\n  \
+                            terawalk bench plant.tw --path fly.json --compare 10 --samples 1 --reference-samples 16   # LOD vs brute force against a 16-sample truth\n  \
                             terawalk bench plant.tw --path path.json --reference --frames 20\n  \
                             terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
     Bench(BenchArgs),
@@ -655,6 +656,14 @@ pub struct BenchArgs {
     /// the same frames.
     #[arg(long, value_name = "K")]
     pub compare: Option<usize>,
+    /// With --compare: also render each compared frame's full-detail reference supersampled
+    /// with N samples per pixel (1, 4, 16 or 64: an ordered s × s grid, drawn at s × the size
+    /// and box-filtered in linear light), and record against it both the frame's PSNR and the
+    /// brute-force full-detail frame's at the run's samples, and their difference (LOD − brute
+    /// force, dB). 1, the default, renders no supersampled reference.
+    /// Example: --compare 10 --samples 1 --reference-samples 16
+    #[arg(long, default_value = "1", value_name = "N", value_parser = parse_reference_samples, requires = "compare")]
+    pub reference_samples: u32,
     /// On the compared frames (every 10th without --compare), count the exact visible objects
     /// and triangles from an item buffer at full detail: culling efficiency = drawn ÷ exact.
     #[arg(long)]
@@ -786,6 +795,17 @@ pub fn parse_samples(s: &str) -> Result<SamplesChoice, String> {
     }
 }
 
+/// A `--reference-samples` count: one of [`tw_frame::supersample::REFERENCE_SAMPLES`].
+pub fn parse_reference_samples(s: &str) -> Result<u32, String> {
+    match s.trim().parse::<u32>() {
+        Ok(n) if tw_frame::supersample::grid_side(n).is_some() => Ok(n),
+        _ => Err(format!(
+            "expected one of {:?} reference samples per pixel (an s × s grid: s = 1, 2, 4, 8), got {s:?}",
+            tw_frame::supersample::REFERENCE_SAMPLES
+        )),
+    }
+}
+
 fn parse_up_request(s: &str) -> Result<tw_io::up::UpRequest, String> {
     tw_io::up::UpRequest::parse(s)
 }
@@ -826,6 +846,17 @@ mod tests {
         assert_eq!(parse_samples("4"), Ok(SamplesChoice::Is(4)));
         for bad in ["3", "0", "", "four", "-4"] {
             assert!(parse_samples(bad).unwrap_err().contains("samples per pixel"), "{bad:?}");
+        }
+    }
+
+    #[test]
+    fn reference_samples() {
+        for n in [1, 4, 16, 64] {
+            assert_eq!(parse_reference_samples(&n.to_string()), Ok(n));
+        }
+        for bad in ["0", "2", "9", "32", "256", "", "sixteen", "-4"] {
+            let e = parse_reference_samples(bad).unwrap_err();
+            assert!(e.contains("[1, 4, 16, 64]") && e.contains("s × s"), "{bad:?}: {e}");
         }
     }
 

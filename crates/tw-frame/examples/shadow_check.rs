@@ -2,7 +2,8 @@
 //! rasterized shadow mask (shadow maps drawn from the light-view sets, cross-culled; the frame
 //! pipeline with `ColorMode::Shadow`) against the ray tracer's (a shadow ray per pixel, the same
 //! LOD cut), compared away from shadow edges (`tw_frame::mask`). Pages are loaded before each
-//! frame, so both draw the complete cut.
+//! frame, so both draw the complete cut. Every frame of the path is drawn in order (the layers
+//! are reused from frame to frame as in a walkthrough); every EVERY-th is compared.
 //!
 //! `cargo run --release -p tw-frame --example shadow_check -- STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES]`
 //! (defaults: every 10th frame, `sun`, 640x360, the default layers of `ShadowOptions`).
@@ -46,7 +47,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let trace = TraceSettings { coloring: ColorMode::Shadow, ..Default::default() };
     let mut traced = TracedWalkthrough::new(store.clone(), (w, h), stream, trace)?;
     let (mut compared, mut agree, mut worst) = (0u64, 0u64, 1f64);
-    for (i, f) in path.frames.iter().enumerate().step_by(every) {
+    // Every frame is drawn, in order, so that the layers are reused as along a walk; every
+    // `every`-th is compared.
+    for (i, f) in path.frames.iter().enumerate() {
         let camera = f.to_scene(store.header())?;
         let light = light.to_scene(store.header(), store.header().up_axis, &camera);
         let options = ShadowOptions { size, cascades, ..defaults };
@@ -57,22 +60,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             shadows: Some(ShadowSettings { light, options, cross_culling: true }),
             ..Default::default()
         };
-        walk.reset();
         let (raster, info) = walk.frame(&camera, &settings)?;
+        if i % every != 0 {
+            continue;
+        }
         let (reference, ..) = traced.frame(&camera, &settings)?;
         let a = compare_shadow_images(&reference, &raster, EDGE_PX)?;
         compared += a.compared;
         agree += a.agree;
         worst = worst.min(a.ratio());
         println!(
-            "frame {i:4} ({}): {:.3} % of {} pixels agree (lit as blocked {}, blocked as lit {}; {} edge pixels left out); {} layers",
+            "frame {i:4} ({}): {:.3} % of {} pixels agree (lit as blocked {}, blocked as lit {}; {} edge pixels left out); {} layers, {} reused",
             f.segment,
             100.0 * a.ratio(),
             a.compared,
             a.lit_as_blocked,
             a.blocked_as_lit,
             a.excluded_edge,
-            info.shadow.layers
+            info.shadow.layers,
+            info.shadow.layers_reused
         );
     }
     println!(

@@ -17,6 +17,9 @@
 //! [`Walkthrough::reference`] draws the full-detail scene without any culling (τ = 0, no
 //! frustum, no occlusion), in chunks of pages so that memory stays within the budget whatever
 //! the scene size: the image every fidelity figure is measured against.
+//! [`Walkthrough::reference_supersampled`] ([`supersample`]) draws it on an s × s grid of
+//! samples per pixel: the ground truth that both a LOD frame and the 1-sample full-detail frame
+//! are measured against (`bench --reference-samples`).
 //! [`Walkthrough::exact_visibility`] draws the same into the item buffer: the exact visible
 //! objects and triangles (docs/DESIGN.md "Measuring").
 
@@ -26,6 +29,7 @@ pub mod occlude;
 pub mod popping;
 pub mod remote;
 pub mod shadow;
+pub mod supersample;
 pub mod traced;
 
 use std::sync::Arc;
@@ -168,8 +172,8 @@ pub struct Walkthrough {
     selection: Selection,
     /// The last frame's shadow layers (`None` without shadows).
     shadows: Option<tw_runtime::Shadows>,
-    /// The clusters the light saw last frame (the light-view occlusion history, [`shadow`]).
-    light_seen: std::collections::HashSet<ClusterRef>,
+    /// What the shadow stage keeps between frames: its layers and what they hold ([`shadow`]).
+    shadow_cache: shadow::ShadowCache,
 }
 
 impl Walkthrough {
@@ -188,7 +192,7 @@ impl Walkthrough {
             occlusion: occlude::OcclusionState::default(),
             selection: Selection::default(),
             shadows: None,
-            light_seen: Default::default(),
+            shadow_cache: Default::default(),
         })
     }
 
@@ -240,7 +244,7 @@ impl Walkthrough {
     /// a teleport or a change of settings.
     pub fn reset(&mut self) {
         self.occlusion.reset();
-        self.light_seen.clear();
+        self.shadow_cache = Default::default();
         self.streamer.reset_history();
     }
 
@@ -585,7 +589,7 @@ impl Walkthrough {
                     settings.wait_for_pages,
                     &receivers,
                     bounds,
-                    &mut self.light_seen,
+                    &mut self.shadow_cache,
                 )?;
                 self.shadows = Some(layers);
                 info
@@ -593,7 +597,7 @@ impl Walkthrough {
             None => {
                 shadow::clear(&mut self.renderer);
                 self.shadows = None;
-                self.light_seen.clear();
+                self.shadow_cache = Default::default();
                 ShadowInfo::default()
             }
         };

@@ -19,8 +19,19 @@
 //!
 //! The eye's pass then draws as without shadows ([`crate::occlude::draw_culled`]), the renderer
 //! shading each cluster by its class.
+//!
+//! **Reusing layers.** The scene and the light stand still while the eye moves, so a layer drawn
+//! in an earlier frame is still a shadow map of the light for its own matrix. Where this frame's
+//! fit can take last frame's layer ([`tw_runtime::shadow::reuse`]: it holds the cascade, its
+//! texels are not much wider, same bias) and the layer's casters are still at the eye's level of
+//! detail within a quarter of the bias (the clusters that entered and left its light-view set
+//! since it was drawn moved the surface by less, [`tw_runtime::shadow::lod_within_bias`]), steps
+//! 3 and the read-back of 4 are skipped for it: the map's layer and its depth pyramid serve
+//! again. On the 10^8 plant's walk most frames draw no layer at all; a cascade is drawn again
+//! when the eye has moved a few percent of its width or the level of detail of its casters has
+//! changed.
 
-use std::collections::HashSet;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -29,7 +40,8 @@ use serde::{Deserialize, Serialize};
 use tw_gpu::Renderer;
 use tw_runtime::frustum::grid_box;
 use tw_runtime::shadow::{
-    casters, classify_receivers, fit_layers, light_visible, LightDepth, ShadowSetStats,
+    casters, classify_receivers, fit_layers, light_visible, lod_within_bias, refit_layers, LightDepth,
+    ShadowSetStats,
 };
 use tw_runtime::{Camera, ClusterRef, Light, ResidentPage, SelectOptions, ShadowClass, Shadows, Streamer};
 use tw_store::PageCluster;
@@ -52,8 +64,12 @@ pub struct ShadowSettings {
 /// What the shadow stage of one frame did: set sizes (thesis ch. 4's figures) and stage times.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct ShadowInfo {
-    /// Shadow-map layers drawn (sun cascades or cube faces).
+    /// Shadow-map layers of the frame (sun cascades or cube faces).
     pub layers: u32,
+    /// Of `layers`, those kept from an earlier frame instead of drawn (module documentation,
+    /// "Reusing layers"); their triangles are not in `light_drawn_triangles`.
+    #[serde(default)]
+    pub layers_reused: u32,
     /// Triangles drawn into the layers (the light-view sets at the eye's LOD; a cluster in two
     /// layers counts twice); their clusters are `sets.light_cut`.
     pub light_triangles: u64,
@@ -69,7 +85,8 @@ pub struct ShadowInfo {
     pub fit: Duration,
     /// Selecting the light-view sets.
     pub select: Duration,
-    /// Drawing the layers (uploads included; waits for the GPU only where the pool must).
+    /// Drawing the layers (uploads included; waits for the GPU only where the pool must), or
+    /// checking that last frame's still serve.
     pub draw: Duration,
     /// Reading the layers back (waits for them to be drawn: on a CPU driver, their rasterization).
     pub readback: Duration,
@@ -79,9 +96,43 @@ pub struct ShadowInfo {
     pub total: Duration,
 }
 
+/// What the shadow stage keeps from frame to frame (module documentation, "Reusing layers").
+#[derive(Default)]
+pub(crate) struct ShadowCache {
+    /// The layers as the map holds them (`None` before the first frame and after a reset).
+    shadows: Option<Shadows>,
+    /// Per layer of `shadows`: what the map's layer holds.
+    layers: Vec<LayerState>,
+}
+
+/// What one layer of the shadow map holds.
+#[derive(Default)]
+struct LayerState {
+    /// The light-view set drawn into it: each cluster's simplification error (scene units) and
+    /// box centre, for the level-of-detail check of a reuse.
+    drawn: HashMap<ClusterRef, (f32, Vec3)>,
+    /// The clusters the light saw in it: the first pass of its light occlusion culling when it
+    /// is drawn again.
+    seen: HashSet<ClusterRef>,
+    /// Its depth pyramid, once read back (cross-culling).
+    depth: Option<LightDepth>,
+    /// Its cross-culling figures, once counted: kept while the layer is reused.
+    figures: Option<LayerFigures>,
+}
+
+/// A layer's light-view set as cross-culling counts it (the thesis' figures, not the image).
+#[derive(Clone, Copy, Debug)]
+struct LayerFigures {
+    /// Clusters the light sees.
+    visible: u64,
+    /// Clusters in front of a partly shadowed receiver, and their triangles.
+    casters: u64,
+    caster_triangles: u64,
+}
+
 /// Runs the shadow stage for `camera`'s cut `receivers` (decoded, with their grid boxes from
 /// `bounds`) and leaves the renderer set up to shade the eye's pass with shadows; returns the
-/// stage's figures and the layers it drew.
+/// stage's figures and the layers it used. `cache` carries the layers from frame to frame.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn prepare(
     settings: &ShadowSettings,
@@ -92,7 +143,7 @@ pub(crate) fn prepare(
     wait_for_pages: bool,
     receivers: &[(ClusterRef, &PageCluster)],
     bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])>,
-    light_seen: &mut HashSet<ClusterRef>,
+    cache: &mut ShadowCache,
 ) -> Result<(ShadowInfo, Shadows), FrameError> {
     let start = Instant::now();
     let mut info = ShadowInfo::default();
@@ -102,24 +153,26 @@ pub(crate) fn prepare(
         .iter()
         .map(|(k, _)| bounds(k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step)))
         .collect();
-    let shadows = fit_layers(
-        &settings.light,
-        camera,
-        aspect(options.viewport),
-        &boxes,
-        scene_box(&header),
-        &settings.options,
-    );
+    let (light, aspect, scene) = (&settings.light, aspect(options.viewport), scene_box(&header));
+    let (shadows, reusable) = match &cache.shadows {
+        Some(previous) => refit_layers(light, camera, aspect, &boxes, scene, &settings.options, previous),
+        None => {
+            let shadows = fit_layers(light, camera, aspect, &boxes, scene, &settings.options);
+            let fresh = vec![false; shadows.layers.len()];
+            (shadows, fresh)
+        }
+    };
     info.fit = start.elapsed();
     info.layers = shadows.layers.len() as u32;
     renderer.set_shadows(None);
     if shadows.layers.is_empty() {
+        *cache = ShadowCache::default();
         info.total = start.elapsed();
         return Ok((info, shadows));
     }
-    renderer.set_shadow_map(shadows.size, shadows.layers.len() as u32)?;
+    renderer.set_shadow_map(shadows.size, map_layers(&settings.light, &settings.options))?;
+    cache.layers.resize_with(shadows.layers.len(), LayerState::default);
     let mut light_sets: Vec<LightSet> = Vec::with_capacity(shadows.layers.len());
-    let mut seen_now: HashSet<ClusterRef> = HashSet::new();
     for (i, layer) in shadows.layers.iter().enumerate() {
         let t = Instant::now();
         let (selection, pages) = if wait_for_pages {
@@ -135,17 +188,32 @@ pub(crate) fn prepare(
         info.sets.light_cut += set.len() as u64;
         info.light_triangles += triangles(&set);
         let set_boxes = light_boxes(&set, &pages, step);
-        let seen =
-            draw_layer_culled(&mut info, renderer, &shadows, i, camera, step, &set, &set_boxes, light_seen)?;
-        seen_now.extend(seen);
+        let state = &mut cache.layers[i];
+        let bias_texels = settings.options.bias_texels;
+        if reusable[i] && still_serves(&shadows, i, bias_texels, &set, &set_boxes, &state.drawn) {
+            info.layers_reused += 1;
+        } else {
+            *state = draw_layer_culled(
+                &mut info,
+                renderer,
+                &shadows,
+                i,
+                camera,
+                step,
+                &set,
+                &set_boxes,
+                &state.seen,
+            )?;
+        }
         info.draw += t.elapsed();
         if settings.cross_culling {
             light_sets.push(set_boxes);
         }
     }
-    *light_seen = seen_now;
+    cache.shadows = Some(shadows.clone());
     if settings.cross_culling {
-        cross_cull(&mut info, renderer, &shadows, camera, receivers, &boxes, &light_sets)?;
+        let layers = &mut cache.layers;
+        cross_cull(&mut info, renderer, &shadows, camera, (receivers, &boxes), &light_sets, layers)?;
     } else {
         info.sets.receivers_partial = receivers.len() as u64;
         info.sets.triangles_partial = triangles(receivers);
@@ -155,58 +223,126 @@ pub(crate) fn prepare(
     Ok((info, shadows))
 }
 
-/// Steps 2–4 of the thesis' cross-culling against the read-back layers: the receivers' classes
-/// (handed to the renderer), then per layer the light-visible clusters and the casters.
+/// The layers the map is allocated with: as many as the light can ever need, so that a frame
+/// needing fewer or more cascades keeps the map (and the layers it can reuse).
+fn map_layers(light: &Light, options: &ShadowOptions) -> u32 {
+    match light {
+        Light::Sun { .. } => options.cascades,
+        Light::Point { .. } => tw_gpu::MAX_SHADOW_LAYERS,
+    }
+}
+
+/// Whether layer `layer`, drawn in an earlier frame from the light-view set `drawn`, serves for
+/// this frame's set `set` (with its boxes `set_boxes`): the clusters that left and entered the
+/// set since moved the casters' surface within the bias' share for level of detail.
+fn still_serves(
+    shadows: &Shadows,
+    layer: usize,
+    bias_texels: f32,
+    set: &[(ClusterRef, &PageCluster)],
+    set_boxes: &[((Vec3, Vec3), u64)],
+    drawn: &HashMap<ClusterRef, (f32, Vec3)>,
+) -> bool {
+    let keys: HashSet<ClusterRef> = set.iter().map(|(k, _)| *k).collect();
+    let (mut entered, mut left) = (0f32, 0f32);
+    let mut changed = Vec::new();
+    for ((k, c), ((lo, hi), _)) in set.iter().zip(set_boxes) {
+        if !drawn.contains_key(k) {
+            entered = entered.max(c.self_error);
+            changed.push((*lo + *hi) * 0.5);
+        }
+    }
+    for (k, &(error, centre)) in drawn {
+        if !keys.contains(k) {
+            left = left.max(error);
+            changed.push(centre);
+        }
+    }
+    // Where the texels are narrowest: for a point light, nearest the light.
+    let at = match shadows.light {
+        Light::Point { position } => {
+            changed.iter().copied().min_by(|a, b| a.distance(position).total_cmp(&b.distance(position)))
+        }
+        Light::Sun { .. } => changed.first().copied(),
+    };
+    lod_within_bias(shadows, layer, bias_texels, entered + left, at.unwrap_or(Vec3::ZERO))
+}
+
+/// Steps 2–4 of the thesis' cross-culling against the layers' depth pyramids (read back now
+/// where `layers` has none): the receivers' classes (handed to the renderer), then per layer the
+/// light-visible clusters and the casters — counted once per drawing of a layer: a reused layer
+/// keeps the figures of the frame that drew it (they are figures, the image does not use them).
 fn cross_cull(
     info: &mut ShadowInfo,
     renderer: &mut Renderer,
     shadows: &Shadows,
     camera: &Camera,
-    receivers: &[(ClusterRef, &PageCluster)],
-    boxes: &[(Vec3, Vec3)],
+    (receivers, boxes): (&[Decoded<'_>], &[(Vec3, Vec3)]),
     light_sets: &[LightSet],
+    layers: &mut [LayerState],
 ) -> Result<(), FrameError> {
-    let t = Instant::now();
     let mut depths = Vec::with_capacity(shadows.layers.len());
-    for i in 0..shadows.layers.len() {
-        depths.push(renderer.read_shadow_map(i as u32)?);
+    for (i, state) in layers.iter_mut().enumerate().take(shadows.layers.len()) {
+        let depth = match state.depth.take() {
+            Some(depth) => depth,
+            None => {
+                let t = Instant::now();
+                let texels = renderer.read_shadow_map(i as u32)?;
+                info.readback += t.elapsed();
+                let t = Instant::now();
+                let depth = LightDepth::new(&texels, shadows.size)?;
+                info.classify += t.elapsed();
+                depth
+            }
+        };
+        depths.push(depth);
     }
-    info.readback += t.elapsed();
     let t = Instant::now();
-    let depths: Vec<LightDepth> =
-        depths.iter().map(|d| LightDepth::new(d, shadows.size)).collect::<Result<_, _>>()?;
     let classes = classify_receivers(shadows, &depths, camera, boxes);
     let mut sets = ShadowSetStats::default();
     let receiver_triangles: Vec<u32> = receivers.iter().map(|(_, c)| (c.indices.len() / 3) as u32).collect();
     sets.add_receivers(&classes, &receiver_triangles);
     for (i, set) in light_sets.iter().enumerate() {
-        let set_boxes: Vec<(Vec3, Vec3)> = set.iter().map(|(b, _)| *b).collect();
-        let visible = light_visible(shadows, i, &depths[i], camera, &set_boxes);
-        let casters = casters(shadows, i, camera, boxes, &classes, &set_boxes, &visible);
-        sets.add_layer(set.len(), &visible, &casters);
-        info.caster_triangles +=
-            set.iter().zip(&casters).filter(|(_, &c)| c).map(|((_, tris), _)| tris).sum::<u64>();
+        let figures = *layers[i].figures.get_or_insert_with(|| {
+            let set_boxes: Vec<(Vec3, Vec3)> = set.iter().map(|(b, _)| *b).collect();
+            let visible = light_visible(shadows, i, &depths[i], camera, &set_boxes);
+            let casters = casters(shadows, i, camera, boxes, &classes, &set_boxes, &visible);
+            let count = |flags: &[bool]| flags.iter().filter(|&&f| f).count() as u64;
+            let caster_triangles =
+                set.iter().zip(&casters).filter(|(_, &c)| c).map(|((_, tris), _)| tris).sum::<u64>();
+            LayerFigures { visible: count(&visible), casters: count(&casters), caster_triangles }
+        });
+        sets.light_cut += set.len() as u64;
+        sets.light_visible += figures.visible;
+        sets.casters += figures.casters;
+        info.caster_triangles += figures.caster_triangles;
     }
     info.sets = sets;
     let keyed: Vec<(ClusterRef, ShadowClass)> = receivers.iter().map(|(k, _)| *k).zip(classes).collect();
     renderer.set_shadow_classes(&keyed);
+    for (state, depth) in layers.iter_mut().zip(depths) {
+        state.depth = Some(depth);
+    }
     info.classify += t.elapsed();
     Ok(())
 }
+
+/// A decoded cluster of a cut.
+type Decoded<'a> = (ClusterRef, &'a PageCluster);
 
 /// A layer's light-view set for cross-culling: its clusters' boxes and triangles.
 type LightSet = Vec<((Vec3, Vec3), u64)>;
 
 /// Draws layer `layer`'s light-view set `set` with occlusion culling from the light, two-pass
-/// as the eye's hzb (crate::occlude): the clusters the light saw last frame (`light_seen`)
-/// first, then the layer is read back and every cluster is tested against it (a box entirely
-/// behind the map's farthest depth over its footprint is hidden, [`light_visible`]); the
-/// visible others are drawn on top. The map is the one drawing the whole set would give,
+/// as the eye's hzb (crate::occlude): the clusters the light saw when the layer was last drawn
+/// (`seen`) first, then the layer is read back and every cluster is tested against it (a box
+/// entirely behind the map's farthest depth over its footprint is hidden, [`light_visible`]);
+/// the visible others are drawn on top. The map is the one drawing the whole set would give,
 /// without drawing what the light cannot see: from inside the 10^8 plant, the floors and roof
-/// above a room (a light-view set of 0.4–0.5 M triangles of which ~35 k are drawn). Returns the
-/// clusters the light sees, next frame's first pass: the visible others and the first pass's
-/// clusters still visible. Without a history (the first frame, after a reset) the whole set is
-/// drawn and tested once.
+/// above a room (a light-view set of 0.4–0.5 M triangles of which ~35 k are drawn). Returns what
+/// the layer now holds: the set, the clusters the light sees (the visible others and the first
+/// pass's clusters still visible) and, when the second pass drew nothing, the first pass's depth
+/// pyramid, which is then the layer's. Without a history the whole set is drawn and tested once.
 #[allow(clippy::too_many_arguments)]
 fn draw_layer_culled(
     info: &mut ShadowInfo,
@@ -217,13 +353,13 @@ fn draw_layer_culled(
     grid_step: f64,
     set: &[(ClusterRef, &PageCluster)],
     set_boxes: &[((Vec3, Vec3), u64)],
-    light_seen: &HashSet<ClusterRef>,
-) -> Result<Vec<ClusterRef>, FrameError> {
+    seen: &HashSet<ClusterRef>,
+) -> Result<LayerState, FrameError> {
     let view_proj = &shadows.layers[layer].view_proj;
-    let (first, rest): (Vec<usize>, Vec<usize>) = if light_seen.is_empty() {
+    let (first, rest): (Vec<usize>, Vec<usize>) = if seen.is_empty() {
         ((0..set.len()).collect(), Vec::new())
     } else {
-        (0..set.len()).partition(|&i| light_seen.contains(&set[i].0))
+        (0..set.len()).partition(|&i| seen.contains(&set[i].0))
     };
     let pick = |ids: &[usize]| -> Vec<(ClusterRef, &PageCluster)> { ids.iter().map(|&i| set[i]).collect() };
     let occluders = pick(&first);
@@ -242,7 +378,13 @@ fn draw_layer_culled(
         renderer.draw_shadow_map(layer as u32, view_proj, grid_step, &second, false)?;
     }
     info.light_drawn_triangles += triangles(&occluders) + triangles(&second);
-    Ok(first.iter().chain(&shown).filter(|&&i| visible[i]).map(|&i| set[i].0).collect())
+    let drawn = set
+        .iter()
+        .zip(set_boxes)
+        .map(|((k, c), ((lo, hi), _))| (*k, (c.self_error, (*lo + *hi) * 0.5)))
+        .collect();
+    let seen = first.iter().chain(&shown).filter(|&&i| visible[i]).map(|&i| set[i].0).collect();
+    Ok(LayerState { drawn, seen, depth: second.is_empty().then_some(depth), figures: None })
 }
 
 /// The scene-space boxes and triangle counts of a light-view set's clusters.

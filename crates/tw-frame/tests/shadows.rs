@@ -127,3 +127,43 @@ fn shadow_maps_are_drawn_at_the_eyes_lod() {
         }
     }
 }
+
+/// Reusing layers (docs/RUNTIME.md "Shadows", "Reusing layers"): along a walk of small steps most
+/// layers serve again, and the shadow mask drawn with them agrees with the one of layers fitted
+/// and drawn afresh for every frame, away from shadow edges (a reused layer's texels are up to
+/// √2 wider, so edges may move by a texel). With a still camera every layer is reused and the
+/// image is the fresh frame's, pixel for pixel.
+#[test]
+fn reused_layers_give_the_shadows_of_fresh_ones() {
+    let store = plant();
+    let _lock = gpu_lock();
+    let new = |what| common::walkthrough(store.clone(), wgpu::Backends::VULKAN, what, 256 << 20);
+    let (Some(mut reusing), Some(mut fresh)) = (new("reused layers"), new("fresh layers")) else {
+        return;
+    };
+    reusing.set_color_mode(ColorMode::Shadow);
+    fresh.set_color_mode(ColorMode::Shadow);
+    let views = cameras(&store, PathPart::Walk, 24, 1);
+    let light = Light::default_sun(&views[0]);
+    let settings = settings(light, true, Occlusion::Hzb);
+    let (mut reused, mut layers, mut compared, mut agree) = (0, 0, 0, 0);
+    for (i, camera) in views.iter().enumerate() {
+        let (image, info) = reusing.frame(camera, &settings).unwrap();
+        fresh.reset();
+        let (reference, _) = fresh.frame(camera, &settings).unwrap();
+        reused += info.shadow.layers_reused;
+        layers += info.shadow.layers;
+        let a = tw_frame::mask::compare_shadow_images(&reference, &image, 2).unwrap();
+        assert!(a.ratio() >= 0.98, "frame {i}: {:.2} % of the mask agrees", 100.0 * a.ratio());
+        compared += a.compared;
+        agree += a.agree;
+    }
+    assert!(reused > 0 && reused < layers, "{reused} of {layers} layers reused: nothing was tested");
+    assert!(agree as f64 >= 0.995 * compared as f64, "{agree} of {compared} mask pixels agree");
+    // A still camera: the second frame reuses every layer and draws the first frame's image.
+    reusing.reset();
+    let (first, _) = reusing.frame(&views[5], &settings).unwrap();
+    let (again, info) = reusing.frame(&views[5], &settings).unwrap();
+    assert_eq!(info.shadow.layers_reused, info.shadow.layers);
+    assert!(first.rgba == again.rgba, "a still camera's image changed with reused layers");
+}

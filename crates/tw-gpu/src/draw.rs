@@ -43,9 +43,20 @@ pub(crate) enum Shading {
     /// The shadows' light, on or off by the cluster's class (`Lit`, `Shadowed`), no lookup
     /// (shadow.wgsl `fs_classified`).
     Classified,
-    /// The shadows' light, with a lookup in a map of this many layers for the fragments of
-    /// `Partial` clusters (shadow.wgsl `fs_shadowed`).
-    Lookup(u32),
+    /// The shadows' light, with a lookup in the map's layers for the fragments of `Partial`
+    /// clusters (shadow.wgsl `fs_shadowed`).
+    Lookup(LookupLayers),
+}
+
+/// The layers a lookup picks from, as pipeline constants (shadow.wgsl `SHADOW_LAYERS`,
+/// `SHADOW_DISJOINT`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct LookupLayers {
+    /// How many layers the shadows have.
+    pub count: u32,
+    /// Whether their splits are ascending and disjoint (sun cascades): then the depth alone
+    /// picks the one layer to look up.
+    pub disjoint: bool,
 }
 
 /// What a shaded pipeline is made for: (format, samples, mode, shading).
@@ -185,7 +196,12 @@ impl Pipelines {
                         samples,
                     ),
                     Shading::Lookup(layers) => {
-                        let all = [constants[0], constants[1], ("SHADOW_LAYERS", layers as f64)];
+                        let all = [
+                            constants[0],
+                            constants[1],
+                            ("SHADOW_LAYERS", layers.count as f64),
+                            ("SHADOW_DISJOINT", if layers.disjoint { 1.0 } else { 0.0 }),
+                        ];
                         pipeline(
                             device,
                             &self.shadowed_layout,

@@ -44,7 +44,7 @@ use tw_runtime::hzb::{Hzb, HzbLevel, HzbResult, DEPTH_MARGIN, RECT_SLACK_PX};
 use tw_runtime::Camera;
 use tw_store::PageCluster;
 
-use crate::draw::Shading;
+use crate::draw::{LookupLayers, Shading};
 use crate::error::GpuError;
 use crate::pool::{DrawArgs, Ensure, PoolKey};
 use crate::renderer::{bind_group, Eye, Pass};
@@ -516,6 +516,28 @@ impl GpuCull {
     }
 }
 
+/// Where a GPU-culled frame's readback puts what it reads: the candidates' flags (a count and
+/// one word each) at 0, the occluders' after them (none when there are no occluders), then the
+/// timestamps at an 8-byte boundary (none without a timestamp query set or passes).
+struct ReadbackLayout {
+    bytes0: u64,
+    bytes1: u64,
+    ts_at: u64,
+    ts_bytes: u64,
+    total: u64,
+}
+
+impl ReadbackLayout {
+    fn new(candidates: usize, occluders: usize, passes: u32, cull: Option<&GpuCull>) -> ReadbackLayout {
+        let bytes0 = 4 + 4 * candidates as u64;
+        let bytes1 = if occluders == 0 { 0 } else { 4 + 4 * occluders as u64 };
+        let ts_at = (bytes0 + bytes1).next_multiple_of(8);
+        let timestamps = cull.and_then(|c| c.timestamps.as_ref()).filter(|_| passes > 0);
+        let ts_bytes = if timestamps.is_some() { 2 * passes as u64 * wgpu::QUERY_SIZE as u64 } else { 0 };
+        ReadbackLayout { bytes0, bytes1, ts_at, ts_bytes, total: ts_at + ts_bytes }
+    }
+}
+
 fn decode_flags(bytes: &[u8], n: usize) -> Vec<HzbResult> {
     bytes
         .chunks_exact(4)
@@ -581,6 +603,75 @@ impl Renderer {
         }
         let shadow_layers = self.shadow_layers()?;
         // 1. Residency.
+        let Some((list, keys)) =
+            self.resident_candidates(grid_step, candidates, boxes, shadow_layers.is_some())
+        else {
+            return self.draw_all_over_budget(camera, grid_step, candidates, occluder_boxes.len());
+        };
+        let encode_start = Instant::now();
+        let compact = self.gpu_cull_compacts();
+        let occluders: Vec<Candidate> =
+            occluder_boxes.iter().map(|&b| Candidate::new(b, DrawArgs::zeroed())).collect();
+        self.prepare_cull(camera, size, &list, &occluders, shadow_layers.is_some())?;
+        let mut encoder =
+            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gpu hzb") });
+        // 2–3. Pyramid from the occluders' depth, cull (and compaction). Timestamps: a pair
+        // per compute pass encoded.
+        let mut passes = 0u32;
+        self.encode_depth_resolve(&mut encoder);
+        let cull = self.gpu_cull.as_ref().expect("made above");
+        if !list.is_empty() {
+            cull.encode(&self.device, &mut encoder, true, 0, list.len(), compact, 0);
+            passes += 1;
+        }
+        // 4. Draw.
+        let state0 = self.encode_visible_draw(&mut encoder, size, list.len(), compact, shadow_layers)?;
+        // 5. Rebuild from the final depth, test the occluders.
+        self.depth_stale = self.samples > 1;
+        if !occluders.is_empty() {
+            self.encode_depth_resolve(&mut encoder);
+            let cull = self.gpu_cull.as_ref().expect("made above");
+            cull.encode(&self.device, &mut encoder, true, 1, occluders.len(), false, 2 * passes);
+            passes += 1;
+        }
+        // 6. Read back the flags and timestamps.
+        let layout = ReadbackLayout::new(list.len(), occluders.len(), passes, self.gpu_cull.as_ref());
+        self.encode_readback(&mut encoder, &state0, &layout, passes);
+        let encode_time = encode_start.elapsed();
+        let total = layout.total as usize;
+        let bytes = self.readback.finish(&self.device, &self.queue, encoder, total, total, 1)?;
+        self.pool.note_batch();
+        self.pool.release_batch(&keys);
+        let (b0, b1) = (layout.bytes0 as usize, (layout.bytes0 + layout.bytes1) as usize);
+        let flags = decode_flags(&bytes[..b0], list.len());
+        let occluder_flags = if layout.bytes1 > 0 {
+            decode_flags(&bytes[b0..b1], occluders.len())
+        } else {
+            vec![HzbResult::Visible; occluder_boxes.len()]
+        };
+        let gpu_time = (layout.ts_bytes > 0).then(|| self.gpu_time(&bytes[layout.ts_at as usize..]));
+        self.count_visible(&list, &flags);
+        self.stats.render += start.elapsed();
+        Ok(GpuCullResult {
+            candidates: flags,
+            occluders: occluder_flags,
+            gpu_time,
+            encode_time,
+            compacted: compact,
+            over_budget: false,
+        })
+    }
+
+    /// Makes the candidates' clusters resident (noting their slots for the shadow stage when
+    /// `shadows`): each as a [`Candidate`] with its box, empty clusters with no draw, and the
+    /// keys of those in the pool. `None` when the pool is full (the keys taken are released).
+    fn resident_candidates(
+        &mut self,
+        grid_step: f64,
+        candidates: &[(ClusterKey, &PageCluster)],
+        boxes: &[(Vec3, Vec3)],
+        shadows: bool,
+    ) -> Option<(Vec<Candidate>, Vec<PoolKey>)> {
         let t = Instant::now();
         let mut list = Vec::with_capacity(candidates.len());
         let mut keys: Vec<PoolKey> = Vec::with_capacity(candidates.len());
@@ -589,7 +680,7 @@ impl Renderer {
             let pk = (key.page, key.index_in_page);
             match self.pool.ensure(&self.device, &self.queue, pk, grid_step, cluster) {
                 Ensure::Ready { args, slot } => {
-                    if shadow_layers.is_some() {
+                    if shadows {
                         self.shadow.note_slot(pk, slot);
                     }
                     list.push(Candidate::new(b, args));
@@ -604,50 +695,75 @@ impl Renderer {
         }
         self.stats.upload += t.elapsed();
         if over_budget {
-            // Conservative: draw them all, in batches, and keep every occluder.
             self.pool.release_batch(&keys);
-            let view = self.color_view.clone();
-            let shade = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
-            self.depth_stale = self.samples > 1;
-            self.draw_pass(None, shade, size, Eye::Camera(camera), grid_step, candidates, None, false)?;
-            return Ok(GpuCullResult {
-                candidates: vec![HzbResult::Visible; candidates.len()],
-                occluders: vec![HzbResult::Visible; occluder_boxes.len()],
-                over_budget: true,
-                ..Default::default()
-            });
+            return None;
         }
-        let encode_start = Instant::now();
+        Some((list, keys))
+    }
+
+    /// Over the GPU budget: conservatively draws every candidate, in batches, and keeps every
+    /// occluder.
+    fn draw_all_over_budget(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        candidates: &[(ClusterKey, &PageCluster)],
+        occluders: usize,
+    ) -> Result<GpuCullResult, GpuError> {
+        let size = (self.width, self.height);
+        let view = self.color_view.clone();
+        let shade = Pass::Shade { view: &view, format: COLOR_FORMAT, own: true };
+        self.depth_stale = self.samples > 1;
+        self.draw_pass(None, shade, size, Eye::Camera(camera), grid_step, candidates, None, false)?;
+        Ok(GpuCullResult {
+            candidates: vec![HzbResult::Visible; candidates.len()],
+            occluders: vec![HzbResult::Visible; occluders],
+            over_budget: true,
+            ..Default::default()
+        })
+    }
+
+    /// Writes the frame's uniforms (and the shadows' when `shadows`), builds the HZB pyramid's
+    /// resources from the own depth target and uploads the candidates (set 0) and occluders
+    /// (set 1, if any) with their cull uniforms.
+    fn prepare_cull(
+        &mut self,
+        camera: &Camera,
+        size: (u32, u32),
+        list: &[Candidate],
+        occluders: &[Candidate],
+        shadows: bool,
+    ) -> Result<(), GpuError> {
         self.write_uniforms(camera, size);
-        if shadow_layers.is_some() {
+        if shadows {
             self.shadow.write_uniforms(&self.queue, camera);
         }
-        let compact = self.gpu_cull_compacts();
         let view_proj = camera.projection_reverse_z(size.0 as f32 / size.1 as f32) * camera.view();
-        let occluders: Vec<Candidate> =
-            occluder_boxes.iter().map(|&b| Candidate::new(b, DrawArgs::zeroed())).collect();
         let spread = tw_runtime::hzb::sample_spread(self.sample_positions());
         let cull = self.gpu_cull.get_or_insert_with(|| GpuCull::new(&self.device));
         cull.spread = spread;
         cull.pyramid(&self.device, &self.queue, &self.depth)?;
         let u0 = cull.uniform(&view_proj, list.len());
-        cull.sets[0].prepare(&self.device, &self.queue, &list, &u0);
+        cull.sets[0].prepare(&self.device, &self.queue, list, &u0);
         if !occluders.is_empty() {
             let u1 = cull.uniform(&view_proj, occluders.len());
-            cull.sets[1].prepare(&self.device, &self.queue, &occluders, &u1);
+            cull.sets[1].prepare(&self.device, &self.queue, occluders, &u1);
         }
-        let mut encoder =
-            self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("gpu hzb") });
-        // 2–3. Pyramid from the occluders' depth, cull (and compaction). Timestamps: a pair
-        // per compute pass encoded.
-        let mut passes = 0u32;
-        self.encode_depth_resolve(&mut encoder);
-        let cull = self.gpu_cull.as_ref().expect("made above");
-        if !list.is_empty() {
-            cull.encode(&self.device, &mut encoder, true, 0, list.len(), compact, 0);
-            passes += 1;
-        }
-        // 4. Draw.
+        Ok(())
+    }
+
+    /// Encodes the draw of the visible candidates: one indirect list of `n` draws (compacted
+    /// behind a count when `compact`), every cluster with the lookup pipeline (which honours
+    /// the shadow stage's classes). Returns the candidate set's state buffer, whose flags are
+    /// read back.
+    fn encode_visible_draw(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        size: (u32, u32),
+        n: usize,
+        compact: bool,
+        shadow_layers: Option<LookupLayers>,
+    ) -> Result<wgpu::Buffer, GpuError> {
         if self.bind_generation != self.pool.generation {
             self.bind_group =
                 bind_group(&self.device, &self.pipelines, &self.uniforms, &self.pool, &self.object_colors);
@@ -656,7 +772,6 @@ impl Renderer {
         let color_view = self.color_view.clone();
         let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT, own: true };
         let att = self.attachments(&shade, size, self.depth_view.clone());
-        // One indirect list: every cluster with the lookup pipeline (which honours the classes).
         let shading = shadow_layers.map_or(Shading::Plain, Shading::Lookup);
         let (pipeline, shadow_bind) = self.shaded_pipeline(COLOR_FORMAT, att.samples, shading)?;
         let Some(color) = att.color.clone() else {
@@ -664,9 +779,9 @@ impl Renderer {
         };
         let cull = self.gpu_cull.as_ref().expect("made above");
         let set0 = cull.sets[0].buffers.as_ref().expect("prepared above");
-        // Handles, so that the depth resolve below may borrow the renderer.
+        // Handles, so that the depth resolve after this may borrow the renderer.
         let (args0, state0) = (set0.args.clone(), set0.state.clone());
-        if let (Some(arena), false) = (self.pool.arena(), list.is_empty()) {
+        if let (Some(arena), false) = (self.pool.arena(), n == 0) {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("gpu hzb draw"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -695,59 +810,51 @@ impl Renderer {
             pass.set_vertex_buffer(0, arena.slice(..));
             pass.set_index_buffer(arena.slice(..), wgpu::IndexFormat::Uint32);
             if compact {
-                pass.multi_draw_indexed_indirect_count(&args0, 0, &state0, 0, list.len() as u32);
+                pass.multi_draw_indexed_indirect_count(&args0, 0, &state0, 0, n as u32);
             } else {
-                pass.multi_draw_indexed_indirect(&args0, 0, list.len() as u32);
+                pass.multi_draw_indexed_indirect(&args0, 0, n as u32);
             }
         }
-        // 5. Rebuild from the final depth, test the occluders.
-        self.depth_stale = self.samples > 1;
-        if !occluders.is_empty() {
-            self.encode_depth_resolve(&mut encoder);
-            let cull = self.gpu_cull.as_ref().expect("made above");
-            cull.encode(&self.device, &mut encoder, true, 1, occluders.len(), false, 2 * passes);
-            passes += 1;
-        }
-        // 6. Read back the flags and timestamps.
-        let bytes0 = 4 + 4 * list.len() as u64;
-        let bytes1 = if occluders.is_empty() { 0 } else { 4 + 4 * occluders.len() as u64 };
-        let ts_at = (bytes0 + bytes1).next_multiple_of(8);
+        Ok(state0)
+    }
+
+    /// Encodes the copies of the candidates' flags (`state0`), the occluders' and the resolved
+    /// timestamps of `passes` compute passes into the readback buffer, at `layout`'s offsets.
+    fn encode_readback(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        state0: &wgpu::Buffer,
+        layout: &ReadbackLayout,
+        passes: u32,
+    ) {
         let cull = self.gpu_cull.as_ref().expect("made above");
         let timestamps = cull.timestamps.as_ref().filter(|_| passes > 0);
-        let ts_bytes = if timestamps.is_some() { 2 * passes as u64 * wgpu::QUERY_SIZE as u64 } else { 0 };
-        let total = ts_at + ts_bytes;
         if let Some((q, resolve)) = timestamps {
             encoder.resolve_query_set(q, 0..2 * passes, resolve, 0);
         }
-        let target = self.readback.buffer(&self.device, total);
-        encoder.copy_buffer_to_buffer(&state0, 0, target, 0, bytes0);
-        if bytes1 > 0 {
+        let target = self.readback.buffer(&self.device, layout.total);
+        encoder.copy_buffer_to_buffer(state0, 0, target, 0, layout.bytes0);
+        if layout.bytes1 > 0 {
             let set1 = cull.sets[1].buffers.as_ref().expect("prepared above");
-            encoder.copy_buffer_to_buffer(&set1.state, 0, target, bytes0, bytes1);
+            encoder.copy_buffer_to_buffer(&set1.state, 0, target, layout.bytes0, layout.bytes1);
         }
         if let Some((_, resolve)) = timestamps {
-            encoder.copy_buffer_to_buffer(resolve, 0, target, ts_at, ts_bytes);
+            encoder.copy_buffer_to_buffer(resolve, 0, target, layout.ts_at, layout.ts_bytes);
         }
-        let encode_time = encode_start.elapsed();
-        let total = total as usize;
-        let bytes = self.readback.finish(&self.device, &self.queue, encoder, total, total, 1)?;
-        self.pool.note_batch();
-        self.pool.release_batch(&keys);
-        let flags = decode_flags(&bytes[..bytes0 as usize], list.len());
-        let occluder_flags = if bytes1 > 0 {
-            decode_flags(&bytes[bytes0 as usize..(bytes0 + bytes1) as usize], occluders.len())
-        } else {
-            vec![HzbResult::Visible; occluder_boxes.len()]
-        };
-        let gpu_time = (ts_bytes > 0).then(|| {
-            let ts: Vec<u64> = bytes[ts_at as usize..]
-                .chunks_exact(8)
-                .map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes")))
-                .collect();
-            let ticks: u64 = ts.chunks_exact(2).map(|p| p[1].saturating_sub(p[0])).sum();
-            Duration::from_nanos((ticks as f64 * self.queue.get_timestamp_period() as f64) as u64)
-        });
-        for (c, f) in list.iter().zip(&flags) {
+    }
+
+    /// The GPU time of the compute passes from their timestamp pairs (`bytes`).
+    fn gpu_time(&self, bytes: &[u8]) -> Duration {
+        let ts: Vec<u64> =
+            bytes.chunks_exact(8).map(|b| u64::from_le_bytes(b.try_into().expect("8 bytes"))).collect();
+        let ticks: u64 = ts.chunks_exact(2).map(|p| p[1].saturating_sub(p[0])).sum();
+        Duration::from_nanos((ticks as f64 * self.queue.get_timestamp_period() as f64) as u64)
+    }
+
+    /// Counts the drawn candidates (visible, with triangles) in the frame's figures, and the
+    /// one indirect draw call if there were any.
+    fn count_visible(&mut self, list: &[Candidate], flags: &[HzbResult]) {
+        for (c, f) in list.iter().zip(flags) {
             if *f == HzbResult::Visible && c.args.index_count > 0 {
                 self.stats.clusters += 1;
                 self.stats.triangles += c.args.index_count as u64 / 3;
@@ -755,15 +862,6 @@ impl Renderer {
             }
         }
         self.stats.draw_calls += u64::from(!list.is_empty());
-        self.stats.render += start.elapsed();
-        Ok(GpuCullResult {
-            candidates: flags,
-            occluders: occluder_flags,
-            gpu_time,
-            encode_time,
-            compacted: compact,
-            over_budget: false,
-        })
     }
 
     /// Builds the HZB from the own depth target as the frame's draws left it and tests `boxes`

@@ -33,7 +33,7 @@ use glam::Mat4;
 use tw_runtime::{Camera, Light, ShadowClass, Shadows};
 use tw_store::PageCluster;
 
-use crate::draw::{Shading, DEPTH_FORMAT};
+use crate::draw::{LookupLayers, Shading, DEPTH_FORMAT};
 use crate::pool::PoolKey;
 use crate::readback::{padded_row, Readback};
 use crate::renderer::{Eye, Pass};
@@ -266,9 +266,14 @@ fn no_map() -> GpuError {
 impl Renderer {
     /// Allocates the shadow map array: `layers` (1..=[`MAX_SHADOW_LAYERS`]) layers of
     /// `size`×`size` (1 to the device's texture limit), `Depth32Float`, cleared to 1.0 (standard
-    /// depth, 0 nearest the light). Replaces the previous map. Errors, never panics, on bad sizes
-    /// and when the device cannot hold it.
+    /// depth, 0 nearest the light). Replaces the previous map, except that a map of the same size
+    /// and layers is kept as it is, contents included: a caller may set the map every frame and
+    /// keep drawn layers for later frames (tw-frame's shadow stage reuses them). Errors, never
+    /// panics, on bad sizes and when the device cannot hold it.
     pub fn set_shadow_map(&mut self, size: u32, layers: u32) -> Result<(), GpuError> {
+        if self.shadow.map.as_ref().is_some_and(|m| m.size == size && m.layers == layers) {
+            return Ok(());
+        }
         let limits = self.device.limits();
         let max = limits.max_texture_dimension_2d;
         if size == 0 || size > max {
@@ -416,8 +421,9 @@ impl Renderer {
     }
 
     /// The layers the shaded passes shade with: `None` without shadows, else the shadows'
-    /// layer count, once the shadows are checked against the map.
-    pub(crate) fn shadow_layers(&self) -> Result<Option<u32>, GpuError> {
+    /// layer count and whether their splits are disjoint, once the shadows are checked against
+    /// the map.
+    pub(crate) fn shadow_layers(&self) -> Result<Option<LookupLayers>, GpuError> {
         let Some(shadows) = &self.shadow.shadows else { return Ok(None) };
         let map = self.shadow.map.as_ref().ok_or_else(no_map)?;
         if shadows.size != map.size {
@@ -433,7 +439,8 @@ impl Renderer {
                 map.layers
             )));
         }
-        Ok(Some(shadows.layers.len() as u32))
+        let disjoint = shadows.layers.windows(2).all(|w| w[0].split[1] <= w[1].split[0]);
+        Ok(Some(LookupLayers { count: shadows.layers.len() as u32, disjoint }))
     }
 
     /// The shaded pipeline into `format` at `samples` with `shading`, and its group 1 with

@@ -41,15 +41,57 @@ fn vs_depth(@location(0) position: vec3<f32>) -> @builtin(position) vec4<f32> {
     return u.view_proj * vec4<f32>(position, 1.0);
 }
 
+// The lookup's inputs are affine in the scene-space point — its eye depth and its light clip
+// position in each layer (homogeneous: a point light's perspective divides per fragment) — so
+// the vertex stage computes them and the rasterizer interpolates them, instead of a matrix
+// product per layer and fragment: on a CPU driver the fragments are the frame's cost.
 struct ShadowedOut {
     @builtin(position) clip: vec4<f32>,
-    // The scene-space point, for the lookup.
-    @location(0) world: vec3<f32>,
+    // Rule 1's eye depth, (p − eye) · view direction.
+    @location(0) eye_depth: f32,
     // The triangle's colour with the light's term and without it.
     @location(1) @interpolate(flat) lit: vec3<f32>,
     @location(2) @interpolate(flat) dark: vec3<f32>,
     @location(3) @interpolate(flat) shadow_class: u32,
+    // The point in the light clip space of layers 0..5 (those past SHADOW_LAYERS unused).
+    @location(4) l0: vec4<f32>,
+    @location(5) l1: vec4<f32>,
+    @location(6) l2: vec4<f32>,
+    @location(7) l3: vec4<f32>,
+    @location(8) l4: vec4<f32>,
+    @location(9) l5: vec4<f32>,
 };
+
+// The light clip position of `p` in layer `i` (zero past SHADOW_LAYERS).
+fn layer_clip_of(i: u32, p: vec3<f32>) -> vec4<f32> {
+    if (i >= SHADOW_LAYERS) {
+        return vec4<f32>(0.0);
+    }
+    return su.layers[i].view_proj * vec4<f32>(p, 1.0);
+}
+
+// The interpolated light clip position of layer `i` (selects, no branches: fragments of one
+// block may be in different layers).
+// The guards are pipeline constants: the layers past SHADOW_LAYERS are not even interpolated.
+fn layer_clip(in: ShadowedOut, i: u32) -> vec4<f32> {
+    var c = in.l0;
+    if (SHADOW_LAYERS > 1u) {
+        c = select(c, in.l1, i == 1u);
+    }
+    if (SHADOW_LAYERS > 2u) {
+        c = select(c, in.l2, i == 2u);
+    }
+    if (SHADOW_LAYERS > 3u) {
+        c = select(c, in.l3, i == 3u);
+    }
+    if (SHADOW_LAYERS > 4u) {
+        c = select(c, in.l4, i == 4u);
+    }
+    if (SHADOW_LAYERS > 5u) {
+        c = select(c, in.l5, i == 5u);
+    }
+    return c;
+}
 
 // Light::towards_from: the unit direction from `p` towards the light. Selects, not branches,
 // between the sun and a point light (the kind is a uniform).
@@ -72,7 +114,13 @@ fn vs_shadowed(
 ) -> ShadowedOut {
     var out: ShadowedOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
-    out.world = position;
+    out.eye_depth = dot(position - u.eye.xyz, su.view_dir.xyz);
+    out.l0 = layer_clip_of(0u, position);
+    out.l1 = layer_clip_of(1u, position);
+    out.l2 = layer_clip_of(2u, position);
+    out.l3 = layer_clip_of(3u, position);
+    out.l4 = layer_clip_of(4u, position);
+    out.l5 = layer_clip_of(5u, position);
     let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let facing = max(dot(n, towards_light(position)), 0.0);
@@ -96,29 +144,52 @@ fn vs_shadowed(
     return out;
 }
 
+// Whether the splits of the layers are ascending and disjoint (sun cascades), a pipeline
+// constant: then at most one layer's split holds a depth, found without a loop over the layers.
+override SHADOW_DISJOINT: bool = false;
+
+// Rule 2 in layer `i` for a point whose eye depth the layer's split holds: 0 if the layer's clip
+// space does not hold it, 1 if the light reaches it, 2 if not.
+fn lookup_in(in: ShadowedOut, i: u32) -> u32 {
+    let c = layer_clip(in, i);
+    if (c.w <= 0.0) {
+        return 0u;
+    }
+    let d = c.xyz / c.w;
+    if (!(abs(d.x) <= 1.0 && abs(d.y) <= 1.0 && d.z >= 0.0 && d.z <= 1.0)) {
+        return 0u;
+    }
+    let s = su.params.x;
+    let x = clamp(floor((d.x + 1.0) * 0.5 * s), 0.0, s - 1.0);
+    let y = clamp(floor((1.0 - d.y) * 0.5 * s), 0.0, s - 1.0);
+    let stored = textureLoad(shadow_map, vec2<i32>(i32(x), i32(y)), i32(i), 0).x;
+    return select(2u, 1u, d.z <= stored + su.params.y);
+}
+
 // The lookup rule (tw-runtime shadow/mod.rs, Shadows::lit): rule 1 picks the first layer whose
 // eye-depth split holds p and whose clip space holds p; rule 2 compares p's light depth with the
-// texel's. A point in no layer is lit.
-fn light_reaches(p: vec3<f32>) -> bool {
-    let depth = dot(p - u.eye.xyz, su.view_dir.xyz);
-    let s = su.params.x;
+// texel's. A point in no layer is lit. With disjoint splits the only candidate is the last layer
+// whose split starts at or before the depth: one lookup a fragment instead of one a layer, which
+// is what a CPU driver pays for (it runs the loop's iterations for the whole block of fragments).
+fn light_reaches(in: ShadowedOut) -> bool {
+    let depth = in.eye_depth;
+    if (SHADOW_DISJOINT) {
+        var i = 0u;
+        for (var k = 1u; k < SHADOW_LAYERS; k = k + 1u) {
+            i = select(i, k, depth >= su.layers[k].split.x);
+        }
+        let split = su.layers[i].split;
+        return !(depth >= split.x && depth < split.y) || lookup_in(in, i) != 2u;
+    }
     for (var i = 0u; i < SHADOW_LAYERS; i = i + 1u) {
-        let layer = su.layers[i];
-        if (!(depth >= layer.split.x && depth < layer.split.y)) {
+        let split = su.layers[i].split;
+        if (!(depth >= split.x && depth < split.y)) {
             continue;
         }
-        let c = layer.view_proj * vec4<f32>(p, 1.0);
-        if (c.w <= 0.0) {
-            continue;
+        let r = lookup_in(in, i);
+        if (r != 0u) {
+            return r == 1u;
         }
-        let d = c.xyz / c.w;
-        if (!(abs(d.x) <= 1.0 && abs(d.y) <= 1.0 && d.z >= 0.0 && d.z <= 1.0)) {
-            continue;
-        }
-        let x = clamp(floor((d.x + 1.0) * 0.5 * s), 0.0, s - 1.0);
-        let y = clamp(floor((1.0 - d.y) * 0.5 * s), 0.0, s - 1.0);
-        let stored = textureLoad(shadow_map, vec2<i32>(i32(x), i32(y)), i32(i), 0).x;
-        return d.z <= stored + su.params.y;
     }
     return true;
 }
@@ -134,7 +205,7 @@ fn fs_classified(in: ShadowedOut) -> @location(0) vec4<f32> {
 fn fs_shadowed(in: ShadowedOut) -> @location(0) vec4<f32> {
     var lit = in.shadow_class == CLASS_LIT;
     if (in.shadow_class == CLASS_PARTIAL) {
-        lit = light_reaches(in.world);
+        lit = light_reaches(in);
     }
     return vec4<f32>(select(in.dark, in.lit, lit), 1.0);
 }

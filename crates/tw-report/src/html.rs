@@ -126,6 +126,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     let base = first.map(|r| r.summary.median_ms).unwrap_or(0.0);
     let base_name = first.map(|r| r.name.as_str()).unwrap_or("");
     let any_psnr = report.runs.iter().any(|r| r.summary.min_psnr_db.is_some());
+    let any_gap = report.runs.iter().any(|r| r.summary.min_psnr_gap_db.is_some());
     let any_eff = report.runs.iter().any(|r| r.summary.median_culling_efficiency.is_some());
     let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
     let any_lod = report.runs.iter().any(|r| r.summary.median_lod_efficiency.is_some());
@@ -140,6 +141,9 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
     }
     if any_psnr {
         h.push_str("<th>Min PSNR dB</th>");
+    }
+    if any_gap {
+        h.push_str("<th>LOD − brute force dB, median (supersampled reference)</th><th>Worst frame's</th>");
     }
     if any_eff {
         h.push_str("<th>Culling efficiency</th><th>Of the cut</th>");
@@ -181,6 +185,10 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
         }
         if any_psnr {
             let _ = write!(h, "<td>{}</td>", opt(s.min_psnr_db, 2));
+        }
+        if any_gap {
+            let _ =
+                write!(h, "<td>{}</td><td>{}</td>", opt(s.median_psnr_gap_db, 2), opt(s.min_psnr_gap_db, 2));
         }
         if any_eff {
             let _ = write!(h, "<td>{}</td>", opt(s.median_culling_efficiency, 3));

@@ -152,6 +152,20 @@ pub struct FrameRecord {
     /// `--compare`: share of pixels that differ from the reference (0..1).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub differing_pixels: Option<f64>,
+    /// `--compare` with `--reference-samples N` (N > 1): PSNR (dB, capped at 99) of the frame
+    /// against the full-detail reference supersampled with N samples per pixel (the ground
+    /// truth, tw-frame's `supersample`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supersampled_psnr_db: Option<f64>,
+    /// `--reference-samples N`: PSNR (dB, capped at 99) of the brute-force frame (full detail,
+    /// no culling, at the run's samples per pixel: the `--compare` reference) against the same
+    /// supersampled reference: the best a frame at these samples can do.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub brute_force_psnr_db: Option<f64>,
+    /// `--reference-samples N`: `supersampled_psnr_db − brute_force_psnr_db`, dB: what the
+    /// LOD cut and the culling lose against brute force (negative: worse than brute force).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub psnr_gap_db: Option<f64>,
     /// `--exact`: triangles and objects visible in the item buffer.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub exact_visible_triangles: Option<u64>,
@@ -201,6 +215,9 @@ pub struct FrameRecord {
 pub struct ShadowRecord {
     /// Shadow-map layers (sun cascades or cube faces).
     pub layers: u32,
+    /// Of `layers`, those kept from an earlier frame instead of drawn.
+    #[serde(default)]
+    pub layers_reused: u32,
     pub light_clusters: u64,
     pub light_triangles: u64,
     /// Of `light_triangles`, those drawn after occlusion culling from the light.
@@ -256,6 +273,12 @@ pub struct Summary {
     pub peak_rss_mb: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub min_psnr_db: Option<f64>,
+    /// Median and lowest (the worst frame's) of the frames' `psnr_gap_db` (LOD − brute force
+    /// against the supersampled reference, dB).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub median_psnr_gap_db: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub min_psnr_gap_db: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub median_culling_efficiency: Option<f64>,
     /// Median of the frames' `cut_efficiency` (drawn ÷ visible of the frame's own cut).
@@ -281,6 +304,7 @@ impl Summary {
         let median_ms = med(ms.clone());
         let psnr: Vec<f64> = frames.iter().filter_map(|f| f.psnr_db).collect();
         let eff: Vec<f64> = frames.iter().filter_map(|f| f.culling_efficiency).collect();
+        let gap: Vec<f64> = frames.iter().filter_map(|f| f.psnr_gap_db).collect();
         Summary {
             frames: frames.len(),
             median_ms,
@@ -297,6 +321,8 @@ impl Summary {
             max_resident_mb: frames.iter().map(|f| f.resident_mb).fold(0.0, f64::max),
             peak_rss_mb: peak_rss_bytes.map(|b| b as f64 / 1e6),
             min_psnr_db: psnr.iter().cloned().reduce(f64::min),
+            median_psnr_gap_db: stats::median(&gap),
+            min_psnr_gap_db: gap.iter().cloned().reduce(f64::min),
             median_culling_efficiency: stats::median(&eff),
             median_cut_efficiency: stats::median(
                 &frames.iter().filter_map(|f| f.cut_efficiency).collect::<Vec<f64>>(),

@@ -251,3 +251,95 @@ fn reports_without_run_kinds_or_build_figures_still_read() {
     assert!(back.meta.commit.is_empty());
     tw_report::html::page(&back, &[]);
 }
+
+/// Two walkthrough runs measured with `bench --popping`: the LOD-only change of every frame (0 on
+/// the first), its PSNR only where something changed.
+fn popping_runs() -> Vec<Run> {
+    let run = |name: &str, scale: f64| {
+        let frames = (0..30)
+            .map(|i| {
+                let changed = if i % 3 == 0 { 0.0 } else { scale * 0.001 * i as f64 };
+                FrameRecord {
+                    frame: i,
+                    frame_ms: 10.0,
+                    popping_changed_pixels: Some(changed),
+                    popping_psnr_db: (changed > 0.0).then_some(50.0 - i as f64 * 0.1),
+                    ..Default::default()
+                }
+            })
+            .collect();
+        Run::new(name, "", frames, None)
+    };
+    vec![run("none", 1.0), run("hzb", 2.0)]
+}
+
+#[test]
+fn popping_is_plotted_per_run_with_its_psnr_where_defined() {
+    let runs = popping_runs();
+    let shown = svg::plotted(&runs);
+    for key in ["popping_changed_pixels", "popping_psnr_db"] {
+        let series = shown.iter().find(|s| s.key == key).unwrap_or_else(|| panic!("{key} not plotted"));
+        let plot = svg::plot(series, &runs);
+        // One line per run, each in its own colour, with a legend naming it.
+        assert_eq!(plot.matches("<polyline").count(), 2, "{key}: {plot}");
+        assert!(plot.contains(svg::PALETTE[0]) && plot.contains(svg::PALETTE[1]), "{key}");
+        assert!(plot.contains(">none<") && plot.contains(">hzb<"), "{key}: {plot}");
+    }
+    // The PSNR is left out of the unchanged frames (every third); the share is 0 there.
+    let psnr = svg::SERIES.iter().find(|s| s.key == "popping_psnr_db").unwrap();
+    let xs: Vec<f64> = svg::points(psnr, &runs[0]).iter().map(|p| p.0).collect();
+    assert_eq!(xs.len(), 20);
+    assert!(xs.iter().all(|&x| !(x as u32).is_multiple_of(3)), "{xs:?}");
+    let share = svg::SERIES.iter().find(|s| s.key == "popping_changed_pixels").unwrap();
+    assert_eq!(svg::points(share, &runs[1]).len(), 30);
+    assert_eq!(svg::points(share, &runs[1])[5], (5.0, 0.01));
+    // On the page, under its title.
+    let mut r = report();
+    r.runs = runs;
+    let html = tw_report::html::page(&r, &[]);
+    assert!(html.contains("data-series=\"popping_changed_pixels\""));
+    assert!(html.contains("Popping: pixels the LOD alone changes"));
+}
+
+#[test]
+fn supersampled_fidelity_is_summarised_shown_and_optional() {
+    // Frames compared against a supersampled reference: the LOD frame, the brute-force frame,
+    // and their difference.
+    let frames: Vec<FrameRecord> = (0..5)
+        .map(|i| {
+            let (lod, brute) = (30.0 + i as f64, 30.5 + i as f64 + 0.1 * i as f64);
+            FrameRecord {
+                frame: 10 * i,
+                frame_ms: 10.0,
+                psnr_db: Some(40.0),
+                supersampled_psnr_db: Some(lod),
+                brute_force_psnr_db: Some(brute),
+                psnr_gap_db: Some(lod - brute),
+                ..Default::default()
+            }
+        })
+        .collect();
+    let s = Summary::of(&frames, None);
+    assert!((s.median_psnr_gap_db.unwrap() - -0.7).abs() < 1e-9, "{s:?}");
+    assert!((s.min_psnr_gap_db.unwrap() - -0.9).abs() < 1e-9, "{s:?}");
+    let mut r = report();
+    r.runs[1] = Run::new("hzb", "", frames, None);
+    let dir = tempfile::tempdir().unwrap();
+    let files = write_report(dir.path(), &r, &[]).unwrap();
+    let json = std::fs::read_to_string(&files.json).unwrap();
+    assert!(json.contains("\"supersampled_psnr_db\"") && json.contains("\"psnr_gap_db\""));
+    assert_eq!(BenchReport::from_json(&json).unwrap(), r);
+    let html = std::fs::read_to_string(&files.html).unwrap();
+    assert!(html.contains("LOD − brute force dB") && html.contains("<td>-0.70</td><td>-0.90</td>"));
+    for key in ["supersampled_psnr_db", "brute_force_psnr_db", "psnr_gap_db"] {
+        assert!(html.contains(&format!("data-series=\"{key}\"")), "{key}");
+    }
+    // Reports written before these fields load, without them.
+    let old =
+        std::fs::read_to_string(write_report(dir.path().join("old").as_path(), &report(), &[]).unwrap().json)
+            .unwrap();
+    assert!(!old.contains("psnr_gap_db"));
+    let back = BenchReport::from_json(&old).unwrap();
+    assert!(back.runs.iter().all(|r| r.summary.median_psnr_gap_db.is_none()));
+    assert!(back.runs.iter().flat_map(|r| &r.frames).all(|f| f.supersampled_psnr_db.is_none()));
+}

@@ -232,7 +232,7 @@ impl HudFrame {
             ("stage", format!("{:.1} ms", ms(s.total))),
             ("fit / select / draw", format!("{:.1} / {:.1} / {:.1} ms", ms(s.fit), ms(s.select), ms(s.draw))),
             ("read back / classify", format!("{:.1} / {:.1} ms", ms(s.readback), ms(s.classify))),
-            ("layers", s.layers.to_string()),
+            ("layers", format!("{} ({} reused)", s.layers, s.layers_reused)),
             ("light-view sets", set(s.sets.light_cut, s.light_triangles)),
         ];
         if self.cross_culling {

@@ -10,6 +10,11 @@
 //!   so that its full-detail draws do not empty the caches in the middle of one); every run's records of those frames get PSNR and the share of differing pixels, and
 //!   a "reference" run holds the reference frame times (same frames), so the speed-up is a
 //!   ratio of the same frames;
+//! - `--reference-samples N` (with `--compare`): the compared frames' references are also
+//!   rendered supersampled, N samples per pixel (tw-frame's `supersample`), and every run's
+//!   compared frames get their PSNR against it beside the brute-force frame's (the 1-sample
+//!   reference above, at the run's samples) and the difference: what the LOD loses, apart from
+//!   the aliasing both share;
 //! - `--exact`: on the same frames, the item buffer at full detail gives the exact visible
 //!   objects and triangles, and every run's culling efficiency (drawn ÷ exact visible).
 //!
@@ -106,6 +111,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     outln!("adapter: {adapter}");
     let samples = args.samples.resolve(&renderer);
     renderer.set_samples(samples)?;
+    if args.reference_samples > 1 {
+        // Before any frame: a supersampled target the device cannot hold fails now, not after
+        // the first reference.
+        tw_frame::supersample::check_grid(&renderer, args.reference_samples)?;
+    }
     let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
     let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
     walk.set_color_mode(args.color.mode());
@@ -155,6 +165,8 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
     // frames after a reference would start cold: a coarser cut, a slower frame).
     let mut references: HashMap<usize, Vec<u8>> = HashMap::new();
     let mut exacts: HashMap<usize, (ExactVisibility, ExactVisibility)> = HashMap::new();
+    let mut truths: HashMap<usize, Truth> = HashMap::new();
+    let mut truth_time = std::time::Duration::ZERO;
     if let (Some(k), false) = (every, args.reference) {
         let compared: Vec<usize> = (0..cameras.len()).step_by(k).collect();
         let bar = crate::progress::count(compared.len() as u64, "reference".to_string());
@@ -162,6 +174,11 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             let (reference, rinfo) = walk.reference(&cameras[i])?;
             reference_frames.push(record(i, &frames[i].segment, &rinfo));
             if args.compare.is_some() {
+                if args.reference_samples > 1 {
+                    let start = std::time::Instant::now();
+                    truths.insert(i, Truth::of(&mut walk, &cameras[i], &reference, args.reference_samples)?);
+                    truth_time += start.elapsed();
+                }
                 references.insert(i, reference.png_bytes()?);
             }
             if args.exact {
@@ -171,6 +188,15 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             bar.inc(1);
         }
         bar.finish_and_clear();
+        if !truths.is_empty() {
+            outln!(
+                "{:>10}: {} supersampled references ({} samples per pixel) in {:.1} s",
+                "reference",
+                truths.len(),
+                args.reference_samples,
+                truth_time.as_secs_f64()
+            );
+        }
     }
     for (ri, &(strategy, shadowed)) in runs_wanted.iter().enumerate() {
         // A strategy given again (`--occlusion none,queries,none`: does memory come back down?)
@@ -228,6 +254,9 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
                     let (reference, image) = (Image::from_png_bytes(png)?, image.to_opaque());
                     rec.psnr_db = Some(image.psnr(&reference)?.min(99.0));
                     rec.differing_pixels = Some(image.differing_share(&reference)?);
+                }
+                if let Some(truth) = truths.get(&i) {
+                    truth.record(&mut rec, &image)?;
                 }
                 if let Some((exact, of_cut)) = exacts.get(&i) {
                     rec.exact_visible_triangles = Some(exact.triangles);
@@ -337,6 +366,9 @@ pub fn run(args: BenchArgs) -> Result<BenchOutcome> {
             ("samples per pixel".into(), samples.to_string()),
         ]
         .into_iter()
+        .chain((args.reference_samples > 1).then(|| {
+            ("reference samples per pixel".to_string(), format!("{} (supersampled)", args.reference_samples))
+        }))
         .chain(args.cull_server.iter().map(|a| ("cull server".to_string(), a.clone())))
         .chain(net_lines)
         .collect(),
@@ -471,6 +503,7 @@ fn shadow_record(s: &tw_frame::ShadowInfo) -> tw_report::ShadowRecord {
     let ms = |d: std::time::Duration| d.as_secs_f64() * 1e3;
     tw_report::ShadowRecord {
         layers: s.layers,
+        layers_reused: s.layers_reused,
         light_clusters: s.sets.light_cut,
         light_triangles: s.light_triangles,
         light_drawn_triangles: s.light_drawn_triangles,
@@ -555,6 +588,7 @@ fn print_comparison(report: &BenchReport) {
                 psnr.len()
             );
         }
+        print_supersampled(run);
         if let Some(e) = run.summary.median_culling_efficiency {
             let of_cut = run.summary.median_cut_efficiency.map_or(String::new(), |c| {
                 format!(" (/ visible triangles of the frame's own LOD cut: median {c:.1})")
@@ -604,6 +638,53 @@ fn print_run(run: &Run) {
     print_popping(run);
 }
 
+/// `--reference-samples`: the ground truth of one compared frame, its full-detail reference
+/// supersampled (PNG-compressed, like the 1-sample references), and the brute-force frame's
+/// PSNR against it.
+struct Truth {
+    png: Vec<u8>,
+    brute_force_psnr_db: f64,
+}
+
+impl Truth {
+    /// The truth of `camera`, whose 1-sample full-detail reference (at the run's samples) is
+    /// `brute_force`.
+    fn of(walk: &mut Walkthrough, camera: &Camera, brute_force: &Image, samples: u32) -> Result<Truth> {
+        let truth = walk.reference_supersampled(camera, samples)?;
+        Ok(Truth { brute_force_psnr_db: brute_force.psnr(&truth)?.min(99.0), png: truth.png_bytes()? })
+    }
+
+    /// Sets `rec`'s figures against the truth for its frame's `image`: the frame's PSNR, the
+    /// brute-force frame's, and their difference (both capped at 99 dB as `psnr_db` is).
+    fn record(&self, rec: &mut FrameRecord, image: &Image) -> Result<()> {
+        let truth = Image::from_png_bytes(&self.png)?;
+        let lod = image.psnr(&truth)?.min(99.0);
+        rec.supersampled_psnr_db = Some(lod);
+        rec.brute_force_psnr_db = Some(self.brute_force_psnr_db);
+        rec.psnr_gap_db = Some(lod - self.brute_force_psnr_db);
+        Ok(())
+    }
+}
+
+/// `--reference-samples`: a run's PSNR against the supersampled references, its brute-force
+/// counterpart's, and the difference (median, and the worst frame's).
+fn print_supersampled(run: &Run) {
+    let gaps: Vec<(u32, f64)> = run.frames.iter().filter_map(|f| Some((f.frame, f.psnr_gap_db?))).collect();
+    let Some(&(worst_frame, worst)) = gaps.iter().min_by(|a, b| a.1.total_cmp(&b.1)) else { return };
+    let median = |v: Vec<f64>| tw_report::stats::median(&v).unwrap_or(f64::NAN);
+    outln!(
+        "{:>10}: {}: PSNR against the supersampled reference: median {:.2} dB (brute force {:.2} dB); \
+         LOD − brute force: median {:.2} dB, worst {worst:.2} dB (frame {worst_frame}), {} of {} frames within 0.5 dB",
+        "truth",
+        run.name,
+        median(run.frames.iter().filter_map(|f| f.supersampled_psnr_db).collect()),
+        median(run.frames.iter().filter_map(|f| f.brute_force_psnr_db).collect()),
+        median(gaps.iter().map(|g| g.1).collect()),
+        gaps.iter().filter(|g| g.1 >= -0.5).count(),
+        gaps.len()
+    );
+}
+
 /// `--popping`: the LOD-only image change of a run's frames.
 fn print_popping(run: &Run) {
     let changed: Vec<f64> = run.frames.iter().filter_map(|f| f.popping_changed_pixels).collect();
@@ -636,17 +717,22 @@ fn print_shadows(run: &Run) {
     let med = |f: &dyn Fn(&tw_report::ShadowRecord) -> f64| {
         tw_report::stats::median(&shadows.iter().map(|s| f(s)).collect::<Vec<f64>>()).unwrap_or(0.0)
     };
+    let sum = |f: &dyn Fn(&tw_report::ShadowRecord) -> u32| shadows.iter().map(|s| f(s) as f64).sum::<f64>();
+    let reused = 100.0 * sum(&|s| s.layers_reused) / sum(&|s| s.layers).max(1.0);
+    let mean = shadows.iter().map(|s| s.total_ms).sum::<f64>() / shadows.len() as f64;
     outln!(
-        "{:>10}: {}: median {:.1} ms (select {:.1}, map {:.1}, read-back {:.1}, classify {:.1}); light-view set {} \
-         triangles ({} drawn) in {:.0} layers, {:.0} of {:.0} clusters seen by the light, casters {} triangles; receivers lit {} / \
-         shadowed {} / partly {} triangles",
+        "{:>10}: {}: median {:.1} ms, mean {:.1} (select {:.1}, map {:.1}, read-back {:.1}, classify {:.1}); {:.0} % of \
+         the layers reused from an earlier frame; light-view set {} triangles ({} drawn) in {:.0} layers, {:.0} of {:.0} \
+         clusters seen by the light, casters {} triangles; receivers lit {} / shadowed {} / partly {} triangles",
         "shadows",
         run.name,
         med(&|s| s.total_ms),
+        mean,
         med(&|s| s.select_ms),
         med(&|s| s.draw_ms),
         med(&|s| s.readback_ms),
         med(&|s| s.classify_ms),
+        reused,
         fmt_count(med(&|s| s.light_triangles as f64) as u64),
         fmt_count(med(&|s| s.light_drawn_triangles as f64) as u64),
         med(&|s| s.layers as f64),

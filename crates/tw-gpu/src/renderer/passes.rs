@@ -9,7 +9,7 @@ use tw_runtime::{full_mask, Camera, PageCache, Selection, TriangleMask};
 use tw_store::{PageCluster, Store};
 
 use super::{bind_group, Attachments, Pass, Renderer, Target};
-use crate::draw::{self, Shading, Uniforms, DEPTH_FORMAT};
+use crate::draw::{self, LookupLayers, Shading, Uniforms, DEPTH_FORMAT};
 use crate::pool::{DrawArgs, Ensure, PoolKey};
 use crate::{
     color, query, ClusterKey, DrawMode, FrameStats, GpuError, Image, ItemBuffer, COLOR_FORMAT, DEFAULT_COLOR,
@@ -39,7 +39,7 @@ enum Kind {
     /// unshadowed shading).
     Shade {
         format: wgpu::TextureFormat,
-        shadow_layers: Option<u32>,
+        shadow_layers: Option<LookupLayers>,
     },
     Items,
     /// Depth only, into a shadow-map layer (cleared to 1, standard depth).
@@ -550,33 +550,8 @@ impl Renderer {
             }
             _ => None,
         };
-        // The pipeline of each run of draws `[from, to)`, with the shadows' bind group where it
-        // shades with shadows.
-        let (plain, classified, lookup) = match kind {
-            Kind::Shade { format, shadow_layers: None } => {
-                (self.shaded_pipeline(format, att.samples, Shading::Plain)?, None, None)
-            }
-            Kind::Shade { format, shadow_layers: Some(layers) } => {
-                let classified = self.shaded_pipeline(format, att.samples, Shading::Classified)?;
-                let lookup = self.shaded_pipeline(format, att.samples, Shading::Lookup(layers))?;
-                (classified.clone(), Some(classified), Some(lookup))
-            }
-            Kind::Items => ((self.pipelines.item(&self.device).clone(), None), None, None),
-            Kind::ShadowMap => ((self.pipelines.shadow_depth(&self.device).clone(), None), None, None),
-        };
-        let groups: Vec<(&RunPipeline, std::ops::Range<usize>)> = match (&classified, &lookup) {
-            (Some(classified), Some(lookup)) => runs
-                .iter()
-                .enumerate()
-                .map(|(i, &(from, lookups))| {
-                    let to = runs.get(i + 1).map_or(batch.len(), |r| r.0);
-                    (if lookups { lookup } else { classified }, from..to)
-                })
-                .collect(),
-            _ => vec![(&plain, 0..batch.len())],
-        };
-        // Standard depth for the shadow map (0 nearest the light), reverse-Z elsewhere.
-        let clear_depth = if kind == Kind::ShadowMap { 1.0 } else { 0.0 };
+        let (plain, classified, lookup) = self.pass_pipelines(kind, att.samples)?;
+        let groups = run_groups(&plain, classified.as_ref(), lookup.as_ref(), runs, batch.len());
         let mut own = None;
         let encoder = match external {
             Some(e) => e,
@@ -585,57 +560,108 @@ impl Renderer {
                     .create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("clusters") }),
             ),
         };
-        {
-            let load_color =
-                if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
-            let color = att.color.as_ref().map(|view| wgpu::RenderPassColorAttachment {
-                view,
-                depth_slice: None,
-                resolve_target: att.resolve.as_ref(),
-                ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
-            });
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("clusters"),
-                color_attachments: if color.is_some() { std::slice::from_ref(&color) } else { &[] },
-                depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
-                    view: &att.depth,
-                    depth_ops: Some(wgpu::Operations {
-                        load: if clear { wgpu::LoadOp::Clear(clear_depth) } else { wgpu::LoadOp::Load },
-                        store: wgpu::StoreOp::Store,
-                    }),
-                    stencil_ops: None,
-                }),
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
-            for ((pipeline, shadow_bind), range) in &groups {
-                pass.set_pipeline(pipeline);
-                pass.set_bind_group(0, &self.bind_group, &[]);
-                if let Some(bind) = shadow_bind {
-                    pass.set_bind_group(1, bind, &[]);
-                }
-                if let Some(arena) = self.pool.arena() {
-                    let offset = (range.start * std::mem::size_of::<DrawArgs>()) as u64;
-                    let args = &batch[range.clone()];
-                    draw::encode_batch(&mut pass, arena, args, indirect.as_ref().map(|b| (b, offset)));
-                }
-            }
-        }
+        self.encode_runs(encoder, att, kind, clear, &groups, batch, indirect.as_ref());
         if let Some(e) = own {
-            // At most two batches in flight: a CPU driver runs a submission long after it is
-            // made, and each holds the staging copies of its uploads (up to a quarter of the
-            // GPU budget, `UPLOADS_PER_BATCH`), so without this wait they piled up over
-            // frames. Waiting for the previous batch, not this one, keeps the CPU preparing
-            // the next batch while the GPU draws.
-            let index = self.queue.submit([e.finish()]);
-            if let Some(previous) = self.in_flight.replace(index) {
-                self.device
-                    .poll(wgpu::PollType::Wait { submission_index: Some(previous), timeout: None })
-                    .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
-            }
+            self.submit_batch(e)?;
         }
         self.pool.note_batch();
+        self.count_draws(kind, &groups, start);
+        Ok(())
+    }
+
+    /// The pipelines of a pass of `kind`: the one for every draw, and with shadow layers the
+    /// one for clusters the shadow stage classified and the one for clusters that need lookups
+    /// (the first is then the classified one), each with the shadows' bind group where it
+    /// shades with shadows.
+    fn pass_pipelines(
+        &mut self,
+        kind: Kind,
+        samples: u32,
+    ) -> Result<(RunPipeline, Option<RunPipeline>, Option<RunPipeline>), GpuError> {
+        Ok(match kind {
+            Kind::Shade { format, shadow_layers: None } => {
+                (self.shaded_pipeline(format, samples, Shading::Plain)?, None, None)
+            }
+            Kind::Shade { format, shadow_layers: Some(layers) } => {
+                let classified = self.shaded_pipeline(format, samples, Shading::Classified)?;
+                let lookup = self.shaded_pipeline(format, samples, Shading::Lookup(layers))?;
+                (classified.clone(), Some(classified), Some(lookup))
+            }
+            Kind::Items => ((self.pipelines.item(&self.device).clone(), None), None, None),
+            Kind::ShadowMap => ((self.pipelines.shadow_depth(&self.device).clone(), None), None, None),
+        })
+    }
+
+    /// Encodes one render pass over `att` (cleared when `clear`: standard depth for the shadow
+    /// map, 0 nearest the light, reverse-Z elsewhere) drawing each group's range of `batch`
+    /// with its pipeline, indirectly from `indirect` when given.
+    #[allow(clippy::too_many_arguments)]
+    fn encode_runs(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        att: &Attachments,
+        kind: Kind,
+        clear: bool,
+        groups: &[(&RunPipeline, std::ops::Range<usize>)],
+        batch: &[DrawArgs],
+        indirect: Option<&wgpu::Buffer>,
+    ) {
+        let clear_depth = if kind == Kind::ShadowMap { 1.0 } else { 0.0 };
+        let load_color =
+            if clear { wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT) } else { wgpu::LoadOp::Load };
+        let color = att.color.as_ref().map(|view| wgpu::RenderPassColorAttachment {
+            view,
+            depth_slice: None,
+            resolve_target: att.resolve.as_ref(),
+            ops: wgpu::Operations { load: load_color, store: wgpu::StoreOp::Store },
+        });
+        let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+            label: Some("clusters"),
+            color_attachments: if color.is_some() { std::slice::from_ref(&color) } else { &[] },
+            depth_stencil_attachment: Some(wgpu::RenderPassDepthStencilAttachment {
+                view: &att.depth,
+                depth_ops: Some(wgpu::Operations {
+                    load: if clear { wgpu::LoadOp::Clear(clear_depth) } else { wgpu::LoadOp::Load },
+                    store: wgpu::StoreOp::Store,
+                }),
+                stencil_ops: None,
+            }),
+            timestamp_writes: None,
+            occlusion_query_set: None,
+            multiview_mask: None,
+        });
+        for ((pipeline, shadow_bind), range) in groups {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            if let Some(bind) = shadow_bind {
+                pass.set_bind_group(1, bind, &[]);
+            }
+            if let Some(arena) = self.pool.arena() {
+                let offset = (range.start * std::mem::size_of::<DrawArgs>()) as u64;
+                let args = &batch[range.clone()];
+                draw::encode_batch(&mut pass, arena, args, indirect.map(|b| (b, offset)));
+            }
+        }
+    }
+
+    /// Submits a batch's own encoder. At most two batches in flight: a CPU driver runs a
+    /// submission long after it is made, and each holds the staging copies of its uploads (up
+    /// to a quarter of the GPU budget, `UPLOADS_PER_BATCH`), so without this wait they piled
+    /// up over frames. Waiting for the previous batch, not this one, keeps the CPU preparing
+    /// the next batch while the GPU draws.
+    fn submit_batch(&mut self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        let index = self.queue.submit([encoder.finish()]);
+        if let Some(previous) = self.in_flight.replace(index) {
+            self.device
+                .poll(wgpu::PollType::Wait { submission_index: Some(previous), timeout: None })
+                .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
+        }
+        Ok(())
+    }
+
+    /// Counts a batch's draw calls (one per group drawn indirectly, one per draw directly) and
+    /// its time since `start`, under the shadow map's figures or the frame's.
+    fn count_draws(&mut self, kind: Kind, groups: &[(&RunPipeline, std::ops::Range<usize>)], start: Instant) {
         let calls: u64 = groups
             .iter()
             .map(|(_, range)| match (self.draw_mode, range.is_empty()) {
@@ -651,7 +677,29 @@ impl Renderer {
             self.stats.draw_calls += calls;
             self.stats.render += start.elapsed();
         }
-        Ok(())
+    }
+}
+
+/// The pipeline of each run of draws `[from, to)` of a batch of `n`: with shadow layers, each
+/// of `runs` (first draw, whether it needs lookups) with the lookup or the classified
+/// pipeline; else all of them with `plain`.
+fn run_groups<'p>(
+    plain: &'p RunPipeline,
+    classified: Option<&'p RunPipeline>,
+    lookup: Option<&'p RunPipeline>,
+    runs: &[(usize, bool)],
+    n: usize,
+) -> Vec<(&'p RunPipeline, std::ops::Range<usize>)> {
+    match (classified, lookup) {
+        (Some(classified), Some(lookup)) => runs
+            .iter()
+            .enumerate()
+            .map(|(i, &(from, lookups))| {
+                let to = runs.get(i + 1).map_or(n, |r| r.0);
+                (if lookups { lookup } else { classified }, from..to)
+            })
+            .collect(),
+        _ => vec![(plain, 0..n)],
     }
 }
 

@@ -30,12 +30,18 @@
 //! **Bias** (rule 2's `d ≤ map + bias`, one value for all layers): `bias_texels` texels' worth of
 //! depth, i.e. the depth a surface at 45° to the light changes by over that many texels. Sun:
 //! ortho depth is linear, `Δd = Δz / range`, so a texel of side `t` is worth `t / range`; each
-//! cascade's depth range is stretched to `t·K` (`K` the largest `range / t` of the cascades),
-//! which makes that worth the same `1/K` in every cascade, and `bias = bias_texels / K`.
+//! cascade's depth range is stretched to `t·K` (`K` the largest `range / t` of the cascades,
+//! rounded up to a power of two), which makes that worth the same `1/K` in every cascade, and
+//! `bias = bias_texels / K`.
 //! Point light: perspective depth `d = f/(f−n)·(1 − n/z)` changes by `f·n/((f−n)·z²)` per unit
 //! at distance `z`, where a texel is `2z/size` wide; the bias is taken at the nearest receiver's
-//! distance `z₀` (the largest it must be), `bias_texels · 2·f·n / (size·(f−n)·z₀)`: at least
-//! `bias_texels` texels everywhere, growing linearly with distance beyond `z₀`.
+//! distance `z₀` (the largest it must be; rounded down to a power of 2^¼),
+//! `bias_texels · 2·f·n / (size·(f−n)·z₀)`: at least `bias_texels` texels everywhere, growing
+//! linearly with distance beyond `z₀`.
+//!
+//! **Stable from frame to frame**: the rectangle of a cascade is padded by [`WINDOW_PAD`] on
+//! each side, and the roundings of `K` and `z₀` keep the bias put, so that a moving eye often
+//! finds last frame's layers still fit for it (src/shadow/reuse.rs).
 
 use glam::{DMat4, DVec3, DVec4, Mat4, Vec3};
 use rayon::prelude::*;
@@ -45,6 +51,7 @@ use crate::error::RuntimeError;
 use crate::frustum::{Containment, Frustum};
 use crate::light::Light;
 use crate::shadow::clip::{clip_box, corners, depth_slab};
+use crate::shadow::reuse::reuse_layers;
 use crate::shadow::{ShadowLayer, Shadows};
 
 /// λ of the practical split scheme: 0 uniform, 1 logarithmic (Zhang et al. 2006 use ~0.5–0.8).
@@ -52,6 +59,11 @@ pub const SPLIT_LAMBDA: f64 = 0.7;
 
 /// Point light near plane as a fraction of the scene box's diagonal (when the light is in it).
 pub const POINT_NEAR_FRACTION: f64 = 1e-4;
+
+/// Room around a cascade's receivers, as a fraction of their light-space extent on each side:
+/// the eye can move that far before the receivers leave last frame's cascade and it must be
+/// drawn again (src/shadow/reuse.rs); the price is texels up to `1 + 2·WINDOW_PAD` times wider.
+pub const WINDOW_PAD: f64 = 0.08;
 
 /// The projection scale of a cube face: `1/tan(fov/2)` a little below 1, i.e. a field of view a
 /// little over 90°, so neighbouring faces overlap by a hair instead of leaving a seam.
@@ -107,16 +119,48 @@ pub fn fit_layers(
     scene: (Vec3, Vec3),
     options: &ShadowOptions,
 ) -> Shadows {
+    fit(light, eye, aspect, receivers, scene, options).0
+}
+
+/// [`fit_layers`], taking `previous` frame's layers where they still serve
+/// (src/shadow/reuse.rs): the layers, and per layer whether it is `previous`'s.
+pub fn refit_layers(
+    light: &Light,
+    eye: &Camera,
+    aspect: f32,
+    receivers: &[(Vec3, Vec3)],
+    scene: (Vec3, Vec3),
+    options: &ShadowOptions,
+    previous: &Shadows,
+) -> (Shadows, Vec<bool>) {
+    let (mut shadows, needs) = fit(light, eye, aspect, receivers, scene, options);
+    let reused = reuse_layers(&mut shadows, &needs, previous);
+    (shadows, reused)
+}
+
+/// The layers, and per sun cascade the box it must hold (the corners of its receivers' light-space
+/// rectangle before padding, from the farthest receiver point up to the scene's side nearest the
+/// light; none for a point light's faces).
+fn fit(
+    light: &Light,
+    eye: &Camera,
+    aspect: f32,
+    receivers: &[(Vec3, Vec3)],
+    scene: (Vec3, Vec3),
+    options: &ShadowOptions,
+) -> (Shadows, Vec<[Vec3; 8]>) {
     let empty = Shadows { light: *light, layers: Vec::new(), size: options.size.max(1), bias: 0.0 };
     if receivers.is_empty() {
-        return empty;
+        return (empty, Vec::new());
     }
     let fitted = match *light {
         Light::Sun { towards } => fit_sun(towards, eye, aspect, receivers, scene, options),
-        Light::Point { position } => fit_point(position, receivers, scene, options),
+        Light::Point { position } => {
+            fit_point(position, receivers, scene, options).map(|(l, b)| (l, b, Vec::new()))
+        }
     };
-    let (layers, bias) = fitted.unwrap_or_default();
-    Shadows { layers, bias, ..empty }
+    let (layers, bias, needs) = fitted.unwrap_or_default();
+    (Shadows { layers, bias, ..empty }, needs)
 }
 
 /// The side of a layer's texels in scene units (for a point light: at unit distance from the
@@ -240,6 +284,29 @@ fn quantize_up(x: f64) -> f64 {
     2f64.powf((x.log2() * 4.0).ceil() / 4.0)
 }
 
+/// The largest power of 2^¼ at most `x` (> 0).
+fn quantize_down(x: f64) -> f64 {
+    2f64.powf((x.log2() * 4.0).floor() / 4.0)
+}
+
+/// A cascade's depth range in texels, `K`, rounded up to a power of two: a longer range only
+/// spends depth precision, and a `K` that stays put as the eye moves keeps the bias
+/// (`bias_texels / K`) the same from frame to frame, so that last frame's layers can serve
+/// again (src/shadow/reuse.rs).
+fn quantize_k(k: f64) -> f64 {
+    if k.is_finite() && k > 0.0 {
+        2f64.powf(k.log2().ceil())
+    } else {
+        k
+    }
+}
+
+/// Each side of a cascade's light-space rectangle grows by [`WINDOW_PAD`] of its extent.
+fn padded(lo: [f64; 2], hi: [f64; 2]) -> ([f64; 2], [f64; 2]) {
+    let pad = WINDOW_PAD * (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    ([lo[0] - pad, lo[1] - pad], [hi[0] + pad, hi[1] + pad])
+}
+
 /// A square window of side quantized from the rectangle `lo..hi` (light-space x, y) for a map of
 /// `size` texels, its corner snapped to whole texels: `(x0, y0, side)`, containing the rectangle.
 /// `None` for a rectangle that is not finite (receiver boxes of NaN or infinite coordinates).
@@ -294,6 +361,8 @@ struct Cascade {
     /// receiver point.
     top: f64,
     bottom: f64,
+    /// The box the cascade must hold, in scene space (see [`fit`]).
+    need: [Vec3; 8],
 }
 
 /// The sun's cascades and bias (module documentation).
@@ -304,7 +373,7 @@ fn fit_sun(
     receivers: &[(Vec3, Vec3)],
     scene: (Vec3, Vec3),
     options: &ShadowOptions,
-) -> Option<(Vec<ShadowLayer>, f32)> {
+) -> Option<(Vec<ShadowLayer>, f32, Vec<[Vec3; 8]>)> {
     let t = towards.as_dvec3().normalize();
     if !t.is_finite() {
         return None;
@@ -334,11 +403,18 @@ fn fit_sun(
         if !(lo[0] <= hi[0] && lo[1] <= hi[1]) {
             continue; // no receiver point in the eye's view in this slab
         }
-        let Some(window) = snapped_window(lo, hi, size) else { continue };
         let top = scene_top.max(got.hi.z);
+        let need = std::array::from_fn(|c| {
+            let x = if c & 1 == 0 { lo[0] } else { hi[0] };
+            let y = if c & 2 == 0 { lo[1] } else { hi[1] };
+            let z = if c & 4 == 0 { got.lo.z } else { top };
+            (right * x + up * y + t * z).as_vec3()
+        });
+        let (lo, hi) = padded(lo, hi);
+        let Some(window) = snapped_window(lo, hi, size) else { continue };
         let split =
             [if i == 0 { 0.0 } else { d0 as f32 }, if i + 2 == splits.len() { f32::MAX } else { d1 as f32 }];
-        fitted.push(Cascade { split, window, top, bottom: got.lo.z });
+        fitted.push(Cascade { split, window, top, bottom: got.lo.z, need });
     }
     if fitted.is_empty() {
         return None;
@@ -352,6 +428,7 @@ fn fit_sun(
         })
         .fold(0f64, f64::max)
         * (1.0 + 1e-4);
+    let k = quantize_k(k);
     let view = DMat4::from_cols(
         DVec4::new(right.x, up.x, t.x, 0.0),
         DVec4::new(right.y, up.y, t.y, 0.0),
@@ -369,7 +446,8 @@ fn fit_sun(
             ShadowLayer { view_proj: (proj * view).as_mat4(), split }
         })
         .collect();
-    Some((layers, (options.bias_texels as f64 / k) as f32))
+    let needs = fitted.iter().map(|c| c.need).collect();
+    Some((layers, (options.bias_texels as f64 / k) as f32, needs))
 }
 
 /// The point light's cube faces and bias (module documentation).
@@ -424,6 +502,9 @@ fn fit_point(
         .map(|&(a, b)| (a.as_dvec3() - p).max(p - b.as_dvec3()).max(DVec3::ZERO).length())
         .fold(f64::INFINITY, f64::min)
         .max(near);
+    // Down to a power of 2^¼ (a larger bias): the same bias while the eye moves a little keeps
+    // last frame's faces usable (src/shadow/reuse.rs).
+    let z0 = quantize_down(z0).max(near);
     let bias =
         options.bias_texels as f64 * 2.0 * far * near / (options.size.max(1) as f64 * s * (far - near) * z0);
     Some((layers, bias as f32))
