@@ -129,3 +129,39 @@ mod tests {
         assert_eq!(level_color(0), level_color(8));
     }
 }
+
+/// The sRGB transfer function's decoding (IEC 61966-2-1), per encoded byte: linear light 0..1.
+/// One table for every place that averages colours in linear light (the supersampled reference,
+/// the viewer's progressive ray tracing).
+pub fn srgb_decode_table() -> &'static [f32; 256] {
+    static TABLE: std::sync::OnceLock<[f32; 256]> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        std::array::from_fn(|b| {
+            let c = b as f64 / 255.0;
+            let l = if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
+            l as f32
+        })
+    })
+}
+
+/// The sRGB transfer function's encoding: linear light (clamped to 0..1) → the byte, rounded to
+/// nearest; every byte survives [`srgb_decode_table`] and back.
+pub fn srgb_encode(l: f32) -> u8 {
+    let l = l.clamp(0.0, 1.0) as f64;
+    let c = if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
+    (c * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+#[cfg(test)]
+mod srgb_tests {
+    use super::*;
+
+    #[test]
+    fn every_byte_survives_decoding_and_encoding() {
+        let decode = srgb_decode_table();
+        for b in 0..=255u8 {
+            assert_eq!(srgb_encode(decode[b as usize]), b);
+        }
+        assert_eq!((srgb_encode(0.0), srgb_encode(1.0), srgb_encode(0.5)), (0, 255, 188));
+    }
+}

@@ -27,9 +27,9 @@
 //! detail within a quarter of the bias (the clusters that entered and left its light-view set
 //! since it was drawn moved the surface by less, [`tw_runtime::shadow::lod_within_bias`]), steps
 //! 3 and the read-back of 4 are skipped for it: the map's layer and its depth pyramid serve
-//! again. On the 10^8 plant's walk most frames draw no layer at all; a cascade is drawn again
+//! again. On the 10^8 plant's walk three layers in four are reused; a cascade is drawn again
 //! when the eye has moved a few percent of its width or the level of detail of its casters has
-//! changed.
+//! changed (on a fly-over, every frame).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;

@@ -18,8 +18,7 @@
 //! [`Image::opaque`] does, decoded to linear light, averaged, and encoded back: averaging
 //! encoded bytes would darken every edge between a light and a dark surface.
 
-use std::sync::OnceLock;
-
+use tw_core::color::{srgb_decode_table, srgb_encode};
 use tw_gpu::{wgpu, GpuError, Image, Renderer, Target, BACKGROUND};
 use tw_runtime::Camera;
 
@@ -81,7 +80,7 @@ pub fn box_filter(image: &Image, side: u32) -> Result<Image, GpuError> {
 /// of them) to `out`: `width / side` pixels for every `side` rows.
 fn filter_rows(rows: &[u8], width: u32, side: u32, out: &mut Vec<u8>) {
     let (width, side) = (width as usize, side as usize);
-    let decode = srgb_to_linear_table();
+    let decode = srgb_decode_table();
     let row_bytes = width * 4;
     let count = (side * side) as f32;
     let mut sums = vec![[0f32; 3]; width / side];
@@ -96,7 +95,7 @@ fn filter_rows(rows: &[u8], width: u32, side: u32, out: &mut Vec<u8>) {
             }
         }
         for s in &sums {
-            out.extend(s.map(|v| linear_to_srgb(v / count)));
+            out.extend(s.map(|v| srgb_encode(v / count)));
             out.push(255);
         }
     }
@@ -107,25 +106,6 @@ fn filter_rows(rows: &[u8], width: u32, side: u32, out: &mut Vec<u8>) {
 fn over_background(p: &[u8], c: usize) -> u8 {
     let rest = 255 - p[3] as u32;
     (p[c] as u32 + (rest * BACKGROUND[c] as u32 + 127) / 255).min(255) as u8
-}
-
-/// sRGB-encoded byte → linear light (0..1), the IEC 61966-2-1 curve.
-fn srgb_to_linear_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|i| {
-            let v = i as f64 / 255.0;
-            let l = if v <= 0.04045 { v / 12.92 } else { ((v + 0.055) / 1.055).powf(2.4) };
-            l as f32
-        })
-    })
-}
-
-/// Linear light (0..1) → sRGB-encoded byte, rounded to nearest.
-fn linear_to_srgb(l: f32) -> u8 {
-    let l = l.clamp(0.0, 1.0) as f64;
-    let v = if l <= 0.0031308 { 12.92 * l } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
-    (v * 255.0).round().clamp(0.0, 255.0) as u8
 }
 
 impl Walkthrough {
@@ -220,43 +200,13 @@ fn read_filtered(renderer: &Renderer, texture: &wgpu::Texture, side: u32) -> Res
         );
         queue.submit([encoder.finish()]);
         rows.clear();
-        map_rows(device, &buffer, pitch as usize, row as usize, n as usize, &mut rows)?;
+        tw_gpu::map_read(device, &buffer, pitch as usize, n as usize, |r| {
+            rows.extend_from_slice(&r[..row as usize])
+        })?;
         filter_rows(&rows, width, side, &mut out);
         y += n;
     }
     Ok(Image { width: width / side, height: height / side, rgba: out })
-}
-
-/// Waits for `buffer`, appends its first `count` rows (`row` bytes of each `pitch`) to `out`,
-/// and unmaps it.
-fn map_rows(
-    device: &wgpu::Device,
-    buffer: &wgpu::Buffer,
-    pitch: usize,
-    row: usize,
-    count: usize,
-    out: &mut Vec<u8>,
-) -> Result<(), GpuError> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
-    rx.recv()
-        .map_err(|_| GpuError::Gpu("the supersampled reference was never mapped".into()))?
-        .map_err(|e| GpuError::Gpu(format!("mapping the supersampled reference: {e}")))?;
-    {
-        let view = buffer
-            .get_mapped_range(..)
-            .map_err(|e| GpuError::Gpu(format!("reading the supersampled reference: {e}")))?;
-        for r in view.chunks(pitch).take(count) {
-            out.extend_from_slice(&r[..row]);
-        }
-    }
-    buffer.unmap();
-    Ok(())
 }
 
 #[cfg(test)]
@@ -277,9 +227,9 @@ mod tests {
 
     #[test]
     fn the_srgb_curve_round_trips_every_byte() {
-        let decode = srgb_to_linear_table();
+        let decode = srgb_decode_table();
         for v in 0..=255u8 {
-            assert_eq!(linear_to_srgb(decode[v as usize]), v);
+            assert_eq!(srgb_encode(decode[v as usize]), v);
         }
     }
 
@@ -302,10 +252,10 @@ mod tests {
         let out = box_filter(&image(4, 2, &px), 2).unwrap();
         assert_eq!((out.width, out.height), (2, 1));
         assert_eq!(&out.rgba[..4], &[200, 100, 50, 255]);
-        let decode = srgb_to_linear_table();
+        let decode = srgb_decode_table();
         for ch in 0..3 {
             let mean = (3.0 * decode[c[ch] as usize] + decode[BACKGROUND[ch] as usize]) / 4.0;
-            assert_eq!(out.rgba[4 + ch], linear_to_srgb(mean), "channel {ch}");
+            assert_eq!(out.rgba[4 + ch], srgb_encode(mean), "channel {ch}");
         }
     }
 

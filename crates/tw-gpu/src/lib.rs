@@ -83,6 +83,7 @@ pub use ids::{ClusterVisibility, Item, ItemBuffer, VisibleSet};
 pub use image::Image;
 pub use msaa::SUPPORTED_SAMPLES;
 pub use pool::{PoolStats, MIN_BUDGET};
+pub use readback::map_read;
 pub use renderer::{FrameStats, Renderer, Target, MAX_RUNS};
 pub use shadow::MAX_SHADOW_LAYERS;
 pub use tw_runtime::SelectionPages;

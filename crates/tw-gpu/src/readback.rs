@@ -113,29 +113,42 @@ impl Readback {
         encoder: wgpu::CommandEncoder,
         pitch: usize,
         rows: usize,
-        mut row: impl FnMut(&[u8]),
+        row: impl FnMut(&[u8]),
     ) -> Result<(), GpuError> {
         queue.submit([encoder.finish()]);
         let buffer = self.buffer.as_ref().ok_or_else(|| GpuError::Gpu("nothing to read back".into()))?;
-        let (tx, rx) = std::sync::mpsc::channel();
-        buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-            let _ = tx.send(r);
-        });
-        device
-            .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
-        rx.recv()
-            .map_err(|_| GpuError::Gpu("the readback was never mapped".into()))?
-            .map_err(|e| GpuError::Gpu(format!("mapping the readback buffer: {e}")))?;
-        {
-            let view = buffer
-                .get_mapped_range(..)
-                .map_err(|e| GpuError::Gpu(format!("reading the readback buffer: {e}")))?;
-            for r in view.chunks(pitch).take(rows) {
-                row(r);
-            }
-        }
-        buffer.unmap();
-        Ok(())
+        map_read(device, buffer, pitch, rows, row)
     }
+}
+
+/// Waits for the GPU, maps `buffer` and hands each of its first `rows` rows (`pitch` bytes, the
+/// last maybe shorter) to `row`, then unmaps it: the end of every read-back, the renderer's and
+/// its users' (tw-frame's supersampled reference reads its strips so).
+pub fn map_read(
+    device: &wgpu::Device,
+    buffer: &wgpu::Buffer,
+    pitch: usize,
+    rows: usize,
+    mut row: impl FnMut(&[u8]),
+) -> Result<(), GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Gpu(format!("waiting for the GPU: {e}")))?;
+    rx.recv()
+        .map_err(|_| GpuError::Gpu("the read-back buffer was never mapped".into()))?
+        .map_err(|e| GpuError::Gpu(format!("mapping the read-back buffer: {e}")))?;
+    {
+        let view = buffer
+            .get_mapped_range(..)
+            .map_err(|e| GpuError::Gpu(format!("reading the read-back buffer: {e}")))?;
+        for r in view.chunks(pitch).take(rows) {
+            row(r);
+        }
+    }
+    buffer.unmap();
+    Ok(())
 }

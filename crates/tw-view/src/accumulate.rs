@@ -47,16 +47,9 @@ fn radical_inverse(base: u32, mut i: u32) -> f32 {
     value as f32
 }
 
-/// The sRGB transfer function's decoding, per byte.
+/// The sRGB decoding, per byte (tw-core's).
 fn decode_table() -> &'static [f32; 256] {
-    static TABLE: OnceLock<[f32; 256]> = OnceLock::new();
-    TABLE.get_or_init(|| {
-        std::array::from_fn(|b| {
-            let c = b as f64 / 255.0;
-            let l = if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) };
-            l as f32
-        })
-    })
+    tw_core::color::srgb_decode_table()
 }
 
 /// Steps of [`encode`]'s table: fine enough that every byte survives decoding and encoding
@@ -68,13 +61,7 @@ const ENCODE_STEPS: usize = 1 << 16;
 fn encode(l: f32) -> u8 {
     static TABLE: OnceLock<Vec<u8>> = OnceLock::new();
     let table = TABLE.get_or_init(|| {
-        (0..ENCODE_STEPS)
-            .map(|i| {
-                let l = i as f64 / (ENCODE_STEPS - 1) as f64;
-                let c = if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
-                (c * 255.0).round().clamp(0.0, 255.0) as u8
-            })
-            .collect()
+        (0..ENCODE_STEPS).map(|i| tw_core::color::srgb_encode(i as f32 / (ENCODE_STEPS - 1) as f32)).collect()
     });
     let i = (l.clamp(0.0, 1.0) * (ENCODE_STEPS - 1) as f32).round() as usize;
     table[i.min(ENCODE_STEPS - 1)]

@@ -527,7 +527,7 @@ mod cascade_count_tests {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
     fn eye() -> Camera {
@@ -536,7 +536,7 @@ mod tests {
     }
 
     /// A grid of floor tiles and a few boxes standing on it.
-    fn receivers() -> Vec<(Vec3, Vec3)> {
+    pub(crate) fn receivers() -> Vec<(Vec3, Vec3)> {
         let mut v = Vec::new();
         for x in -20..20 {
             for y in -20..20 {
@@ -549,7 +549,7 @@ mod tests {
         v
     }
 
-    fn scene() -> (Vec3, Vec3) {
+    pub(crate) fn scene() -> (Vec3, Vec3) {
         (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 8.0))
     }
 

@@ -108,27 +108,11 @@ mod tests {
     use super::*;
     use crate::camera::Camera;
     use crate::shadow::fit::refit_layers;
+    use crate::shadow::fit::tests::{receivers, scene};
     use crate::shadow::{fit_layers, ShadowOptions};
 
     fn eye(x: f32) -> Camera {
         Camera::new(Vec3::new(x, -30.0, 2.0), Vec3::new(x, 0.0, 1.5), Vec3::Z, 1.0, 0.1, 500.0).unwrap()
-    }
-
-    /// Floor tiles and a few boxes.
-    fn receivers() -> Vec<(Vec3, Vec3)> {
-        let mut v = Vec::new();
-        for x in -20..20 {
-            for y in -20..20 {
-                let lo = Vec3::new(x as f32 * 2.0, y as f32 * 2.0, 0.0);
-                v.push((lo, lo + Vec3::new(2.0, 2.0, 0.1)));
-            }
-        }
-        v.push((Vec3::new(-3.0, -3.0, 0.0), Vec3::new(3.0, 3.0, 8.0)));
-        v
-    }
-
-    fn scene() -> (Vec3, Vec3) {
-        (Vec3::new(-40.0, -40.0, 0.0), Vec3::new(40.0, 40.0, 8.0))
     }
 
     /// Whether the eye sees `p` (the points the layers must serve).
