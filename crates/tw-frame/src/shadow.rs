@@ -99,6 +99,8 @@ pub struct ShadowInfo {
 /// What the shadow stage keeps from frame to frame (module documentation, "Reusing layers").
 #[derive(Default)]
 pub(crate) struct ShadowCache {
+    /// The map's size and layer count: a map set up anew holds nothing.
+    map: Option<(u32, u32)>,
     /// The layers as the map holds them (`None` before the first frame and after a reset).
     shadows: Option<Shadows>,
     /// Per layer of `shadows`: what the map's layer holds.
@@ -153,6 +155,10 @@ pub(crate) fn prepare(
         .iter()
         .map(|(k, _)| bounds(k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step)))
         .collect();
+    let map = (settings.options.size.max(1), map_layers(&settings.light, &settings.options));
+    if cache.map != Some(map) {
+        *cache = ShadowCache { map: Some(map), ..Default::default() };
+    }
     let (light, aspect, scene) = (&settings.light, aspect(options.viewport), scene_box(&header));
     let (shadows, reusable) = match &cache.shadows {
         Some(previous) => refit_layers(light, camera, aspect, &boxes, scene, &settings.options, previous),
@@ -166,11 +172,11 @@ pub(crate) fn prepare(
     info.layers = shadows.layers.len() as u32;
     renderer.set_shadows(None);
     if shadows.layers.is_empty() {
-        *cache = ShadowCache::default();
+        *cache = ShadowCache { map: cache.map, ..Default::default() };
         info.total = start.elapsed();
         return Ok((info, shadows));
     }
-    renderer.set_shadow_map(shadows.size, map_layers(&settings.light, &settings.options))?;
+    renderer.set_shadow_map(map.0, map.1)?;
     cache.layers.resize_with(shadows.layers.len(), LayerState::default);
     let mut light_sets: Vec<LightSet> = Vec::with_capacity(shadows.layers.len());
     for (i, layer) in shadows.layers.iter().enumerate() {

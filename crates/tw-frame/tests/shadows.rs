@@ -166,4 +166,11 @@ fn reused_layers_give_the_shadows_of_fresh_ones() {
     let (again, info) = reusing.frame(&views[5], &settings).unwrap();
     assert_eq!(info.shadow.layers_reused, info.shadow.layers);
     assert!(first.rgba == again.rgba, "a still camera's image changed with reused layers");
+    // Another cap on the cascades sets the map up anew: nothing in it can be reused.
+    let mut more = settings;
+    if let Some(s) = more.shadows.as_mut() {
+        s.options.cascades = 4;
+    }
+    let (_, info) = reusing.frame(&views[5], &more).unwrap();
+    assert_eq!(info.shadow.layers_reused, 0, "layers reused from a map set up anew");
 }
