@@ -251,18 +251,27 @@ fn still_serves(
 ) -> bool {
     let keys: HashSet<ClusterRef> = set.iter().map(|(k, _)| *k).collect();
     let (mut entered, mut left) = (0f32, 0f32);
+    let (mut entering, mut leaving) = (0, 0);
     let mut changed = Vec::new();
     for ((k, c), ((lo, hi), _)) in set.iter().zip(set_boxes) {
         if !drawn.contains_key(k) {
             entered = entered.max(c.self_error);
+            entering += 1;
             changed.push((*lo + *hi) * 0.5);
         }
     }
     for (k, &(error, centre)) in drawn {
         if !keys.contains(k) {
             left = left.max(error);
+            leaving += 1;
             changed.push(centre);
         }
+    }
+    // The eye's cut covers the scene once at some level, so within a layer's unchanged frustum
+    // clusters enter only as others leave (a level for another). One without the other is a
+    // caster that came or went (a page that arrived with nothing drawn for it before): drawn.
+    if (entering == 0) != (leaving == 0) {
+        return false;
     }
     // Where the texels are narrowest: for a point light, nearest the light.
     let at = match shadows.light {
@@ -453,4 +462,55 @@ fn scene_box(header: &tw_store::Header) -> (Vec3, Vec3) {
 
 fn triangles(clusters: &[(ClusterRef, &PageCluster)]) -> u64 {
     clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn cluster(error: f32) -> PageCluster {
+        PageCluster {
+            positions: vec![[0, 0, 0], [1, 0, 0], [0, 1, 0]],
+            indices: vec![0, 1, 2],
+            objects: vec![0],
+            self_error: error,
+            self_sphere: [0.0, 0.0, 0.0, 1.0],
+            group: 0,
+            level: 0,
+        }
+    }
+
+    fn key(page: u32) -> ClusterRef {
+        ClusterRef { page, index_in_page: 0, group: 0 }
+    }
+
+    /// A sun layer with texels of 1/1024 scene units over a 2-unit window.
+    fn shadows() -> Shadows {
+        let layer = tw_runtime::ShadowLayer {
+            view_proj: glam::Mat4::from_scale(Vec3::new(1.0, 1.0, 0.01)),
+            split: [0.0, f32::MAX],
+        };
+        Shadows { light: Light::Sun { towards: Vec3::Z }, layers: vec![layer], size: 1024, bias: 1e-3 }
+    }
+
+    #[test]
+    fn a_layer_serves_while_levels_swap_within_the_slack_and_not_when_a_caster_comes_or_goes() {
+        let s = shadows();
+        let texel = tw_runtime::shadow::texel_size(&s, 0).unwrap();
+        let small = 0.1 * tw_runtime::shadow::reuse::LOD_SHARE * 1.5 * texel;
+        let (a, b, c) = (cluster(small), cluster(0.0), cluster(0.0));
+        let boxes = |n: usize| vec![((Vec3::ZERO, Vec3::ONE), 1u64); n];
+        let drawn: HashMap<ClusterRef, (f32, Vec3)> =
+            [(key(1), (small, Vec3::ZERO)), (key(2), (0.0, Vec3::ZERO))].into_iter().collect();
+        // The same set: serves.
+        assert!(still_serves(&s, 0, 1.5, &[(key(1), &a), (key(2), &b)], &boxes(2), &drawn));
+        // Cluster 1 swapped for its children (3): the surface moved by at most `small`.
+        assert!(still_serves(&s, 0, 1.5, &[(key(3), &c), (key(2), &b)], &boxes(2), &drawn));
+        // A swap by more than the slack: drawn again.
+        let coarse = cluster(10.0 * texel);
+        assert!(!still_serves(&s, 0, 1.5, &[(key(4), &coarse), (key(2), &b)], &boxes(2), &drawn));
+        // A caster of error 0 appears with nothing leaving, or one goes: drawn again.
+        assert!(!still_serves(&s, 0, 1.5, &[(key(1), &a), (key(2), &b), (key(3), &c)], &boxes(3), &drawn));
+        assert!(!still_serves(&s, 0, 1.5, &[(key(1), &a)], &boxes(1), &drawn));
+    }
 }
