@@ -40,27 +40,10 @@ pub fn read_texture(
         wgpu::Extent3d { width: w, height: h, depth_or_array_layers: 1 },
     );
     queue.submit([encoder.finish()]);
-    let (tx, rx) = std::sync::mpsc::channel();
-    buffer.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| ViewError::Gpu(format!("waiting for the screenshot: {e}")))?;
-    rx.recv()
-        .map_err(|_| ViewError::Gpu("the screenshot buffer was never mapped".into()))?
-        .map_err(|e| ViewError::Gpu(format!("mapping the screenshot buffer: {e}")))?;
     let row = w as usize * 4;
     let mut rgba = Vec::with_capacity(row * h as usize);
-    {
-        let view = buffer
-            .get_mapped_range(..)
-            .map_err(|e| ViewError::Gpu(format!("reading the screenshot: {e}")))?;
-        for r in view.chunks(padded as usize).take(h as usize) {
-            rgba.extend_from_slice(&r[..row]);
-        }
-    }
-    buffer.unmap();
+    tw_gpu::map_read(device, &buffer, padded as usize, h as usize, |r| rgba.extend_from_slice(&r[..row]))
+        .map_err(|e| ViewError::Gpu(format!("reading the screenshot: {e}")))?;
     if matches!(texture.format(), wgpu::TextureFormat::Bgra8Unorm | wgpu::TextureFormat::Bgra8UnormSrgb) {
         for p in rgba.chunks_exact_mut(4) {
             p.swap(0, 2);
