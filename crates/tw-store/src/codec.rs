@@ -342,6 +342,9 @@ fn packed_len(count: usize, bits_each: u32) -> usize {
     (count * bits_each as usize).div_ceil(8)
 }
 
+/// Appends the encoding of `c` (in canonical form) to `out`: the header, the positions in the
+/// smallest of their encodings, the triangles, the object ids. `rel` and `objects` are the
+/// thread's reused buffers ([`Scratch`]).
 fn encode_cluster(
     c: ClusterParts<'_>,
     out: &mut Vec<u8>,
@@ -349,130 +352,205 @@ fn encode_cluster(
     rel: &mut Vec<[u32; 3]>,
     objects: &mut Vec<u32>,
 ) -> Result<(), String> {
-    let t = c.triangle_count();
-    let v = c.positions.len();
+    let plan = PositionPlan::new(c, force, rel)?;
+    let multi = distinct_objects(c.objects, objects);
+    put_cluster_header(c, &plan, multi, out);
+    plan.put_positions(c.positions, rel, out)?;
+    put_triangles(c.indices, out)?;
+    put_objects(c.objects, objects, multi, out);
+    Ok(())
+}
+
+/// How a cluster's positions will be written: the encoding picked and what it needs.
+struct PositionPlan {
+    mode: PositionMode,
+    /// The origin stored in the header: the first vertex for deltas, else the minimum corner.
+    origin: [u32; 3],
+    /// Bits per axis of the offsets from the minimum corner ([`PositionMode::Packed`]).
+    packed_w: [u32; 3],
+    /// Bits per axis of the zigzag deltas ([`PositionMode::Delta`]).
+    delta_w: [u32; 3],
+    /// meshoptimizer's encoding of the offsets, when it was a candidate.
+    meshopt_bytes: Option<Vec<u8>>,
+}
+
+impl PositionPlan {
+    /// Sizes every candidate position encoding (or only the forced one) and picks the smallest
+    /// (ties: the lower mode number). Leaves the offsets from the minimum corner in `rel`.
+    fn new(
+        c: ClusterParts<'_>,
+        force: Option<PositionMode>,
+        rel: &mut Vec<[u32; 3]>,
+    ) -> Result<PositionPlan, String> {
+        let v = c.positions.len();
+        let (min, max) = grid_bounds(c.positions);
+        let packed_w: [u32; 3] = std::array::from_fn(|a| bits32(max[a] - min[a]));
+        let packed_size = 3 + packed_len(v, packed_w.iter().sum());
+        let delta_w = delta_widths(c.positions);
+        let delta_size = 3 + packed_len(v.saturating_sub(1), delta_w.iter().sum());
+        rel.clear();
+        rel.extend(c.positions.iter().map(|p| [p[0] - min[0], p[1] - min[1], p[2] - min[2]]));
+        // Compression level 0 of the vertex codec: on the 10^7-triangle plant it cut the build's CPU
+        // time by ~10% (20.9 -> 18.7 user-seconds) for a store 1.3% larger than level 2 (115.2 vs
+        // 113.8 MB); the decoder reads every level.
+        let meshopt_bytes = match force {
+            None | Some(PositionMode::Meshopt) if v > 0 => Some(
+                meshopt::encode_vertex_buffer_level(rel, 0, Some(1))
+                    .map_err(|e| format!("meshopt: {e:?}"))?,
+            ),
+            _ => None,
+        };
+        let meshopt_size = meshopt_bytes.as_ref().map(|b| varint_len(b.len() as u32) + b.len());
+        let mode = force.unwrap_or_else(|| smallest_mode(v, packed_size, delta_size, meshopt_size));
+        let mode = if v == 0 { PositionMode::Packed } else { mode };
+        let origin = if mode == PositionMode::Delta { c.positions[0] } else { min };
+        Ok(PositionPlan { mode, origin, packed_w, delta_w, meshopt_bytes })
+    }
+
+    /// Appends the position block in the planned encoding; `rel` holds the offsets from the
+    /// minimum corner.
+    fn put_positions(
+        self,
+        positions: &[[u32; 3]],
+        rel: &[[u32; 3]],
+        out: &mut Vec<u8>,
+    ) -> Result<(), String> {
+        let PositionPlan { mode, packed_w, delta_w, meshopt_bytes, .. } = self;
+        match mode {
+            PositionMode::Packed => {
+                out.extend(packed_w.iter().map(|&w| w as u8));
+                let mut bw = BitWriter::new(out);
+                for p in rel.iter() {
+                    for a in 0..3 {
+                        bw.put(p[a] as u64, packed_w[a]);
+                    }
+                }
+                bw.finish();
+            }
+            PositionMode::Delta => {
+                out.extend(delta_w.iter().map(|&w| w as u8));
+                let mut bw = BitWriter::new(out);
+                for w in positions.windows(2) {
+                    for a in 0..3 {
+                        bw.put(zigzag(w[1][a] as i64 - w[0][a] as i64), delta_w[a]);
+                    }
+                }
+                bw.finish();
+            }
+            PositionMode::Meshopt => {
+                let b = meshopt_bytes.ok_or("meshopt vertex encoding missing")?;
+                put_varint(out, b.len() as u32);
+                out.extend_from_slice(&b);
+            }
+        }
+        Ok(())
+    }
+}
+
+/// The inclusive grid box of `positions`; all zeros for no positions.
+fn grid_bounds(positions: &[[u32; 3]]) -> ([u32; 3], [u32; 3]) {
     let mut min = [u32::MAX; 3];
     let mut max = [0u32; 3];
-    for p in c.positions {
+    for p in positions {
         for a in 0..3 {
             min[a] = min[a].min(p[a]);
             max[a] = max[a].max(p[a]);
         }
     }
-    if v == 0 {
+    if positions.is_empty() {
         min = [0; 3];
     }
+    (min, max)
+}
 
-    // Candidate position encodings; the smallest wins (ties: the lower mode number).
-    let packed_w: [u32; 3] = std::array::from_fn(|a| bits32(max[a] - min[a]));
-    let packed_size = 3 + packed_len(v, packed_w.iter().sum());
+/// Bits per axis of the zigzag deltas from each vertex to the next.
+fn delta_widths(positions: &[[u32; 3]]) -> [u32; 3] {
     let mut delta_w = [0u32; 3];
-    for w in c.positions.windows(2) {
+    for w in positions.windows(2) {
         for a in 0..3 {
             delta_w[a] = delta_w[a].max(bits64(zigzag(w[1][a] as i64 - w[0][a] as i64)));
         }
     }
-    let delta_size = 3 + packed_len(v.saturating_sub(1), delta_w.iter().sum());
-    rel.clear();
-    rel.extend(c.positions.iter().map(|p| [p[0] - min[0], p[1] - min[1], p[2] - min[2]]));
-    // Compression level 0 of the vertex codec: on the 10^7-triangle plant it cut the build's CPU
-    // time by ~10% (20.9 -> 18.7 user-seconds) for a store 1.3% larger than level 2 (115.2 vs
-    // 113.8 MB); the decoder reads every level.
-    let meshopt_bytes = match force {
-        None | Some(PositionMode::Meshopt) if v > 0 => Some(
-            meshopt::encode_vertex_buffer_level(rel, 0, Some(1)).map_err(|e| format!("meshopt: {e:?}"))?,
-        ),
-        _ => None,
-    };
-    let meshopt_size = meshopt_bytes.as_ref().map(|b| varint_len(b.len() as u32) + b.len());
-    let mode = force.unwrap_or_else(|| {
-        let mut best = (packed_size, PositionMode::Packed);
-        if delta_size < best.0 && v > 0 {
-            best = (delta_size, PositionMode::Delta);
-        }
-        if let Some(m) = meshopt_size.filter(|&m| m < best.0) {
-            best = (m, PositionMode::Meshopt);
-        }
-        best.1
-    });
-    let mode = if v == 0 { PositionMode::Packed } else { mode };
+    delta_w
+}
 
-    objects.clear();
-    objects.extend_from_slice(c.objects);
-    objects.sort_unstable();
-    objects.dedup();
-    let multi = objects.len() > 1;
+/// The position encoding with the fewest bytes for `v` vertices; ties go to the lower mode
+/// number.
+fn smallest_mode(
+    v: usize,
+    packed_size: usize,
+    delta_size: usize,
+    meshopt_size: Option<usize>,
+) -> PositionMode {
+    let mut best = (packed_size, PositionMode::Packed);
+    if delta_size < best.0 && v > 0 {
+        best = (delta_size, PositionMode::Delta);
+    }
+    if let Some(m) = meshopt_size.filter(|&m| m < best.0) {
+        best = (m, PositionMode::Meshopt);
+    }
+    best.1
+}
 
-    out.push(t as u8);
-    out.push(v as u8);
+/// Replaces `distinct` with the sorted distinct ids of `objects`; true when there are several.
+fn distinct_objects(objects: &[u32], distinct: &mut Vec<u32>) -> bool {
+    distinct.clear();
+    distinct.extend_from_slice(objects);
+    distinct.sort_unstable();
+    distinct.dedup();
+    distinct.len() > 1
+}
+
+/// Appends the fixed [`CLUSTER_HEADER_LEN`]-byte header: counts, level, modes, group, self
+/// error and sphere, position origin.
+fn put_cluster_header(c: ClusterParts<'_>, plan: &PositionPlan, multi: bool, out: &mut Vec<u8>) {
+    out.push(c.triangle_count() as u8);
+    out.push(c.positions.len() as u8);
     out.push(c.level);
-    out.push(mode as u8 | if multi { MULTI_OBJECT } else { 0 });
+    out.push(plan.mode as u8 | if multi { MULTI_OBJECT } else { 0 });
     out.extend_from_slice(&c.group.to_le_bytes());
     out.extend_from_slice(&c.self_error.to_le_bytes());
     for x in c.self_sphere {
         out.extend_from_slice(&x.to_le_bytes());
     }
-    let origin = if mode == PositionMode::Delta { c.positions[0] } else { min };
-    for x in origin {
+    for x in plan.origin {
         out.extend_from_slice(&x.to_le_bytes());
     }
+}
 
-    match mode {
-        PositionMode::Packed => {
-            out.extend(packed_w.iter().map(|&w| w as u8));
-            let mut bw = BitWriter::new(out);
-            for p in rel.iter() {
-                for a in 0..3 {
-                    bw.put(p[a] as u64, packed_w[a]);
-                }
-            }
-            bw.finish();
-        }
-        PositionMode::Delta => {
-            out.extend(delta_w.iter().map(|&w| w as u8));
-            let mut bw = BitWriter::new(out);
-            for w in c.positions.windows(2) {
-                for a in 0..3 {
-                    bw.put(zigzag(w[1][a] as i64 - w[0][a] as i64), delta_w[a]);
-                }
-            }
-            bw.finish();
-        }
-        PositionMode::Meshopt => {
-            let b = meshopt_bytes.ok_or("meshopt vertex encoding missing")?;
-            put_varint(out, b.len() as u32);
-            out.extend_from_slice(&b);
-        }
-    }
-
-    let tri = meshopt::encode_meshlet(meshopt::Meshlet { vertices: &[], triangles: c.indices })
+/// Appends the triangles through meshoptimizer's meshlet codec, after their length.
+fn put_triangles(indices: &[u8], out: &mut Vec<u8>) -> Result<(), String> {
+    let tri = meshopt::encode_meshlet(meshopt::Meshlet { vertices: &[], triangles: indices })
         .map_err(|e| format!("meshopt: {e:?}"))?;
     if tri.len() < 16 {
         return Err(format!("meshlet codec produced {} bytes, expected at least 16", tri.len()));
     }
     put_varint(out, tri.len() as u32);
     out.extend_from_slice(&tri);
-
-    if multi {
-        put_varint(out, objects.len() as u32);
-        put_varint(out, objects[0]);
-        for w in objects.windows(2) {
-            put_varint(out, w[1] - w[0] - 1);
-        }
-        let width = bits32(objects.len() as u32 - 1);
-        let mut bw = BitWriter::new(out);
-        for o in c.objects {
-            // `objects` holds every id of `c.objects`, so the search succeeds.
-            let k = objects.binary_search(o).unwrap_or(0);
-            bw.put(k as u64, width);
-        }
-        bw.finish();
-    } else {
-        put_varint(out, objects[0]);
-    }
     Ok(())
 }
 
+/// Appends the object ids: one varint for a single object, else the sorted id table (as gaps)
+/// and a bit-packed slot per triangle. `distinct` is from [`distinct_objects`].
+fn put_objects(objects: &[u32], distinct: &[u32], multi: bool, out: &mut Vec<u8>) {
+    if !multi {
+        put_varint(out, distinct[0]);
+        return;
+    }
+    put_varint(out, distinct.len() as u32);
+    put_varint(out, distinct[0]);
+    for w in distinct.windows(2) {
+        put_varint(out, w[1] - w[0] - 1);
+    }
+    let width = bits32(distinct.len() as u32 - 1);
+    let mut bw = BitWriter::new(out);
+    for o in objects {
+        // `distinct` holds every id of `objects`, so the search succeeds.
+        let k = distinct.binary_search(o).unwrap_or(0);
+        bw.put(k as u64, width);
+    }
+    bw.finish();
+}
 /// Decodes a page of `cluster_count` clusters. `bytes` must be exactly the page's bytes.
 pub fn decode_page(bytes: &[u8], cluster_count: usize) -> Result<Vec<PageCluster>, CodecError> {
     // Each cluster takes at least MIN_CLUSTER_BYTES: this bounds the allocation.
@@ -543,80 +621,146 @@ impl<'a> Cursor<'a> {
     }
 }
 
+/// Decodes the cluster that starts at byte `start` of the page; returns it and the byte after
+/// it. Every step checks what it reads before it uses it.
 fn decode_cluster(bytes: &[u8], start: usize) -> Result<(PageCluster, usize), CodecError> {
     let mut r = Cursor { bytes, pos: start };
-    let t = r.u8()? as usize;
-    let v = r.u8()? as usize;
-    if t == 0 || t > MAX_TRIANGLES {
-        return Err(CodecError::new(start, format!("{t} triangles, expected 1..={MAX_TRIANGLES}")));
-    }
-    let level = r.u8()?;
-    let modes = r.u8()?;
-    if modes & !(POS_MODE_MASK | MULTI_OBJECT) != 0 {
-        return Err(CodecError::new(start + 3, format!("unknown mode bits {modes:#x}")));
-    }
-    let group = r.u32()?;
-    let self_error = r.f32()?;
-    let self_sphere = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
-    if !(self_error.is_finite() && self_error >= 0.0) {
-        return Err(CodecError::new(start + 8, format!("self error {self_error} is not finite and ≥ 0")));
-    }
-    if self_sphere.iter().any(|x| !x.is_finite()) || self_sphere[3] < 0.0 {
-        return Err(CodecError::new(start + 12, format!("invalid self sphere {self_sphere:?}")));
-    }
-    let origin = [r.u32()?, r.u32()?, r.u32()?];
+    let head = ClusterHead::read(&mut r)?;
+    let positions = decode_positions(&mut r, &head)?;
+    let indices = decode_triangles(&mut r, head.triangles, head.vertices)?;
+    let objects = decode_objects(&mut r, head.modes & MULTI_OBJECT != 0, head.triangles)?;
+    let ClusterHead { level, group, self_error, self_sphere, .. } = head;
+    Ok((PageCluster { positions, indices, objects, self_error, self_sphere, group, level }, r.pos))
+}
 
-    let pos_at = r.pos;
+/// The fixed header of an encoded cluster, checked.
+struct ClusterHead {
+    /// Byte of the page where the cluster starts (error offsets are relative to it).
+    start: usize,
+    triangles: usize,
+    vertices: usize,
+    level: u8,
+    /// The position mode and the [`MULTI_OBJECT`] bit.
+    modes: u8,
+    group: u32,
+    self_error: f32,
+    self_sphere: [f32; 4],
+    origin: [u32; 3],
+}
+
+impl ClusterHead {
+    /// Reads the header at the cursor: counts within the codec's limits, known mode bits, a
+    /// finite self error ≥ 0 and a valid self sphere.
+    #[inline]
+    fn read(r: &mut Cursor<'_>) -> Result<ClusterHead, CodecError> {
+        let start = r.pos;
+        let t = r.u8()? as usize;
+        let v = r.u8()? as usize;
+        if t == 0 || t > MAX_TRIANGLES {
+            return Err(CodecError::new(start, format!("{t} triangles, expected 1..={MAX_TRIANGLES}")));
+        }
+        let level = r.u8()?;
+        let modes = r.u8()?;
+        if modes & !(POS_MODE_MASK | MULTI_OBJECT) != 0 {
+            return Err(CodecError::new(start + 3, format!("unknown mode bits {modes:#x}")));
+        }
+        let group = r.u32()?;
+        let self_error = r.f32()?;
+        let self_sphere = [r.f32()?, r.f32()?, r.f32()?, r.f32()?];
+        if !(self_error.is_finite() && self_error >= 0.0) {
+            return Err(CodecError::new(start + 8, format!("self error {self_error} is not finite and ≥ 0")));
+        }
+        if self_sphere.iter().any(|x| !x.is_finite()) || self_sphere[3] < 0.0 {
+            return Err(CodecError::new(start + 12, format!("invalid self sphere {self_sphere:?}")));
+        }
+        let origin = [r.u32()?, r.u32()?, r.u32()?];
+        let (triangles, vertices) = (t, v);
+        Ok(ClusterHead { start, triangles, vertices, level, modes, group, self_error, self_sphere, origin })
+    }
+}
+
+/// The position block, in the encoding the header's mode names.
+#[inline]
+fn decode_positions(r: &mut Cursor<'_>, head: &ClusterHead) -> Result<Vec<[u32; 3]>, CodecError> {
+    match head.modes & POS_MODE_MASK {
+        0 => decode_bit_packed(r, head, false),
+        1 => decode_bit_packed(r, head, true),
+        2 => decode_vertex_codec(r, head),
+        m => Err(CodecError::new(head.start + 3, format!("unknown position mode {m}"))),
+    }
+}
+
+/// Positions bit-packed as offsets from the origin ([`PositionMode::Packed`]) or, with `delta`,
+/// as zigzag deltas from the previous vertex after the origin as the first vertex
+/// ([`PositionMode::Delta`]).
+#[inline]
+fn decode_bit_packed(
+    r: &mut Cursor<'_>,
+    head: &ClusterHead,
+    delta: bool,
+) -> Result<Vec<[u32; 3]>, CodecError> {
+    let (v, origin, pos_at) = (head.vertices, head.origin, r.pos);
     let mut positions = Vec::with_capacity(v);
-    let offset_err = || CodecError::new(pos_at, "vertex position outside the u32 grid");
-    match modes & POS_MODE_MASK {
-        0 | 1 => {
-            let delta = modes & POS_MODE_MASK == 1;
-            let w = r.take(3)?;
-            let w = [w[0] as u32, w[1] as u32, w[2] as u32];
-            let limit = if delta { 33 } else { 32 };
-            if w.iter().any(|&x| x > limit) {
-                return Err(CodecError::new(pos_at, format!("position bit widths {w:?} exceed {limit}")));
-            }
-            let count = if delta { v.saturating_sub(1) } else { v };
-            let data = r.take(packed_len(count, w.iter().sum()))?;
-            let mut br = BitReader::new(data);
-            if delta && v > 0 {
-                positions.push(origin);
-            }
-            for _ in 0..count {
-                let mut p = [0u32; 3];
-                for a in 0..3 {
-                    let x = br.get(w[a]);
-                    let value = if delta {
-                        positions.last().map_or(0, |q: &[u32; 3]| q[a] as i64) + unzigzag(x)
-                    } else {
-                        origin[a] as i64 + x as i64
-                    };
-                    p[a] = u32::try_from(value).map_err(|_| offset_err())?;
-                }
-                positions.push(p);
-            }
-        }
-        2 => {
-            let len = r.varint()? as usize;
-            let data = r.take(len)?;
-            if v == 0 {
-                return Err(CodecError::new(pos_at, "vertex codec used for a cluster without vertices"));
-            }
-            let rel: Vec<[u32; 3]> = meshopt::decode_vertex_buffer(data, v)
-                .map_err(|e| CodecError::new(pos_at, format!("vertex codec: {e:?}")))?;
-            for q in rel {
-                let mut p = [0u32; 3];
-                for a in 0..3 {
-                    p[a] = origin[a].checked_add(q[a]).ok_or_else(offset_err)?;
-                }
-                positions.push(p);
-            }
-        }
-        m => return Err(CodecError::new(start + 3, format!("unknown position mode {m}"))),
+    let w = r.take(3)?;
+    let w = [w[0] as u32, w[1] as u32, w[2] as u32];
+    let limit = if delta { 33 } else { 32 };
+    if w.iter().any(|&x| x > limit) {
+        return Err(CodecError::new(pos_at, format!("position bit widths {w:?} exceed {limit}")));
     }
+    let count = if delta { v.saturating_sub(1) } else { v };
+    let data = r.take(packed_len(count, w.iter().sum()))?;
+    let mut br = BitReader::new(data);
+    if delta && v > 0 {
+        positions.push(origin);
+    }
+    for _ in 0..count {
+        let mut p = [0u32; 3];
+        for a in 0..3 {
+            let x = br.get(w[a]);
+            let value = if delta {
+                positions.last().map_or(0, |q: &[u32; 3]| q[a] as i64) + unzigzag(x)
+            } else {
+                origin[a] as i64 + x as i64
+            };
+            p[a] = u32::try_from(value).map_err(|_| outside_grid(pos_at))?;
+        }
+        positions.push(p);
+    }
+    Ok(positions)
+}
 
+/// Positions through meshoptimizer's vertex codec, as offsets from the origin
+/// ([`PositionMode::Meshopt`]).
+#[inline]
+fn decode_vertex_codec(r: &mut Cursor<'_>, head: &ClusterHead) -> Result<Vec<[u32; 3]>, CodecError> {
+    let (v, origin, pos_at) = (head.vertices, head.origin, r.pos);
+    let mut positions = Vec::with_capacity(v);
+    let len = r.varint()? as usize;
+    let data = r.take(len)?;
+    if v == 0 {
+        return Err(CodecError::new(pos_at, "vertex codec used for a cluster without vertices"));
+    }
+    let rel: Vec<[u32; 3]> = meshopt::decode_vertex_buffer(data, v)
+        .map_err(|e| CodecError::new(pos_at, format!("vertex codec: {e:?}")))?;
+    for q in rel {
+        let mut p = [0u32; 3];
+        for a in 0..3 {
+            p[a] = origin[a].checked_add(q[a]).ok_or_else(|| outside_grid(pos_at))?;
+        }
+        positions.push(p);
+    }
+    Ok(positions)
+}
+
+/// The error of a decoded position beyond the `u32` grid (the position block starts at `at`).
+fn outside_grid(at: usize) -> CodecError {
+    CodecError::new(at, "vertex position outside the u32 grid")
+}
+
+/// The `t` triangles through meshoptimizer's meshlet codec, each index below `v`, each
+/// triangle rotated to its canonical rotation.
+#[inline]
+fn decode_triangles(r: &mut Cursor<'_>, t: usize, v: usize) -> Result<Vec<u8>, CodecError> {
     let idx_at = r.pos;
     let len = r.varint()? as usize;
     let data = r.take(len)?;
@@ -636,40 +780,48 @@ fn decode_cluster(bytes: &[u8], start: usize) -> Result<(PageCluster, usize), Co
         return Err(CodecError::new(idx_at, format!("index {i} out of range ({v} vertices)")));
     }
     rotate_triangles(&mut indices);
-
-    let obj_at = r.pos;
-    let objects = if modes & MULTI_OBJECT != 0 {
-        let n = r.varint()? as usize;
-        if n < 2 || n > t {
-            return Err(CodecError::new(obj_at, format!("{n} distinct objects for {t} triangles")));
-        }
-        let mut table = Vec::with_capacity(n);
-        table.push(r.varint()?);
-        for _ in 1..n {
-            let at = r.pos;
-            let d = r.varint()?;
-            let prev = table.last().copied().unwrap_or(0);
-            let next = prev.checked_add(d).and_then(|x| x.checked_add(1));
-            table.push(next.ok_or_else(|| CodecError::new(at, "object id overflows u32"))?);
-        }
-        let width = bits32(n as u32 - 1);
-        let data = r.take(packed_len(t, width))?;
-        let mut br = BitReader::new(data);
-        let mut objects = Vec::with_capacity(t);
-        for _ in 0..t {
-            let k = br.get(width) as usize;
-            objects.push(
-                *table.get(k).ok_or_else(|| CodecError::new(obj_at, format!("object slot {k} of {n}")))?,
-            );
-        }
-        objects
-    } else {
-        vec![r.varint()?; t]
-    };
-
-    Ok((PageCluster { positions, indices, objects, self_error, self_sphere, group, level }, r.pos))
+    Ok(indices)
 }
 
+/// The object id of each of the `t` triangles: one id for them all, or (`multi`) a table of
+/// 2..=t distinct ids and a bit-packed slot of it per triangle.
+#[inline]
+fn decode_objects(r: &mut Cursor<'_>, multi: bool, t: usize) -> Result<Vec<u32>, CodecError> {
+    if !multi {
+        return Ok(vec![r.varint()?; t]);
+    }
+    let obj_at = r.pos;
+    let n = r.varint()? as usize;
+    if n < 2 || n > t {
+        return Err(CodecError::new(obj_at, format!("{n} distinct objects for {t} triangles")));
+    }
+    let table = decode_object_table(r, n)?;
+    let width = bits32(n as u32 - 1);
+    let data = r.take(packed_len(t, width))?;
+    let mut br = BitReader::new(data);
+    let mut objects = Vec::with_capacity(t);
+    for _ in 0..t {
+        let k = br.get(width) as usize;
+        objects
+            .push(*table.get(k).ok_or_else(|| CodecError::new(obj_at, format!("object slot {k} of {n}")))?);
+    }
+    Ok(objects)
+}
+
+/// The `n` increasing distinct object ids, stored as the first id and then each gap less one.
+#[inline]
+fn decode_object_table(r: &mut Cursor<'_>, n: usize) -> Result<Vec<u32>, CodecError> {
+    let mut table = Vec::with_capacity(n);
+    table.push(r.varint()?);
+    for _ in 1..n {
+        let at = r.pos;
+        let d = r.varint()?;
+        let prev = table.last().copied().unwrap_or(0);
+        let next = prev.checked_add(d).and_then(|x| x.checked_add(1));
+        table.push(next.ok_or_else(|| CodecError::new(at, "object id overflows u32"))?);
+    }
+    Ok(table)
+}
 fn varint_len(v: u32) -> usize {
     (bits32(v).max(1) as usize).div_ceil(7)
 }
@@ -744,324 +896,4 @@ impl<'a> BitReader<'a> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// A `w`×`h` grid of quads (2 triangles each) at grid spacing `step`, starting at `base`,
-    /// split into clusters of ≤ 128 triangles (8×8 quads each), object id per row band.
-    pub(crate) fn grid_clusters(
-        w: u32,
-        h: u32,
-        step: u32,
-        base: [u32; 3],
-        objects_per_cluster: u32,
-    ) -> Vec<PageCluster> {
-        let mut out = Vec::new();
-        for by in (0..h).step_by(8) {
-            for bx in (0..w).step_by(8) {
-                let (nx, ny) = ((w - bx).min(8), (h - by).min(8));
-                let mut c = PageCluster {
-                    self_sphere: [1.0, 2.0, 3.0, 4.0],
-                    group: out.len() as u32,
-                    ..Default::default()
-                };
-                for y in 0..=ny {
-                    for x in 0..=nx {
-                        let gx = (bx + x) * step;
-                        let gy = (by + y) * step;
-                        // A gentle height field so z varies too.
-                        let gz = ((gx / 7 + gy / 5) % 97) * step / 4;
-                        c.positions.push([base[0] + gx, base[1] + gy, base[2] + gz]);
-                    }
-                }
-                for y in 0..ny {
-                    for x in 0..nx {
-                        let i = (y * (nx + 1) + x) as u8;
-                        let j = i + 1;
-                        let k = i + nx as u8 + 1;
-                        let l = k + 1;
-                        let o = 7 + (y * objects_per_cluster / ny.max(1));
-                        c.indices.extend_from_slice(&[i, j, l, i, l, k]);
-                        c.objects.extend_from_slice(&[o, o]);
-                    }
-                }
-                out.push(c);
-            }
-        }
-        out
-    }
-
-    fn round_trip(clusters: &[PageCluster], force: Option<PositionMode>) -> usize {
-        let mut bytes = Vec::new();
-        let s = encode_page_with(clusters, &mut bytes, force).unwrap();
-        assert_eq!(s.encoded_len, bytes.len());
-        let back = decode_page(&bytes, clusters.len()).unwrap();
-        for (a, b) in clusters.iter().zip(&back) {
-            assert_eq!(&a.canonical(), b);
-        }
-        bytes.len()
-    }
-
-    #[test]
-    fn every_position_mode_round_trips() {
-        let cs = grid_clusters(24, 16, 3, [1000, 2000, 3000], 3);
-        for mode in [PositionMode::Packed, PositionMode::Delta, PositionMode::Meshopt] {
-            round_trip(&cs, Some(mode));
-        }
-        round_trip(&cs, None);
-    }
-
-    #[test]
-    fn clusters_encoded_apart_make_the_same_page() {
-        let mut cs = grid_clusters(24, 16, 3, [1000, 2000, 3000], 3);
-        cs[1].level = 3;
-        let mut whole = Vec::new();
-        let expected = encode_page(&cs, &mut whole).unwrap();
-        // Encoded one by one under another group id, which is set afterwards.
-        let encoded: Vec<EncodedCluster> = cs
-            .iter()
-            .map(|c| {
-                let mut e = EncodedCluster::new(&PageCluster { group: 12345, ..c.clone() }).unwrap();
-                assert_eq!(e.group(), 12345);
-                e.set_group(c.group);
-                assert_eq!(e.group(), c.group);
-                e
-            })
-            .collect();
-        let mut apart = vec![0xAB];
-        let s = encoded_page(&encoded, &mut apart).unwrap();
-        assert_eq!(&apart[1..], &whole[..]);
-        assert_eq!(s, expected);
-        assert_eq!((s.level_min, s.level_max), (0, 3));
-        assert!(encoded_page(&[], &mut apart).is_err());
-        let bad = PageCluster { indices: vec![0, 1], ..cs[0].clone() };
-        assert!(EncodedCluster::new(&bad).is_err());
-    }
-
-    #[test]
-    fn triangles_rotate_to_their_smallest_rotation() {
-        for a in 0..5u8 {
-            for b in 0..5u8 {
-                for c in 0..5u8 {
-                    let mut t = [a, b, c];
-                    rotate_triangles(&mut t);
-                    let best = [[a, b, c], [b, c, a], [c, a, b]].into_iter().min().unwrap();
-                    assert_eq!(t, best, "{a} {b} {c}");
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn a_threads_reused_buffers_do_not_leak_into_the_next_cluster() {
-        // Clusters of different sizes and object counts, one after the other on this thread,
-        // each against a fresh thread's encoding of it alone.
-        let mut cs = grid_clusters(24, 16, 3, [1000, 2000, 3000], 3);
-        cs.extend(grid_clusters(3, 2, 5, [7, 8, 9], 1));
-        cs.extend(grid_clusters(16, 16, 1, [0, 0, 0], 5));
-        for c in &cs {
-            let here = EncodedCluster::from_parts(c.parts()).unwrap();
-            let alone = std::thread::scope(|s| s.spawn(|| EncodedCluster::new(c).unwrap()).join().unwrap());
-            assert_eq!(here, alone);
-        }
-    }
-
-    #[test]
-    fn extreme_coordinates_round_trip() {
-        let c = PageCluster {
-            positions: vec![[0, u32::MAX, 5], [u32::MAX, 0, 5], [7, 7, u32::MAX]],
-            indices: vec![0, 1, 2, 2, 1, 0],
-            objects: vec![u32::MAX, 0],
-            self_error: 0.5,
-            self_sphere: [0.0; 4],
-            group: u32::MAX,
-            level: 255,
-        };
-        for mode in [PositionMode::Packed, PositionMode::Delta, PositionMode::Meshopt] {
-            round_trip(std::slice::from_ref(&c), Some(mode));
-        }
-    }
-
-    #[test]
-    fn degenerate_and_unused_vertices_round_trip() {
-        let c = PageCluster {
-            positions: vec![[1, 1, 1], [9, 9, 9], [2, 3, 4], [5, 5, 5]],
-            indices: vec![2, 2, 0, 0, 2, 3],
-            objects: vec![4, 4],
-            ..Default::default()
-        };
-        let canon = c.canonical();
-        assert_eq!(canon.positions, vec![[2, 3, 4], [1, 1, 1], [5, 5, 5], [9, 9, 9]]);
-        assert_eq!(canon.indices, vec![0, 0, 1, 0, 2, 1]);
-        round_trip(&[c], None);
-    }
-
-    #[test]
-    fn canonical_keeps_winding_and_triangle_order() {
-        let c = PageCluster {
-            positions: vec![[0; 3], [1, 0, 0], [0, 1, 0], [1, 1, 0]],
-            indices: vec![3, 1, 2, 2, 1, 0],
-            objects: vec![1, 2],
-            ..Default::default()
-        };
-        let k = c.canonical();
-        for t in 0..2 {
-            let orig: Vec<[u32; 3]> = (0..3).map(|i| c.positions[c.indices[3 * t + i] as usize]).collect();
-            let new: Vec<[u32; 3]> = (0..3).map(|i| k.positions[k.indices[3 * t + i] as usize]).collect();
-            let rotations: Vec<Vec<[u32; 3]>> =
-                (0..3).map(|r| (0..3).map(|i| orig[(i + r) % 3]).collect()).collect();
-            assert!(rotations.contains(&new), "triangle {t}: {new:?} is not a rotation of {orig:?}");
-        }
-        assert_eq!(k.objects, vec![1, 2]);
-    }
-
-    #[test]
-    fn encoder_rejects_invalid_clusters() {
-        let ok = PageCluster {
-            positions: vec![[0; 3]; 3],
-            indices: vec![0, 1, 2],
-            objects: vec![0],
-            ..Default::default()
-        };
-        let mut out = Vec::new();
-        let cases: Vec<(&str, PageCluster)> = vec![
-            ("no triangles", PageCluster { indices: vec![], objects: vec![], ..ok.clone() }),
-            ("index range", PageCluster { indices: vec![0, 1, 3], ..ok.clone() }),
-            ("objects", PageCluster { objects: vec![], ..ok.clone() }),
-            ("too many", PageCluster { indices: vec![0; 3 * 129], objects: vec![0; 129], ..ok.clone() }),
-            ("vertices", PageCluster { positions: vec![[0; 3]; 256], ..ok.clone() }),
-            ("nan error", PageCluster { self_error: f32::NAN, ..ok.clone() }),
-            ("inf error", PageCluster { self_error: f32::INFINITY, ..ok.clone() }),
-            ("sphere", PageCluster { self_sphere: [0.0, 0.0, 0.0, -1.0], ..ok.clone() }),
-        ];
-        for (name, c) in cases {
-            assert!(encode_page(&[c], &mut out).is_err(), "{name} accepted");
-        }
-        assert!(encode_page(&[], &mut out).is_err());
-        assert!(encode_page(&[ok], &mut out).is_ok());
-    }
-
-    #[test]
-    fn decoder_rejects_short_trailing_and_overcounted_pages() {
-        let cs = grid_clusters(16, 8, 1, [0; 3], 1);
-        let mut bytes = Vec::new();
-        encode_page(&cs, &mut bytes).unwrap();
-        for len in 0..bytes.len() {
-            assert!(decode_page(&bytes[..len], cs.len()).is_err(), "{len}-byte prefix decoded");
-        }
-        let mut longer = bytes.clone();
-        longer.push(0);
-        assert!(decode_page(&longer, cs.len()).unwrap_err().msg.contains("after the last cluster"));
-        assert!(decode_page(&bytes, cs.len() + 1).is_err());
-        assert!(decode_page(&bytes, 1_000_000_000).is_err());
-    }
-
-    #[test]
-    fn decoder_never_panics_on_flipped_bytes() {
-        let mut cs = grid_clusters(16, 8, 5, [77, 0, 9], 4);
-        cs[0].positions.iter_mut().for_each(|p| p[0] += 1 << 20);
-        let mut bytes = Vec::new();
-        encode_page(&cs, &mut bytes).unwrap();
-        for i in 0..bytes.len() {
-            for bit in [0x01, 0x80, 0xff] {
-                let mut b = bytes.clone();
-                b[i] ^= bit;
-                if let Ok(back) = decode_page(&b, cs.len()) {
-                    for c in &back {
-                        c.validate().unwrap();
-                    }
-                }
-            }
-        }
-    }
-
-    #[test]
-    fn decoder_reports_out_of_range_indices_and_bad_modes() {
-        let c = PageCluster {
-            positions: vec![[0; 3]; 3],
-            indices: vec![0, 1, 2],
-            objects: vec![0],
-            ..Default::default()
-        };
-        let mut bytes = Vec::new();
-        encode_page(&[c], &mut bytes).unwrap();
-        let mut b = bytes.clone();
-        b[1] = 2; // claim 2 vertices: index 2 is now out of range (and the position block shrinks)
-        assert!(decode_page(&b, 1).is_err());
-        let mut b = bytes.clone();
-        b[3] = 3;
-        assert!(decode_page(&b, 1).unwrap_err().msg.contains("position mode"));
-        let mut b = bytes;
-        b[0] = 200;
-        assert!(decode_page(&b, 1).unwrap_err().msg.contains("triangles"));
-    }
-
-    #[test]
-    fn varints_round_trip() {
-        for v in [0, 1, 127, 128, 16383, 16384, u32::MAX] {
-            let mut b = Vec::new();
-            put_varint(&mut b, v);
-            assert_eq!(b.len(), varint_len(v));
-            assert_eq!(Cursor { bytes: &b, pos: 0 }.varint().unwrap(), v);
-        }
-        assert!(Cursor { bytes: &[0xff, 0xff, 0xff, 0xff, 0x7f], pos: 0 }.varint().is_err());
-        assert!(Cursor { bytes: &[0x80; 6], pos: 0 }.varint().is_err());
-    }
-
-    /// Bytes per triangle of each position mode on a 10k-triangle height-field grid, at two grid
-    /// spacings (dense scan-like and sparse CAD-like). Run with `--nocapture` to see the numbers.
-    #[test]
-    fn compression_size_per_triangle() {
-        for (step, label) in [(1u32, "spacing 1"), (37, "spacing 37"), (1021, "spacing 1021")] {
-            let cs = grid_clusters(100, 50, step, [123_456, 654_321, 1_000], 1);
-            let tris: usize = cs.iter().map(|c| c.triangle_count()).sum();
-            assert_eq!(tris, 10_000);
-            let mut line = format!("{label}: {} clusters", cs.len());
-            let mut auto = 0;
-            for (name, mode) in [
-                ("packed", Some(PositionMode::Packed)),
-                ("delta", Some(PositionMode::Delta)),
-                ("meshopt", Some(PositionMode::Meshopt)),
-                ("auto", None),
-            ] {
-                let len = round_trip(&cs, mode);
-                line += &format!(", {name} {:.2} B/tri", len as f64 / tris as f64);
-                auto = len;
-            }
-            println!("{line}");
-            assert!((auto as f64 / tris as f64) < 6.0, "{line}");
-        }
-    }
-
-    /// Encode and decode speed: `cargo test --release -p tw-store codec_throughput -- --ignored --nocapture`.
-    #[test]
-    #[ignore]
-    fn codec_throughput() {
-        let cs = grid_clusters(1000, 500, 37, [123_456, 654_321, 1_000], 2);
-        let tris: usize = cs.iter().map(|c| c.triangle_count()).sum();
-        let t0 = std::time::Instant::now();
-        let mut bytes = Vec::new();
-        for page in cs.chunks(64) {
-            encode_page(page, &mut bytes).unwrap();
-        }
-        let enc = t0.elapsed().as_secs_f64();
-        let t0 = std::time::Instant::now();
-        let mut pos = 0;
-        let mut n = 0;
-        for page in cs.chunks(64) {
-            let mut one = Vec::new();
-            let s = encode_page(page, &mut one).unwrap();
-            let back = decode_page(&bytes[pos..pos + s.encoded_len], page.len()).unwrap();
-            n += back.len();
-            pos += s.encoded_len;
-        }
-        let dec = t0.elapsed().as_secs_f64() - enc; // the loop re-encodes to find page lengths
-        assert_eq!(n, cs.len());
-        println!(
-            "{tris} triangles, {:.2} B/tri: encode {:.1} M tri/s, decode ~{:.1} M tri/s",
-            bytes.len() as f64 / tris as f64,
-            tris as f64 / enc / 1e6,
-            tris as f64 / dec.max(1e-9) / 1e6
-        );
-    }
-}
+mod tests;

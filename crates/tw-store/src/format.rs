@@ -1,9 +1,13 @@
 //! On-disk structures of `scene.tw`, version 2, as specified in `docs/FORMAT.md`.
 //!
 //! Every structure is little-endian with a fixed size and is (de)serialized field by field with
-//! checked reads: nothing is transmuted from file bytes. [`validate_tables`] holds the structural
-//! invariants shared by the writer (which refuses to write a store that breaks them) and the reader
-//! (which refuses to open one).
+//! checked reads: nothing is transmuted from file bytes. [`validate_tables`] (module `tables`)
+//! holds the structural invariants shared by the writer (which refuses to write a store that
+//! breaks them) and the reader (which refuses to open one).
+
+mod tables;
+
+pub use tables::{validate_tables, GroupLinks, Tables};
 
 /// The first 8 bytes of every store.
 pub const MAGIC: [u8; 8] = *b"TERAWALK";
@@ -225,56 +229,129 @@ impl Header {
             return Err((bytes.len() as u64, format!("header needs {HEADER_LEN} bytes")));
         }
         let mut r = Reader::new(bytes, 0);
-        let magic = r.bytes(8)?;
-        if magic != MAGIC {
-            return Err((0, "bad magic".into()));
+        let version = read_preamble(&mut r)?;
+        if verify_checksum {
+            check_header_checksum(bytes)?;
         }
-        let version = r.u32()?;
-        let header_len = r.u32()?;
-        if header_len as usize != HEADER_LEN {
-            return Err((12, format!("header length {header_len}, expected {HEADER_LEN}")));
-        }
-        let stored = u32::from_le_bytes([
-            bytes[HEADER_CRC_AT],
-            bytes[HEADER_CRC_AT + 1],
-            bytes[HEADER_CRC_AT + 2],
-            bytes[HEADER_CRC_AT + 3],
-        ]);
-        let actual = checksum(&bytes[..HEADER_CRC_AT]);
-        if verify_checksum && stored != actual {
-            return Err((
-                HEADER_CRC_AT as u64,
-                format!("header checksum mismatch (stored {stored:#010x}, computed {actual:#010x})"),
-            ));
-        }
-        let flags = r.u32()?;
-        if flags != 0 {
-            return Err((16, format!("unknown header flags {flags:#x}")));
-        }
-        let up_axis = r.u8()?;
-        if up_axis > 2 {
-            return Err((20, format!("up axis {up_axis}, expected 0 (x), 1 (y) or 2 (z)")));
-        }
-        r.zeros(3)?;
-        let bounds_min = r.f64x3()?;
-        let bounds_max = r.f64x3()?;
-        let grid_origin = r.f64x3()?;
-        let grid_step = r.f64()?;
-        for (i, v) in bounds_min.iter().chain(&bounds_max).chain(&grid_origin).enumerate() {
+        let (flags, up_axis) = read_flags_and_up_axis(&mut r)?;
+        let frame = SceneFrame::read(&mut r)?;
+        let header = Header {
+            version,
+            flags,
+            up_axis,
+            bounds_min: frame.bounds_min,
+            bounds_max: frame.bounds_max,
+            grid_origin: frame.grid_origin,
+            grid_step: frame.grid_step,
+            units: r.str_ref()?,
+            build_options: r.str_ref()?,
+            object_count: r.u32()?,
+            node_count: r.u32()?,
+            group_count: r.u32()?,
+            page_count: r.u32()?,
+            input_triangles: r.u64()?,
+            cluster_count: r.u64()?,
+            triangle_count: r.u64()?,
+            sections: read_section_directory(&mut r)?,
+        };
+        r.zeros(HEADER_CRC_AT - r.pos)?;
+        Ok(header)
+    }
+}
+
+/// The magic, the version and the header length (bytes 0..16); returns the version (the caller
+/// compares it with [`FORMAT_VERSION`]).
+fn read_preamble(r: &mut Reader) -> Result<u32, (u64, String)> {
+    let magic = r.bytes(8)?;
+    if magic != MAGIC {
+        return Err((0, "bad magic".into()));
+    }
+    let version = r.u32()?;
+    let header_len = r.u32()?;
+    if header_len as usize != HEADER_LEN {
+        return Err((12, format!("header length {header_len}, expected {HEADER_LEN}")));
+    }
+    Ok(version)
+}
+
+/// The stored CRC-32C of the header's first [`HEADER_CRC_AT`] bytes is theirs.
+fn check_header_checksum(bytes: &[u8]) -> Result<(), (u64, String)> {
+    let stored = u32::from_le_bytes([
+        bytes[HEADER_CRC_AT],
+        bytes[HEADER_CRC_AT + 1],
+        bytes[HEADER_CRC_AT + 2],
+        bytes[HEADER_CRC_AT + 3],
+    ]);
+    let actual = checksum(&bytes[..HEADER_CRC_AT]);
+    if stored != actual {
+        return Err((
+            HEADER_CRC_AT as u64,
+            format!("header checksum mismatch (stored {stored:#010x}, computed {actual:#010x})"),
+        ));
+    }
+    Ok(())
+}
+
+/// The feature flags (none defined: 0) and the up axis (0, 1 or 2) with its 3 reserved bytes.
+fn read_flags_and_up_axis(r: &mut Reader) -> Result<(u32, u8), (u64, String)> {
+    let flags = r.u32()?;
+    if flags != 0 {
+        return Err((16, format!("unknown header flags {flags:#x}")));
+    }
+    let up_axis = r.u8()?;
+    if up_axis > 2 {
+        return Err((20, format!("up axis {up_axis}, expected 0 (x), 1 (y) or 2 (z)")));
+    }
+    r.zeros(3)?;
+    Ok((flags, up_axis))
+}
+
+/// The header's scene frame (bytes 24..104): bounds, grid origin and grid step, in input
+/// coordinates.
+struct SceneFrame {
+    bounds_min: [f64; 3],
+    bounds_max: [f64; 3],
+    grid_origin: [f64; 3],
+    grid_step: f64,
+}
+
+impl SceneFrame {
+    /// Reads the frame and checks that it is finite, ordered and renderable.
+    fn read(r: &mut Reader) -> Result<SceneFrame, (u64, String)> {
+        let frame = SceneFrame {
+            bounds_min: r.f64x3()?,
+            bounds_max: r.f64x3()?,
+            grid_origin: r.f64x3()?,
+            grid_step: r.f64()?,
+        };
+        frame.check_finite()?;
+        frame.check_renderable()?;
+        Ok(frame)
+    }
+
+    /// Finite coordinates, bounds min ≤ max, a positive grid step.
+    fn check_finite(&self) -> Result<(), (u64, String)> {
+        let coords = self.bounds_min.iter().chain(&self.bounds_max).chain(&self.grid_origin);
+        for (i, v) in coords.enumerate() {
             if !v.is_finite() {
                 return Err((24 + 8 * i as u64, format!("coordinate {v} is not finite")));
             }
         }
-        if (0..3).any(|i| bounds_min[i] > bounds_max[i]) {
+        if (0..3).any(|i| self.bounds_min[i] > self.bounds_max[i]) {
             return Err((24, "scene bounds min > max".into()));
         }
+        let grid_step = self.grid_step;
         if !(grid_step.is_finite() && grid_step > 0.0) {
             return Err((96, format!("grid step {grid_step} is not positive")));
         }
-        // The runtime frames cameras and paths by the scene bounds in scene space (relative to
-        // the grid origin, as f32): they must be representable there too.
-        for (i, v) in bounds_min.iter().chain(&bounds_max).enumerate() {
-            let scene = v - grid_origin[i % 3];
+        Ok(())
+    }
+
+    /// The runtime frames cameras and paths by the scene bounds in scene space (relative to the
+    /// grid origin, as f32): they must be representable there too, and so must the grid step.
+    fn check_renderable(&self) -> Result<(), (u64, String)> {
+        for (i, v) in self.bounds_min.iter().chain(&self.bounds_max).enumerate() {
+            let scene = v - self.grid_origin[i % 3];
             if scene.abs() > MAX_SCENE_COORD {
                 return Err((
                     24 + 8 * i as u64,
@@ -285,6 +362,7 @@ impl Header {
                 ));
             }
         }
+        let grid_step = self.grid_step;
         if !(MIN_GRID_STEP..=MAX_SCENE_COORD).contains(&grid_step) {
             return Err((
                 96,
@@ -294,43 +372,20 @@ impl Header {
                 ),
             ));
         }
-        let units = StrRef { offset: r.u32()?, len: r.u32()? };
-        let build_options = StrRef { offset: r.u32()?, len: r.u32()? };
-        let object_count = r.u32()?;
-        let node_count = r.u32()?;
-        let group_count = r.u32()?;
-        let page_count = r.u32()?;
-        let input_triangles = r.u64()?;
-        let cluster_count = r.u64()?;
-        let triangle_count = r.u64()?;
-        let mut sections = [Section::default(); SECTION_COUNT];
-        for s in &mut sections {
-            s.offset = r.u64()?;
-            s.length = r.u64()?;
-            s.checksum = r.u32()?;
-            r.zeros(4)?;
-        }
-        r.zeros(HEADER_CRC_AT - r.pos)?;
-        Ok(Header {
-            version,
-            flags,
-            up_axis,
-            bounds_min,
-            bounds_max,
-            grid_origin,
-            grid_step,
-            units,
-            build_options,
-            object_count,
-            node_count,
-            group_count,
-            page_count,
-            input_triangles,
-            cluster_count,
-            triangle_count,
-            sections,
-        })
+        Ok(())
     }
+}
+
+/// The section directory: offset, length and checksum of each section, then 4 reserved bytes.
+fn read_section_directory(r: &mut Reader) -> Result<[Section; SECTION_COUNT], (u64, String)> {
+    let mut sections = [Section::default(); SECTION_COUNT];
+    for s in &mut sections {
+        s.offset = r.u64()?;
+        s.length = r.u64()?;
+        s.checksum = r.u32()?;
+        r.zeros(4)?;
+    }
+    Ok(sections)
 }
 
 /// One object table entry (an input object: name, colour, triangle count).
@@ -528,349 +583,6 @@ impl PageEntry {
     }
 }
 
-/// The tables a store is made of, as checked by [`validate_tables`].
-pub struct Tables<'a> {
-    pub header: &'a Header,
-    pub objects: &'a [ObjectEntry],
-    pub nodes: &'a [Node],
-    pub groups: &'a [Group],
-    pub pages: &'a [PageEntry],
-    pub strings: &'a [u8],
-    /// The group sources section: each group's sources, group after group.
-    pub sources: &'a [u32],
-}
-
-/// The links of the cluster DAG between groups, in flat arrays (no allocation per group).
-///
-/// The *sources* of group `g` are the finer groups its clusters were simplified from; its
-/// *parents* are the coarser groups whose clusters were simplified from `g` (the inverse
-/// relation, derived when the store is opened). Both lists are sorted; sources have smaller
-/// indices than their group, parents larger ones.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct GroupLinks {
-    /// Sources of group `g`: `sources[source_first[g]..source_first[g + 1]]`.
-    source_first: Vec<u32>,
-    sources: Vec<u32>,
-    /// Parents of group `g`: `parents[parent_first[g]..parent_first[g + 1]]`.
-    parent_first: Vec<u32>,
-    parents: Vec<u32>,
-}
-
-impl GroupLinks {
-    /// The sources of `group` (empty for a group of input clusters, or out of range).
-    pub fn sources(&self, group: u32) -> &[u32] {
-        range_of(&self.source_first, &self.sources, group)
-    }
-
-    /// The parents of `group` (empty for a root group, or out of range).
-    pub fn parents(&self, group: u32) -> &[u32] {
-        range_of(&self.parent_first, &self.parents, group)
-    }
-
-    /// Number of links (Σ source counts = Σ parent counts).
-    pub fn link_count(&self) -> usize {
-        self.sources.len()
-    }
-
-    /// Where the sources of `group` lie among all links (empty when out of range).
-    pub(crate) fn source_range(&self, group: u32) -> std::ops::Range<usize> {
-        let g = group as usize;
-        match (self.source_first.get(g), self.source_first.get(g + 1)) {
-            (Some(&a), Some(&b)) => a as usize..b as usize,
-            _ => 0..0,
-        }
-    }
-}
-
-fn range_of<'a>(first: &[u32], items: &'a [u32], g: u32) -> &'a [u32] {
-    let g = g as usize;
-    match (first.get(g), first.get(g + 1)) {
-        (Some(&a), Some(&b)) => items.get(a as usize..b as usize).unwrap_or_default(),
-        _ => &[],
-    }
-}
-
-/// Checks the structural invariants that need no page decoding (docs/FORMAT.md, "Invariants")
-/// and returns the group links they describe. Errors are `(absolute byte offset of the offending
-/// entry, message)`; offsets assume the header's section directory (the writer validates before
-/// writing with the final offsets).
-pub fn validate_tables(t: &Tables) -> Result<GroupLinks, (u64, String)> {
-    let h = t.header;
-    let at = |kind: SectionKind, i: usize, len: usize| h.section(kind).offset + (i * len) as u64;
-    for (what, s, off) in [("units", h.units, 104u64), ("build options", h.build_options, 112)] {
-        str_at(t.strings, s).map_err(|m| (off, format!("{what}: {m}")))?;
-    }
-    for (i, o) in t.objects.iter().enumerate() {
-        str_at(t.strings, o.name)
-            .map_err(|m| (at(SectionKind::Objects, i, OBJECT_LEN), format!("object {i} name: {m}")))?;
-    }
-
-    // Pages: contiguous in file order, filling the pages region exactly.
-    let region = h.section(SectionKind::Pages);
-    let mut next = region.offset;
-    let (mut clusters, mut triangles) = (0u64, 0u64);
-    for (i, p) in t.pages.iter().enumerate() {
-        let off = at(SectionKind::PageTable, i, PAGE_ENTRY_LEN);
-        if p.offset != next {
-            return Err((off, format!("page {i} starts at byte {}, expected {next}", p.offset)));
-        }
-        next = p.offset + p.compressed_len as u64;
-        if p.cluster_count == 0 {
-            return Err((off, format!("page {i} has no clusters")));
-        }
-        if p.level_min > p.level_max {
-            return Err((off, format!("page {i}: level range {}..={}", p.level_min, p.level_max)));
-        }
-        // Every encoded cluster takes at least MIN_CLUSTER_BYTES; this also bounds decode allocations.
-        if (p.cluster_count as u64) * crate::codec::MIN_CLUSTER_BYTES as u64 > p.compressed_len as u64
-            || p.triangle_count as u64 > p.cluster_count as u64 * crate::codec::MAX_TRIANGLES as u64
-            || (p.triangle_count as u64) < p.cluster_count as u64
-            || p.uncompressed_len as u64 > p.cluster_count as u64 * crate::codec::MAX_DECODED_CLUSTER as u64
-        {
-            return Err((
-                off,
-                format!(
-                    "page {i}: {} clusters / {} triangles / {} decoded bytes do not fit {} encoded bytes",
-                    p.cluster_count, p.triangle_count, p.uncompressed_len, p.compressed_len
-                ),
-            ));
-        }
-        clusters += p.cluster_count as u64;
-        triangles += p.triangle_count as u64;
-    }
-    if next != region.end() {
-        return Err((
-            region.offset,
-            format!("pages end at byte {next}, pages region ends at {}", region.end()),
-        ));
-    }
-    if clusters != h.cluster_count || triangles != h.triangle_count {
-        return Err((
-            144,
-            format!(
-                "header counts {} clusters / {} triangles, pages hold {clusters} / {triangles}",
-                h.cluster_count, h.triangle_count
-            ),
-        ));
-    }
-
-    // Nodes: a tree rooted at node 0, children after their parent, each node with one parent.
-    let n = t.nodes.len();
-    if n == 0 {
-        return Err((h.section(SectionKind::Nodes).offset, "the skeleton has no root node".into()));
-    }
-    // Every vertex lies in the root's box (children lie in their parents, vertices in their
-    // group's node: checked here and by verify), so this bounds every scene-space position.
-    let far = t.nodes[0].max.iter().map(|&g| g as f64 * h.grid_step).fold(0.0, f64::max);
-    if far > MAX_SCENE_COORD {
-        return Err((
-            h.section(SectionKind::Nodes).offset,
-            format!(
-                "the root box reaches grid coordinate {:?}, {far:e} in scene space with grid step {:e}: \
-                 beyond the {MAX_SCENE_COORD:e} that f32 rendering can hold",
-                t.nodes[0].max, h.grid_step
-            ),
-        ));
-    }
-    let mut parents = vec![0u8; n];
-    let mut group_owner = vec![u32::MAX; t.groups.len()];
-    for (i, node) in t.nodes.iter().enumerate() {
-        let off = at(SectionKind::Nodes, i, NODE_LEN);
-        if (0..3).any(|a| node.min[a] > node.max[a]) {
-            return Err((off, format!("node {i}: bounds min > max")));
-        }
-        if node.max_error.is_nan() || node.max_error < 0.0 {
-            return Err((off, format!("node {i}: max error {} is not ≥ 0", node.max_error)));
-        }
-        if node.child_count == 0 && node.first_child != 0 {
-            return Err((off, format!("node {i}: a leaf with first child {} (must be 0)", node.first_child)));
-        }
-        if node.child_count > 0 {
-            let end = node.first_child as u64 + node.child_count as u64;
-            if node.first_child as usize <= i || end > n as u64 {
-                return Err((
-                    off,
-                    format!(
-                        "node {i}: children {}..{end} must lie after the node and within {n} nodes",
-                        node.first_child
-                    ),
-                ));
-            }
-            let first = node.first_child as usize;
-            for (c, child) in t.nodes.iter().enumerate().take(end as usize).skip(first) {
-                parents[c] = parents[c].saturating_add(1);
-                if (0..3).any(|a| child.min[a] < node.min[a] || child.max[a] > node.max[a]) {
-                    return Err((off, format!("node {i}: bounds do not contain child {c}")));
-                }
-            }
-        }
-        let end = node.first_group as u64 + node.group_count as u64;
-        if end > t.groups.len() as u64 {
-            return Err((
-                off,
-                format!("node {i}: groups {}..{end} beyond {} groups", node.first_group, t.groups.len()),
-            ));
-        }
-        for (g, owner) in
-            group_owner.iter_mut().enumerate().take(end as usize).skip(node.first_group as usize)
-        {
-            if *owner != u32::MAX {
-                return Err((off, format!("node {i}: group {g} is already listed by node {owner}")));
-            }
-            *owner = i as u32;
-        }
-    }
-    for (i, &p) in parents.iter().enumerate() {
-        let expected = if i == 0 { 0 } else { 1 };
-        if p != expected {
-            return Err((
-                at(SectionKind::Nodes, i, NODE_LEN),
-                format!("node {i} has {p} parents, expected {expected} (the skeleton must be one tree)"),
-            ));
-        }
-    }
-
-    // Groups: listed by their node, clusters within one page.
-    let mut group_clusters = 0u64;
-    for (i, g) in t.groups.iter().enumerate() {
-        let off = at(SectionKind::Groups, i, GROUP_LEN);
-        if group_owner[i] != g.node {
-            return Err((
-                off,
-                if group_owner[i] == u32::MAX {
-                    format!("group {i} is not listed by any node (unreachable from the root)")
-                } else {
-                    format!("group {i} says node {}, but node {} lists it", g.node, group_owner[i])
-                },
-            ));
-        }
-        if g.sphere.iter().any(|v| !v.is_finite()) || g.sphere[3] < 0.0 {
-            return Err((off, format!("group {i}: invalid sphere {:?}", g.sphere)));
-        }
-        if g.error.is_nan() || g.error < 0.0 {
-            return Err((off, format!("group {i}: error {} is not ≥ 0", g.error)));
-        }
-        let Some(page) = t.pages.get(g.page as usize) else {
-            return Err((off, format!("group {i}: page {} beyond {} pages", g.page, t.pages.len())));
-        };
-        if g.cluster_count == 0 || g.first_cluster as u64 + g.cluster_count as u64 > page.cluster_count as u64
-        {
-            return Err((
-                off,
-                format!(
-                    "group {i}: clusters {}..{} not within the {} clusters of page {}",
-                    g.first_cluster,
-                    g.first_cluster as u64 + g.cluster_count as u64,
-                    page.cluster_count,
-                    g.page
-                ),
-            ));
-        }
-        if g.level < page.level_min || g.level > page.level_max {
-            return Err((off, format!("group {i}: level {} outside page {}'s level range", g.level, g.page)));
-        }
-        group_clusters += g.cluster_count as u64;
-    }
-    if group_clusters != h.cluster_count {
-        return Err((
-            h.section(SectionKind::Groups).offset,
-            format!("groups list {group_clusters} clusters, the pages hold {}", h.cluster_count),
-        ));
-    }
-    validate_links(t)
-}
-
-/// The group sources (docs/FORMAT.md, "Group sources"): each group's sources strictly increasing
-/// and smaller than the group's index (so the links form a DAG and there is no self-link), of a
-/// level ≤ and a finite error ≤ the group's; every group with a finite error is the source of at
-/// least one group, a root group (error = +∞) of none. Builds the inverse relation (parents).
-fn validate_links(t: &Tables) -> Result<GroupLinks, (u64, String)> {
-    let h = t.header;
-    let section = h.section(SectionKind::GroupSources);
-    let group_at = |i: usize| h.section(SectionKind::Groups).offset + (i * GROUP_LEN) as u64;
-    let total: u64 = t.groups.iter().map(|g| g.source_count as u64).sum();
-    if total != t.sources.len() as u64 {
-        return Err((
-            section.offset,
-            format!("the groups count {total} sources, the group sources section holds {}", t.sources.len()),
-        ));
-    }
-    // The prefix sums below are u32.
-    if total > u32::MAX as u64 {
-        return Err((section.offset, format!("{total} group sources: more than 2^32 - 1")));
-    }
-    let mut source_first = Vec::with_capacity(t.groups.len() + 1);
-    let mut parent_count = vec![0u32; t.groups.len()];
-    let mut next = 0usize;
-    source_first.push(0u32);
-    for (i, g) in t.groups.iter().enumerate() {
-        let end = next + g.source_count as usize;
-        let mut prev: Option<u32> = None;
-        for (k, &s) in t.sources[next..end].iter().enumerate() {
-            let at = section.offset + ((next + k) * SOURCE_LEN) as u64;
-            if s as usize >= i {
-                return Err((
-                    at,
-                    format!("group {i}: source {s} is not a group before it (sources precede their group)"),
-                ));
-            }
-            if prev.is_some_and(|p| p >= s) {
-                return Err((at, format!("group {i}: sources are not strictly increasing ({prev:?}, {s})")));
-            }
-            prev = Some(s);
-            let src = &t.groups[s as usize];
-            if src.level > g.level {
-                return Err((at, format!("group {i}: source {s} has level {} > {}", src.level, g.level)));
-            }
-            if !src.error.is_finite() || src.error > g.error {
-                return Err((
-                    at,
-                    format!(
-                        "group {i}: source {s} has error {} (must be finite and ≤ the group's {})",
-                        src.error, g.error
-                    ),
-                ));
-            }
-            parent_count[s as usize] += 1;
-        }
-        next = end;
-        source_first.push(next as u32);
-    }
-    for (i, g) in t.groups.iter().enumerate() {
-        let (finite, parents) = (g.error.is_finite(), parent_count[i]);
-        if finite && parents == 0 {
-            return Err((
-                group_at(i),
-                format!(
-                    "group {i} has error {} but no group was simplified from it (a finite error needs a \
-                     coarser group that replaces it)",
-                    g.error
-                ),
-            ));
-        }
-        // Root groups are never sources (checked above: sources have finite errors).
-        debug_assert!(finite || parents == 0);
-    }
-    // Parents: counting sort of the links by source, filled in group order, so each group's
-    // parents come out increasing.
-    let mut parent_first = Vec::with_capacity(t.groups.len() + 1);
-    let mut sum = 0u32;
-    for &c in &parent_count {
-        parent_first.push(sum);
-        sum += c;
-    }
-    parent_first.push(sum);
-    let mut fill = parent_first.clone();
-    let mut parents = vec![0u32; t.sources.len()];
-    for i in 0..t.groups.len() {
-        for &s in &t.sources[source_first[i] as usize..source_first[i + 1] as usize] {
-            parents[fill[s as usize] as usize] = i as u32;
-            fill[s as usize] += 1;
-        }
-    }
-    Ok(GroupLinks { source_first, sources: t.sources.to_vec(), parent_first, parents })
-}
-
 /// The string `s` of the string table, checked.
 pub fn str_at(strings: &[u8], s: StrRef) -> Result<&str, String> {
     let end = s.offset as u64 + s.len as u64;
@@ -940,6 +652,11 @@ impl<'a> Reader<'a> {
         Ok([self.f64()?, self.f64()?, self.f64()?])
     }
 
+    /// A string reference: offset, then length.
+    fn str_ref(&mut self) -> Result<StrRef, (u64, String)> {
+        Ok(StrRef { offset: self.u32()?, len: self.u32()? })
+    }
+
     /// Reserved bytes: must be zero.
     pub fn zeros(&mut self, n: usize) -> Result<(), (u64, String)> {
         let at = self.offset();
@@ -971,7 +688,7 @@ pub fn put_f64(w: &mut Vec<u8>, v: f64) {
 mod tests {
     use super::*;
 
-    fn header() -> Header {
+    pub(super) fn header() -> Header {
         Header {
             version: FORMAT_VERSION,
             flags: 0,
@@ -1051,85 +768,6 @@ mod tests {
         assert_eq!(Group::parse(&mut Reader::new(&w, 0)).unwrap(), g);
         w[42] = 1;
         assert_eq!(Group::parse(&mut Reader::new(&w, 1000)).unwrap_err().0, 1042);
-    }
-
-    /// Groups 0 and 1 (finite errors) are simplified into group 2; group 3 (error ∞) is made
-    /// from 2; group 4 is a lone root.
-    fn linked_groups() -> (Vec<Group>, Vec<u32>) {
-        let g = |error: f32, level: u8, source_count: u32| Group {
-            error,
-            level,
-            source_count,
-            ..Group::default()
-        };
-        (
-            vec![g(1.0, 0, 0), g(1.0, 0, 0), g(2.0, 1, 2), g(f32::INFINITY, 2, 1), g(f32::INFINITY, 0, 0)],
-            vec![0, 1, 2],
-        )
-    }
-
-    fn links_of(groups: &[Group], sources: &[u32]) -> Result<GroupLinks, (u64, String)> {
-        let mut h = header();
-        h.sections[SectionKind::Groups as usize].offset = 1000;
-        h.sections[SectionKind::GroupSources as usize].offset = 2000;
-        validate_links(&Tables {
-            header: &h,
-            objects: &[],
-            nodes: &[],
-            groups,
-            pages: &[],
-            strings: &[],
-            sources,
-        })
-    }
-
-    #[test]
-    fn links_give_sources_and_parents() {
-        let (groups, sources) = linked_groups();
-        let links = links_of(&groups, &sources).unwrap();
-        assert_eq!(links.link_count(), 3);
-        let all = |f: &dyn Fn(u32) -> Vec<u32>| (0..5).map(f).collect::<Vec<_>>();
-        assert_eq!(all(&|g| links.sources(g).to_vec()), vec![vec![], vec![], vec![0, 1], vec![2], vec![]]);
-        assert_eq!(all(&|g| links.parents(g).to_vec()), vec![vec![2], vec![2], vec![3], vec![], vec![]]);
-        assert!(links.sources(5).is_empty() && links.parents(u32::MAX).is_empty());
-        assert_eq!(GroupLinks::default().sources(0), &[] as &[u32]);
-    }
-
-    #[test]
-    fn broken_links_are_rejected_with_their_offset() {
-        type Edit = fn(&mut Vec<Group>, &mut Vec<u32>);
-        let cases: [(&str, Edit, u64, &str); 9] = [
-            ("self link", |_, s| s[2] = 3, 2008, "not a group before it"),
-            ("forward link", |_, s| s[1] = 4, 2004, "not a group before it"),
-            ("out of range", |_, s| s[2] = 99, 2008, "not a group before it"),
-            ("unsorted", |_, s| s.swap(0, 1), 2004, "strictly increasing"),
-            ("duplicate", |_, s| s[1] = 0, 2004, "strictly increasing"),
-            ("finer level", |g, _| g[0].level = 2, 2000, "level"),
-            ("larger error", |g, _| g[1].error = 3.0, 2004, "error"),
-            (
-                "finite error, no parent",
-                |g, s| {
-                    g[2].source_count = 1;
-                    s.remove(1);
-                },
-                1048,
-                "no group was simplified from it",
-            ),
-            ("count mismatch", |g, _| g[3].source_count = 2, 2000, "sources"),
-        ];
-        for (name, edit, offset, msg) in cases {
-            let (mut groups, mut sources) = linked_groups();
-            edit(&mut groups, &mut sources);
-            let (at, m) = links_of(&groups, &sources).expect_err(name);
-            assert_eq!(at, offset, "{name}: {m}");
-            assert!(m.contains(msg), "{name}: {m}");
-        }
-        // A root group (error ∞) is never a source.
-        let (mut groups, sources) = linked_groups();
-        groups[1].error = f32::INFINITY;
-        groups[2].error = f32::INFINITY;
-        let (_, m) = links_of(&groups, &sources).unwrap_err();
-        assert!(m.contains("source 1 has error inf"), "{m}");
     }
 
     #[test]

@@ -178,171 +178,17 @@ impl Store {
         Ok(Store { path, data: Data::Vec(bytes), t })
     }
 
+    /// Checks the header and the tables, in the order that gives the dedicated errors first
+    /// (not a store, version, truncation), and copies them out of `bytes`.
     fn parse(path: &Path, bytes: &[u8]) -> Result<Parsed, StoreError> {
-        let path = path.to_path_buf();
-        let len = bytes.len() as u64;
-        let corrupt = |(offset, msg): (u64, String)| StoreError::Corrupt { path: path.clone(), offset, msg };
-        let truncated = |what: &str, needed: u64| StoreError::Truncated {
-            path: path.clone(),
-            what: what.into(),
-            needed,
-            len,
-        };
-
-        let n = bytes.len().min(MAGIC.len());
-        if bytes[..n] != MAGIC[..n] {
-            return Err(StoreError::NotAStore { path });
-        }
-        if bytes.len() < 12 {
-            return Err(truncated("the header", HEADER_LEN as u64));
-        }
-        let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
-        if version != FORMAT_VERSION {
-            return Err(StoreError::Version { path, found: version });
-        }
-        if bytes.len() < HEADER_LEN {
-            return Err(truncated("the header", HEADER_LEN as u64));
-        }
-        let header = Header::parse(&bytes[..HEADER_LEN], CHECK_CRC).map_err(corrupt)?;
-
-        // Section directory: canonical layout, table lengths matching the counts.
-        let h = &header;
-        let fixed = [
-            (SectionKind::Objects, h.object_count, OBJECT_LEN),
-            (SectionKind::Nodes, h.node_count, NODE_LEN),
-            (SectionKind::Groups, h.group_count, GROUP_LEN),
-            (SectionKind::PageTable, h.page_count, PAGE_ENTRY_LEN),
-        ];
-        let dir_at = |k: SectionKind| (SECTIONS_AT + SECTION_ENTRY_LEN * k as usize) as u64;
-        for (kind, count, size) in fixed {
-            if h.section(kind).length != count as u64 * size as u64 {
-                return Err(corrupt((
-                    dir_at(kind),
-                    format!(
-                        "{} is {} bytes, expected {count} entries of {size}",
-                        kind.name(),
-                        h.section(kind).length
-                    ),
-                )));
-            }
-        }
-        let sources_len = h.section(SectionKind::GroupSources).length;
-        if sources_len % SOURCE_LEN as u64 != 0 {
-            return Err(corrupt((
-                dir_at(SectionKind::GroupSources),
-                format!("group sources are {sources_len} bytes, not a multiple of {SOURCE_LEN}"),
-            )));
-        }
-        let strings_len = h.section(SectionKind::Strings).length;
-        if strings_len > u32::MAX as u64 {
-            return Err(corrupt((dir_at(SectionKind::Strings), "string table over 4 GiB".into())));
-        }
-        let pages = h.section(SectionKind::Pages);
-        if pages.offset != HEADER_LEN as u64 || pages.checksum != 0 {
-            return Err(corrupt((
-                dir_at(SectionKind::Pages),
-                format!(
-                    "pages region at byte {} with checksum {}, expected {HEADER_LEN} and 0",
-                    pages.offset, pages.checksum
-                ),
-            )));
-        }
-        // The lengths come from the file: each section must end within it before the next
-        // offset is computed from its end (which cannot overflow then).
-        if pages.length > len {
-            return Err(truncated("the pages region", pages.offset.saturating_add(pages.length)));
-        }
-        let mut pos = pages.end();
-        for kind in TABLE_ORDER {
-            let s = h.section(kind);
-            let offset = pos.next_multiple_of(SECTION_ALIGN);
-            if s.offset != offset {
-                return Err(corrupt((
-                    dir_at(kind),
-                    format!("{} at byte {}, expected {offset}", kind.name(), s.offset),
-                )));
-            }
-            pos = s.end();
-            if pos > len {
-                return Err(truncated("the tables", pos));
-            }
-        }
-        if pos < len {
-            return Err(corrupt((pos, format!("{} unexpected bytes after the last table", len - pos))));
-        }
-        let mut prev_end = pages.end();
-        for kind in TABLE_ORDER {
-            let s = h.section(kind);
-            if let Some(i) = bytes[prev_end as usize..s.offset as usize].iter().position(|&b| b != 0) {
-                return Err(corrupt((prev_end + i as u64, "padding byte is not zero".into())));
-            }
-            prev_end = s.end();
-            let body = &bytes[s.offset as usize..s.end() as usize];
-            let actual = checksum(body);
-            if CHECK_CRC && actual != s.checksum {
-                return Err(corrupt((
-                    s.offset,
-                    format!(
-                        "{} checksum mismatch (stored {:#010x}, computed {actual:#010x})",
-                        kind.name(),
-                        s.checksum
-                    ),
-                )));
-            }
-        }
-
-        let section = |k: SectionKind| {
-            let s = h.section(k);
-            Reader::new(&bytes[s.offset as usize..s.end() as usize], s.offset)
-        };
-        let mut r = section(SectionKind::Objects);
-        let object_entries = (0..h.object_count)
-            .map(|_| ObjectEntry::parse(&mut r))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(corrupt)?;
-        let mut r = section(SectionKind::Nodes);
-        let nodes =
-            (0..h.node_count).map(|_| Node::parse(&mut r)).collect::<Result<Vec<_>, _>>().map_err(corrupt)?;
-        let mut r = section(SectionKind::Groups);
-        let groups = (0..h.group_count)
-            .map(|_| Group::parse(&mut r))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(corrupt)?;
-        let mut r = section(SectionKind::PageTable);
-        let page_entries = (0..h.page_count)
-            .map(|_| PageEntry::parse(&mut r))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(corrupt)?;
-        // The section lies inside the file (checked above): its length bounds this allocation.
-        let mut r = section(SectionKind::GroupSources);
-        let sources = (0..sources_len / SOURCE_LEN as u64)
-            .map(|_| r.u32())
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(corrupt)?;
-        let s = h.section(SectionKind::Strings);
-        let strings = &bytes[s.offset as usize..s.end() as usize];
-
-        let links = validate_tables(&Tables {
-            header: h,
-            objects: &object_entries,
-            nodes: &nodes,
-            groups: &groups,
-            pages: &page_entries,
-            strings,
-            sources: &sources,
-        })
-        .map_err(corrupt)?;
-        drop(sources);
-
-        // Validated above: these cannot fail.
-        let text = |r| str_at(strings, r).unwrap_or_default().to_owned();
-        let units = text(h.units);
-        let build_options = text(h.build_options);
-        let objects = object_entries
-            .iter()
-            .map(|o| Object { name: text(o.name), color: o.color, triangles: o.triangles })
-            .collect();
-        Ok(Parsed { header, units, build_options, objects, nodes, groups, links, pages: page_entries })
+        let p = Parser { path, bytes };
+        let header = p.header()?;
+        p.check_table_sizes(&header)?;
+        p.check_layout(&header)?;
+        p.check_padding_and_checksums(&header)?;
+        let raw = p.tables(&header)?;
+        let links = validate_tables(&raw.as_tables(&header)).map_err(|e| p.corrupt(e))?;
+        Ok(raw.into_parsed(header, links))
     }
 
     /// The file this store was opened from (`<memory>` for [`from_bytes`](Self::from_bytes)).
@@ -482,126 +328,26 @@ impl Store {
     /// simplification step) have the same parents.
     /// `progress(done, total)` is called after each page. Stops at the first problem.
     pub fn verify(&self, mut progress: impl FnMut(u32, u32)) -> Result<VerifyReport, StoreError> {
-        let invariant = |msg: String| StoreError::Invariant { path: self.path.clone(), msg };
-        let mut rep = VerifyReport {
-            file_bytes: self.file_len(),
-            page_bytes: self.t.header.section(SectionKind::Pages).length,
-            pages: self.t.pages.len() as u32,
-            nodes: self.t.nodes.len() as u32,
-            groups: self.t.groups.len() as u32,
-            objects: self.t.objects.len() as u32,
-            group_links: self.t.links.link_count() as u64,
-            ..Default::default()
-        };
-        // Whether some cluster of the group was made from that source, by link.
-        let mut link_used = vec![false; self.t.links.link_count()];
-        let mut claimed = vec![0u32; self.t.groups.len()];
-        let mut group_tris = vec![0u64; self.t.groups.len()];
+        let mut v = Verifier::new(self);
         let total = self.t.pages.len() as u32;
         for (pi, p) in self.t.pages.iter().enumerate() {
-            let pi = pi as u32;
-            let clusters = self.page(pi)?;
-            rep.root_pages += p.is_root() as u32;
-            for (k, c) in clusters.iter().enumerate() {
-                let at = format!("page {pi} cluster {k}");
-                let g = self.t.groups.get(c.group as usize).ok_or_else(|| {
-                    invariant(format!("{at}: group {} beyond {} groups", c.group, self.t.groups.len()))
-                })?;
-                let k = k as u64;
-                if g.page != pi
-                    || k < g.first_cluster as u64
-                    || k >= g.first_cluster as u64 + g.cluster_count as u64
-                {
-                    return Err(invariant(format!(
-                        "{at}: says group {}, which lists clusters {}..{} of page {}",
-                        c.group,
-                        g.first_cluster,
-                        g.first_cluster as u64 + g.cluster_count as u64,
-                        g.page
-                    )));
-                }
-                claimed[c.group as usize] += 1;
-                group_tris[c.group as usize] += c.triangle_count() as u64;
-                if c.self_error > g.error {
-                    return Err(invariant(format!(
-                        "{at}: self error {} > error {} of its group {}",
-                        c.self_error, g.error, c.group
-                    )));
-                }
-                // A simplified cluster (self error > 0) carries the error and sphere of the
-                // source(s) it was made from.
-                if c.self_error > 0.0 {
-                    let range = self.t.links.source_range(c.group);
-                    let mut matched = false;
-                    for (k, &s) in range.clone().zip(self.t.links.sources(c.group)) {
-                        let src = &self.t.groups[s as usize];
-                        if src.error == c.self_error && src.sphere == c.self_sphere {
-                            link_used[k] = true;
-                            matched = true;
-                        }
-                    }
-                    if !matched {
-                        return Err(invariant(format!(
-                            "{at}: self error {} and sphere {:?} match none of the sources {:?} of its group {}",
-                            c.self_error,
-                            c.self_sphere,
-                            self.t.links.sources(c.group),
-                            c.group
-                        )));
-                    }
-                }
-                if !sphere_contains(g.sphere, c.self_sphere) {
-                    return Err(invariant(format!(
-                        "{at}: self sphere {:?} not inside the sphere {:?} of its group {}",
-                        c.self_sphere, g.sphere, c.group
-                    )));
-                }
-                if c.level > g.level {
-                    return Err(invariant(format!(
-                        "{at}: level {} > level {} of its group",
-                        c.level, g.level
-                    )));
-                }
-                // group.node < nodes.len(): checked at open.
-                let node = &self.t.nodes[g.node as usize];
-                if let Some(q) =
-                    c.positions.iter().find(|q| (0..3).any(|a| q[a] < node.min[a] || q[a] > node.max[a]))
-                {
-                    return Err(invariant(format!(
-                        "{at}: vertex {q:?} outside the bounds {:?}..={:?} of node {} (its group's node)",
-                        node.min, node.max, g.node
-                    )));
-                }
-                rep.clusters += 1;
-                rep.triangles += c.triangle_count() as u64;
-                if c.level == 0 {
-                    rep.level0_triangles += c.triangle_count() as u64;
-                }
-                rep.max_level = rep.max_level.max(c.level);
-            }
-            progress(pi + 1, total);
+            v.check_page(pi as u32, p)?;
+            progress(pi as u32 + 1, total);
         }
-        for (i, g) in self.t.groups.iter().enumerate() {
-            if claimed[i] != g.cluster_count || group_tris[i] != g.triangles as u64 {
-                return Err(invariant(format!(
-                    "group {i} lists {} clusters / {} triangles, its clusters are {} / {}",
-                    g.cluster_count, g.triangles, claimed[i], group_tris[i]
-                )));
-            }
-        }
-        if let Some(k) = link_used.iter().position(|&u| !u) {
-            let group = (0..self.t.groups.len() as u32)
-                .find(|&g| self.t.links.source_range(g).contains(&k))
-                .unwrap_or_default();
-            let s = self.t.links.sources(group)[k - self.t.links.source_range(group).start];
-            return Err(invariant(format!(
-                "group {group}: source {s} (error {}, sphere {:?}) matches none of the group's clusters \
-                 (no cluster was simplified from it)",
-                self.t.groups[s as usize].error, self.t.groups[s as usize].sphere
-            )));
-        }
-        // The sources of one simplification step (those of a group with equal error and sphere)
-        // have the same parents, so that the runtime's availability rule treats them alike.
+        v.check_group_counts()?;
+        v.check_every_source_used()?;
+        self.check_step_parents()?;
+        self.check_node_errors()?;
+        Ok(v.report())
+    }
+
+    fn invariant(&self, msg: String) -> StoreError {
+        StoreError::Invariant { path: self.path.clone(), msg }
+    }
+
+    /// The sources of one simplification step (those of a group with equal error and sphere)
+    /// have the same parents, so that the runtime's availability rule treats them alike.
+    fn check_step_parents(&self) -> Result<(), StoreError> {
         let step_key = |s: u32| {
             let g = &self.t.groups[s as usize];
             (g.error.to_bits(), g.sphere.map(f32::to_bits))
@@ -615,7 +361,7 @@ impl Store {
                 if step_key(w[0]) == step_key(w[1])
                     && self.t.links.parents(w[0]) != self.t.links.parents(w[1])
                 {
-                    return Err(invariant(format!(
+                    return Err(self.invariant(format!(
                         "group {group}: sources {} and {} have the same error and sphere (one simplification \
                          step) but different parents {:?} and {:?}",
                         w[0],
@@ -626,7 +372,12 @@ impl Store {
                 }
             }
         }
-        // Children come after their parent (checked at open): one backward pass.
+        Ok(())
+    }
+
+    /// Each node's `max_error` is at least the largest error of the groups in its subtree.
+    /// Children come after their parent (checked at open): one backward pass.
+    fn check_node_errors(&self) -> Result<(), StoreError> {
         let mut subtree = vec![0f32; self.t.nodes.len()];
         for i in (0..self.t.nodes.len()).rev() {
             let n = &self.t.nodes[i];
@@ -640,17 +391,424 @@ impl Store {
                 m = m.max(c);
             }
             if n.max_error < m {
-                return Err(invariant(format!(
+                return Err(self.invariant(format!(
                     "node {i}: max error {} < {m}, the largest group error in its subtree",
                     n.max_error
                 )));
             }
             subtree[i] = m;
         }
-        if self.t.header.input_triangles > 0 {
-            rep.bytes_per_input_triangle = rep.file_bytes as f64 / self.t.header.input_triangles as f64;
+        Ok(())
+    }
+}
+
+/// What [`Store::verify`] gathers page after page, and the checks of each cluster.
+struct Verifier<'s> {
+    store: &'s Store,
+    rep: VerifyReport,
+    /// Whether some cluster of the group was made from that source, by link.
+    link_used: Vec<bool>,
+    /// Clusters found of each group.
+    claimed: Vec<u32>,
+    /// Triangles found of each group.
+    group_tris: Vec<u64>,
+}
+
+impl<'s> Verifier<'s> {
+    fn new(store: &'s Store) -> Verifier<'s> {
+        let t = &store.t;
+        let rep = VerifyReport {
+            file_bytes: store.file_len(),
+            page_bytes: t.header.section(SectionKind::Pages).length,
+            pages: t.pages.len() as u32,
+            nodes: t.nodes.len() as u32,
+            groups: t.groups.len() as u32,
+            objects: t.objects.len() as u32,
+            group_links: t.links.link_count() as u64,
+            ..Default::default()
+        };
+        Verifier {
+            store,
+            rep,
+            link_used: vec![false; t.links.link_count()],
+            claimed: vec![0u32; t.groups.len()],
+            group_tris: vec![0u64; t.groups.len()],
         }
-        Ok(rep)
+    }
+
+    fn invariant(&self, msg: String) -> StoreError {
+        self.store.invariant(msg)
+    }
+
+    /// Decodes page `pi` (checksum, decoding, page table counts) and checks each cluster.
+    fn check_page(&mut self, pi: u32, p: &PageEntry) -> Result<(), StoreError> {
+        let clusters = self.store.page(pi)?;
+        self.rep.root_pages += p.is_root() as u32;
+        for (k, c) in clusters.iter().enumerate() {
+            self.check_cluster(pi, k, c)?;
+        }
+        Ok(())
+    }
+
+    /// Cluster `k` of page `pi` against its group, its group's sources and its group's node;
+    /// counts it.
+    fn check_cluster(&mut self, pi: u32, k: usize, c: &PageCluster) -> Result<(), StoreError> {
+        let at = format!("page {pi} cluster {k}");
+        let g = self.group_listing(&at, pi, k, c)?;
+        self.claimed[c.group as usize] += 1;
+        self.group_tris[c.group as usize] += c.triangle_count() as u64;
+        if c.self_error > g.error {
+            return Err(self.invariant(format!(
+                "{at}: self error {} > error {} of its group {}",
+                c.self_error, g.error, c.group
+            )));
+        }
+        // A simplified cluster (self error > 0) carries the error and sphere of the
+        // source(s) it was made from.
+        if c.self_error > 0.0 {
+            self.match_sources(&at, c)?;
+        }
+        self.check_within_group(&at, c, g)?;
+        self.count(c);
+        Ok(())
+    }
+
+    /// The cluster's group, which must list it: same page, within the group's cluster range.
+    fn group_listing(&self, at: &str, pi: u32, k: usize, c: &PageCluster) -> Result<&'s Group, StoreError> {
+        let groups = &self.store.t.groups;
+        let g = groups.get(c.group as usize).ok_or_else(|| {
+            self.invariant(format!("{at}: group {} beyond {} groups", c.group, groups.len()))
+        })?;
+        let k = k as u64;
+        if g.page != pi || k < g.first_cluster as u64 || k >= g.first_cluster as u64 + g.cluster_count as u64
+        {
+            return Err(self.invariant(format!(
+                "{at}: says group {}, which lists clusters {}..{} of page {}",
+                c.group,
+                g.first_cluster,
+                g.first_cluster as u64 + g.cluster_count as u64,
+                g.page
+            )));
+        }
+        Ok(g)
+    }
+
+    /// A simplified cluster's self error and sphere are those of some source of its group;
+    /// marks every source they match as used.
+    fn match_sources(&mut self, at: &str, c: &PageCluster) -> Result<(), StoreError> {
+        let t = &self.store.t;
+        let range = t.links.source_range(c.group);
+        let mut matched = false;
+        for (k, &s) in range.clone().zip(t.links.sources(c.group)) {
+            let src = &t.groups[s as usize];
+            if src.error == c.self_error && src.sphere == c.self_sphere {
+                self.link_used[k] = true;
+                matched = true;
+            }
+        }
+        if !matched {
+            return Err(self.invariant(format!(
+                "{at}: self error {} and sphere {:?} match none of the sources {:?} of its group {}",
+                c.self_error,
+                c.self_sphere,
+                t.links.sources(c.group),
+                c.group
+            )));
+        }
+        Ok(())
+    }
+
+    /// The cluster lies within its group `g`: self sphere inside the group's sphere, level ≤
+    /// the group's, every vertex inside the bounds of the group's node.
+    fn check_within_group(&self, at: &str, c: &PageCluster, g: &Group) -> Result<(), StoreError> {
+        if !sphere_contains(g.sphere, c.self_sphere) {
+            return Err(self.invariant(format!(
+                "{at}: self sphere {:?} not inside the sphere {:?} of its group {}",
+                c.self_sphere, g.sphere, c.group
+            )));
+        }
+        if c.level > g.level {
+            return Err(self.invariant(format!("{at}: level {} > level {} of its group", c.level, g.level)));
+        }
+        // group.node < nodes.len(): checked at open.
+        let node = &self.store.t.nodes[g.node as usize];
+        if let Some(q) = c.positions.iter().find(|q| (0..3).any(|a| q[a] < node.min[a] || q[a] > node.max[a]))
+        {
+            return Err(self.invariant(format!(
+                "{at}: vertex {q:?} outside the bounds {:?}..={:?} of node {} (its group's node)",
+                node.min, node.max, g.node
+            )));
+        }
+        Ok(())
+    }
+
+    /// Adds a checked cluster to the report's counts.
+    fn count(&mut self, c: &PageCluster) {
+        self.rep.clusters += 1;
+        self.rep.triangles += c.triangle_count() as u64;
+        if c.level == 0 {
+            self.rep.level0_triangles += c.triangle_count() as u64;
+        }
+        self.rep.max_level = self.rep.max_level.max(c.level);
+    }
+
+    /// Each group's clusters and triangles, as found in the pages, are those it lists.
+    fn check_group_counts(&self) -> Result<(), StoreError> {
+        for (i, g) in self.store.t.groups.iter().enumerate() {
+            if self.claimed[i] != g.cluster_count || self.group_tris[i] != g.triangles as u64 {
+                return Err(self.invariant(format!(
+                    "group {i} lists {} clusters / {} triangles, its clusters are {} / {}",
+                    g.cluster_count, g.triangles, self.claimed[i], self.group_tris[i]
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// Every source of a group was matched by one of the group's clusters (some cluster was
+    /// simplified from it).
+    fn check_every_source_used(&self) -> Result<(), StoreError> {
+        let t = &self.store.t;
+        if let Some(k) = self.link_used.iter().position(|&u| !u) {
+            let group = (0..t.groups.len() as u32)
+                .find(|&g| t.links.source_range(g).contains(&k))
+                .unwrap_or_default();
+            let s = t.links.sources(group)[k - t.links.source_range(group).start];
+            return Err(self.invariant(format!(
+                "group {group}: source {s} (error {}, sphere {:?}) matches none of the group's clusters \
+                 (no cluster was simplified from it)",
+                t.groups[s as usize].error, t.groups[s as usize].sphere
+            )));
+        }
+        Ok(())
+    }
+
+    /// The report, with the file's bytes per input triangle.
+    fn report(self) -> VerifyReport {
+        let mut rep = self.rep;
+        let input_triangles = self.store.t.header.input_triangles;
+        if input_triangles > 0 {
+            rep.bytes_per_input_triangle = rep.file_bytes as f64 / input_triangles as f64;
+        }
+        rep
+    }
+}
+
+/// Byte offset of the section directory's entry for `kind`.
+fn dir_at(kind: SectionKind) -> u64 {
+    (SECTIONS_AT + SECTION_ENTRY_LEN * kind as usize) as u64
+}
+
+/// The steps of [`Store::parse`] over a store's bytes; errors name `path`.
+struct Parser<'a> {
+    path: &'a Path,
+    bytes: &'a [u8],
+}
+
+impl<'a> Parser<'a> {
+    fn len(&self) -> u64 {
+        self.bytes.len() as u64
+    }
+
+    fn corrupt(&self, (offset, msg): (u64, String)) -> StoreError {
+        StoreError::Corrupt { path: self.path.to_path_buf(), offset, msg }
+    }
+
+    fn truncated(&self, what: &str, needed: u64) -> StoreError {
+        StoreError::Truncated { path: self.path.to_path_buf(), what: what.into(), needed, len: self.len() }
+    }
+
+    /// The magic and the version first (their own errors: not a store, rebuild), then the
+    /// whole header and its checks.
+    fn header(&self) -> Result<Header, StoreError> {
+        let bytes = self.bytes;
+        let n = bytes.len().min(MAGIC.len());
+        if bytes[..n] != MAGIC[..n] {
+            return Err(StoreError::NotAStore { path: self.path.to_path_buf() });
+        }
+        if bytes.len() < 12 {
+            return Err(self.truncated("the header", HEADER_LEN as u64));
+        }
+        let version = u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]);
+        if version != FORMAT_VERSION {
+            return Err(StoreError::Version { path: self.path.to_path_buf(), found: version });
+        }
+        if bytes.len() < HEADER_LEN {
+            return Err(self.truncated("the header", HEADER_LEN as u64));
+        }
+        Header::parse(&bytes[..HEADER_LEN], CHECK_CRC).map_err(|e| self.corrupt(e))
+    }
+
+    /// Section directory: the tables of fixed-size entries as long as their counts say, the
+    /// group sources whole entries, the string table within 4 GiB.
+    fn check_table_sizes(&self, h: &Header) -> Result<(), StoreError> {
+        let fixed = [
+            (SectionKind::Objects, h.object_count, OBJECT_LEN),
+            (SectionKind::Nodes, h.node_count, NODE_LEN),
+            (SectionKind::Groups, h.group_count, GROUP_LEN),
+            (SectionKind::PageTable, h.page_count, PAGE_ENTRY_LEN),
+        ];
+        for (kind, count, size) in fixed {
+            if h.section(kind).length != count as u64 * size as u64 {
+                return Err(self.corrupt((
+                    dir_at(kind),
+                    format!(
+                        "{} is {} bytes, expected {count} entries of {size}",
+                        kind.name(),
+                        h.section(kind).length
+                    ),
+                )));
+            }
+        }
+        let sources_len = h.section(SectionKind::GroupSources).length;
+        if !sources_len.is_multiple_of(SOURCE_LEN as u64) {
+            return Err(self.corrupt((
+                dir_at(SectionKind::GroupSources),
+                format!("group sources are {sources_len} bytes, not a multiple of {SOURCE_LEN}"),
+            )));
+        }
+        let strings_len = h.section(SectionKind::Strings).length;
+        if strings_len > u32::MAX as u64 {
+            return Err(self.corrupt((dir_at(SectionKind::Strings), "string table over 4 GiB".into())));
+        }
+        Ok(())
+    }
+
+    /// The canonical layout: the pages region right after the header, then the tables in
+    /// [`TABLE_ORDER`] at their aligned offsets, all within the file and nothing after them.
+    fn check_layout(&self, h: &Header) -> Result<(), StoreError> {
+        let len = self.len();
+        let pages = h.section(SectionKind::Pages);
+        if pages.offset != HEADER_LEN as u64 || pages.checksum != 0 {
+            return Err(self.corrupt((
+                dir_at(SectionKind::Pages),
+                format!(
+                    "pages region at byte {} with checksum {}, expected {HEADER_LEN} and 0",
+                    pages.offset, pages.checksum
+                ),
+            )));
+        }
+        // The lengths come from the file: each section must end within it before the next
+        // offset is computed from its end (which cannot overflow then).
+        if pages.length > len {
+            return Err(self.truncated("the pages region", pages.offset.saturating_add(pages.length)));
+        }
+        let mut pos = pages.end();
+        for kind in TABLE_ORDER {
+            let s = h.section(kind);
+            let offset = pos.next_multiple_of(SECTION_ALIGN);
+            if s.offset != offset {
+                return Err(self.corrupt((
+                    dir_at(kind),
+                    format!("{} at byte {}, expected {offset}", kind.name(), s.offset),
+                )));
+            }
+            pos = s.end();
+            if pos > len {
+                return Err(self.truncated("the tables", pos));
+            }
+        }
+        if pos < len {
+            return Err(self.corrupt((pos, format!("{} unexpected bytes after the last table", len - pos))));
+        }
+        Ok(())
+    }
+
+    /// The padding before each table is zero and each table's checksum matches (the layout is
+    /// checked: every range lies in the file).
+    fn check_padding_and_checksums(&self, h: &Header) -> Result<(), StoreError> {
+        let mut prev_end = h.section(SectionKind::Pages).end();
+        for kind in TABLE_ORDER {
+            let s = h.section(kind);
+            if let Some(i) = self.bytes[prev_end as usize..s.offset as usize].iter().position(|&b| b != 0) {
+                return Err(self.corrupt((prev_end + i as u64, "padding byte is not zero".into())));
+            }
+            prev_end = s.end();
+            let actual = checksum(self.section(h, kind));
+            if CHECK_CRC && actual != s.checksum {
+                return Err(self.corrupt((
+                    s.offset,
+                    format!(
+                        "{} checksum mismatch (stored {:#010x}, computed {actual:#010x})",
+                        kind.name(),
+                        s.checksum
+                    ),
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The bytes of section `kind` (within the file: checked by [`Parser::check_layout`]).
+    fn section(&self, h: &Header, kind: SectionKind) -> &'a [u8] {
+        let s = h.section(kind);
+        &self.bytes[s.offset as usize..s.end() as usize]
+    }
+
+    /// `count` entries of the table `kind`, each read by `parse`.
+    fn entries<T>(
+        &self,
+        h: &Header,
+        kind: SectionKind,
+        count: u64,
+        mut parse: impl FnMut(&mut Reader<'a>) -> Result<T, (u64, String)>,
+    ) -> Result<Vec<T>, StoreError> {
+        let mut r = Reader::new(self.section(h, kind), h.section(kind).offset);
+        (0..count).map(|_| parse(&mut r)).collect::<Result<Vec<_>, _>>().map_err(|e| self.corrupt(e))
+    }
+
+    /// Every table, entry by entry (each entry's own checks; the relations between them are
+    /// [`validate_tables`]'s).
+    fn tables(&self, h: &Header) -> Result<RawTables<'a>, StoreError> {
+        let objects = self.entries(h, SectionKind::Objects, h.object_count as u64, ObjectEntry::parse)?;
+        let nodes = self.entries(h, SectionKind::Nodes, h.node_count as u64, Node::parse)?;
+        let groups = self.entries(h, SectionKind::Groups, h.group_count as u64, Group::parse)?;
+        let pages = self.entries(h, SectionKind::PageTable, h.page_count as u64, PageEntry::parse)?;
+        // The section lies inside the file (checked above): its length bounds this allocation.
+        let source_count = h.section(SectionKind::GroupSources).length / SOURCE_LEN as u64;
+        let sources = self.entries(h, SectionKind::GroupSources, source_count, |r| r.u32())?;
+        let strings = self.section(h, SectionKind::Strings);
+        Ok(RawTables { objects, nodes, groups, pages, sources, strings })
+    }
+}
+
+/// The tables as stored, parsed but not yet validated as a whole.
+struct RawTables<'a> {
+    objects: Vec<ObjectEntry>,
+    nodes: Vec<Node>,
+    groups: Vec<Group>,
+    pages: Vec<PageEntry>,
+    sources: Vec<u32>,
+    strings: &'a [u8],
+}
+
+impl RawTables<'_> {
+    fn as_tables<'t>(&'t self, header: &'t Header) -> Tables<'t> {
+        Tables {
+            header,
+            objects: &self.objects,
+            nodes: &self.nodes,
+            groups: &self.groups,
+            pages: &self.pages,
+            strings: self.strings,
+            sources: &self.sources,
+        }
+    }
+
+    /// The store's own copy of the validated tables: strings resolved, the group sources
+    /// replaced by `links` (dropped before the object names are copied).
+    fn into_parsed(self, header: Header, links: GroupLinks) -> Parsed {
+        let RawTables { objects, nodes, groups, pages, sources, strings } = self;
+        drop(sources);
+        // Validated: these cannot fail.
+        let text = |r| str_at(strings, r).unwrap_or_default().to_owned();
+        let units = text(header.units);
+        let build_options = text(header.build_options);
+        let objects = objects
+            .iter()
+            .map(|o| Object { name: text(o.name), color: o.color, triangles: o.triangles })
+            .collect();
+        Parsed { header, units, build_options, objects, nodes, groups, links, pages }
     }
 }
 

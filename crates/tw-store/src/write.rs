@@ -183,32 +183,46 @@ impl StoreWriter {
         groups: &[Group],
         group_sources: &[u32],
     ) -> Result<WriteSummary, StoreError> {
-        let count = |n: usize, what: &str| {
-            u32::try_from(n).map_err(|_| StoreError::Invalid(format!("{n} {what}: more than 2^32")))
+        let tables = self.encode_tables(info, objects, nodes, groups, group_sources)?;
+        let header = self.header(info, &tables, nodes.len(), groups.len())?;
+        let header_bytes = header.to_bytes();
+        // The reader's checks, run before anything is written.
+        Header::parse(&header_bytes, true).map_err(|(_, m)| StoreError::Invalid(format!("header: {m}")))?;
+        validate_tables(&Tables {
+            header: &header,
+            objects: &tables.objects,
+            nodes,
+            groups,
+            pages: &self.pages,
+            strings: &tables.bodies[SectionKind::Strings as usize],
+            sources: group_sources,
+        })
+        .map_err(|(_, m)| StoreError::Invalid(m))?;
+        self.write_tables(&header, &tables.bodies)?;
+        let summary = WriteSummary {
+            file_bytes: self.pos,
+            page_bytes: header.section(SectionKind::Pages).length,
+            pages: header.page_count,
+            clusters: header.cluster_count,
+            triangles: header.triangle_count,
         };
-        let mut strings = Vec::new();
-        let mut add_str = |s: &str| -> Result<StrRef, StoreError> {
-            let r = StrRef {
-                offset: count(strings.len(), "string bytes")?,
-                len: count(s.len(), "string bytes")?,
-            };
-            strings.extend_from_slice(s.as_bytes());
-            Ok(r)
-        };
-        let units = add_str(&info.units)?;
-        let build_options = add_str(&info.build_options)?;
-        let mut object_entries = Vec::with_capacity(objects.len());
-        for o in objects {
-            object_entries.push(ObjectEntry {
-                name: add_str(&o.name)?,
-                color: o.color,
-                triangles: o.triangles,
-            });
-        }
-        count(strings.len(), "string bytes")?;
+        let path = self.persist(&header_bytes)?;
+        tracing::debug!("{}: wrote {} bytes, {} pages", path.display(), summary.file_bytes, summary.pages);
+        Ok(summary)
+    }
 
+    /// The strings and the tables after the pages region, as bytes.
+    fn encode_tables(
+        &self,
+        info: &StoreInfo,
+        objects: &[Object],
+        nodes: &[Node],
+        groups: &[Group],
+        group_sources: &[u32],
+    ) -> Result<EncodedTables, StoreError> {
+        let StringTable { bytes: strings, units, build_options, objects } = StringTable::new(info, objects)?;
         let mut bodies: [Vec<u8>; SECTION_COUNT] = Default::default();
-        object_entries.iter().for_each(|o| o.write(&mut bodies[SectionKind::Objects as usize]));
+        objects.iter().for_each(|o| o.write(&mut bodies[SectionKind::Objects as usize]));
         nodes.iter().for_each(|n| n.write(&mut bodies[SectionKind::Nodes as usize]));
         groups.iter().for_each(|g| g.write(&mut bodies[SectionKind::Groups as usize]));
         let links = &mut bodies[SectionKind::GroupSources as usize];
@@ -216,13 +230,25 @@ impl StoreWriter {
         group_sources.iter().for_each(|&s| links.extend_from_slice(&s.to_le_bytes()));
         self.pages.iter().for_each(|p| p.write(&mut bodies[SectionKind::PageTable as usize]));
         bodies[SectionKind::Strings as usize] = strings;
+        Ok(EncodedTables { units, build_options, objects, bodies })
+    }
 
+    /// The header of the finished store: `info`'s scene frame, the counts, and the canonical
+    /// section layout of the pages written and the `tables`.
+    fn header(
+        &self,
+        info: &StoreInfo,
+        tables: &EncodedTables,
+        nodes: usize,
+        groups: usize,
+    ) -> Result<Header, StoreError> {
+        let bodies = &tables.bodies;
         let sections = layout_sections(
             self.pos - HEADER_LEN as u64,
             |k| bodies[k as usize].len() as u64,
             |k| checksum(&bodies[k as usize]),
         );
-        let header = Header {
+        Ok(Header {
             version: FORMAT_VERSION,
             flags: 0,
             up_axis: info.up_axis,
@@ -230,31 +256,22 @@ impl StoreWriter {
             bounds_max: info.bounds_max,
             grid_origin: info.grid_origin,
             grid_step: info.grid_step,
-            units,
-            build_options,
-            object_count: count(objects.len(), "objects")?,
-            node_count: count(nodes.len(), "nodes")?,
-            group_count: count(groups.len(), "groups")?,
+            units: tables.units,
+            build_options: tables.build_options,
+            object_count: count(tables.objects.len(), "objects")?,
+            node_count: count(nodes, "nodes")?,
+            group_count: count(groups, "groups")?,
             page_count: self.page_count(),
             input_triangles: info.input_triangles,
             cluster_count: self.pages.iter().map(|p| p.cluster_count as u64).sum(),
             triangle_count: self.pages.iter().map(|p| p.triangle_count as u64).sum(),
             sections,
-        };
-        let header_bytes = header.to_bytes();
-        // The reader's checks, run before anything is written.
-        Header::parse(&header_bytes, true).map_err(|(_, m)| StoreError::Invalid(format!("header: {m}")))?;
-        let tables = Tables {
-            header: &header,
-            objects: &object_entries,
-            nodes,
-            groups,
-            pages: &self.pages,
-            strings: &bodies[SectionKind::Strings as usize],
-            sources: group_sources,
-        };
-        validate_tables(&tables).map_err(|(_, m)| StoreError::Invalid(m))?;
+        })
+    }
 
+    /// Writes the tables after the pages region, each at its offset in `header` (zero padding
+    /// before it).
+    fn write_tables(&mut self, header: &Header, bodies: &[Vec<u8>; SECTION_COUNT]) -> Result<(), StoreError> {
         for kind in TABLE_ORDER {
             let s = header.section(kind);
             let pad = (s.offset - self.pos) as usize;
@@ -265,15 +282,19 @@ impl StoreWriter {
             res.map_err(|e| self.io(e))?;
             self.pos = s.end();
         }
-        let file_bytes = self.pos;
-        let page_bytes = header.section(SectionKind::Pages).length;
+        Ok(())
+    }
+
+    /// Flushes the file, writes the header in place, fsyncs the file and renames it over the
+    /// destination (then fsyncs its directory); returns the destination.
+    fn persist(self, header_bytes: &[u8; HEADER_LEN]) -> Result<PathBuf, StoreError> {
         let path = self.path.clone();
         let io = |source| StoreError::Io { path: path.clone(), source };
         drop(self.out.finish().map_err(io)?);
         let mut tmp = self.tmp;
         let f: &mut File = tmp.as_file_mut();
         f.seek(SeekFrom::Start(0)).map_err(io)?;
-        f.write_all(&header_bytes).map_err(io)?;
+        f.write_all(header_bytes).map_err(io)?;
         f.sync_all().map_err(io)?;
         tmp.persist(&path).map_err(|e| io(e.error))?;
         #[cfg(unix)]
@@ -283,15 +304,59 @@ impl StoreWriter {
                 tracing::warn!("{}: could not fsync the directory: {e}", dir.display());
             }
         }
-        tracing::debug!("{}: wrote {file_bytes} bytes, {} pages", path.display(), header.page_count);
-        Ok(WriteSummary {
-            file_bytes,
-            page_bytes,
-            pages: header.page_count,
-            clusters: header.cluster_count,
-            triangles: header.triangle_count,
-        })
+        Ok(path)
     }
+}
+
+/// `n` as a `u32` count of `what`; an error when there are 2^32 or more.
+fn count(n: usize, what: &str) -> Result<u32, StoreError> {
+    u32::try_from(n).map_err(|_| StoreError::Invalid(format!("{n} {what}: more than 2^32")))
+}
+
+/// The string table of a store, and the references to its strings.
+struct StringTable {
+    bytes: Vec<u8>,
+    units: StrRef,
+    build_options: StrRef,
+    /// The object table, each name in the string table.
+    objects: Vec<ObjectEntry>,
+}
+
+impl StringTable {
+    /// The units, the build options, then every object name, one after the other.
+    fn new(info: &StoreInfo, objects: &[Object]) -> Result<StringTable, StoreError> {
+        let mut t = StringTable {
+            bytes: Vec::new(),
+            units: StrRef::default(),
+            build_options: StrRef::default(),
+            objects: Vec::with_capacity(objects.len()),
+        };
+        t.units = t.add(&info.units)?;
+        t.build_options = t.add(&info.build_options)?;
+        for o in objects {
+            let name = t.add(&o.name)?;
+            t.objects.push(ObjectEntry { name, color: o.color, triangles: o.triangles });
+        }
+        count(t.bytes.len(), "string bytes")?;
+        Ok(t)
+    }
+
+    fn add(&mut self, s: &str) -> Result<StrRef, StoreError> {
+        let r =
+            StrRef { offset: count(self.bytes.len(), "string bytes")?, len: count(s.len(), "string bytes")? };
+        self.bytes.extend_from_slice(s.as_bytes());
+        Ok(r)
+    }
+}
+
+/// The tables [`StoreWriter::finish`] writes after the pages region.
+struct EncodedTables {
+    units: StrRef,
+    build_options: StrRef,
+    /// The object table's entries.
+    objects: Vec<ObjectEntry>,
+    /// Each table's bytes, indexed by [`SectionKind`] (the pages region's stays empty).
+    bodies: [Vec<u8>; SECTION_COUNT],
 }
 
 /// Tables in file order, after the pages region.
