@@ -378,6 +378,7 @@ fn face_normal(tri: &[DVec3; 3], towards: DVec3, up: DVec3) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tw_core::rng::Rng;
 
     const R: f32 = 0.3;
     const TOL: f64 = R as f64 * 1e-3;
@@ -553,44 +554,38 @@ mod tests {
         feet
     }
 
-    /// A tiny deterministic generator (xorshift).
-    struct Rng(u64);
-    impl Rng {
-        fn f(&mut self) -> f32 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 40) as f32 / (1u64 << 24) as f32
-        }
+    /// Uniform in [0, 1], from the project's generator.
+    fn unit(rng: &mut Rng) -> f32 {
+        rng.f64() as f32
     }
 
     #[test]
     fn random_walks_in_a_room_with_pillars_never_penetrate() {
         let c = body();
         for seed in 1..=6u64 {
-            let mut rng = Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+            let mut rng = Rng::new(seed);
             let mut tris = floor(0.0, 6.0).to_vec();
             tris.extend(wall_x(-5.0, -5.0, 5.0));
             tris.extend(wall_x(5.0, -5.0, 5.0));
             tris.extend(wall_y(-5.0, -5.0, 5.0));
             tris.extend(wall_y(5.0, -5.0, 5.0));
             for _ in 0..12 {
-                let (x, y) = (rng.f() * 8.0 - 4.0, rng.f() * 8.0 - 4.0);
-                let (w, d) = (0.05 + rng.f() * 0.6, 0.05 + rng.f() * 0.6);
+                let (x, y) = (unit(&mut rng) * 8.0 - 4.0, unit(&mut rng) * 8.0 - 4.0);
+                let (w, d) = (0.05 + unit(&mut rng) * 0.6, 0.05 + unit(&mut rng) * 0.6);
                 // Some pillars are low (stepped onto), some are sheets of no thickness.
-                let h = if rng.f() < 0.3 { 0.1 + rng.f() * 0.3 } else { 3.0 };
-                let d = if rng.f() < 0.2 { 0.0 } else { d };
+                let h = if unit(&mut rng) < 0.3 { 0.1 + unit(&mut rng) * 0.3 } else { 3.0 };
+                let d = if unit(&mut rng) < 0.2 { 0.0 } else { d };
                 tris.extend(block([x, y, 0.0], [x + w, y + d, h]));
             }
             let mut feet = Vec3::new(0.0, 0.0, 0.01);
             // Put it somewhere free.
             while c.clearance(feet, &tris) < 0.0 {
-                feet = Vec3::new(rng.f() * 8.0 - 4.0, rng.f() * 8.0 - 4.0, 0.01);
+                feet = Vec3::new(unit(&mut rng) * 8.0 - 4.0, unit(&mut rng) * 8.0 - 4.0, 0.01);
             }
             let mut scratch = Vec::new();
             for i in 0..400 {
-                let len = if rng.f() < 0.1 { rng.f() * 3.0 } else { rng.f() * 0.1 };
-                let a = rng.f() * std::f32::consts::TAU;
+                let len = if unit(&mut rng) < 0.1 { unit(&mut rng) * 3.0 } else { unit(&mut rng) * 0.1 };
+                let a = unit(&mut rng) * std::f32::consts::TAU;
                 let m = Vec3::new(a.cos() * len, a.sin() * len, -0.05);
                 let moved = c.move_by(feet, m, &tris, &mut scratch);
                 let clear = c.clearance(moved.feet, &tris);

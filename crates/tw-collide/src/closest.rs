@@ -139,19 +139,11 @@ pub fn segment_triangle(p: DVec3, q: DVec3, tri: &[DVec3; 3]) -> (DVec3, DVec3) 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use tw_core::rng::Rng;
 
-    /// A tiny deterministic generator (xorshift), so the tests need no dependency.
-    struct Rng(u64);
-    impl Rng {
-        fn f(&mut self) -> f64 {
-            self.0 ^= self.0 << 13;
-            self.0 ^= self.0 >> 7;
-            self.0 ^= self.0 << 17;
-            (self.0 >> 11) as f64 / (1u64 << 53) as f64
-        }
-        fn v(&mut self) -> DVec3 {
-            DVec3::new(self.f() * 2.0 - 1.0, self.f() * 2.0 - 1.0, self.f() * 2.0 - 1.0)
-        }
+    /// Uniform in the cube [-1, 1]³, from the project's generator.
+    fn v(rng: &mut Rng) -> DVec3 {
+        DVec3::from_array([(); 3].map(|_| rng.range_f64(-1.0, 1.0)))
     }
 
     /// The distance by dense sampling of the segment and the triangle (barycentric grid).
@@ -172,18 +164,18 @@ mod tests {
 
     #[test]
     fn segment_triangle_distance_matches_brute_force() {
-        let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+        let mut rng = Rng::new(0x9e37_79b9_7f4a_7c15);
         for case in 0..150 {
-            let t = [rng.v(), rng.v(), rng.v()];
+            let t = [v(&mut rng), v(&mut rng), v(&mut rng)];
             // Some segments cross, some lie near the plane, some are far.
             let (p, q) = match case % 3 {
-                0 => (rng.v() * 2.0, rng.v() * 2.0),
+                0 => (v(&mut rng) * 2.0, v(&mut rng) * 2.0),
                 1 => {
                     let c = (t[0] + t[1] + t[2]) / 3.0;
                     let n = (t[1] - t[0]).cross(t[2] - t[0]).normalize();
-                    (c + n * 0.3 + rng.v() * 0.2, c - n * 0.3 + rng.v() * 0.2)
+                    (c + n * 0.3 + v(&mut rng) * 0.2, c - n * 0.3 + v(&mut rng) * 0.2)
                 }
-                _ => (rng.v() * 0.5, rng.v() * 0.5),
+                _ => (v(&mut rng) * 0.5, v(&mut rng) * 0.5),
             };
             let (s, x) = segment_triangle(p, q, &t);
             let exact = s.distance(x);

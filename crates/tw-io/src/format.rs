@@ -59,7 +59,9 @@ impl Default for ImportOptions {
     }
 }
 
-/// Detects the format of `input` from its first bytes and its name.
+/// Detects the format of `input` from its first bytes and its name: a name that the content
+/// contradicts is an error; otherwise the content's magic (PLY, GLB) decides, then the name,
+/// then, for a name without a known extension, the content alone.
 pub fn detect(input: &mut Input) -> Result<Format, ImportError> {
     let path = input.path.clone();
     let by_name = Format::from_name(&path);
@@ -67,51 +69,79 @@ pub fn detect(input: &mut Input) -> Result<Format, ImportError> {
     if head.is_empty() {
         return Err(ImportError::parse(&path, Position::File, "empty file"));
     }
-    let is_ply = head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n");
-    let is_glb = head.starts_with(b"glTF");
-    let first_text = head.iter().find(|b| !b.is_ascii_whitespace()).copied();
-    let named = |f: Format| by_name == Some(f);
-    let mismatch = |f: Format, what: &str| {
-        ImportError::parse(&path, Position::Byte(0), format!("not a {} file: {what}", f.name()))
-    };
+    let magic = Magic::of(head);
+    if let Some(named) = by_name {
+        check_name(&path, named, &magic)?;
+    }
     match by_name {
-        Some(Format::Ply) if !is_ply => Err(mismatch(Format::Ply, "it does not start with the line \"ply\"")),
-        Some(Format::Glb) if !is_glb => {
-            Err(mismatch(Format::Glb, "it does not start with the magic \"glTF\""))
-        }
-        Some(Format::Gltf) if first_text != Some(b'{') && !is_glb => {
-            Err(mismatch(Format::Gltf, "it is not a JSON document"))
-        }
-        _ if is_ply => Ok(Format::Ply),
-        _ if is_glb => Ok(Format::Glb),
+        _ if magic.ply => Ok(Format::Ply),
+        _ if magic.glb => Ok(Format::Glb),
         Some(f) => Ok(f),
-        None => {
-            // No known extension: accept only what the content makes unambiguous.
-            let text = std::str::from_utf8(&head[..head.len().min(256)]).unwrap_or("");
-            if named(Format::Stl) || text.trim_start().starts_with("solid") && text.contains("facet") {
-                Ok(Format::Stl)
-            } else if first_text == Some(b'{') && text.contains("\"asset\"") {
-                Ok(Format::Gltf)
-            } else if text.lines().any(|l| l.starts_with("v ")) {
-                Ok(Format::Obj)
-            } else if let Some((converter, format)) = crate::convert::Converter::for_name(&path) {
-                // Only `terawalk build` (and the commands that build on the fly) convert.
-                Err(ImportError::parse(
-                    &path,
-                    Position::File,
-                    format!(
-                        "{format} is not read directly: `terawalk build` converts it with {} first",
-                        converter.tool()
-                    ),
-                ))
-            } else {
-                Err(ImportError::parse(
-                    &path,
-                    Position::File,
-                    "unknown format: expected .obj, .ply, .stl, .gltf or .glb (each optionally .gz)",
-                ))
-            }
+        None => by_content(&path, head, &magic),
+    }
+}
+
+/// What the first bytes of a file say about its format.
+struct Magic {
+    /// It starts with the line "ply".
+    ply: bool,
+    /// It starts with GLB's magic "glTF".
+    glb: bool,
+    /// Its first byte that is not white space.
+    first_text: Option<u8>,
+}
+
+impl Magic {
+    fn of(head: &[u8]) -> Magic {
+        Magic {
+            ply: head.starts_with(b"ply\n") || head.starts_with(b"ply\r\n"),
+            glb: head.starts_with(b"glTF"),
+            first_text: head.iter().find(|b| !b.is_ascii_whitespace()).copied(),
         }
+    }
+}
+
+/// An error when the content contradicts the format that the name `named` promises (PLY and
+/// GLB by their magic, glTF by being a JSON document or, misnamed, GLB).
+fn check_name(path: &Path, named: Format, magic: &Magic) -> Result<(), ImportError> {
+    let mismatch = |what: &str| {
+        Err(ImportError::parse(path, Position::Byte(0), format!("not a {} file: {what}", named.name())))
+    };
+    match named {
+        Format::Ply if !magic.ply => mismatch("it does not start with the line \"ply\""),
+        Format::Glb if !magic.glb => mismatch("it does not start with the magic \"glTF\""),
+        Format::Gltf if magic.first_text != Some(b'{') && !magic.glb => mismatch("it is not a JSON document"),
+        _ => Ok(()),
+    }
+}
+
+/// The format of a file whose name has no known extension and whose content has no magic:
+/// only what the content makes unambiguous (STL's "solid … facet", glTF's JSON "asset", OBJ's
+/// vertex lines); a format that `terawalk build` converts, or an unknown one, is an error.
+fn by_content(path: &Path, head: &[u8], magic: &Magic) -> Result<Format, ImportError> {
+    let text = std::str::from_utf8(&head[..head.len().min(256)]).unwrap_or("");
+    if text.trim_start().starts_with("solid") && text.contains("facet") {
+        Ok(Format::Stl)
+    } else if magic.first_text == Some(b'{') && text.contains("\"asset\"") {
+        Ok(Format::Gltf)
+    } else if text.lines().any(|l| l.starts_with("v ")) {
+        Ok(Format::Obj)
+    } else if let Some((converter, format)) = crate::convert::Converter::for_name(path) {
+        // Only `terawalk build` (and the commands that build on the fly) convert.
+        Err(ImportError::parse(
+            path,
+            Position::File,
+            format!(
+                "{format} is not read directly: `terawalk build` converts it with {} first",
+                converter.tool()
+            ),
+        ))
+    } else {
+        Err(ImportError::parse(
+            path,
+            Position::File,
+            "unknown format: expected .obj, .ply, .stl, .gltf or .glb (each optionally .gz)",
+        ))
     }
 }
 

@@ -5,8 +5,8 @@
 
 use std::fmt::Write;
 
-use crate::svg::{escape, plot, plotted, plotted_runs, PALETTE, SERIES};
-use crate::{BenchReport, ReportImage, RunKind, RunMeta};
+use crate::svg::{escape, plot, plotted, plotted_runs, Series, PALETTE, SERIES};
+use crate::{BenchReport, ReportImage, Run, RunKind, RunMeta};
 
 const STYLE: &str = "\
 :root{--fg:#1f2933;--muted:#616e7c;--line:#d9e2ec;--bg:#f5f7fa}\
@@ -41,59 +41,89 @@ figcaption{color:var(--muted);font-size:12px;margin-top:4px}\
 .note{color:var(--muted);font-size:12px;margin:8px 0 0}\
 footer{color:var(--muted);font-size:12px;text-align:center;padding:0 0 24px}";
 
-/// The page for `report` with `images` embedded (PNG bytes, checked by the caller).
+/// The page for `report` with `images` embedded (PNG bytes, checked by the caller): the
+/// document head, then each section in reading order.
 pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
-    let m = &report.meta;
     let mut h = String::with_capacity(64 << 10);
-    let title = format!("terawalk bench — {}", if m.store.is_empty() { "report" } else { &m.store });
+    let title = title(&report.meta);
+    head(&mut h, &title);
+    header(&mut h, report, &title);
+    damaged_section(&mut h, report);
+    run_section(&mut h, &report.meta);
+    summary_section(&mut h, report);
+    plots_section(&mut h, report);
+    frames_section(&mut h, images);
+    footer(&mut h);
+    h
+}
+
+/// The page's title: the store's path, "report" for a report without one.
+fn title(m: &RunMeta) -> String {
+    format!("terawalk bench — {}", if m.store.is_empty() { "report" } else { &m.store })
+}
+
+/// The document up to `<body>`: the title and the inline style sheet.
+fn head(h: &mut String, title: &str) {
     let _ = write!(
         h,
         "<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">\
          <meta name=\"viewport\" content=\"width=device-width,initial-scale=1\">\
          <title>{}</title><style>{STYLE}</style></head><body>",
-        escape(&title)
+        escape(title)
     );
-    let first = report.runs.first();
+}
+
+/// The banner (title, [`header_input`], [`header_run`]), and the opening of `<main>` that
+/// [`footer`] closes.
+fn header(h: &mut String, report: &BenchReport, title: &str) {
     let _ = write!(
         h,
         "<header><h1>{}</h1><p>{}</p><p>{}</p></header><main>",
-        escape(&title),
-        escape(&header_input(m)),
+        escape(title),
+        escape(&header_input(&report.meta)),
         escape(&header_run(report))
     );
+}
 
-    if !report.damaged_pages.is_empty() {
-        let pages: Vec<String> = report.damaged_pages.iter().take(20).map(|d| d.page.to_string()).collect();
-        let more = report.damaged_pages.len().saturating_sub(pages.len());
-        let _ = write!(
-            h,
-            "<section class=\"damaged\"><h2>Damaged store</h2><p>{} page(s) failed their checksum or \
-             decoding (pages {}{}): their geometry was drawn from coarser levels where the store has \
-             them and is missing otherwise. These frames are not the store's true images; \
-             <code>terawalk info STORE --verify</code> checks the whole store.</p><ul>",
-            report.damaged_pages.len(),
-            pages.join(", "),
-            if more > 0 { format!(" and {more} more") } else { String::new() }
-        );
-        for d in report.damaged_pages.iter().take(20) {
-            let _ = write!(h, "<li>page {}: {}</li>", d.page, escape(&d.error));
-        }
-        h.push_str("</ul></section>");
+/// The pages that failed their checksum or decoding, first on the page because every figure
+/// below them is suspect (nothing when the store was whole). Lists at most 20 of them.
+fn damaged_section(h: &mut String, report: &BenchReport) {
+    if report.damaged_pages.is_empty() {
+        return;
     }
+    let pages: Vec<String> = report.damaged_pages.iter().take(20).map(|d| d.page.to_string()).collect();
+    let more = report.damaged_pages.len().saturating_sub(pages.len());
+    let _ = write!(
+        h,
+        "<section class=\"damaged\"><h2>Damaged store</h2><p>{} page(s) failed their checksum or \
+         decoding (pages {}{}): their geometry was drawn from coarser levels where the store has \
+         them and is missing otherwise. These frames are not the store's true images; \
+         <code>terawalk info STORE --verify</code> checks the whole store.</p><ul>",
+        report.damaged_pages.len(),
+        pages.join(", "),
+        if more > 0 { format!(" and {more} more") } else { String::new() }
+    );
+    for d in report.damaged_pages.iter().take(20) {
+        let _ = write!(h, "<li>page {}: {}</li>", d.page, escape(&d.error));
+    }
+    h.push_str("</ul></section>");
+}
 
-    // Metadata.
+/// The run's metadata as a two-column table; a field the report did not record (empty or
+/// zero) has no row.
+fn run_section(h: &mut String, m: &RunMeta) {
     h.push_str("<section><h2>Run</h2><table class=\"meta\">");
-    let mut row = |k: &str, v: String| {
-        if !v.is_empty() {
-            let _ = write!(h, "<tr><td>{}</td><td>{v}</td></tr>", escape(k));
-        }
-    };
-    row("Store", escape(&m.store));
-    row("Store size", if m.store_bytes == 0 { String::new() } else { bytes(m.store_bytes) });
-    row("Input triangles", if m.input_triangles == 0 { String::new() } else { thousands(m.input_triangles) });
-    row("terawalk", escape(&build(m)));
-    row("Camera path", escape(&m.path));
-    row(
+    meta_row(h, "Store", escape(&m.store));
+    meta_row(h, "Store size", if m.store_bytes == 0 { String::new() } else { bytes(m.store_bytes) });
+    meta_row(
+        h,
+        "Input triangles",
+        if m.input_triangles == 0 { String::new() } else { thousands(m.input_triangles) },
+    );
+    meta_row(h, "terawalk", escape(&build(m)));
+    meta_row(h, "Camera path", escape(&m.path));
+    meta_row(
+        h,
         "Command",
         if m.command_line.is_empty() {
             String::new()
@@ -101,13 +131,15 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             format!("<code>{}</code>", escape(&m.command_line))
         },
     );
-    row("Adapter", escape(&m.adapter));
-    row(
+    meta_row(h, "Adapter", escape(&m.adapter));
+    meta_row(
+        h,
         "Image size",
         if m.size == [0, 0] { String::new() } else { format!("{} × {} px", m.size[0], m.size[1]) },
     );
-    row("Pixel error ε", format!("{} px", m.error_px));
-    row(
+    meta_row(h, "Pixel error ε", format!("{} px", m.error_px));
+    meta_row(
+        h,
         "Memory budget",
         if m.memory_budget_bytes == 0 {
             String::new()
@@ -115,99 +147,150 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             format!("{:.0} MB", m.memory_budget_bytes as f64 / 1e6)
         },
     );
-    row("Date", escape(&m.date));
-    row("Machine", escape(&m.machine));
+    meta_row(h, "Date", escape(&m.date));
+    meta_row(h, "Machine", escape(&m.machine));
     for (k, v) in &m.extra {
-        row(k, escape(v));
+        meta_row(h, k, escape(v));
     }
     h.push_str("</table></section>");
+}
 
-    // Summary.
+/// One row of the metadata table: `k` as text, `v` as HTML (escaped by the caller); none
+/// when `v` is empty.
+fn meta_row(h: &mut String, k: &str, v: String) {
+    if !v.is_empty() {
+        let _ = write!(h, "<tr><td>{}</td><td>{v}</td></tr>", escape(k));
+    }
+}
+
+/// The summary table's optional columns: each is shown when some run has its figure.
+struct Columns {
+    rss: bool,
+    psnr: bool,
+    gap: bool,
+    efficiency: bool,
+    lod: bool,
+}
+
+impl Columns {
+    fn of(runs: &[Run]) -> Columns {
+        Columns {
+            rss: runs.iter().any(|r| r.summary.peak_rss_mb.is_some()),
+            psnr: runs.iter().any(|r| r.summary.min_psnr_db.is_some()),
+            gap: runs.iter().any(|r| r.summary.min_psnr_gap_db.is_some()),
+            efficiency: runs.iter().any(|r| r.summary.median_culling_efficiency.is_some()),
+            lod: runs.iter().any(|r| r.summary.median_lod_efficiency.is_some()),
+        }
+    }
+}
+
+/// The summary: one row of figures per run (speed-up against the first run), then the notes
+/// that say how they were computed.
+fn summary_section(h: &mut String, report: &BenchReport) {
+    let columns = Columns::of(&report.runs);
+    let first = report.runs.first();
     let base = first.map(|r| r.summary.median_ms).unwrap_or(0.0);
     let base_name = first.map(|r| r.name.as_str()).unwrap_or("");
-    let any_psnr = report.runs.iter().any(|r| r.summary.min_psnr_db.is_some());
-    let any_gap = report.runs.iter().any(|r| r.summary.min_psnr_gap_db.is_some());
-    let any_eff = report.runs.iter().any(|r| r.summary.median_culling_efficiency.is_some());
-    let any_rss = report.runs.iter().any(|r| r.summary.peak_rss_mb.is_some());
-    let any_lod = report.runs.iter().any(|r| r.summary.median_lod_efficiency.is_some());
+    h.push_str("<section><h2>Summary</h2><div class=\"wide\"><table class=\"summary\">");
+    summary_heading(h, base_name, &columns);
+    for (i, r) in report.runs.iter().enumerate() {
+        summary_row(h, i, r, base, &columns);
+    }
+    h.push_str("</table></div>");
+    summary_notes(h, &report.runs, &columns);
+    h.push_str("</section>");
+}
+
+/// The summary table's heading row.
+fn summary_heading(h: &mut String, base_name: &str, columns: &Columns) {
     h.push_str(
-        "<section><h2>Summary</h2><div class=\"wide\"><table class=\"summary\"><tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
+        "<tr><th>Run</th><th>Frames</th><th>Median ms</th><th>p95 ms</th>\
                 <th>p99 ms</th><th>Max ms</th><th>Mean fps</th>",
     );
     let _ = write!(h, "<th>Speed-up vs {}</th>", escape(base_name));
     h.push_str("<th>Median triangles</th><th>Median select ms</th><th>Median culling ms</th><th>Max resident MB</th><th>Disk MB</th>");
-    if any_rss {
+    if columns.rss {
         h.push_str("<th>Peak RSS MB</th>");
     }
-    if any_psnr {
+    if columns.psnr {
         h.push_str("<th>Min PSNR dB</th>");
     }
-    if any_gap {
+    if columns.gap {
         h.push_str("<th>LOD − brute force dB, median (supersampled reference)</th><th>Worst frame's</th>");
     }
-    if any_eff {
+    if columns.efficiency {
         h.push_str("<th>Culling efficiency</th><th>Of the cut</th>");
     }
-    if any_lod {
+    if columns.lod {
         h.push_str("<th>Median cut triangles</th><th>Median needed at ε</th><th>LOD efficiency</th>");
     }
     h.push_str("</tr>");
-    for (i, r) in report.runs.iter().enumerate() {
-        let s = &r.summary;
-        let speedup = if s.median_ms > 0.0 && base > 0.0 {
-            format!("{:.2}×", base / s.median_ms)
-        } else {
-            "–".into()
-        };
+}
+
+/// The summary row of run `r`, the `i`-th (its colour); `base` is the first run's median frame
+/// time, which the speed-up divides.
+fn summary_row(h: &mut String, i: usize, r: &Run, base: f64, columns: &Columns) {
+    let s = &r.summary;
+    let speedup =
+        if s.median_ms > 0.0 && base > 0.0 { format!("{:.2}×", base / s.median_ms) } else { "–".into() };
+    let _ = write!(
+        h,
+        "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{:.2}</td>\
+         <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.1}</td><td>{speedup}</td><td>{:.0}</td><td>{:.2}</td>\
+         <td>{:.2}</td><td>{:.1}</td><td>{:.1}</td>",
+        PALETTE[i % PALETTE.len()],
+        escape(&r.name),
+        s.frames,
+        s.median_ms,
+        s.p95_ms,
+        s.p99_ms,
+        s.max_ms,
+        s.mean_fps,
+        s.median_triangles,
+        s.median_select_ms,
+        s.median_culling_ms,
+        s.max_resident_mb,
+        s.total_disk_read_mb
+    );
+    if columns.rss {
+        let _ = write!(h, "<td>{}</td>", optional(s.peak_rss_mb, 1));
+    }
+    if columns.psnr {
+        let _ = write!(h, "<td>{}</td>", optional(s.min_psnr_db, 2));
+    }
+    if columns.gap {
         let _ = write!(
             h,
-            "<tr><td><span class=\"swatch\" style=\"background:{}\"></span>{}</td><td>{}</td><td>{:.2}</td>\
-             <td>{:.2}</td><td>{:.2}</td><td>{:.2}</td><td>{:.1}</td><td>{speedup}</td><td>{:.0}</td><td>{:.2}</td>\
-             <td>{:.2}</td><td>{:.1}</td><td>{:.1}</td>",
-            PALETTE[i % PALETTE.len()],
-            escape(&r.name),
-            s.frames,
-            s.median_ms,
-            s.p95_ms,
-            s.p99_ms,
-            s.max_ms,
-            s.mean_fps,
-            s.median_triangles,
-            s.median_select_ms,
-            s.median_culling_ms,
-            s.max_resident_mb,
-            s.total_disk_read_mb
+            "<td>{}</td><td>{}</td>",
+            optional(s.median_psnr_gap_db, 2),
+            optional(s.min_psnr_gap_db, 2)
         );
-        let opt =
-            |v: Option<f64>, digits: usize| v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into());
-        if any_rss {
-            let _ = write!(h, "<td>{}</td>", opt(s.peak_rss_mb, 1));
-        }
-        if any_psnr {
-            let _ = write!(h, "<td>{}</td>", opt(s.min_psnr_db, 2));
-        }
-        if any_gap {
-            let _ =
-                write!(h, "<td>{}</td><td>{}</td>", opt(s.median_psnr_gap_db, 2), opt(s.min_psnr_gap_db, 2));
-        }
-        if any_eff {
-            let _ = write!(h, "<td>{}</td>", opt(s.median_culling_efficiency, 3));
-            let _ = write!(h, "<td>{}</td>", opt(s.median_cut_efficiency, 3));
-        }
-        if any_lod {
-            let _ = write!(
-                h,
-                "<td>{:.0}</td><td>{}</td><td>{}</td>",
-                s.median_cut_triangles,
-                opt(s.median_needed_triangles, 0),
-                opt(s.median_lod_efficiency, 2)
-            );
-        }
-        h.push_str("</tr>");
     }
-    h.push_str("</table></div>");
-    let described: Vec<String> = report
-        .runs
+    if columns.efficiency {
+        let _ = write!(h, "<td>{}</td>", optional(s.median_culling_efficiency, 3));
+        let _ = write!(h, "<td>{}</td>", optional(s.median_cut_efficiency, 3));
+    }
+    if columns.lod {
+        let _ = write!(
+            h,
+            "<td>{:.0}</td><td>{}</td><td>{}</td>",
+            s.median_cut_triangles,
+            optional(s.median_needed_triangles, 0),
+            optional(s.median_lod_efficiency, 2)
+        );
+    }
+    h.push_str("</tr>");
+}
+
+/// A figure a run may lack, with `digits` decimals; "–" when it has none.
+fn optional(v: Option<f64>, digits: usize) -> String {
+    v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "–".into())
+}
+
+/// Under the summary table: the runs' descriptions, and what the percentiles, the speed-up
+/// and the efficiencies mean.
+fn summary_notes(h: &mut String, runs: &[Run], columns: &Columns) {
+    let described: Vec<String> = runs
         .iter()
         .filter(|r| !r.description.is_empty())
         .map(|r| format!("<b>{}</b>: {}", escape(&r.name), escape(&r.description)))
@@ -221,7 +304,7 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
          triangles visible at full detail (item buffer); of the cut: ÷ triangles of the frame's own LOD cut \
          visible in its item buffer (the culling's excess alone).</p>",
     );
-    if any_lod {
+    if columns.lod {
         h.push_str(
             "<p class=\"note\">LOD efficiency: triangles of the LOD cut (before occlusion culling) ÷ the \
              triangles a screen can use at ε, modelled as 2 · covered pixels ÷ ε² (a triangle of ε-pixel \
@@ -230,17 +313,25 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
              visible surface. Median of the per-frame ratios.</p>",
         );
     }
-    h.push_str("</section>");
+}
 
-    // Plots.
+/// A plot per series worth one ([`plotted`]), then notes on what is not plotted: the
+/// reference renderings, and the series that are zero throughout.
+fn plots_section(h: &mut String, report: &BenchReport) {
     let shown = plotted(&report.runs);
     h.push_str("<section><h2>Per frame</h2><div class=\"plots\">");
     for s in &shown {
         h.push_str(&plot(s, &report.runs));
     }
     h.push_str("</div>");
-    let references: Vec<String> = report
-        .runs
+    references_note(h, &report.runs);
+    zero_series_note(h, &report.runs, &shown);
+    h.push_str("</section>");
+}
+
+/// Names the reference runs the plots leave out ([`plotted_runs`] says why).
+fn references_note(h: &mut String, runs: &[Run]) {
+    let references: Vec<String> = runs
         .iter()
         .filter(|r| r.kind == RunKind::Reference)
         .map(|r| format!("<b>{}</b>", escape(&r.name)))
@@ -253,10 +344,15 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             references.join(", ")
         );
     }
+}
+
+/// Names the series that have values but no plot (`shown` lacks them): zero everywhere, so
+/// that a missing plot reads as "measured, nothing happened" rather than "not measured".
+fn zero_series_note(h: &mut String, runs: &[Run], shown: &[&Series]) {
     let zero: Vec<&str> = SERIES
         .iter()
         .filter(|s| !shown.iter().any(|p| p.key == s.key))
-        .filter(|s| plotted_runs(&report.runs).any(|(_, r)| r.frames.iter().any(|f| (s.value)(f).is_some())))
+        .filter(|s| plotted_runs(runs).any(|(_, r)| r.frames.iter().any(|f| (s.value)(f).is_some())))
         .map(|s| s.title)
         .collect();
     if !zero.is_empty() {
@@ -266,27 +362,32 @@ pub fn page(report: &BenchReport, images: &[ReportImage]) -> String {
             escape(&zero.join(", "))
         );
     }
-    h.push_str("</section>");
+}
 
-    // Frames.
-    if !images.is_empty() {
-        h.push_str("<section><h2>Frames</h2><div class=\"frames\">");
-        for im in images {
-            let _ = write!(
-                h,
-                "<figure><img alt=\"{c}\" src=\"data:image/png;base64,{}\"><figcaption>{c}</figcaption></figure>",
-                base64(&im.png),
-                c = escape(&im.caption)
-            );
-        }
-        h.push_str("</div></section>");
+/// The embedded frames with their captions (nothing without images).
+fn frames_section(h: &mut String, images: &[ReportImage]) {
+    if images.is_empty() {
+        return;
     }
+    h.push_str("<section><h2>Frames</h2><div class=\"frames\">");
+    for im in images {
+        let _ = write!(
+            h,
+            "<figure><img alt=\"{c}\" src=\"data:image/png;base64,{}\"><figcaption>{c}</figcaption></figure>",
+            base64(&im.png),
+            c = escape(&im.caption)
+        );
+    }
+    h.push_str("</div></section>");
+}
+
+/// Closes `<main>` (opened by [`header`]) and the document.
+fn footer(h: &mut String) {
     let _ = writeln!(
         h,
         "</main><footer>terawalk {} · every figure is also in report.json</footer></body></html>",
         env!("CARGO_PKG_VERSION")
     );
-    h
 }
 
 /// The header's first line, under the store's path in the title: the store's size and the

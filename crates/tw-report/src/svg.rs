@@ -236,13 +236,35 @@ const ML: f64 = 62.0;
 const MR: f64 = 14.0;
 const MT: f64 = 34.0;
 const MB: f64 = 38.0;
+/// The plotting area's width and height, inside the margins.
+const PW: f64 = W - ML - MR;
+const PH: f64 = H - MT - MB;
 
 /// The plot of `series` over the plotted runs of `runs` ([`plotted_runs`]) as one `<svg>`
-/// element: x the frame number, y the value.
+/// element: x the frame number, y the value. Drawn back to front: the path's segments, the
+/// grid, the axes, the runs' lines, the legend.
 pub fn plot(series: &Series, runs: &[Run]) -> String {
     let shown: Vec<(usize, &Run)> = plotted_runs(runs).collect();
     let data: Vec<(usize, Vec<(f64, f64)>)> = shown.iter().map(|&(ri, r)| (ri, points(series, r))).collect();
     let last_frame = shown.iter().flat_map(|(_, r)| r.frames.iter().map(|f| f.frame)).max().unwrap_or(0);
+    let axes = Axes::new(last_frame, y_range(&data));
+    let mut s = String::new();
+    open_svg(&mut s, series);
+    // Segment bands from the first plotted run's frames.
+    if let Some(&(_, r)) = shown.first() {
+        segment_bands(&mut s, r, &axes);
+    }
+    grid_and_ticks(&mut s, &axes);
+    axes_and_titles(&mut s, series);
+    lines(&mut s, &data, &axes);
+    legend(&mut s, &shown);
+    s.push_str("</svg>");
+    s
+}
+
+/// The y range the plot must show: every value, from 0 unless the values are far from it
+/// (PSNR); 0..1 when there is none.
+fn y_range(data: &[(usize, Vec<(f64, f64)>)]) -> (f64, f64) {
     let (mut ymin, mut ymax) = (f64::INFINITY, f64::NEG_INFINITY);
     for &(_, y) in data.iter().flat_map(|(_, pts)| pts) {
         ymin = ymin.min(y);
@@ -255,14 +277,44 @@ pub fn plot(series: &Series, runs: &[Run]) -> String {
     if ymin >= 0.0 && ymin < 0.5 * ymax {
         ymin = 0.0;
     }
-    let yt = Ticks::new(ymin, ymax, 5, 0.0);
-    let (y0, y1) = (yt.values[0], *yt.values.last().unwrap_or(&1.0));
-    let xt = Ticks::new(0.0, f64::from(last_frame.max(1)), 8, 1.0);
-    let (x0, x1) = (xt.values[0], *xt.values.last().unwrap_or(&1.0));
-    let (pw, ph) = (W - ML - MR, H - MT - MB);
-    let sx = |x: f64| ML + (x - x0) / (x1 - x0).max(1e-300) * pw;
-    let sy = |y: f64| MT + ph - (y - y0) / (y1 - y0).max(1e-300) * ph;
-    let mut s = String::new();
+    (ymin, ymax)
+}
+
+/// A plot's two axes: their ticks, and the ranges (first to last tick) that span the
+/// plotting area.
+struct Axes {
+    x: Ticks,
+    y: Ticks,
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+impl Axes {
+    /// Frames 0..=`last_frame` across (whole frames only), `y` up.
+    fn new(last_frame: u32, (ymin, ymax): (f64, f64)) -> Axes {
+        let y = Ticks::new(ymin, ymax, 5, 0.0);
+        let (y0, y1) = (y.values[0], *y.values.last().unwrap_or(&1.0));
+        let x = Ticks::new(0.0, f64::from(last_frame.max(1)), 8, 1.0);
+        let (x0, x1) = (x.values[0], *x.values.last().unwrap_or(&1.0));
+        Axes { x, y, x0, x1, y0, y1 }
+    }
+
+    /// The SVG x of frame `x`.
+    fn sx(&self, x: f64) -> f64 {
+        ML + (x - self.x0) / (self.x1 - self.x0).max(1e-300) * PW
+    }
+
+    /// The SVG y of value `y` (SVG's y grows downwards).
+    fn sy(&self, y: f64) -> f64 {
+        MT + PH - (y - self.y0) / (self.y1 - self.y0).max(1e-300) * PH
+    }
+}
+
+/// The `<svg>` element's opening (its title and series key for readers and tests) and the
+/// white background.
+fn open_svg(s: &mut String, series: &Series) {
     let _ = write!(
         s,
         "<svg xmlns=\"http://www.w3.org/2000/svg\" class=\"plot\" viewBox=\"0 0 {W} {H}\" role=\"img\" \
@@ -271,98 +323,115 @@ pub fn plot(series: &Series, runs: &[Run]) -> String {
         k = series.key
     );
     let _ = write!(s, "<rect x=\"0\" y=\"0\" width=\"{W}\" height=\"{H}\" fill=\"#fff\"/>");
-    // Segment bands from the first plotted run's frames.
-    if let Some(&(_, r)) = shown.first() {
-        let mut start = 0;
-        let mut band = 0;
-        for i in 1..=r.frames.len() {
-            if i == r.frames.len() || r.frames[i].segment != r.frames[start].segment {
-                let seg = &r.frames[start].segment;
-                if !(seg.is_empty() || start == 0 && i == r.frames.len()) {
-                    let (a, b) = (sx(f64::from(r.frames[start].frame)), sx(f64::from(r.frames[i - 1].frame)));
-                    let fill = if band % 2 == 0 { "#f3f6fa" } else { "#fbf7f0" };
-                    let _ = write!(
-                        s,
-                        "<rect x=\"{a:.1}\" y=\"{MT}\" width=\"{:.1}\" height=\"{ph}\" fill=\"{fill}\"/>\
-                         <text x=\"{:.1}\" y=\"{:.1}\" class=\"seg\">{}</text>",
-                        (b - a).max(0.5),
-                        a + 4.0,
-                        MT + 12.0,
-                        escape(seg)
-                    );
-                    band += 1;
-                }
-                start = i;
+}
+
+/// The camera path's segments ("walk", "fly") of run `r` as alternately shaded, labelled
+/// bands; none when the whole run is one segment or the frames name none.
+fn segment_bands(s: &mut String, r: &Run, axes: &Axes) {
+    let mut start = 0;
+    let mut band = 0;
+    for i in 1..=r.frames.len() {
+        if i == r.frames.len() || r.frames[i].segment != r.frames[start].segment {
+            let seg = &r.frames[start].segment;
+            if !(seg.is_empty() || start == 0 && i == r.frames.len()) {
+                let (a, b) =
+                    (axes.sx(f64::from(r.frames[start].frame)), axes.sx(f64::from(r.frames[i - 1].frame)));
+                let fill = if band % 2 == 0 { "#f3f6fa" } else { "#fbf7f0" };
+                let _ = write!(
+                    s,
+                    "<rect x=\"{a:.1}\" y=\"{MT}\" width=\"{:.1}\" height=\"{PH}\" fill=\"{fill}\"/>\
+                     <text x=\"{:.1}\" y=\"{:.1}\" class=\"seg\">{}</text>",
+                    (b - a).max(0.5),
+                    a + 4.0,
+                    MT + 12.0,
+                    escape(seg)
+                );
+                band += 1;
             }
+            start = i;
         }
     }
-    // Grid and ticks.
-    for (&t, text) in yt.values.iter().zip(yt.labels()) {
-        let y = sy(t);
+}
+
+/// Horizontal grid lines with the y ticks' labels, and the x ticks with theirs.
+fn grid_and_ticks(s: &mut String, axes: &Axes) {
+    for (&t, text) in axes.y.values.iter().zip(axes.y.labels()) {
+        let y = axes.sy(t);
         let _ = write!(
             s,
             "<line x1=\"{ML}\" x2=\"{:.1}\" y1=\"{y:.1}\" y2=\"{y:.1}\" class=\"grid\"/>\
              <text x=\"{:.1}\" y=\"{:.1}\" class=\"tick\" text-anchor=\"end\">{text}</text>",
-            ML + pw,
+            ML + PW,
             ML - 6.0,
             y + 4.0,
         );
     }
-    for (&t, text) in xt.values.iter().zip(xt.labels()) {
-        let x = sx(t);
+    for (&t, text) in axes.x.values.iter().zip(axes.x.labels()) {
+        let x = axes.sx(t);
         let _ = write!(
             s,
             "<line x1=\"{x:.1}\" x2=\"{x:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" class=\"axis\"/>\
              <text x=\"{x:.1}\" y=\"{:.1}\" class=\"tick\" text-anchor=\"middle\">{text}</text>",
-            MT + ph,
-            MT + ph + 5.0,
-            MT + ph + 18.0,
+            MT + PH,
+            MT + PH + 5.0,
+            MT + PH + 18.0,
         );
     }
+}
+
+/// The two axis lines, their labels (frame; the series' unit) and the plot's title.
+fn axes_and_titles(s: &mut String, series: &Series) {
     let _ = write!(
         s,
         "<line x1=\"{ML}\" x2=\"{ML}\" y1=\"{MT}\" y2=\"{:.1}\" class=\"axis\"/>\
          <line x1=\"{ML}\" x2=\"{:.1}\" y1=\"{:.1}\" y2=\"{:.1}\" class=\"axis\"/>",
-        MT + ph,
-        ML + pw,
-        MT + ph,
-        MT + ph
+        MT + PH,
+        ML + PW,
+        MT + PH,
+        MT + PH
     );
     let _ = write!(
         s,
         "<text x=\"{:.1}\" y=\"{:.1}\" class=\"axislabel\" text-anchor=\"middle\">frame</text>\
          <text x=\"14\" y=\"{:.1}\" class=\"axislabel\" text-anchor=\"middle\" \
          transform=\"rotate(-90 14 {:.1})\">{}</text>",
-        ML + pw / 2.0,
+        ML + PW / 2.0,
         H - 6.0,
-        MT + ph / 2.0,
-        MT + ph / 2.0,
+        MT + PH / 2.0,
+        MT + PH / 2.0,
         escape(series.unit)
     );
     let _ = write!(s, "<text x=\"{ML}\" y=\"20\" class=\"ptitle\">{}</text>", escape(series.title));
-    // Lines.
-    for (ri, pts) in &data {
+}
+
+/// Each run's points in its colour: a polyline through them ([`decimate`]d to the plot's
+/// width), or a dot for a single point.
+fn lines(s: &mut String, data: &[(usize, Vec<(f64, f64)>)], axes: &Axes) {
+    for (ri, pts) in data {
         if pts.is_empty() {
             continue;
         }
         let colour = PALETTE[ri % PALETTE.len()];
-        let pts = decimate(pts, pw as usize);
+        let pts = decimate(pts, PW as usize);
         let mut d = String::with_capacity(pts.len() * 14);
         for (i, &(x, y)) in pts.iter().enumerate() {
-            let _ = write!(d, "{}{:.1},{:.1}", if i == 0 { "" } else { " " }, sx(x), sy(y));
+            let _ = write!(d, "{}{:.1},{:.1}", if i == 0 { "" } else { " " }, axes.sx(x), axes.sy(y));
         }
         if pts.len() == 1 {
             let _ = write!(
                 s,
                 "<circle cx=\"{:.1}\" cy=\"{:.1}\" r=\"2.5\" fill=\"{colour}\"/>",
-                sx(pts[0].0),
-                sy(pts[0].1)
+                axes.sx(pts[0].0),
+                axes.sy(pts[0].1)
             );
         } else {
             let _ = write!(s, "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"1.4\" stroke-linejoin=\"round\" points=\"{d}\"/>");
         }
     }
-    // Legend, right-aligned in the title row: the plotted runs, each in its summary colour.
+}
+
+/// The legend, right-aligned in the title row: the plotted runs, each in its summary colour.
+fn legend(s: &mut String, shown: &[(usize, &Run)]) {
     let mut x = W - MR;
     for &(ri, r) in shown.iter().rev() {
         let name = escape(&r.name);
@@ -376,8 +445,6 @@ pub fn plot(series: &Series, runs: &[Run]) -> String {
             x + 16.0
         );
     }
-    s.push_str("</svg>");
-    s
 }
 
 /// At most about `2 × columns` points: the first, minimum, maximum and last of each bucket.

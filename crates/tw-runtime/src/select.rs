@@ -86,11 +86,13 @@ use glam::{Mat4, Vec3};
 use tw_store::Store;
 
 use crate::availability::{Availability, Requests};
-use crate::cache::{PageCache, ResidentPage};
+use crate::cache::{ClusterInfo, PageCache, ResidentPage};
 use crate::camera::Camera;
-use crate::error::RuntimeError;
-use crate::frustum::{grid_box, Containment, Frustum};
+use crate::frustum::{grid_box, Frustum};
 use crate::lod_error::LodMetric;
+
+mod traversal;
+use traversal::{Scratch, Traversal};
 
 /// What to select for one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -485,204 +487,25 @@ impl Selector {
         self.traverse(store, &mut mode, &View::culled_by(eye, layer_view_proj, options), out);
     }
 
+    /// One traversal of `view` into `out` (cleared first): the steps of the module
+    /// documentation, in [`traversal`].
     fn traverse(&self, store: &Store, mode: &mut Mode<'_>, view: &View, out: &mut Selection) {
-        out.clusters.clear();
-        out.triangles = 0;
-        out.stats = SelectStats::default();
-        let (metric, frustum, tau) = (view.metric, &view.frustum, view.tau);
-        let nodes = store.nodes();
-        let groups = store.groups();
-        let stats = &mut out.stats;
-        let mut pages: Vec<u32> = Vec::new();
-        let mut verdicts: Vec<(u32, Verdict)> = Vec::new();
-        let mut from_steps = 0u64;
-        // (node, inside): `inside` = an ancestor's box is entirely inside the frustum.
-        let mut stack: Vec<(u32, bool)> = vec![(0, !view.cull)];
-        if nodes.is_empty() {
-            stack.clear();
-        }
-        while let Some((ni, mut inside)) = stack.pop() {
-            let (Some(node), Some(&(lo, hi))) = (nodes.get(ni as usize), self.node_boxes.get(ni as usize))
-            else {
-                continue;
-            };
-            stats.nodes_visited += 1;
-            if !inside {
-                match frustum.test_aabb(lo, hi) {
-                    Containment::Outside => {
-                        stats.nodes_culled_frustum += 1;
-                        continue;
-                    }
-                    Containment::Inside => inside = true,
-                    Containment::Intersecting => {}
+        let mut scratch = Scratch::default();
+        Traversal::new(self, store, &mut scratch).run(mode, view, out);
+    }
+
+    /// Keeps group `g`'s steps the first time its page is read: the distinct steps of its
+    /// clusters `infos` (in `page`), in order of first appearance ([`Selector::all_skip`]
+    /// reads them in later frames).
+    fn keep_steps(&self, g: usize, infos: &[ClusterInfo], page: &ResidentPage) {
+        self.group_steps[g].get_or_init(|| {
+            let mut seen: Vec<u32> = Vec::new();
+            for info in infos {
+                if !seen.contains(&info.step) {
+                    seen.push(info.step);
                 }
             }
-            let (blo, bhi) = self.lod_boxes[ni as usize];
-            if metric.aabb(self.subtree_error[ni as usize], blo, bhi) * (1.0 + 1e-9) <= tau {
-                stats.nodes_culled_lod += 1;
-                continue;
-            }
-            let first = node.first_group as usize;
-            for gi in first..first + node.group_count as usize {
-                let Some(&(gerror, gsphere)) = self.group_lod.get(gi) else { break };
-                stats.groups_tested += 1;
-                if metric.sphere(gerror, gsphere) <= tau {
-                    continue; // replaced by coarser clusters
-                }
-                if !inside
-                    && frustum.test_sphere(Vec3::new(gsphere[0], gsphere[1], gsphere[2]), gsphere[3])
-                        == Containment::Outside
-                {
-                    stats.groups_culled_frustum += 1;
-                    continue;
-                }
-                let Some(g) = groups.get(gi) else { break };
-                // Streaming: a group whose steps are known and all skipped is selected without
-                // reading its page (asked in the order the full path below would ask).
-                if let Mode::Stream { cache, availability, .. } = mode {
-                    if availability.available(store, cache, gi as u32)
-                        && availability.is_resident(cache, g.page)
-                        && self.all_skip(store, mode, &metric, tau, gi as u32) == Some(true)
-                    {
-                        stats.groups_selected += 1;
-                        from_steps += 1;
-                        pages.push(g.page);
-                        continue;
-                    }
-                }
-                let page = match mode {
-                    Mode::Wait(cache) => match cache.get(store, g.page) {
-                        Ok(p) => p,
-                        Err(e) => {
-                            match &e {
-                                RuntimeError::PageFailed { .. } => tracing::debug!("group {gi}: {e}"),
-                                _ => tracing::error!("group {gi} skipped: {e}"),
-                            }
-                            stats.groups_failed += 1;
-                            continue;
-                        }
-                    },
-                    Mode::Stream { cache, availability, requests } => {
-                        let page = if availability.available(store, cache, gi as u32) {
-                            availability.page(cache, g.page)
-                        } else {
-                            None
-                        };
-                        match page {
-                            Some(p) => p,
-                            None => {
-                                // Treated as replaced: its available ancestors are drawn.
-                                if availability.page_failed(cache, g.page) {
-                                    stats.groups_failed += 1;
-                                } else {
-                                    stats.groups_unavailable += 1;
-                                }
-                                availability.request_for(store, cache, &metric, gi as u32, requests);
-                                continue;
-                            }
-                        }
-                    }
-                };
-                let page: Arc<ResidentPage> = page;
-                let range = g.first_cluster as usize..g.first_cluster as usize + g.cluster_count as usize;
-                let (Some(infos), Some(bounds)) = (page.info().get(range.clone()), page.bounds.get(range))
-                else {
-                    tracing::error!(
-                        "group {gi} skipped: clusters {}..+{} beyond the {} clusters of page {}",
-                        g.first_cluster,
-                        g.cluster_count,
-                        page.clusters.len(),
-                        g.page
-                    );
-                    stats.groups_failed += 1;
-                    continue;
-                };
-                if let Some(c) = infos.iter().find(|c| c.group as usize != gi) {
-                    tracing::error!(
-                        "group {gi} skipped: page {} lists a member of group {}",
-                        g.page,
-                        c.group
-                    );
-                    stats.groups_failed += 1;
-                    continue;
-                }
-                stats.groups_selected += 1;
-                pages.push(g.page);
-                self.group_steps[gi].get_or_init(|| {
-                    let mut seen: Vec<u32> = Vec::new();
-                    for info in infos {
-                        if !seen.contains(&info.step) {
-                            seen.push(info.step);
-                        }
-                    }
-                    seen.iter().map(|&k| page.steps()[k as usize]).collect()
-                });
-                if matches!(mode, Mode::Wait(_))
-                    && self.all_skip(store, mode, &metric, tau, gi as u32) == Some(true)
-                {
-                    continue;
-                }
-                // The LOD test of a cluster depends only on its step (self error and sphere):
-                // evaluated once per step met in this group, in cluster order, so that the
-                // availability snapshot is consulted in the same order as cluster by cluster.
-                verdicts.clear();
-                for (k, (info, &(cmin, cmax))) in infos.iter().zip(bounds).enumerate() {
-                    let verdict = match verdicts.iter().find(|(s, _)| *s == info.step) {
-                        Some(&(_, v)) => v,
-                        None => {
-                            let (error, sphere) = page.steps()[info.step as usize];
-                            let v = step_verdict(
-                                store,
-                                &self.group_lod,
-                                mode,
-                                &metric,
-                                tau,
-                                gi as u32,
-                                error,
-                                sphere,
-                            );
-                            verdicts.push((info.step, v));
-                            v
-                        }
-                    };
-                    let fallback = match verdict {
-                        Verdict::Skip => continue,
-                        Verdict::Draw => false,
-                        Verdict::Fallback => true,
-                    };
-                    if !inside {
-                        let (clo, chi) = grid_box(cmin, cmax, self.grid_step);
-                        if frustum.test_aabb(clo, chi) == Containment::Outside {
-                            stats.clusters_culled_frustum += 1;
-                            continue;
-                        }
-                    }
-                    if fallback {
-                        stats.clusters_fallback += 1;
-                        if let Mode::Stream { cache, availability, requests } = mode {
-                            let (error, sphere) = page.steps()[info.step as usize];
-                            for s in step_sources(store, &self.group_lod, gi as u32, error, sphere) {
-                                availability.request_for(store, cache, &metric, s, requests);
-                            }
-                        }
-                    }
-                    out.clusters.push(ClusterRef {
-                        page: g.page,
-                        index_in_page: g.first_cluster + k as u32,
-                        group: gi as u32,
-                    });
-                    out.triangles += info.triangles as u64;
-                }
-            }
-            let children = node.first_child..node.first_child.saturating_add(node.child_count);
-            if node.child_count > 0 {
-                stack.extend(children.rev().map(|c| (c, inside)));
-            }
-        }
-        self.from_steps.fetch_add(from_steps, Ordering::Relaxed);
-        stats.clusters_selected = out.clusters.len() as u64;
-        pages.sort_unstable();
-        pages.dedup();
-        stats.pages_touched = pages.len() as u64;
+            seen.iter().map(|&k| page.steps()[k as usize]).collect()
+        });
     }
 }

@@ -10,6 +10,7 @@ mod common;
 use common::{small_pages_plant_path, spheres_path};
 
 use glam::Vec3;
+use tw_core::rng::Rng;
 use tw_runtime::{
     Availability, Camera, PageCache, Requests, ResidentPage, SelectOptions, Selection, Selector,
 };
@@ -22,25 +23,20 @@ fn scene_sphere(store: &Store) -> (Vec3, f32) {
     ((lo + hi) * 0.5, (hi - lo).length() * 0.5)
 }
 
-/// xorshift64*: a small deterministic generator (no dependency).
-struct Rng(u64);
+/// The draws the random sequences make, from the project's generator.
+trait Draw {
+    /// Uniform in [0, 1].
+    fn unit(&mut self) -> f32;
+    /// Uniform in the cube [-1, 1]³.
+    fn vec(&mut self) -> Vec3;
+}
 
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-    /// Uniform in 0..1.
+impl Draw for Rng {
     fn unit(&mut self) -> f32 {
-        (self.next() >> 40) as f32 / (1u64 << 24) as f32
-    }
-    fn signed(&mut self) -> f32 {
-        2.0 * self.unit() - 1.0
+        self.f64() as f32
     }
     fn vec(&mut self) -> Vec3 {
-        Vec3::new(self.signed(), self.signed(), self.signed())
+        Vec3::from_array([(); 3].map(|_| self.range_f64(-1.0, 1.0) as f32))
     }
 }
 
@@ -75,7 +71,7 @@ fn check_sequence(store: &Store, budget: u64, frames: usize, seed: u64) {
     cache_w.load_root_pages(store);
     cache_c.load_root_pages(store);
     let mut availability = Availability::default();
-    let mut rng = Rng(seed | 1);
+    let mut rng = Rng::new(seed);
     let mut eye = centre + Vec3::new(0.3, -0.2, 0.1) * radius;
     let mut dir = Vec3::new(1.0, 0.4, -0.1).normalize();
     let taus = [0.25f32, 0.5, 1.0, 2.0, 8.0];
@@ -93,7 +89,7 @@ fn check_sequence(store: &Store, budget: u64, frames: usize, seed: u64) {
             dir = (dir + rng.vec() * 0.1).normalize_or(Vec3::X);
         }
         if rng.unit() < 0.1 {
-            tau = taus[(rng.next() % taus.len() as u64) as usize];
+            tau = *rng.pick(&taus);
         }
         if rng.unit() < 0.1 {
             frustum = !frustum;
@@ -125,7 +121,7 @@ fn check_sequence(store: &Store, budget: u64, frames: usize, seed: u64) {
             drawn += a.0.clusters.len();
             // Some of the requested pages arrive, highest priority first (frame pages, then a
             // few prefetched ones), in both caches alike.
-            let n = (rng.next() % 12) as usize;
+            let n = rng.range_u32(0, 12) as usize;
             let pages: Vec<u32> =
                 a.1.sorted().into_iter().chain(a.3.sorted()).map(|(p, _)| p).take(n).collect();
             drop((a, b));

@@ -502,6 +502,7 @@ mod tests {
     use super::*;
     use crate::light::Light;
     use crate::shadow::fit::{fit_layers, ShadowOptions};
+    use tw_core::rng::Rng;
 
     /// A horizontal rectangle `z = h` over `lo..=hi` in x and y: an occluder of the synthetic maps.
     #[derive(Clone, Copy, Debug)]
@@ -691,17 +692,20 @@ mod tests {
         assert_eq!(stats.receivers_lit, tiles.len() as u64, "{stats:?}");
     }
 
-    /// xorshift64*.
-    struct Rng(u64);
-    impl Rng {
+    /// The `f32` draws these tests make, from the project's generator.
+    trait DrawF32 {
+        /// Uniform in [0, 1].
+        fn unit(&mut self) -> f32;
+        /// Uniform in [a, b].
+        fn range(&mut self, a: f32, b: f32) -> f32;
+    }
+
+    impl DrawF32 for Rng {
         fn unit(&mut self) -> f32 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 40) as f32 / (1u64 << 24) as f32
+            self.f64() as f32
         }
         fn range(&mut self, a: f32, b: f32) -> f32 {
-            a + (b - a) * self.unit()
+            self.range_f64(a.into(), b.into()) as f32
         }
     }
 
@@ -709,7 +713,7 @@ mod tests {
     /// `Shadowed` gets that answer from the lookup rule itself.
     #[test]
     fn lit_and_shadowed_boxes_agree_with_the_lookup_rule_everywhere() {
-        let mut rng = Rng(0x5eed_ab1e);
+        let mut rng = Rng::new(0x5eed_ab1e);
         let (mut lit, mut shadowed, mut partial, mut hidden) = (0, 0, 0, 0);
         for round in 0..12 {
             let cam = Camera::new(
@@ -805,7 +809,7 @@ mod tests {
     #[test]
     #[ignore]
     fn cost_of_a_frame() {
-        let mut rng = Rng(7);
+        let mut rng = Rng::new(7);
         let cam = eye();
         let mut boxes = Vec::new();
         for x in 0..200 {

@@ -199,26 +199,19 @@ impl LightDepth {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// xorshift64*.
-    fn rng(state: &mut u64) -> u64 {
-        *state ^= *state >> 12;
-        *state ^= *state << 25;
-        *state ^= *state >> 27;
-        state.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
+    use tw_core::rng::Rng;
 
     #[test]
     fn rectangle_questions_match_a_scan_of_the_texels() {
-        let mut s = 0x1234_5678u64;
+        let mut rng = Rng::new(0x1234_5678);
         for size in [1u32, 2, 5, 16, 37] {
-            let map: Vec<f32> = (0..size * size).map(|_| (rng(&mut s) % 1000) as f32 / 1000.0).collect();
+            let map: Vec<f32> = (0..size * size).map(|_| rng.range_u32(0, 1000) as f32 / 1000.0).collect();
             let d = LightDepth::new(&map, size).unwrap();
             for _ in 0..300 {
-                let (a, b) = ((rng(&mut s) % size as u64) as u32, (rng(&mut s) % size as u64) as u32);
-                let (c, e) = ((rng(&mut s) % size as u64) as u32, (rng(&mut s) % size as u64) as u32);
+                let (a, b) = (rng.range_u32(0, size), rng.range_u32(0, size));
+                let (c, e) = (rng.range_u32(0, size), rng.range_u32(0, size));
                 let rect = [a.min(b), c.min(e), a.max(b), c.max(e)];
-                let t = (rng(&mut s) % 1000) as f32 / 1000.0;
+                let t = rng.range_u32(0, 1000) as f32 / 1000.0;
                 let scan_at = |f: &dyn Fn(u32, u32, f32) -> bool| {
                     (rect[1]..=rect[3])
                         .any(|y| (rect[0]..=rect[2]).any(|x| f(x, y, map[(y * size + x) as usize])))
