@@ -355,6 +355,35 @@ pub enum RendererChoice {
     Rt,
 }
 
+/// The image flags `render` and `bench` share (same defaults, same meaning): one definition,
+/// so that the two commands cannot drift apart. `view` sizes a window, with its own text.
+#[derive(Args, Debug, Clone)]
+pub struct FrameArgs {
+    /// Image size WIDTHxHEIGHT.
+    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
+    pub size: (u32, u32),
+    /// Samples per pixel: 1, 4 for 4× multisample anti-aliasing (occlusion culling stays
+    /// conservative for every sample), or auto: 4 on a real GPU with Vulkan (or Metal, DX12),
+    /// 1 on CPU drivers and GL.
+    #[arg(long, default_value = "auto", value_parser = parse_samples)]
+    pub samples: SamplesChoice,
+}
+
+/// `--color`, the same in `render`, `bench` and `view`.
+#[derive(Args, Debug, Clone)]
+pub struct ColorArgs {
+    /// How to colour triangles.
+    #[arg(long, value_enum, default_value = "material")]
+    pub color: RenderColoring,
+}
+
+impl ColorArgs {
+    /// The renderers' colour mode.
+    pub fn mode(&self) -> tw_core::color::ColorMode {
+        self.color.mode()
+    }
+}
+
 #[derive(Args, Debug)]
 pub struct RenderArgs {
     /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
@@ -380,14 +409,8 @@ pub struct RenderArgs {
     /// Render only the first N frames of --path.
     #[arg(long, requires = "path")]
     pub frames: Option<usize>,
-    /// Image size WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-    pub size: (u32, u32),
-    /// Samples per pixel: 1, 4 for 4× multisample anti-aliasing (occlusion culling stays
-    /// conservative for every sample), or auto: 4 on a real GPU with Vulkan (or Metal, DX12),
-    /// 1 on CPU drivers and GL.
-    #[arg(long, default_value = "auto", value_parser = parse_samples)]
-    pub samples: SamplesChoice,
+    #[command(flatten)]
+    pub frame: FrameArgs,
     /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
     /// whole scene from an oblique direction.
     #[arg(long, allow_hyphen_values = true, conflicts_with = "path")]
@@ -395,9 +418,8 @@ pub struct RenderArgs {
     /// Pixel error threshold τ of the LOD cut (0 = full resolution).
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
-    /// How to colour triangles.
-    #[arg(long, value_enum, default_value = "material")]
-    pub color: RenderColoring,
+    #[command(flatten)]
+    pub color: ColorArgs,
     /// Memory budget of the decoded page cache (at least 1M; the root pages are kept beyond
     /// it). With --renderer rt a quarter of it goes to the ray tracer's cluster BVHs.
     #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
@@ -570,9 +592,8 @@ pub struct ViewArgs {
     /// Turn view-frustum culling off.
     #[arg(long)]
     pub no_frustum: bool,
-    /// How to colour triangles.
-    #[arg(long, value_enum, default_value = "material")]
-    pub color: RenderColoring,
+    #[command(flatten)]
+    pub color: ColorArgs,
     /// Memory budget of the decoded page cache (at least 1M; the
     /// root pages are kept beyond it).
     #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
@@ -630,14 +651,8 @@ pub struct BenchArgs {
     /// Report folder (index.html, report.json); written atomically.
     #[arg(long, default_value = "bench-report")]
     pub out: PathBuf,
-    /// Image size WIDTHxHEIGHT.
-    #[arg(long, default_value = "1280x720", value_parser = parse_size)]
-    pub size: (u32, u32),
-    /// Samples per pixel: 1, 4 for 4× multisample anti-aliasing (occlusion culling stays
-    /// conservative for every sample), or auto: 4 on a real GPU with Vulkan (or Metal, DX12),
-    /// 1 on CPU drivers and GL.
-    #[arg(long, default_value = "auto", value_parser = parse_samples)]
-    pub samples: SamplesChoice,
+    #[command(flatten)]
+    pub frame: FrameArgs,
     /// Pixel error threshold τ of the LOD cut.
     #[arg(long, default_value_t = 1.0)]
     pub error: f32,
@@ -690,9 +705,8 @@ pub struct BenchArgs {
     /// Frames embedded in the report as pictures.
     #[arg(long, default_value_t = 4)]
     pub images: usize,
-    /// How to colour triangles.
-    #[arg(long, value_enum, default_value = "material")]
-    pub color: RenderColoring,
+    #[command(flatten)]
+    pub color: ColorArgs,
     /// Exit 0 even when store pages fail their checksum (the report lists them); without it a
     /// damaged store fails the command after the report is written.
     #[arg(long)]

@@ -115,18 +115,18 @@ impl<'s> FrameRenderer<'s> {
     fn new(store: &'s Arc<Store>, args: &RenderArgs) -> Result<Self> {
         let backend = match args.renderer {
             RendererChoice::Raster if args.shadows.light.is_some() => {
-                let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+                let mut renderer = Renderer::new_headless(args.frame.size.0, args.frame.size.1)?;
                 outln!("adapter: {}", renderer.adapter_summary());
-                renderer.set_samples(args.samples.resolve(&renderer))?;
+                renderer.set_samples(args.frame.samples.resolve(&renderer))?;
                 renderer.set_color_mode(args.color.mode());
                 let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
                 let walk = Walkthrough::new(store.clone(), renderer, stream)?;
                 Backend::Shadowed(Box::new(walk), args.shadows.clone())
             }
             RendererChoice::Raster => {
-                let mut renderer = Renderer::new_headless(args.size.0, args.size.1)?;
+                let mut renderer = Renderer::new_headless(args.frame.size.0, args.frame.size.1)?;
                 outln!("adapter: {}", renderer.adapter_summary());
-                renderer.set_samples(args.samples.resolve(&renderer))?;
+                renderer.set_samples(args.frame.samples.resolve(&renderer))?;
                 renderer.set_store_colors(store);
                 renderer.set_color_mode(args.color.mode());
                 Backend::Raster(Box::new(renderer))
@@ -139,7 +139,7 @@ impl<'s> FrameRenderer<'s> {
                     ..Default::default()
                 };
                 let stream = StreamOptions { budget_bytes: args.memory, ..Default::default() };
-                let traced = TracedWalkthrough::new(store.clone(), args.size, stream, trace)?;
+                let traced = TracedWalkthrough::new(store.clone(), args.frame.size, stream, trace)?;
                 Backend::TracedShadowed(Box::new(traced), args.shadows.clone())
             }
             RendererChoice::Rt => {
@@ -167,9 +167,12 @@ impl<'s> FrameRenderer<'s> {
         let cache = PageCache::new(store, pages);
         cache.load_root_pages(store);
         let selector = Selector::new(store);
-        let options =
-            SelectOptions { tau: args.error, viewport: [args.size.0, args.size.1], frustum_culling: true };
-        Ok(FrameRenderer { store, backend, size: args.size, cache, selector, options, up: args.up })
+        let options = SelectOptions {
+            tau: args.error,
+            viewport: [args.frame.size.0, args.frame.size.1],
+            frustum_culling: true,
+        };
+        Ok(FrameRenderer { store, backend, size: args.frame.size, cache, selector, options, up: args.up })
     }
 
     /// The LOD cut for `camera`, drawn and read back.
@@ -233,7 +236,7 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
     let header = frame.store.header();
     let camera = match &args.camera {
         Some(s) => InputCamera::parse(s)?.to_scene(header)?,
-        None => default_camera(header, args.size, up_axis(header, args.up))?,
+        None => default_camera(header, args.frame.size, up_axis(header, args.up))?,
     };
     let Frame { image, selection, select_time, traced, shadow } = frame.draw(&camera)?;
     image.save_png(output)?;
@@ -262,7 +265,7 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         (Backend::TracedShadowed(traced, _), Some(t)) => print_trace_stats(&t, traced.tracer().bytes()),
         (Backend::Rt(..) | Backend::TracedShadowed(..), None) => {}
     }
-    outln!("wrote {} ({}x{})", output.display(), args.size.0, args.size.1);
+    outln!("wrote {} ({}x{})", output.display(), args.frame.size.0, args.frame.size.1);
     Ok(())
 }
 
@@ -362,7 +365,7 @@ fn render_sequence(
     }
     let fps = args.fps.unwrap_or(path.fps);
     let mut encoder = match (ffmpeg, &args.video) {
-        (Some(ffmpeg), Some(out)) => Some(video::Encoder::start(ffmpeg, args.size, fps, out)?),
+        (Some(ffmpeg), Some(out)) => Some(video::Encoder::start(ffmpeg, args.frame.size, fps, out)?),
         _ => None,
     };
     let bar = if quiet { ProgressBar::hidden() } else { progress::count(count as u64, "render") };
@@ -384,7 +387,7 @@ fn render_sequence(
     if let Some(e) = encoder {
         e.finish()?;
     }
-    let (w, h) = args.size;
+    let (w, h) = args.frame.size;
     outln!(
         "rendered {count} frames ({w}x{h}, τ = {} px) in {secs:.1} s: {:.1} ms a frame, {} triangles a frame on average",
         args.error,

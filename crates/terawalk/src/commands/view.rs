@@ -125,7 +125,7 @@ fn settings(args: &ViewArgs, occlusion: Occlusion, shadows: ShadowControls) -> S
         occlusion,
         frustum_culling: !args.no_frustum,
         memory_budget: args.memory,
-        coloring: match args.color {
+        coloring: match args.color.color {
             RenderColoring::Material => Coloring::Material,
             RenderColoring::Object => Coloring::Object,
             RenderColoring::Level => Coloring::Level,
