@@ -15,7 +15,10 @@
 //!    light's depth instead of occlusion queries); the light-visible clusters and the casters
 //!    (those in front of a partly shadowed receiver, step 4) are counted. Only partly shadowed
 //!    receivers look the map up when the eye's pass draws them; the classes follow the lookup
-//!    rule conservatively, so the image is the same with or without cross-culling.
+//!    rule conservatively, so the image is the same with or without cross-culling. **Finer
+//!    classes:** the partly shadowed receivers that can cover the most pixels are classified
+//!    again by subobjects of 8 triangles ([`tw_runtime::shadow::subobjects`]), and the renderer
+//!    draws their lit and shadowed triangles without lookups.
 //!
 //! The eye's pass then draws as without shadows ([`crate::occlude::draw_culled`]), the renderer
 //! shading each cluster by its class.
@@ -25,11 +28,12 @@
 //! fit can take last frame's layer ([`tw_runtime::shadow::reuse`]: it holds the cascade, its
 //! texels are not much wider, same bias) and the layer's casters are still at the eye's level of
 //! detail within a quarter of the bias (the clusters that entered and left its light-view set
-//! since it was drawn moved the surface by less, [`tw_runtime::shadow::lod_within_bias`]), steps
-//! 3 and the read-back of 4 are skipped for it: the map's layer and its depth pyramid serve
-//! again. On the 10^8 plant's walk three layers in four are reused; a cascade is drawn again
-//! when the eye has moved a few percent of its width or the level of detail of its casters has
-//! changed (on a fly-over, every frame).
+//! since it was drawn moved the surface by less, [`tw_runtime::shadow::lod_within_bias`]; or the
+//! swaps cannot have changed the map, see `still_serves`), steps 3 and the read-back of 4 are
+//! skipped for it: the map's layer and its depth pyramid serve again. On the 10^8 plant's walk
+//! 9 layers in 10 are reused; a cascade is drawn again when the eye has moved a few percent of
+//! its width or the level of detail of casters it sees has changed (on a fly-over, every
+//! frame).
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -38,10 +42,10 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use serde::{Deserialize, Serialize};
 use tw_gpu::Renderer;
-use tw_runtime::frustum::grid_box;
+use tw_runtime::frustum::{grid_box, Containment, Frustum};
 use tw_runtime::shadow::{
-    casters, classify_receivers, fit_layers, light_visible, lod_within_bias, refit_layers, LightDepth,
-    ShadowSetStats,
+    casters, classify_receivers, classify_subobjects, fit_layers, light_visible, lod_within_bias,
+    refit_layers, LightDepth, ShadowSetStats, TriangleClasses,
 };
 use tw_runtime::{Camera, ClusterRef, Light, ResidentPage, SelectOptions, ShadowClass, Shadows, Streamer};
 use tw_store::PageCluster;
@@ -81,6 +85,14 @@ pub struct ShadowInfo {
     pub sets: ShadowSetStats,
     /// Triangles of the casters (`sets.casters` clusters).
     pub caster_triangles: u64,
+    /// Partly shadowed receivers refined to subobjects of a few triangles (step 4, "Finer
+    /// classes"), and of their triangles those found lit and shadowed: drawn without lookups.
+    #[serde(default)]
+    pub refined_receivers: u64,
+    #[serde(default)]
+    pub refined_lit_triangles: u64,
+    #[serde(default)]
+    pub refined_shadowed_triangles: u64,
     /// Fitting the layers.
     pub fit: Duration,
     /// Selecting the light-view sets.
@@ -110,9 +122,8 @@ pub(crate) struct ShadowCache {
 /// What one layer of the shadow map holds.
 #[derive(Default)]
 struct LayerState {
-    /// The light-view set drawn into it: each cluster's simplification error (scene units) and
-    /// box centre, for the level-of-detail check of a reuse.
-    drawn: HashMap<ClusterRef, (f32, Vec3)>,
+    /// The light-view set drawn into it, for the level-of-detail check of a reuse.
+    drawn: HashMap<ClusterRef, DrawnCluster>,
     /// The clusters the light saw in it: the first pass of its light occlusion culling when it
     /// is drawn again.
     seen: HashSet<ClusterRef>,
@@ -120,6 +131,15 @@ struct LayerState {
     depth: Option<LightDepth>,
     /// Its cross-culling figures, once counted: kept while the layer is reused.
     figures: Option<LayerFigures>,
+}
+
+/// A cluster of a layer's light-view set as it was drawn: its simplification error (scene
+/// units) and box.
+#[derive(Clone, Copy, Debug)]
+struct DrawnCluster {
+    error: f32,
+    lo: Vec3,
+    hi: Vec3,
 }
 
 /// A layer's light-view set as cross-culling counts it (the thesis' figures, not the image).
@@ -177,6 +197,7 @@ pub(crate) fn prepare(
         return Ok((info, shadows));
     }
     renderer.set_shadow_map(map.0, map.1)?;
+    let eye = Frustum::from_view_projection(&camera.view_projection(aspect));
     cache.layers.resize_with(shadows.layers.len(), LayerState::default);
     let mut light_sets: Vec<LightSet> = Vec::with_capacity(shadows.layers.len());
     for (i, layer) in shadows.layers.iter().enumerate() {
@@ -196,7 +217,13 @@ pub(crate) fn prepare(
         let set_boxes = light_boxes(&set, &pages, step);
         let state = &mut cache.layers[i];
         let bias_texels = settings.options.bias_texels;
-        if reusable[i] && still_serves(&shadows, i, bias_texels, &set, &set_boxes, &state.drawn) {
+        let serves =
+            reusable[i] && still_serves(&shadows, i, bias_texels, (camera, &eye), (&set, &set_boxes), state);
+        if !serves {
+            let why = if reusable[i] { "its casters' level of detail changed" } else { "the fit moved" };
+            tracing::debug!("shadow layer {i} drawn again: {why}");
+        }
+        if serves {
             info.layers_reused += 1;
         } else {
             *state = draw_layer_culled(
@@ -219,7 +246,13 @@ pub(crate) fn prepare(
     cache.shadows = Some(shadows.clone());
     if settings.cross_culling {
         let layers = &mut cache.layers;
-        cross_cull(&mut info, renderer, &shadows, camera, (receivers, &boxes), &light_sets, layers)?;
+        let view = ReceiverView {
+            view_proj: camera.view_projection(aspect),
+            viewport: options.viewport,
+            grid_step: step,
+        };
+        let receivers = (receivers, &boxes[..], view);
+        cross_cull(&mut info, renderer, &shadows, camera, receivers, &light_sets, layers)?;
     } else {
         info.sets.receivers_partial = receivers.len() as u64;
         info.sets.triangles_partial = triangles(receivers);
@@ -238,41 +271,69 @@ fn map_layers(light: &Light, options: &ShadowOptions) -> u32 {
     }
 }
 
-/// Whether layer `layer`, drawn in an earlier frame from the light-view set `drawn`, serves for
-/// this frame's set `set` (with its boxes `set_boxes`): the clusters that left and entered the
-/// set since moved the casters' surface within the bias' share for level of detail.
+/// Whether layer `layer`, drawn in an earlier frame (`drawn`), serves for this frame's set `set`
+/// (with its boxes `set_boxes`) seen from `camera` (and its frustum).
+///
+/// A cluster that entered or left the set with no other doing the opposite is a caster that
+/// came or went: the layer is drawn again. Otherwise levels swapped, and
+/// 1. when none of the clusters that left was seen by the light and each that entered lies
+///    behind the layer's depth over its footprint, drawing the layer again would give the same
+///    map: it serves (on the 10^8 walk, the interiors under the far cascade's roofs swap levels
+///    every few frames as the eye moves);
+/// 2. else the swaps that matter are those the eye can see: a surface drawn by the eye at one
+///    level and held by the map at another shadows itself falsely unless they are within the
+///    bias' share for level of detail (the thesis' LOD consistency). A cluster entirely outside
+///    the eye's frustum is not drawn by the eye, so its swap only moves its shadow by its own
+///    simplification error — which a map drawn afresh at the eye's level has too, against the
+///    full-detail caster — and is not counted.
 fn still_serves(
     shadows: &Shadows,
     layer: usize,
     bias_texels: f32,
-    set: &[(ClusterRef, &PageCluster)],
-    set_boxes: &[((Vec3, Vec3), u64)],
-    drawn: &HashMap<ClusterRef, (f32, Vec3)>,
+    (camera, eye): (&Camera, &Frustum),
+    (set, set_boxes): (&[Decoded<'_>], &[LightBox]),
+    drawn: &LayerState,
 ) -> bool {
     let keys: HashSet<ClusterRef> = set.iter().map(|(k, _)| *k).collect();
-    let (mut entered, mut left) = (0f32, 0f32);
-    let (mut entering, mut leaving) = (0, 0);
-    let mut changed = Vec::new();
-    for ((k, c), ((lo, hi), _)) in set.iter().zip(set_boxes) {
-        if !drawn.contains_key(k) {
-            entered = entered.max(c.self_error);
-            entering += 1;
-            changed.push((*lo + *hi) * 0.5);
-        }
-    }
-    for (k, &(error, centre)) in drawn {
-        if !keys.contains(k) {
-            left = left.max(error);
-            leaving += 1;
-            changed.push(centre);
-        }
-    }
+    let entered: Vec<usize> = (0..set.len()).filter(|&i| !drawn.drawn.contains_key(&set[i].0)).collect();
+    let left: Vec<(&ClusterRef, &DrawnCluster)> =
+        drawn.drawn.iter().filter(|(k, _)| !keys.contains(k)).collect();
     // The eye's cut covers the scene once at some level, so within a layer's unchanged frustum
     // clusters enter only as others leave (a level for another). One without the other is a
     // caster that came or went (a page that arrived with nothing drawn for it before): drawn.
-    if (entering == 0) != (leaving == 0) {
+    if entered.is_empty() != left.is_empty() {
+        tracing::debug!(
+            "shadow layer {layer}: {} clusters entered its set, {} left",
+            entered.len(),
+            left.len()
+        );
         return false;
     }
+    if entered.is_empty()
+        || swaps_unseen_by_the_light(shadows, layer, camera, drawn, &entered, set_boxes, &left)
+    {
+        return true;
+    }
+    let seen = |lo: Vec3, hi: Vec3| eye.test_aabb(lo, hi) != Containment::Outside;
+    let (mut entered_error, mut left_error) = (0f32, 0f32);
+    let mut changed = Vec::new();
+    for &i in &entered {
+        let (lo, hi) = set_boxes[i].0;
+        if seen(lo, hi) {
+            entered_error = entered_error.max(set[i].1.self_error);
+            changed.push((lo + hi) * 0.5);
+        }
+    }
+    for (_, d) in &left {
+        if seen(d.lo, d.hi) {
+            left_error = left_error.max(d.error);
+            changed.push((d.lo + d.hi) * 0.5);
+        }
+    }
+    tracing::debug!(
+        "shadow layer {layer}: levels swapped in view, error {} scene units",
+        entered_error + left_error
+    );
     // Where the texels are narrowest: for a point light, nearest the light.
     let at = match shadows.light {
         Light::Point { position } => {
@@ -280,7 +341,28 @@ fn still_serves(
         }
         Light::Sun { .. } => changed.first().copied(),
     };
-    lod_within_bias(shadows, layer, bias_texels, entered + left, at.unwrap_or(Vec3::ZERO))
+    lod_within_bias(shadows, layer, bias_texels, entered_error + left_error, at.unwrap_or(Vec3::ZERO))
+}
+
+/// Whether layer `layer`'s map is what drawing its set again would give after the swaps
+/// (`entered`: indices into `set_boxes`; `left`): no cluster that left wrote a texel of it (the
+/// light did not see it when the layer was drawn), and each that entered lies behind its depth
+/// over its footprint (it would write none). Unknown without the layer's depth pyramid.
+fn swaps_unseen_by_the_light(
+    shadows: &Shadows,
+    layer: usize,
+    camera: &Camera,
+    drawn: &LayerState,
+    entered: &[usize],
+    set_boxes: &[LightBox],
+    left: &[(&ClusterRef, &DrawnCluster)],
+) -> bool {
+    let Some(depth) = &drawn.depth else { return false };
+    if left.iter().any(|(k, _)| drawn.seen.contains(k)) {
+        return false;
+    }
+    let boxes: Vec<(Vec3, Vec3)> = entered.iter().map(|&i| set_boxes[i].0).collect();
+    !light_visible(shadows, layer, depth, camera, &boxes).contains(&true)
 }
 
 /// Steps 2–4 of the thesis' cross-culling against the layers' depth pyramids (read back now
@@ -292,7 +374,7 @@ fn cross_cull(
     renderer: &mut Renderer,
     shadows: &Shadows,
     camera: &Camera,
-    (receivers, boxes): (&[Decoded<'_>], &[(Vec3, Vec3)]),
+    (receivers, boxes, view): (&[Decoded<'_>], &[(Vec3, Vec3)], ReceiverView),
     light_sets: &[LightSet],
     layers: &mut [LayerState],
 ) -> Result<(), FrameError> {
@@ -335,6 +417,10 @@ fn cross_cull(
     info.sets = sets;
     let keyed: Vec<(ClusterRef, ShadowClass)> = receivers.iter().map(|(k, _)| *k).zip(classes).collect();
     renderer.set_shadow_classes(&keyed);
+    if renderer.refines_shadow_classes() {
+        let refined = refine_partial(info, shadows, &depths, camera, receivers, boxes, &keyed, view);
+        renderer.set_shadow_triangle_classes(&refined);
+    }
     for (state, depth) in layers.iter_mut().zip(depths) {
         state.depth = Some(depth);
     }
@@ -345,8 +431,93 @@ fn cross_cull(
 /// A decoded cluster of a cut.
 type Decoded<'a> = (ClusterRef, &'a PageCluster);
 
+/// Screen pixels a partly shadowed receiver must be able to cover (its box's projection) to be
+/// refined. On the 10^8 walk (lavapipe) refining the 32 largest from 4,096 pixels saved ~2 ms
+/// of lookups for ~1.6 ms of classification; refining up to 256 from 1,024 pixels saved no
+/// more lookups (the rest are truly partial: large triangles across a shadow edge) for twice
+/// the classification (docs/benchmarks-log.md).
+const REFINE_MIN_PIXELS: f32 = 4096.0;
+
+/// The most receivers refined in a frame, the largest on screen first: bounds the stage's cost
+/// where a wide view holds thousands of partly shadowed clusters (a fly-over).
+const REFINE_MAX_RECEIVERS: usize = 32;
+
+/// How the receivers are seen and placed: the eye's view-projection, the viewport in pixels,
+/// and the store's grid step (cluster positions are grid coordinates).
+#[derive(Clone, Copy)]
+struct ReceiverView {
+    view_proj: glam::Mat4,
+    viewport: [u32; 2],
+    grid_step: f64,
+}
+
+/// Finer classes (thesis ch. 4, subobjects of k triangles): the partly shadowed receivers that
+/// can cover the most pixels are cut into subobjects of [`tw_runtime::shadow::SUBOBJECT_TRIANGLES`]
+/// and classified again, so that their lit and shadowed triangles are drawn without lookups.
+#[allow(clippy::too_many_arguments)]
+fn refine_partial(
+    info: &mut ShadowInfo,
+    shadows: &Shadows,
+    depths: &[LightDepth],
+    camera: &Camera,
+    receivers: &[Decoded<'_>],
+    boxes: &[(Vec3, Vec3)],
+    classes: &[(ClusterRef, ShadowClass)],
+    view: ReceiverView,
+) -> Vec<(ClusterRef, TriangleClasses)> {
+    let mut candidates: Vec<(f32, usize)> = classes
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, class))| *class == ShadowClass::Partial)
+        .map(|(i, _)| (screen_pixels(&view, boxes[i]), i))
+        .filter(|&(pixels, _)| pixels >= REFINE_MIN_PIXELS)
+        .collect();
+    candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+    candidates.truncate(REFINE_MAX_RECEIVERS);
+    let clusters: Vec<&PageCluster> = candidates.iter().map(|&(_, i)| receivers[i].1).collect();
+    let refined = classify_subobjects(shadows, depths, camera, &clusters, view.grid_step);
+    let mut out = Vec::with_capacity(refined.len());
+    for (&(_, i), triangles) in candidates.iter().zip(refined) {
+        if triangles.refines() {
+            info.refined_receivers += 1;
+            info.refined_lit_triangles += triangles.lit.count_ones() as u64;
+            info.refined_shadowed_triangles += triangles.shadowed.count_ones() as u64;
+            out.push((receivers[i].0, triangles));
+        }
+    }
+    tracing::debug!(
+        "shadow subobjects: {} of {} candidates refined, {} lit and {} shadowed triangles without lookups",
+        out.len(),
+        candidates.len(),
+        info.refined_lit_triangles,
+        info.refined_shadowed_triangles
+    );
+    out
+}
+
+/// The pixels of `view`'s viewport that the screen rectangle of box `(lo, hi)` covers; a box
+/// reaching behind the eye counts as the whole viewport.
+fn screen_pixels(view: &ReceiverView, (lo, hi): (Vec3, Vec3)) -> f32 {
+    let [w, h] = view.viewport.map(|v| v as f32);
+    let (mut x0, mut y0, mut x1, mut y1) =
+        (f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY);
+    for p in tw_runtime::shadow::clip::corners(lo, hi) {
+        let c = view.view_proj * p.extend(1.0);
+        if !c.is_finite() || c.w <= 0.0 {
+            return w * h;
+        }
+        let (x, y) = (c.x / c.w, c.y / c.w);
+        (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+    }
+    let span = |a: f32, b: f32, size: f32| ((b.min(1.0) - a.max(-1.0)).max(0.0)) * 0.5 * size;
+    span(x0, x1, w) * span(y0, y1, h)
+}
+
 /// A layer's light-view set for cross-culling: its clusters' boxes and triangles.
-type LightSet = Vec<((Vec3, Vec3), u64)>;
+type LightSet = Vec<LightBox>;
+
+/// A light-view cluster's box (scene space) and triangles.
+type LightBox = ((Vec3, Vec3), u64);
 
 /// Draws layer `layer`'s light-view set `set` with occlusion culling from the light, two-pass
 /// as the eye's hzb (crate::occlude): the clusters the light saw when the layer was last drawn
@@ -367,7 +538,7 @@ fn draw_layer_culled(
     camera: &Camera,
     grid_step: f64,
     set: &[(ClusterRef, &PageCluster)],
-    set_boxes: &[((Vec3, Vec3), u64)],
+    set_boxes: &[LightBox],
     seen: &HashSet<ClusterRef>,
 ) -> Result<LayerState, FrameError> {
     let view_proj = &shadows.layers[layer].view_proj;
@@ -396,7 +567,7 @@ fn draw_layer_culled(
     let drawn = set
         .iter()
         .zip(set_boxes)
-        .map(|((k, c), ((lo, hi), _))| (*k, (c.self_error, (*lo + *hi) * 0.5)))
+        .map(|((k, c), &((lo, hi), _))| (*k, DrawnCluster { error: c.self_error, lo, hi }))
         .collect();
     let seen = first.iter().chain(&shown).filter(|&&i| visible[i]).map(|&i| set[i].0).collect();
     Ok(LayerState { drawn, seen, depth: second.is_empty().then_some(depth), figures: None })
@@ -493,24 +664,86 @@ mod tests {
         Shadows { light: Light::Sun { towards: Vec3::Z }, layers: vec![layer], size: 1024, bias: 1e-3 }
     }
 
+    /// An eye above the unit box looking down at it, and one looking away from it.
+    fn eyes() -> (Camera, Camera) {
+        let at = |target: Vec3| {
+            Camera::new(Vec3::new(0.5, 0.5, 80.0), target, Vec3::Y, 60f32.to_radians(), 0.1, 1000.0)
+                .expect("a valid camera")
+        };
+        (at(Vec3::new(0.5, 0.5, 0.0)), at(Vec3::new(0.5, 0.5, 200.0)))
+    }
+
+    /// What a layer holds: `drawn` clusters, of which the light saw `seen`, and a map of depth 0
+    /// (everything nearer than depth 0 is hidden behind it: every box here).
+    fn layer(drawn: &[(ClusterRef, DrawnCluster)], seen: &[ClusterRef], with_depth: bool) -> LayerState {
+        LayerState {
+            drawn: drawn.iter().copied().collect(),
+            seen: seen.iter().copied().collect(),
+            depth: with_depth.then(|| LightDepth::new(&vec![0.0; 1024 * 1024], 1024).expect("a depth map")),
+            figures: None,
+        }
+    }
+
+    fn serves(
+        s: &Shadows,
+        camera: &Camera,
+        set: &[(ClusterRef, &PageCluster)],
+        boxes: &[(Vec3, Vec3)],
+        state: &LayerState,
+    ) -> bool {
+        let eye = Frustum::from_view_projection(&camera.view_projection(1.0));
+        let set_boxes: Vec<((Vec3, Vec3), u64)> = boxes.iter().map(|&b| (b, 1)).collect();
+        still_serves(s, 0, 1.5, (camera, &eye), (set, &set_boxes), state)
+    }
+
     #[test]
     fn a_layer_serves_while_levels_swap_within_the_slack_and_not_when_a_caster_comes_or_goes() {
         let s = shadows();
         let texel = tw_runtime::shadow::texel_size(&s, 0).unwrap();
         let small = 0.1 * tw_runtime::shadow::reuse::LOD_SHARE * 1.5 * texel;
         let (a, b, c) = (cluster(small), cluster(0.0), cluster(0.0));
-        let boxes = |n: usize| vec![((Vec3::ZERO, Vec3::ONE), 1u64); n];
-        let drawn: HashMap<ClusterRef, (f32, Vec3)> =
-            [(key(1), (small, Vec3::ZERO)), (key(2), (0.0, Vec3::ZERO))].into_iter().collect();
+        let unit = (Vec3::ZERO, Vec3::ONE);
+        let drawn = |error: f32| DrawnCluster { error, lo: unit.0, hi: unit.1 };
+        // Both clusters wrote texels of the map (the light saw them).
+        let state = layer(&[(key(1), drawn(small)), (key(2), drawn(0.0))], &[key(1), key(2)], true);
+        let (eye, away) = eyes();
         // The same set: serves.
-        assert!(still_serves(&s, 0, 1.5, &[(key(1), &a), (key(2), &b)], &boxes(2), &drawn));
+        assert!(serves(&s, &eye, &[(key(1), &a), (key(2), &b)], &[unit; 2], &state));
         // Cluster 1 swapped for its children (3): the surface moved by at most `small`.
-        assert!(still_serves(&s, 0, 1.5, &[(key(3), &c), (key(2), &b)], &boxes(2), &drawn));
-        // A swap by more than the slack: drawn again.
+        assert!(serves(&s, &eye, &[(key(3), &c), (key(2), &b)], &[unit; 2], &state));
+        // A swap by more than the slack: drawn again, unless the eye cannot see it.
         let coarse = cluster(10.0 * texel);
-        assert!(!still_serves(&s, 0, 1.5, &[(key(4), &coarse), (key(2), &b)], &boxes(2), &drawn));
-        // A caster of error 0 appears with nothing leaving, or one goes: drawn again.
-        assert!(!still_serves(&s, 0, 1.5, &[(key(1), &a), (key(2), &b), (key(3), &c)], &boxes(3), &drawn));
-        assert!(!still_serves(&s, 0, 1.5, &[(key(1), &a)], &boxes(1), &drawn));
+        assert!(!serves(&s, &eye, &[(key(4), &coarse), (key(2), &b)], &[unit; 2], &state));
+        assert!(serves(&s, &away, &[(key(4), &coarse), (key(2), &b)], &[unit; 2], &state));
+        // A caster of error 0 appears with nothing leaving, or one goes: drawn again, seen or not.
+        for eye in [&eye, &away] {
+            assert!(!serves(&s, eye, &[(key(1), &a), (key(2), &b), (key(3), &c)], &[unit; 3], &state));
+            assert!(!serves(&s, eye, &[(key(1), &a)], &[unit; 1], &state));
+        }
+    }
+
+    #[test]
+    fn swaps_the_light_cannot_see_keep_the_layer_whatever_their_error() {
+        let s = shadows();
+        let texel = tw_runtime::shadow::texel_size(&s, 0).unwrap();
+        let coarse = cluster(10.0 * texel);
+        let fine = cluster(0.0);
+        // Depths 0.5–0.6 in the layer: behind the map's 0 everywhere.
+        let deep = (Vec3::new(0.0, 0.0, 50.0), Vec3::new(1.0, 1.0, 60.0));
+        let drawn = DrawnCluster { error: 0.0, lo: deep.0, hi: deep.1 };
+        let (eye, _) = eyes();
+        let set = [(key(4), &coarse), (key(2), &fine)];
+        // Cluster 1 (unseen by the light) swapped for a coarse 4 behind the map: the map is
+        // what drawing again would give.
+        let unseen = layer(&[(key(1), drawn), (key(2), drawn)], &[key(2)], true);
+        assert!(serves(&s, &eye, &set, &[deep; 2], &unseen));
+        // Not when the light saw cluster 1, when 4 may be in front of the map, or without the
+        // map's pyramid: then the level-of-detail slack decides (and 4 is too coarse).
+        let seen = layer(&[(key(1), drawn), (key(2), drawn)], &[key(1), key(2)], true);
+        assert!(!serves(&s, &eye, &set, &[deep; 2], &seen));
+        let near = (Vec3::ZERO, Vec3::ONE);
+        assert!(!serves(&s, &eye, &set, &[near, deep], &unseen));
+        let no_pyramid = layer(&[(key(1), drawn), (key(2), drawn)], &[key(2)], false);
+        assert!(!serves(&s, &eye, &set, &[deep; 2], &no_pyramid));
     }
 }

@@ -58,7 +58,7 @@ fn cross_culling_does_not_change_the_image() {
     };
     let mut views = cameras(&store, PathPart::Walk, 40, 10);
     views.extend(cameras(&store, PathPart::Fly, 40, 20));
-    let (mut classified, mut light_culled) = (0, 0);
+    let (mut classified, mut light_culled, mut refined) = (0, 0, 0);
     for (i, camera) in views.iter().enumerate() {
         for light in [Light::default_sun(camera), lamp(&views[0])] {
             for (mode, occlusion) in
@@ -79,6 +79,7 @@ fn cross_culling_does_not_change_the_image() {
                 assert!(info.shadow.layers > 0, "frame {i} {light:?}: no shadow layers");
                 assert_eq!(info_all.shadow.sets.receivers_lit + info_all.shadow.sets.receivers_shadowed, 0);
                 classified += info.shadow.sets.receivers_lit + info.shadow.sets.receivers_shadowed;
+                refined += info.shadow.refined_lit_triangles + info.shadow.refined_shadowed_triangles;
                 light_culled += info.shadow.light_triangles - info.shadow.light_drawn_triangles;
                 let differing = all.rgba.iter().zip(&culled.rgba).filter(|(a, b)| a != b).count();
                 assert_eq!(
@@ -88,9 +89,11 @@ fn cross_culling_does_not_change_the_image() {
             }
         }
     }
-    // Not a vacuous pass: cross-culling decided something on these views, and the light's
-    // occlusion culling left something out.
+    // Not a vacuous pass: cross-culling decided something on these views, also for triangles of
+    // partly shadowed receivers (drawn in parts, the finer classes), and the light's occlusion
+    // culling left something out.
     assert!(classified > 0, "no receiver was classified fully lit or fully shadowed");
+    assert!(refined > 0, "no triangle of a partly shadowed receiver was classified lit or shadowed");
     assert!(light_culled > 0, "occlusion culling from the light never culled anything");
 }
 

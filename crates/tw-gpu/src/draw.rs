@@ -49,7 +49,7 @@ pub(crate) enum Shading {
 }
 
 /// The layers a lookup picks from, as pipeline constants (shadow.wgsl `SHADOW_LAYERS`,
-/// `SHADOW_DISJOINT`).
+/// `SHADOW_DISJOINT`, `SHADOW_ORTHO`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) struct LookupLayers {
     /// How many layers the shadows have.
@@ -57,6 +57,8 @@ pub(crate) struct LookupLayers {
     /// Whether their splits are ascending and disjoint (sun cascades): then the depth alone
     /// picks the one layer to look up.
     pub disjoint: bool,
+    /// Whether every layer is orthographic (w = 1: no perspective divide).
+    pub orthographic: bool,
 }
 
 /// What a shaded pipeline is made for: (format, samples, mode, shading).
@@ -201,6 +203,7 @@ impl Pipelines {
                             constants[1],
                             ("SHADOW_LAYERS", layers.count as f64),
                             ("SHADOW_DISJOINT", if layers.disjoint { 1.0 } else { 0.0 }),
+                            ("SHADOW_ORTHO", if layers.orthographic { 1.0 } else { 0.0 }),
                         ];
                         pipeline(
                             device,

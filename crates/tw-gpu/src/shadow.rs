@@ -30,7 +30,7 @@ use std::time::Instant;
 
 use bytemuck::{Pod, Zeroable};
 use glam::Mat4;
-use tw_runtime::{Camera, Light, ShadowClass, Shadows};
+use tw_runtime::{Camera, Light, ShadowClass, Shadows, TriangleClasses};
 use tw_store::PageCluster;
 
 use crate::draw::{LookupLayers, Shading, DEPTH_FORMAT};
@@ -50,6 +50,10 @@ const SHADOWED_VERTEX_STORAGE_BUFFERS: u32 = 3;
 const CLASS_PARTIAL: u32 = 0;
 const CLASS_LIT: u32 = 1;
 const CLASS_SHADOWED: u32 = 2;
+
+/// The lit and shadowed class codes, for the draws of a refined cluster's parts
+/// (renderer/classified.rs).
+pub(crate) const CLASSIFIED_CODES: (u32, u32) = (CLASS_LIT, CLASS_SHADOWED);
 
 fn class_code(class: ShadowClass) -> u32 {
     match class {
@@ -166,6 +170,8 @@ pub(crate) struct ShadowState {
     map: Option<ShadowMap>,
     shadows: Option<Shadows>,
     classes: HashMap<PoolKey, u32>,
+    /// The triangle classes of partly shadowed clusters that cross-culling refined.
+    triangles: HashMap<PoolKey, TriangleClasses>,
     /// Class code per pool slot, as the GPU's `slot_classes` should hold it.
     mirror: Vec<u32>,
     /// The slots `[from, to)` of `mirror` changed since the last upload.
@@ -192,6 +198,7 @@ impl ShadowState {
             map: None,
             shadows: None,
             classes: HashMap::new(),
+            triangles: HashMap::new(),
             mirror: Vec::new(),
             dirty: None,
             class_buffer: class_buffer(device, 1024),
@@ -223,6 +230,11 @@ impl ShadowState {
             None => (s, s + 1),
         });
         code == CLASS_PARTIAL
+    }
+
+    /// The triangle classes of the partly shadowed cluster `key`, if cross-culling refined it.
+    pub(crate) fn triangle_classes(&self, key: PoolKey) -> Option<TriangleClasses> {
+        self.triangles.get(&key).copied()
     }
 
     /// The shadow uniforms of a shaded pass from `eye` (the shadows must be set).
@@ -409,15 +421,31 @@ impl Renderer {
         self.shadow.shadows = shadows.cloned();
         if shadows.is_none() {
             self.shadow.classes.clear();
+            self.shadow.triangles.clear();
         }
     }
 
     /// Per-cluster classes for the following shaded draws (replacing earlier ones); clusters
     /// not listed are [`ShadowClass::Partial`]. `Lit`: drawn without lookup, with the light's
     /// term; `Shadowed`: without lookup and without it; `Partial`: a lookup per fragment.
+    /// Forgets the triangle classes ([`set_shadow_triangle_classes`](Self::set_shadow_triangle_classes)).
     pub fn set_shadow_classes(&mut self, classes: &[(ClusterKey, ShadowClass)]) {
         self.shadow.classes =
             classes.iter().map(|(k, c)| ((k.page, k.index_in_page), class_code(*c))).collect();
+        self.shadow.triangles.clear();
+    }
+
+    /// Per-triangle classes of `Partial` clusters for the following shaded draws (replacing
+    /// earlier ones; cross-culling's subobjects, `tw_runtime::shadow::subobjects`): their lit
+    /// and shadowed triangles are drawn without lookups, the rest with them. Ignored where the
+    /// renderer cannot draw a part of a cluster with a class of its own
+    /// ([`refines_shadow_classes`](Self::refines_shadow_classes)).
+    pub fn set_shadow_triangle_classes(&mut self, classes: &[(ClusterKey, TriangleClasses)]) {
+        self.shadow.triangles = classes
+            .iter()
+            .filter(|(_, c)| c.refines())
+            .map(|(k, c)| ((k.page, k.index_in_page), *c))
+            .collect();
     }
 
     /// The layers the shaded passes shade with: `None` without shadows, else the shadows'
@@ -440,7 +468,8 @@ impl Renderer {
             )));
         }
         let disjoint = shadows.layers.windows(2).all(|w| w[0].split[1] <= w[1].split[0]);
-        Ok(Some(LookupLayers { count: shadows.layers.len() as u32, disjoint }))
+        let orthographic = shadows.layers.iter().all(|l| l.view_proj.row(3) == glam::Vec4::W);
+        Ok(Some(LookupLayers { count: shadows.layers.len() as u32, disjoint, orthographic }))
     }
 
     /// The shaded pipeline into `format` at `samples` with `shading`, and its group 1 with

@@ -111,6 +111,7 @@ fn vs_shadowed(
     @location(1) object: u32,
     @location(2) slot: u32,
     @location(3) normal: u32,
+    @builtin(instance_index) instance: u32,
 ) -> ShadowedOut {
     var out: ShadowedOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
@@ -124,8 +125,11 @@ fn vs_shadowed(
     let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let facing = max(dot(n, towards_light(position)), 0.0);
+    // A part of a refined cluster carries its class in the draw's first instance (1 + the
+    // code; renderer/classified.rs), a whole cluster in its slot's entry.
+    let drawn_class = select(slot_classes[slot], instance - 1u, instance > 0u);
     // Facing away, the light's term is 0 either way: no lookup.
-    out.shadow_class = select(slot_classes[slot], CLASS_LIT, facing <= 0.0);
+    out.shadow_class = select(drawn_class, CLASS_LIT, facing <= 0.0);
     if (COLOR_MODE == 4u) {
         out.lit = flat_srgb(select(SHADOW_AWAY, SHADOW_LIT, facing > 0.0));
         out.dark = flat_srgb(select(SHADOW_AWAY, SHADOW_BLOCKED, facing > 0.0));
@@ -148,22 +152,73 @@ fn vs_shadowed(
 // constant: then at most one layer's split holds a depth, found without a loop over the layers.
 override SHADOW_DISJOINT: bool = false;
 
-// Rule 2 in layer `i` for a point whose eye depth the layer's split holds: 0 if the layer's clip
-// space does not hold it, 1 if the light reaches it, 2 if not.
-fn lookup_in(in: ShadowedOut, i: u32) -> u32 {
-    let c = layer_clip(in, i);
-    if (c.w <= 0.0) {
-        return 0u;
+// Whether every layer is orthographic (sun cascades: the last row of each matrix is 0, 0, 0, 1),
+// a pipeline constant: then w = 1 and the perspective divide is skipped (the rule divides by an
+// exact 1; the interpolated w is 1 within rounding).
+override SHADOW_ORTHO: bool = false;
+
+// Rule 2 for a point whose light clip position in layer `i` is `c`, the eye-depth split of the
+// layer holding it: 0 if the layer's clip space does not hold it, 1 if the light reaches it, 2
+// if not. Without branches: a CPU driver runs both sides of a branch for a block of fragments
+// whenever they disagree, and the fetch is made either way.
+fn lookup_clip(c: vec4<f32>, i: u32) -> u32 {
+    var d = c.xyz;
+    var ahead = true;
+    if (!SHADOW_ORTHO) {
+        d = c.xyz / c.w;
+        ahead = c.w > 0.0;
     }
-    let d = c.xyz / c.w;
-    if (!(abs(d.x) <= 1.0 && abs(d.y) <= 1.0 && d.z >= 0.0 && d.z <= 1.0)) {
-        return 0u;
-    }
+    let inside = ahead && abs(d.x) <= 1.0 && abs(d.y) <= 1.0 && d.z >= 0.0 && d.z <= 1.0;
     let s = su.params.x;
     let x = clamp(floor((d.x + 1.0) * 0.5 * s), 0.0, s - 1.0);
     let y = clamp(floor((1.0 - d.y) * 0.5 * s), 0.0, s - 1.0);
     let stored = textureLoad(shadow_map, vec2<i32>(i32(x), i32(y)), i32(i), 0).x;
-    return select(2u, 1u, d.z <= stored + su.params.y);
+    return select(0u, select(2u, 1u, d.z <= stored + su.params.y), inside);
+}
+
+// Rule 2 in layer `i` for a point whose eye depth the layer's split holds.
+fn lookup_in(in: ShadowedOut, i: u32) -> u32 {
+    return lookup_clip(layer_clip(in, i), i);
+}
+
+// With disjoint splits, the only candidate layer for eye depth `depth`: the last whose split
+// starts at or before it, with its clip position and split, picked by selects over the layers
+// the pipeline constants allow (an index varying per fragment into the uniforms would be a
+// gather).
+struct Candidate {
+    i: u32,
+    clip: vec4<f32>,
+    split: vec4<f32>,
+};
+
+fn candidate_layer(in: ShadowedOut, depth: f32) -> Candidate {
+    var k = Candidate(0u, in.l0, su.layers[0].split);
+    if (SHADOW_LAYERS > 1u) {
+        let s = su.layers[1].split;
+        let on = depth >= s.x;
+        k = Candidate(select(k.i, 1u, on), select(k.clip, in.l1, on), select(k.split, s, on));
+    }
+    if (SHADOW_LAYERS > 2u) {
+        let s = su.layers[2].split;
+        let on = depth >= s.x;
+        k = Candidate(select(k.i, 2u, on), select(k.clip, in.l2, on), select(k.split, s, on));
+    }
+    if (SHADOW_LAYERS > 3u) {
+        let s = su.layers[3].split;
+        let on = depth >= s.x;
+        k = Candidate(select(k.i, 3u, on), select(k.clip, in.l3, on), select(k.split, s, on));
+    }
+    if (SHADOW_LAYERS > 4u) {
+        let s = su.layers[4].split;
+        let on = depth >= s.x;
+        k = Candidate(select(k.i, 4u, on), select(k.clip, in.l4, on), select(k.split, s, on));
+    }
+    if (SHADOW_LAYERS > 5u) {
+        let s = su.layers[5].split;
+        let on = depth >= s.x;
+        k = Candidate(select(k.i, 5u, on), select(k.clip, in.l5, on), select(k.split, s, on));
+    }
+    return k;
 }
 
 // The lookup rule (tw-runtime shadow/mod.rs, Shadows::lit): rule 1 picks the first layer whose
@@ -174,12 +229,9 @@ fn lookup_in(in: ShadowedOut, i: u32) -> u32 {
 fn light_reaches(in: ShadowedOut) -> bool {
     let depth = in.eye_depth;
     if (SHADOW_DISJOINT) {
-        var i = 0u;
-        for (var k = 1u; k < SHADOW_LAYERS; k = k + 1u) {
-            i = select(i, k, depth >= su.layers[k].split.x);
-        }
-        let split = su.layers[i].split;
-        return !(depth >= split.x && depth < split.y) || lookup_in(in, i) != 2u;
+        let k = candidate_layer(in, depth);
+        let held = depth >= k.split.x && depth < k.split.y;
+        return !held || lookup_clip(k.clip, k.i) != 2u;
     }
     for (var i = 0u; i < SHADOW_LAYERS; i = i + 1u) {
         let split = su.layers[i].split;

@@ -673,3 +673,52 @@ fn bench_shadow_passes() {
         r.adapter_summary()
     );
 }
+
+/// A floor strip of 32 quads (64 triangles, one cluster) along x at z = 0, under the box's
+/// shadow for x in 35..65 under a sun straight above: its subobjects of 8 triangles (4 quads,
+/// 12 units) are lit, partly shadowed or shadowed.
+fn strip() -> PageCluster {
+    let positions: Vec<[u32; 3]> = (0..=32u32).flat_map(|i| [[3 * i, 40, 0], [3 * i, 50, 0]]).collect();
+    let indices: Vec<u8> =
+        (0..32u8).flat_map(|i| [2 * i, 2 * i + 2, 2 * i + 3, 2 * i, 2 * i + 3, 2 * i + 1]).collect();
+    PageCluster { positions, indices, objects: vec![0; 64], level: 0, ..quad(0, 0, 1, 1, 0, 0) }
+}
+
+#[test]
+fn triangle_classes_draw_parts_of_a_cluster_without_lookups() {
+    use tw_runtime::shadow::{classify_subobjects, LightDepth};
+    use tw_runtime::TriangleClasses;
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(wgpu::Backends::VULKAN) else { return };
+    assert!(r.refines_shadow_classes(), "Vulkan draws indirectly with a first instance");
+    let scene = [(key(0), strip()), (key(1), cuboid(BOX_MIN, BOX_MAX, 1))];
+    let list = refs(&scene);
+    // A bias, so that the strip's own depth in the map proves its lit parts lit.
+    let s = Shadows { bias: 1e-3, ..shadows(sun_above()) };
+    prepare(&mut r, &s, &list);
+    r.set_shadow_classes(&[]);
+    let lookups = render(&mut r, ColorMode::Shadow, &list);
+    // The subobjects' classes as cross-culling finds them, against the map read back.
+    let depth = LightDepth::new(&r.read_shadow_map(0).unwrap(), MAP).unwrap();
+    let classes = classify_subobjects(&s, &[depth], &eye(), &[list[0].1], 1.0);
+    let full = u64::MAX as u128;
+    assert_eq!(classes[0].lit.count_ones(), 32, "{:x?}", classes[0]);
+    assert_eq!(classes[0].shadowed.count_ones(), 16, "{:x?}", classes[0]);
+    r.set_shadow_triangle_classes(&[(key(0), classes[0])]);
+    let parts = render(&mut r, ColorMode::Shadow, &list);
+    assert_eq!(lookups.rgba, parts.rgba, "true triangle classes changed the image");
+    // The parts' classes are used: every triangle classed lit turns the strip's shadow lit.
+    r.set_shadow_triangle_classes(&[(key(0), TriangleClasses { lit: full, shadowed: 0 })]);
+    let wrong = render(&mut r, ColorMode::Shadow, &list);
+    let mut to_lit = 0;
+    for i in 0..(W * H) as usize {
+        match (pixel(&lookups, i), pixel(&wrong, i)) {
+            (SHADOW_BLOCKED, SHADOW_LIT) => to_lit += 1,
+            (a, b) => assert_eq!(a, b, "pixel {i} changed otherwise"),
+        }
+    }
+    assert!(to_lit > 100, "{to_lit} pixels turned lit");
+    // Classes for the whole clusters again forget the triangles' (the next frame's start).
+    r.set_shadow_classes(&[]);
+    assert_eq!(render(&mut r, ColorMode::Shadow, &list).rgba, lookups.rgba);
+}

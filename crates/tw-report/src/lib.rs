@@ -233,6 +233,14 @@ pub struct ShadowRecord {
     pub shadowed_triangles: u64,
     pub partial_triangles: u64,
     pub partial_clusters: u64,
+    /// Of the partly shadowed receivers, those classified again by subobjects of a few
+    /// triangles, and of their triangles those found lit and shadowed (drawn without lookups).
+    #[serde(default)]
+    pub refined_clusters: u64,
+    #[serde(default)]
+    pub refined_lit_triangles: u64,
+    #[serde(default)]
+    pub refined_shadowed_triangles: u64,
     pub total_ms: f64,
     pub select_ms: f64,
     pub draw_ms: f64,

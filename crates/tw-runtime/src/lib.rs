@@ -83,7 +83,7 @@ pub use pathgen::{
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use resolve::SelectionPages;
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
-pub use shadow::{ShadowClass, ShadowLayer, Shadows};
+pub use shadow::{ShadowClass, ShadowLayer, Shadows, TriangleClasses};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};
 pub use triangle_test::{
     full_mask, test_triangles, visible_triangles, visible_triangles_assuming, TriangleMask,

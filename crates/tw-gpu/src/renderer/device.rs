@@ -121,12 +121,14 @@ impl Renderer {
 
     /// Features the renderer uses when the device has them (request them when opening a device
     /// for [`Renderer::from_device`]): `PRIMITIVE_INDEX` (triangle ids in the item buffer),
-    /// `MULTI_DRAW_INDIRECT_COUNT` (compacted GPU-culled draws) and `TIMESTAMP_QUERY` (the GPU
-    /// cull's compute time).
+    /// `MULTI_DRAW_INDIRECT_COUNT` (compacted GPU-culled draws), `TIMESTAMP_QUERY` (the GPU
+    /// cull's compute time) and `INDIRECT_FIRST_INSTANCE` (a part of a cluster drawn with its own
+    /// shadow class, renderer/classified.rs).
     pub fn optional_features() -> wgpu::Features {
         wgpu::Features::PRIMITIVE_INDEX
             | wgpu::Features::MULTI_DRAW_INDIRECT_COUNT
             | wgpu::Features::TIMESTAMP_QUERY
+            | wgpu::Features::INDIRECT_FIRST_INSTANCE
     }
 
     /// A renderer on a device the caller already has (a viewer's winit surface or egui-wgpu

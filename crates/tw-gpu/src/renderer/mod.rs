@@ -1,8 +1,10 @@
 //! The [`Renderer`]: its state, its settings and small accessors. The rest of it lives by
 //! concern: [`device`] (opening it), [`targets`] (its colour, depth, item and multisampled
-//! targets and their readback), [`passes`] (drawing a frame's clusters in batches), and the GPU
+//! targets and their readback), [`passes`] (drawing a frame's clusters in batches),
+//! [`classified`] (the draws of a cluster whose triangles have shadow classes), and the GPU
 //! occlusion cull in [`crate::gpu_cull`].
 
+mod classified;
 mod device;
 mod passes;
 mod targets;
@@ -157,6 +159,14 @@ impl Renderer {
 
     pub fn draw_mode(&self) -> DrawMode {
         self.draw_mode
+    }
+
+    /// Whether the shaded passes draw parts of a cluster by their own shadow class
+    /// ([`Renderer::set_shadow_triangle_classes`]): they need indirect draws with a first
+    /// instance (renderer/classified.rs). The GPU-culled pass draws clusters whole.
+    pub fn refines_shadow_classes(&self) -> bool {
+        self.draw_mode == DrawMode::Indirect
+            && self.device.features().contains(wgpu::Features::INDIRECT_FIRST_INSTANCE)
     }
 
     /// Whether the item buffer has triangle ids (`Features::PRIMITIVE_INDEX`).

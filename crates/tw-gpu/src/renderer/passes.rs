@@ -8,6 +8,7 @@ use glam::{Mat4, Vec3};
 use tw_runtime::{full_mask, Camera, PageCache, Selection, TriangleMask};
 use tw_store::{PageCluster, Store};
 
+use super::classified::push_classified;
 use super::{bind_group, Attachments, Pass, Renderer, Target};
 use crate::draw::{self, LookupLayers, Shading, Uniforms, DEPTH_FORMAT};
 use crate::pool::{DrawArgs, Ensure, PoolKey};
@@ -459,12 +460,24 @@ impl Renderer {
                         Kind::Shade { shadow_layers: Some(_), .. } => self.shadow.note_slot(pk, slot),
                         _ => false,
                     };
+                    let refined = (lookups && self.refines_shadow_classes())
+                        .then(|| self.shadow.triangle_classes(pk))
+                        .flatten();
                     let before = b.draws.len();
-                    let (drawn, masked) = push_runs(&mut b.draws, args, cluster, mask);
+                    let (drawn, masked) = match refined {
+                        Some(classes) => {
+                            let codes = crate::shadow::CLASSIFIED_CODES;
+                            push_classified(&mut b.draws, &mut b.runs, args, cluster, mask, classes, codes)
+                        }
+                        None => {
+                            let counts = push_runs(&mut b.draws, args, cluster, mask);
+                            if b.draws.len() > before && b.runs.last().is_none_or(|r| r.1 != lookups) {
+                                b.runs.push((before, lookups));
+                            }
+                            counts
+                        }
+                    };
                     let cluster_drawn = (b.draws.len() > before) as u64;
-                    if cluster_drawn > 0 && b.runs.last().is_none_or(|r| r.1 != lookups) {
-                        b.runs.push((before, lookups));
-                    }
                     if b.kind == Kind::ShadowMap {
                         self.stats.shadow_clusters += cluster_drawn;
                         self.stats.shadow_triangles += drawn;
@@ -711,7 +724,7 @@ pub const MAX_RUNS: usize = 4;
 /// Appends the draws of `mask`'s triangles of a resident cluster drawn whole by `args` and
 /// returns how many triangles they draw and how many of those are in the mask. A cluster with
 /// a malformed triangle (which the pool skipped, shifting the others) is drawn whole.
-fn push_runs(
+pub(super) fn push_runs(
     batch: &mut Vec<DrawArgs>,
     args: DrawArgs,
     cluster: &PageCluster,

@@ -19,7 +19,8 @@
 //! Submodules, one algorithm each: [`fit`] fits the layers to the eye's receivers, [`reuse`]
 //! keeps last frame's layers where they still serve, [`clip`] cuts a box to what a layer can
 //! hold, [`depth`] keeps a read-back layer as min/max pyramids, [`classify`] cross-culls
-//! receivers and casters against them. The light's view of a layer (the
+//! receivers and casters against them, [`subobjects`] refines partly shadowed receivers to
+//! runs of a few triangles. The light's view of a layer (the
 //! eye's LOD cut culled by the layer's frustum) is [`crate::Selector::select_light`] and
 //! [`crate::Streamer::select_light`].
 
@@ -33,11 +34,13 @@ pub mod clip;
 pub mod depth;
 pub mod fit;
 pub mod reuse;
+pub mod subobjects;
 
 pub use classify::{casters, classify_receivers, light_visible, ShadowSetStats};
 pub use depth::LightDepth;
 pub use fit::{fit_layers, refit_layers, texel_size, ShadowOptions};
 pub use reuse::lod_within_bias;
+pub use subobjects::{classify_subobjects, TriangleClasses, SUBOBJECT_TRIANGLES};
 
 /// What cross-culling decided about a receiver (a cluster of the eye's cut).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

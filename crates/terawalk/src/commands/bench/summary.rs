@@ -183,7 +183,8 @@ fn print_shadows(run: &Run) {
     outln!(
         "{:>10}: {}: median {:.1} ms, mean {:.1} (select {:.1}, map {:.1}, read-back {:.1}, classify {:.1}); {:.0} % of \
          the layers reused from an earlier frame; light-view set {} triangles ({} drawn) in {:.0} layers, {:.0} of {:.0} \
-         clusters seen by the light, casters {} triangles; receivers lit {} / shadowed {} / partly {} triangles",
+         clusters seen by the light, casters {} triangles; receivers lit {} / shadowed {} / partly {} triangles, of \
+         which {} lit and {} shadowed by subobjects",
         "shadows",
         run.name,
         med(&|s| s.total_ms),
@@ -202,6 +203,8 @@ fn print_shadows(run: &Run) {
         fmt_count(med(&|s| s.lit_triangles as f64) as u64),
         fmt_count(med(&|s| s.shadowed_triangles as f64) as u64),
         fmt_count(med(&|s| s.partial_triangles as f64) as u64),
+        fmt_count(med(&|s| s.refined_lit_triangles as f64) as u64),
+        fmt_count(med(&|s| s.refined_shadowed_triangles as f64) as u64),
     );
 }
 
