@@ -197,48 +197,19 @@ pub(crate) fn prepare(
         return Ok((info, shadows));
     }
     renderer.set_shadow_map(map.0, map.1)?;
-    let eye = Frustum::from_view_projection(&camera.view_projection(aspect));
     cache.layers.resize_with(shadows.layers.len(), LayerState::default);
+    let context = LayerContext {
+        shadows: &shadows,
+        camera,
+        eye: Frustum::from_view_projection(&camera.view_projection(aspect)),
+        options,
+        wait_for_pages,
+        bias_texels: settings.options.bias_texels,
+        grid_step: step,
+    };
     let mut light_sets: Vec<LightSet> = Vec::with_capacity(shadows.layers.len());
-    for (i, layer) in shadows.layers.iter().enumerate() {
-        let t = Instant::now();
-        let (selection, pages) = if wait_for_pages {
-            let selection = streamer.select_light_blocking(camera, &layer.view_proj, options);
-            let pages = resident_pages(streamer, &selection.clusters);
-            (selection, pages)
-        } else {
-            streamer.select_light(camera, &layer.view_proj, options)
-        };
-        info.select += t.elapsed();
-        let t = Instant::now();
-        let set = lookup(&pages, &selection.clusters);
-        info.sets.light_cut += set.len() as u64;
-        info.light_triangles += triangles(&set);
-        let set_boxes = light_boxes(&set, &pages, step);
-        let state = &mut cache.layers[i];
-        let bias_texels = settings.options.bias_texels;
-        let serves =
-            reusable[i] && still_serves(&shadows, i, bias_texels, (camera, &eye), (&set, &set_boxes), state);
-        if !serves {
-            let why = if reusable[i] { "its casters' level of detail changed" } else { "the fit moved" };
-            tracing::debug!("shadow layer {i} drawn again: {why}");
-        }
-        if serves {
-            info.layers_reused += 1;
-        } else {
-            *state = draw_layer_culled(
-                &mut info,
-                renderer,
-                &shadows,
-                i,
-                camera,
-                step,
-                &set,
-                &set_boxes,
-                &state.seen,
-            )?;
-        }
-        info.draw += t.elapsed();
+    for (i, state) in cache.layers.iter_mut().enumerate() {
+        let set_boxes = update_layer(&context, i, reusable[i], (streamer, renderer), state, &mut info)?;
         if settings.cross_culling {
             light_sets.push(set_boxes);
         }
@@ -260,6 +231,58 @@ pub(crate) fn prepare(
     renderer.set_shadows(Some(&shadows));
     info.total = start.elapsed();
     Ok((info, shadows))
+}
+
+/// What every layer of a frame's shadow stage is selected and checked with.
+struct LayerContext<'a> {
+    shadows: &'a Shadows,
+    camera: &'a Camera,
+    /// The eye's frustum (`still_serves`).
+    eye: Frustum,
+    options: &'a SelectOptions,
+    wait_for_pages: bool,
+    bias_texels: f32,
+    grid_step: f64,
+}
+
+/// Layer `i` of a frame: selects its light-view set, then keeps the map's layer where it still
+/// serves (`reusable`: this frame's fit kept its matrix; [`still_serves`]) or draws it again.
+/// Returns the set's boxes for cross-culling.
+fn update_layer(
+    context: &LayerContext<'_>,
+    i: usize,
+    reusable: bool,
+    (streamer, renderer): (&mut Streamer, &mut Renderer),
+    state: &mut LayerState,
+    info: &mut ShadowInfo,
+) -> Result<LightSet, FrameError> {
+    let LayerContext { shadows, camera, options, grid_step, .. } = *context;
+    let view_proj = &shadows.layers[i].view_proj;
+    let t = Instant::now();
+    let (selection, pages) = if context.wait_for_pages {
+        let selection = streamer.select_light_blocking(camera, view_proj, options);
+        let pages = resident_pages(streamer, &selection.clusters);
+        (selection, pages)
+    } else {
+        streamer.select_light(camera, view_proj, options)
+    };
+    info.select += t.elapsed();
+    let t = Instant::now();
+    let set = lookup(&pages, &selection.clusters);
+    info.sets.light_cut += set.len() as u64;
+    info.light_triangles += triangles(&set);
+    let set_boxes = light_boxes(&set, &pages, grid_step);
+    let eye = (camera, &context.eye);
+    if reusable && still_serves(shadows, i, context.bias_texels, eye, (&set, &set_boxes), state) {
+        info.layers_reused += 1;
+    } else {
+        let why = if reusable { "its casters' level of detail changed" } else { "the fit moved" };
+        tracing::debug!("shadow layer {i} drawn again: {why}");
+        *state =
+            draw_layer_culled(info, renderer, shadows, i, camera, grid_step, &set, &set_boxes, &state.seen)?;
+    }
+    info.draw += t.elapsed();
+    Ok(set_boxes)
 }
 
 /// The layers the map is allocated with: as many as the light can ever need, so that a frame
