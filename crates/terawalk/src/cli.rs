@@ -508,6 +508,20 @@ impl Default for ShadowArgs {
 }
 
 impl ShadowArgs {
+    /// `--light` and the shadow-map flags, unchecked; `None` without --light. They are checked
+    /// when turned into settings ([`tw_bench::ShadowRequest::settings`]), once the store is open.
+    pub fn request(&self) -> Option<tw_bench::ShadowRequest> {
+        Some(tw_bench::ShadowRequest {
+            light: self.light?,
+            options: ShadowOptions {
+                size: self.shadow_map,
+                cascades: self.cascades,
+                bias_texels: self.shadow_bias,
+            },
+            cross_culling: self.cross_culling,
+        })
+    }
+
     /// The frame's shadow settings for `camera` on a store whose up axis is `up_axis`; `None`
     /// without --light. Errors name the flag.
     pub fn settings(
@@ -516,15 +530,7 @@ impl ShadowArgs {
         up_axis: u8,
         camera: &tw_runtime::Camera,
     ) -> anyhow::Result<Option<tw_frame::ShadowSettings>> {
-        let Some(light) = self.light else { return Ok(None) };
-        let options =
-            ShadowOptions { size: self.shadow_map, cascades: self.cascades, bias_texels: self.shadow_bias };
-        options.validate().map_err(|e| anyhow::anyhow!("--shadow-map/--cascades/--shadow-bias: {e}"))?;
-        Ok(Some(tw_frame::ShadowSettings {
-            light: light.to_scene(header, up_axis, camera),
-            options,
-            cross_culling: self.cross_culling,
-        }))
+        self.request().map(|r| r.settings(header, up_axis, camera)).transpose()
     }
 }
 

@@ -1,7 +1,10 @@
-//! `--light` end to end: `render` draws the shadows of a sun and of a point light with both
-//! renderers, and their shadow masks agree away from the shadow edges; `bench --light` measures
+//! `--light` end to end: `render` draws the shadows of a sun with both renderers (the point
+//! light is checked in tw-gpu and tw-frame), and their shadow masks agree away from the shadow edges; `bench --light` measures
 //! every strategy with and without shadows in one process; bad lights and shadow options are
 //! refused with a message naming them.
+
+use std::path::Path;
+use std::process::Output;
 
 use tw_gpu::Image;
 
@@ -13,11 +16,32 @@ use common::{stderr, stdout, terawalk};
 fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let o = terawalk(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M", "--threads", "2"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
+    build_plant(d);
+    bad_lights_are_refused(d);
+    if !raster_shadows_agree_with_the_ray_tracer(d) {
+        return;
+    }
+    shadows_darken_the_shaded_image(d);
+    bench_measures_every_strategy_with_shadows(d);
+    traced_bench_casts_shadow_rays(d);
+}
 
+/// Runs `terawalk args` in `d` and checks that it succeeded (else fails with its stderr).
+fn run_ok(args: &[&str], d: &Path) -> Output {
+    let o = terawalk(args, d);
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
+/// `p.tw` in `d`: a generated plant of 30k triangles, built.
+fn build_plant(d: &Path) {
+    run_ok(&["generate", "plant", "--triangles", "30k", "-o", "p.ply"], d);
+    run_ok(&["build", "p.ply", "-o", "p.tw", "--memory", "256M", "--threads", "2"], d);
+}
+
+/// A bad light, bad shadow options, and shadow options without a light: refused, with a
+/// message naming what is wrong.
+fn bad_lights_are_refused(d: &Path) {
     for (bad, what) in [
         (vec!["--light", "lamp"], "light"),
         (vec!["--light", "sun:10,95"], "elevation"),
@@ -31,40 +55,15 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
         assert!(!o.status.success(), "{args:?} was accepted");
         assert!(stderr(&o).contains(what), "{args:?}: {}", stderr(&o));
     }
+}
 
-    let o = terawalk(
-        &[
-            "render",
-            "p.tw",
-            "-o",
-            "rt.png",
-            "--size",
-            "320x200",
-            "--renderer",
-            "rt",
-            "--light",
-            "sun:30,40",
-            "--color",
-            "shadow",
-        ],
-        d,
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = terawalk(
-        &[
-            "render",
-            "p.tw",
-            "-o",
-            "raster.png",
-            "--size",
-            "320x200",
-            "--light",
-            "sun:30,40",
-            "--color",
-            "shadow",
-        ],
-        d,
-    );
+/// The shadow masks of a sun (`--color shadow`) by the ray tracer and by the rasterizer: both
+/// have shadows, and they agree away from the shadow edges. False where there is no GPU
+/// adapter and none is required (the rest of the test needs one).
+fn raster_shadows_agree_with_the_ray_tracer(d: &Path) -> bool {
+    let mask = ["--size", "320x200", "--light", "sun:30,40", "--color", "shadow"];
+    run_ok(&[&["render", "p.tw", "-o", "rt.png", "--renderer", "rt"][..], &mask].concat(), d);
+    let o = terawalk(&[&["render", "p.tw", "-o", "raster.png"][..], &mask].concat(), d);
     if !o.status.success()
         && stderr(&o).contains("no GPU adapter")
         && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1")
@@ -73,13 +72,12 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
             "SKIPPED the rasterized shadows: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)",
             stderr(&o)
         );
-        return;
+        return false;
     }
     assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
     assert!(out.contains("shadows:") && out.contains("layers") && out.contains("receivers"), "{out}");
-    let image = |name: &str| Image::from_png_bytes(&std::fs::read(d.join(name)).unwrap()).unwrap();
-    let (rt, raster) = (image("rt.png"), image("raster.png"));
+    let (rt, raster) = (image(d, "rt.png"), image(d, "raster.png"));
     let blocked = |i: &Image| i.rgba.chunks(4).filter(|p| p[3] == 255 && p[..3] == [0, 0, 0]).count();
     assert!(
         blocked(&rt) > 500 && blocked(&raster) > 500,
@@ -89,16 +87,26 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
     );
     let agreement = tw_frame::mask::compare_shadow_images(&rt, &raster, 2).unwrap();
     assert!(agreement.ratio() >= 0.99, "{agreement:?}");
+    true
+}
 
-    // The shaded image: darker where the mask is blocked, the same elsewhere.
-    let o = terawalk(&["render", "p.tw", "-o", "plain.png", "--size", "320x200"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = terawalk(&["render", "p.tw", "-o", "sun.png", "--size", "320x200", "--light", "sun"], d);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let (plain, sun) = (image("plain.png"), image("sun.png"));
+/// The PNG `name` in `d`.
+fn image(d: &Path, name: &str) -> Image {
+    Image::from_png_bytes(&std::fs::read(d.join(name)).unwrap()).unwrap()
+}
+
+/// The shaded image with the default sun's shadows differs from the one without.
+fn shadows_darken_the_shaded_image(d: &Path) {
+    run_ok(&["render", "p.tw", "-o", "plain.png", "--size", "320x200"], d);
+    run_ok(&["render", "p.tw", "-o", "sun.png", "--size", "320x200", "--light", "sun"], d);
+    let (plain, sun) = (image(d, "plain.png"), image(d, "sun.png"));
     assert!(sun.differing_pixels(&plain).unwrap() > 0, "the default sun's shadows changed nothing");
+}
 
-    let o = terawalk(
+/// `bench --light` runs a strategy with shadows beside the one without, compares their frame
+/// rates, prints the light-view set, and puts the shadow figures in the report.
+fn bench_measures_every_strategy_with_shadows(d: &Path) {
+    let o = run_ok(
         &[
             "bench",
             "p.tw",
@@ -117,7 +125,6 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
         ],
         d,
     );
-    assert!(o.status.success(), "{}", stderr(&o));
     let out = stdout(&o);
     assert!(
         out.contains("hzb+shadows")
@@ -130,9 +137,11 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
         report.contains("\"shadow\"") && report.contains("caster_triangles"),
         "no shadow figures in the report"
     );
+}
 
-    // The ray tracer's bench run casts shadow rays of the light (one run, no strategies).
-    let o = terawalk(
+/// The ray tracer's bench run casts shadow rays of the light (one run, no strategies).
+fn traced_bench_casts_shadow_rays(d: &Path) {
+    run_ok(
         &[
             "bench",
             "p.tw",
@@ -151,7 +160,6 @@ fn render_and_bench_draw_shadows_that_the_ray_tracer_confirms() {
         ],
         d,
     );
-    assert!(o.status.success(), "{}", stderr(&o));
     let report = std::fs::read_to_string(d.join("rt/report.json")).unwrap();
     assert!(report.contains("shadow rays of the sun"), "the traced run ignored the light");
 }

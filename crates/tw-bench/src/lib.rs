@@ -98,7 +98,11 @@ impl Bench {
         };
         let strategies = self.strategies(&walk, traced.is_some());
         let header = walk.store().header().clone();
-        let shadows = o.shadows.as_ref().map(|s| s.settings(&header, &frames.cameras[0])).transpose()?;
+        let shadows = o
+            .shadows
+            .as_ref()
+            .map(|s| s.settings(&header, header.up_axis, &frames.cameras[0]))
+            .transpose()?;
         let remote = match (&o.cull_server, start_remote) {
             (Some(_), Some(start)) => Some(start(walk.store().as_ref())),
             (Some(addr), None) => anyhow::bail!("cull server {addr}: no way to reach it was given"),

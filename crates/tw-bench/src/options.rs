@@ -79,7 +79,8 @@ pub struct Program {
 }
 
 /// `--light`: a light and its shadow maps, turned into a frame's settings once the store and
-/// the first camera are known.
+/// the first camera are known. The one place the flags become [`ShadowSettings`], for `bench`
+/// and for `render` and `view` alike, so that they check and name the flags the same way.
 #[derive(Clone, Debug)]
 pub struct ShadowRequest {
     pub light: InputLight,
@@ -88,11 +89,18 @@ pub struct ShadowRequest {
 }
 
 impl ShadowRequest {
-    /// The frames' shadow settings on a store with `header`, its light placed for `camera`.
-    pub fn settings(&self, header: &tw_store::Header, camera: &Camera) -> Result<ShadowSettings> {
+    /// The frames' shadow settings on a store with `header`, its light placed for `camera`
+    /// with `up_axis` up (the store's, or another that the command was given). Errors name
+    /// the flags.
+    pub fn settings(
+        &self,
+        header: &tw_store::Header,
+        up_axis: u8,
+        camera: &Camera,
+    ) -> Result<ShadowSettings> {
         self.options.validate().map_err(|e| anyhow::anyhow!("--shadow-map/--cascades/--shadow-bias: {e}"))?;
         Ok(ShadowSettings {
-            light: self.light.to_scene(header, header.up_axis, camera),
+            light: self.light.to_scene(header, up_axis, camera),
             options: self.options,
             cross_culling: self.cross_culling,
         })

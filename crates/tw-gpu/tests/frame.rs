@@ -582,15 +582,25 @@ fn gpu_cull(backends: wgpu::Backends) {
     let Some(mut r) = renderer(backends, W, H) else { return };
     r.gpu_cull_supported().unwrap();
     eprintln!("{backends:?}: GPU cull compacts: {}", r.gpu_cull_compacts());
-    // A wall at z = 10 with a gap of one grid unit (about 1.4 px) at x = 89..90.
+    check_wall_with_a_gap(&mut r);
+    // The plant: half of the cut as occluders, the other half GPU-culled.
+    let store = Store::open(plant_path()).unwrap();
+    let cache = PageCache::new(&store, 1 << 30);
+    r.set_store_colors(&store);
+    for cam in &plant_cameras(&store, 3) {
+        check_plant_view(&mut r, backends, &store, &cache, cam);
+    }
+}
+
+/// A wall at z = 10 with a gap of one grid unit (about 1.4 px) at x = 89..90: the pyramids
+/// agree, and the GPU test of boxes under, above, beside and around it is the CPU one.
+fn check_wall_with_a_gap(r: &mut Renderer) {
     let cam = top_camera();
     let left = quad(0, 0, 89, 100, 10, 5);
     let right = quad(90, 0, 100, 100, 10, 5);
     r.begin_frame();
     r.draw(Target::Own, &cam, 1.0, &[(key(1), &left), (key(2), &right)], true).unwrap();
-    let depth = r.read_depth().unwrap();
-    let cpu = Hzb::build(&depth.depth, depth.width, depth.height).unwrap();
-    assert_eq!(r.read_gpu_hzb().unwrap(), cpu, "GPU and CPU pyramids of the same depth");
+    let cpu = pyramids_of_the_depth(r);
     let boxes = [
         (Vec3::new(20.0, 40.0, 0.0), Vec3::new(30.0, 60.0, 5.0)), // under the wall
         (Vec3::new(84.0, 48.0, 0.0), Vec3::new(87.5, 52.0, 5.0)), // under the wall, 2 px from the gap
@@ -605,86 +615,144 @@ fn gpu_cull(backends: wgpu::Backends) {
     let vp = cam.projection_reverse_z(W as f32 / H as f32) * cam.view();
     let want: Vec<HzbResult> = boxes.iter().map(|b| cpu.test_box_single_level(&vp, b.0, b.1)).collect();
     assert_eq!(got, want);
+}
 
-    // The plant: half of the cut as occluders, the other half GPU-culled.
-    let store = Store::open(plant_path()).unwrap();
-    let cache = PageCache::new(&store, 1 << 30);
-    r.set_store_colors(&store);
+/// The CPU pyramid of the own depth target, after checking that the GPU built the same one.
+fn pyramids_of_the_depth(r: &mut Renderer) -> Hzb {
+    let depth = r.read_depth().unwrap();
+    let cpu = Hzb::build(&depth.depth, depth.width, depth.height).unwrap();
+    assert_eq!(r.read_gpu_hzb().unwrap(), cpu, "GPU and CPU pyramids of the same depth");
+    cpu
+}
+
+/// One view's cut split in half: the first half drawn as occluders, the second GPU-culled,
+/// each with its clusters' scene-space boxes.
+struct Halves<'a> {
+    occluders: &'a [(ClusterRef, &'a PageCluster)],
+    occluder_boxes: Vec<(Vec3, Vec3)>,
+    candidates: &'a [(ClusterRef, &'a PageCluster)],
+    candidate_boxes: Vec<(Vec3, Vec3)>,
+}
+
+/// The plant from `cam`: the occluders' pyramids agree, random boxes near the candidates are
+/// culled no more than the CPU test culls them, and the GPU-culled second pass draws the image
+/// of drawing both halves.
+fn check_plant_view(
+    r: &mut Renderer,
+    backends: wgpu::Backends,
+    store: &Store,
+    cache: &PageCache,
+    cam: &Camera,
+) {
     let step = store.header().grid_step;
-    for cam in &plant_cameras(&store, 3) {
-        let sel = select(&store, &cache, cam, 0.0);
-        let pages = tw_gpu::SelectionPages::resolve(&store, &cache, &sel);
-        let list = pages.clusters();
-        let (a, b) = list.split_at(list.len() / 2);
-        let box_of = |(k, _): &(ClusterRef, &PageCluster)| {
-            let (lo, hi) = cache.get(&store, k.page).unwrap().bounds[k.index_in_page as usize];
-            tw_runtime::frustum::grid_box(lo, hi, step)
-        };
-        let a_boxes: Vec<(Vec3, Vec3)> = a.iter().map(box_of).collect();
-        let b_boxes: Vec<(Vec3, Vec3)> = b.iter().map(box_of).collect();
-        // Reference: both halves drawn, in the same order.
-        r.begin_frame();
-        r.draw(Target::Own, cam, step, a, true).unwrap();
-        let depth = r.read_depth().unwrap();
-        let cpu = Hzb::build(&depth.depth, depth.width, depth.height).unwrap();
-        assert_eq!(r.read_gpu_hzb().unwrap(), cpu);
-        // Random boxes around the plant's cut: the GPU never culls what the CPU test sees.
-        let mut rng = tw_core::Rng::new(3);
-        let random: Vec<(Vec3, Vec3)> = (0..4000)
-            .map(|_| {
-                let (lo, hi) = b_boxes[(rng.f64() * b_boxes.len() as f64) as usize];
-                let size = (hi - lo).max(Vec3::splat(1e-3));
-                let c = lo
-                    + (hi - lo) * 0.5
-                    + (Vec3::new(rng.f64() as f32, rng.f64() as f32, rng.f64() as f32) - 0.5) * size * 4.0;
-                let half = size * (0.05 + 2.0 * rng.f64() as f32);
-                (c - half, c + half)
-            })
-            .collect();
-        let gpu = r.test_boxes_gpu(cam, &random).unwrap();
-        let (mut agree, mut occluded) = (0, 0);
-        for (bx, g) in random.iter().zip(&gpu) {
-            // Occluded and NoPixels both mean "not drawn": a box the CPU sees, the GPU sees.
-            // The GPU computes the single-level test; the exact CPU test may cull more.
-            let c = cpu.test_box_single_level(&vp_of(cam), bx.0, bx.1);
-            if c == Visible {
-                assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
-            }
-            if *g == Occluded {
-                assert_ne!(cpu.test_box(&vp_of(cam), bx.0, bx.1), Visible, "{backends:?}: {bx:?}");
-            }
-            occluded += usize::from(*g == Occluded);
-            agree += usize::from(c == *g);
+    let sel = select(store, cache, cam, 0.0);
+    let pages = tw_gpu::SelectionPages::resolve(store, cache, &sel);
+    let list = pages.clusters();
+    let (occluders, candidates) = list.split_at(list.len() / 2);
+    let box_of = |(k, _): &(ClusterRef, &PageCluster)| {
+        let (lo, hi) = cache.get(store, k.page).unwrap().bounds[k.index_in_page as usize];
+        tw_runtime::frustum::grid_box(lo, hi, step)
+    };
+    let halves = Halves {
+        occluders,
+        occluder_boxes: occluders.iter().map(box_of).collect(),
+        candidates,
+        candidate_boxes: candidates.iter().map(box_of).collect(),
+    };
+    // Reference: both halves drawn, in the same order.
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, halves.occluders, true).unwrap();
+    let cpu = pyramids_of_the_depth(r);
+    check_random_boxes(r, backends, cam, &cpu, &halves.candidate_boxes);
+    r.draw(Target::Own, cam, step, halves.candidates, false).unwrap();
+    let reference = r.read_color().unwrap();
+    check_culled_second_pass(r, backends, cam, step, &halves, &cpu, &reference);
+}
+
+/// 4000 boxes of random centres and sizes around randomly chosen `boxes` (seeded, so the same
+/// every run).
+fn random_boxes_around(boxes: &[(Vec3, Vec3)]) -> Vec<(Vec3, Vec3)> {
+    let mut rng = tw_core::Rng::new(3);
+    (0..4000)
+        .map(|_| {
+            let (lo, hi) = boxes[(rng.f64() * boxes.len() as f64) as usize];
+            let size = (hi - lo).max(Vec3::splat(1e-3));
+            let c = lo
+                + (hi - lo) * 0.5
+                + (Vec3::new(rng.f64() as f32, rng.f64() as f32, rng.f64() as f32) - 0.5) * size * 4.0;
+            let half = size * (0.05 + 2.0 * rng.f64() as f32);
+            (c - half, c + half)
+        })
+        .collect()
+}
+
+/// Random boxes around the plant's cut against the occluders' pyramid `cpu`: the GPU never
+/// culls what the CPU test sees, and agrees with it on at least 99% of them.
+fn check_random_boxes(
+    r: &mut Renderer,
+    backends: wgpu::Backends,
+    cam: &Camera,
+    cpu: &Hzb,
+    near: &[(Vec3, Vec3)],
+) {
+    use HzbResult::*;
+    let random = random_boxes_around(near);
+    let gpu = r.test_boxes_gpu(cam, &random).unwrap();
+    let (mut agree, mut occluded) = (0, 0);
+    for (bx, g) in random.iter().zip(&gpu) {
+        // Occluded and NoPixels both mean "not drawn": a box the CPU sees, the GPU sees.
+        // The GPU computes the single-level test; the exact CPU test may cull more.
+        let c = cpu.test_box_single_level(&vp_of(cam), bx.0, bx.1);
+        if c == Visible {
+            assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
         }
-        eprintln!("{backends:?}: random boxes: {agree} of {} agree, {occluded} occluded", random.len());
-        assert!(agree * 100 >= random.len() * 99);
-        r.draw(Target::Own, cam, step, b, false).unwrap();
-        let reference = r.read_color().unwrap();
-        // GPU-culled second pass.
-        r.begin_frame();
-        r.draw(Target::Own, cam, step, a, true).unwrap();
-        let res = r.draw_gpu_culled(cam, step, b, &b_boxes, &a_boxes).unwrap();
-        let image = r.read_color().unwrap();
-        let culled = res.candidates.iter().filter(|f| **f == Occluded).count();
-        let hidden = res.occluders.iter().filter(|f| **f != Visible).count();
-        eprintln!(
-            "{backends:?}: {} candidates, {culled} culled; {hidden} of {} occluders hidden at the end; \
-             gpu {:?}, encode {:?}, compacted {}",
-            b.len(),
-            a.len(),
-            res.gpu_time,
-            res.encode_time,
-            res.compacted
-        );
-        assert!(!res.over_budget);
-        assert_eq!(res.candidates.len(), b.len());
-        assert_eq!(image.differing_pixels(&reference).unwrap(), 0, "GPU culling changed the image");
-        // The CPU test of the same candidates against the occluders' depth: every candidate it
-        // sees, the GPU drew.
-        for (bx, g) in b_boxes.iter().zip(&res.candidates) {
-            if cpu.test_box(&vp_of(cam), bx.0, bx.1) == Visible {
-                assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
-            }
+        if *g == Occluded {
+            assert_ne!(cpu.test_box(&vp_of(cam), bx.0, bx.1), Visible, "{backends:?}: {bx:?}");
+        }
+        occluded += usize::from(*g == Occluded);
+        agree += usize::from(c == *g);
+    }
+    eprintln!("{backends:?}: random boxes: {agree} of {} agree, {occluded} occluded", random.len());
+    assert!(agree * 100 >= random.len() * 99);
+}
+
+/// The occluders drawn, then the candidates GPU-culled on top: within budget, one flag per
+/// candidate, the `reference` image exactly, and every candidate the CPU test against the
+/// occluders' pyramid `cpu` sees was drawn.
+fn check_culled_second_pass(
+    r: &mut Renderer,
+    backends: wgpu::Backends,
+    cam: &Camera,
+    step: f64,
+    halves: &Halves,
+    cpu: &Hzb,
+    reference: &Image,
+) {
+    use HzbResult::*;
+    let (a, b) = (halves.occluders, halves.candidates);
+    r.begin_frame();
+    r.draw(Target::Own, cam, step, a, true).unwrap();
+    let res = r.draw_gpu_culled(cam, step, b, &halves.candidate_boxes, &halves.occluder_boxes).unwrap();
+    let image = r.read_color().unwrap();
+    let culled = res.candidates.iter().filter(|f| **f == Occluded).count();
+    let hidden = res.occluders.iter().filter(|f| **f != Visible).count();
+    eprintln!(
+        "{backends:?}: {} candidates, {culled} culled; {hidden} of {} occluders hidden at the end; \
+         gpu {:?}, encode {:?}, compacted {}",
+        b.len(),
+        a.len(),
+        res.gpu_time,
+        res.encode_time,
+        res.compacted
+    );
+    assert!(!res.over_budget);
+    assert_eq!(res.candidates.len(), b.len());
+    assert_eq!(image.differing_pixels(reference).unwrap(), 0, "GPU culling changed the image");
+    // The CPU test of the same candidates against the occluders' depth: every candidate it
+    // sees, the GPU drew.
+    for (bx, g) in halves.candidate_boxes.iter().zip(&res.candidates) {
+        if cpu.test_box(&vp_of(cam), bx.0, bx.1) == Visible {
+            assert_eq!(*g, Visible, "{backends:?}: GPU culls {bx:?}, the CPU test sees it");
         }
     }
 }

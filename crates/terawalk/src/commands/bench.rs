@@ -10,14 +10,14 @@ use std::time::Duration;
 
 use anyhow::Result;
 use indicatif::ProgressBar;
-use tw_bench::{Bench, BenchOptions, Program, ShadowRequest};
+use tw_bench::{Bench, BenchOptions, Program};
 use tw_frame::{FrameInfo, FrameSettings, Walkthrough};
 use tw_gpu::Image;
 use tw_report::{BenchReport, Run, RunKind};
 use tw_runtime::Camera;
 use tw_store::Store;
 
-use crate::cli::{BenchArgs, OcclusionChoice, RendererChoice, SamplesChoice, ShadowArgs};
+use crate::cli::{BenchArgs, OcclusionChoice, RendererChoice, SamplesChoice};
 use crate::commands::cull_client::RemoteCulling;
 
 /// What `run` measured, for callers such as `demo`.
@@ -80,7 +80,7 @@ fn options(args: &BenchArgs) -> BenchOptions {
         ray_traced: args.renderer == RendererChoice::Rt,
         flashlight: args.flashlight,
         popping: args.popping,
-        shadows: shadows(&args.shadows),
+        shadows: args.shadows.request(),
         program: Program {
             command_line: std::env::args().collect::<Vec<_>>().join(" "),
             version: env!("CARGO_PKG_VERSION").into(),
@@ -88,19 +88,6 @@ fn options(args: &BenchArgs) -> BenchOptions {
             commit: env!("TERAWALK_COMMIT").into(),
         },
     }
-}
-
-/// `--light` and the shadow-map flags, checked when the benchmark starts.
-fn shadows(args: &ShadowArgs) -> Option<ShadowRequest> {
-    Some(ShadowRequest {
-        light: args.light?,
-        options: tw_frame::shadow::ShadowOptions {
-            size: args.shadow_map,
-            cascades: args.cascades,
-            bias_texels: args.shadow_bias,
-        },
-        cross_culling: args.cross_culling,
-    })
 }
 
 /// Prints the benchmark's account: lines and summaries on standard output, progress bars on

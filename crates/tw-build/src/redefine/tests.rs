@@ -416,106 +416,121 @@ fn parallel_passes_equal_the_serial_loops() {
     let dir = tempfile::tempdir().unwrap();
     let ing = crate::ingest::tests::ingest_plant(dir.path(), 150_000);
     assert!(ing.triangles > crate::ingest::SCAN_CHUNK as u64, "several chunks");
-    // The defaults split objects (partition-I); without partition-I and with small cells,
-    // partition-II cuts whole large objects by plan (pass C reads them again).
-    let presets = [
+    for ((p, cuts), threads) in pass_presets().iter().flat_map(|p| [(p, 1), (p, 3)]) {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| check_passes_against_serial_loops(&ing, p, *cuts));
+    }
+}
+
+/// The presets the passes are checked on, each with whether partition-II cuts pieces by plan.
+/// The defaults split objects (partition-I); without partition-I and with small cells,
+/// partition-II cuts whole large objects by plan (pass C reads them again).
+fn pass_presets() -> [(RedefineParams, bool); 2] {
+    [
         (RedefineParams::default(), false),
         (
             RedefineParams { s1: 10.0, r1: 1e9, max_cell_triangles: 4096, t2: 2000, ..Default::default() },
             true,
         ),
-    ];
-    for ((p, cuts), threads) in presets.iter().flat_map(|p| [(p, 1), (p, 3)]) {
-        let scale = Scale::new(&ing, p);
-        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-        pool.install(|| {
-            let mut samples = sample_objects(&ing, p).unwrap();
-            // Pass A, serially: every stride-th triangle of each sampled object.
-            let mut seen = vec![0u64; ing.objects.len()];
-            let mut expected = vec![[0f32; 3]; samples.points.len()];
-            ing.work
-                .scan(|_, tris| {
-                    for t in tris {
-                        let o = t.object as usize;
-                        let s = samples.stride[o];
-                        if s > 0 && seen[o].is_multiple_of(s) {
-                            expected[samples.start[o] + (seen[o] / s) as usize] = t.centroid();
-                        }
-                        seen[o] += 1;
-                    }
-                    Ok(())
-                })
-                .unwrap();
-            assert!(samples
-                .points
-                .iter()
-                .zip(&expected)
-                .all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+    ]
+}
 
-            let mut assign = Assigner::default();
-            let mut report = RedefineReport::default();
-            let piece_object = partition_objects(&ing, p, &scale, &mut samples, &mut assign, &mut report);
-            let n = piece_object.len();
-            assert!(*cuts || report.split_objects > 0, "the plant has split objects");
-            let pieces = piece_stats(&ing, &assign, n).unwrap();
-            let (mut count, mut sum, mut lo, mut hi) = (
-                vec![0u64; n],
-                vec![[0f64; 3]; n],
-                vec![[f32::INFINITY; 3]; n],
-                vec![[f32::NEG_INFINITY; 3]; n],
-            );
-            ing.work
-                .scan(|first, tris| {
-                    for (k, t) in tris.iter().enumerate() {
-                        let q = assign.piece(t, first + k as u64) as usize;
-                        count[q] += 1;
-                        let c = t.centroid();
-                        for i in 0..3 {
-                            sum[q][i] += c[i] as f64;
-                            for v in t.p {
-                                lo[q][i] = lo[q][i].min(v[i]);
-                                hi[q][i] = hi[q][i].max(v[i]);
-                            }
-                        }
-                    }
-                    Ok(())
-                })
-                .unwrap();
-            assert_eq!(pieces.count, count);
-            for q in 0..n {
-                let c = count[q].max(1) as f64;
-                let centre = sum[q].map(|s| (s / c) as f32);
-                assert_eq!(pieces.centre[q].map(f32::to_bits), centre.map(f32::to_bits), "piece {q}");
-                assert_eq!(pieces.bounds[q].min.map(f32::to_bits), lo[q].map(f32::to_bits));
-                assert_eq!(pieces.bounds[q].max.map(f32::to_bits), hi[q].map(f32::to_bits));
+/// Runs passes A, B and C of one preset in the order `redefine` does, checking each against
+/// its serial loop; `cuts` says the preset must have partition-II cut some pieces by plan.
+fn check_passes_against_serial_loops(ing: &Ingested, p: &RedefineParams, cuts: bool) {
+    let scale = Scale::new(ing, p);
+    let mut samples = sample_objects(ing, p).unwrap();
+    assert_pass_a_is_serial(ing, &samples);
+
+    let mut assign = Assigner::default();
+    let mut report = RedefineReport::default();
+    let piece_object = partition_objects(ing, p, &scale, &mut samples, &mut assign, &mut report);
+    let n = piece_object.len();
+    assert!(cuts || report.split_objects > 0, "the plant has split objects");
+    let pieces = piece_stats(ing, &assign, n).unwrap();
+    assert_pass_b_is_serial(ing, &assign, n, &pieces);
+
+    let clusters = cluster_pieces(p, &scale, &pieces, &mut report);
+    let cells = partition_clusters(ing, p, &scale, &samples, &pieces, &clusters, &mut assign, &mut report);
+    let cut = (0..n).filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_))).count();
+    assert!(!cuts || (cut > 0 && cut < n), "some pieces cut by a plan ({cut} of {n}), some whole");
+    let stats = cell_stats(ing, &assign, &pieces, &piece_object, cells).unwrap();
+    assert_pass_c_is_serial(ing, &assign, cells as usize, &stats);
+}
+
+/// Pass A, serially: every stride-th triangle of each sampled object, in file order.
+fn assert_pass_a_is_serial(ing: &Ingested, samples: &Samples) {
+    let mut seen = vec![0u64; ing.objects.len()];
+    let mut expected = vec![[0f32; 3]; samples.points.len()];
+    ing.work
+        .scan(|_, tris| {
+            for t in tris {
+                let o = t.object as usize;
+                let s = samples.stride[o];
+                if s > 0 && seen[o].is_multiple_of(s) {
+                    expected[samples.start[o] + (seen[o] / s) as usize] = t.centroid();
+                }
+                seen[o] += 1;
             }
+            Ok(())
+        })
+        .unwrap();
+    assert!(samples.points.iter().zip(&expected).all(|(a, b)| a.map(f32::to_bits) == b.map(f32::to_bits)));
+}
 
-            let clusters = cluster_pieces(p, &scale, &pieces, &mut report);
-            let cells =
-                partition_clusters(&ing, p, &scale, &samples, &pieces, &clusters, &mut assign, &mut report);
-            let cut = (0..n).filter(|&q| matches!(assign.piece_cell[q], Route::Plan(_))).count();
-            assert!(!cuts || (cut > 0 && cut < n), "some pieces cut by a plan ({cut} of {n}), some whole");
-            let stats = cell_stats(&ing, &assign, &pieces, &piece_object, cells).unwrap();
-            let mut tris_of = vec![0u64; cells as usize];
-            let mut box_of = vec![FBox::EMPTY; cells as usize];
-            ing.work
-                .scan(|first, tris| {
-                    for (k, t) in tris.iter().enumerate() {
-                        let c = assign.cell(t, first + k as u64) as usize;
-                        tris_of[c] += 1;
-                        for v in t.p {
-                            box_of[c].grow(v);
-                        }
+/// Pass B, serially: each of the `n` pieces' count, box and centre (centroid sums added in
+/// file order).
+fn assert_pass_b_is_serial(ing: &Ingested, assign: &Assigner, n: usize, pieces: &Pieces) {
+    let (mut count, mut sum, mut lo, mut hi) =
+        (vec![0u64; n], vec![[0f64; 3]; n], vec![[f32::INFINITY; 3]; n], vec![[f32::NEG_INFINITY; 3]; n]);
+    ing.work
+        .scan(|first, tris| {
+            for (k, t) in tris.iter().enumerate() {
+                let q = assign.piece(t, first + k as u64) as usize;
+                count[q] += 1;
+                let c = t.centroid();
+                for i in 0..3 {
+                    sum[q][i] += c[i] as f64;
+                    for v in t.p {
+                        lo[q][i] = lo[q][i].min(v[i]);
+                        hi[q][i] = hi[q][i].max(v[i]);
                     }
-                    Ok(())
-                })
-                .unwrap();
-            assert_eq!(stats.iter().map(|c| c.triangles).collect::<Vec<_>>(), tris_of);
-            for (c, info) in stats.iter().enumerate() {
-                if tris_of[c] > 0 {
-                    assert_eq!(info.bounds, box_of[c].to_grid(&ing.work, &ing.grid), "cell {c}");
                 }
             }
-        });
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(pieces.count, count);
+    for q in 0..n {
+        let c = count[q].max(1) as f64;
+        let centre = sum[q].map(|s| (s / c) as f32);
+        assert_eq!(pieces.centre[q].map(f32::to_bits), centre.map(f32::to_bits), "piece {q}");
+        assert_eq!(pieces.bounds[q].min.map(f32::to_bits), lo[q].map(f32::to_bits));
+        assert_eq!(pieces.bounds[q].max.map(f32::to_bits), hi[q].map(f32::to_bits));
+    }
+}
+
+/// Pass C, serially: each of the `cells` cells' triangle count and, where it has triangles,
+/// its grid box.
+fn assert_pass_c_is_serial(ing: &Ingested, assign: &Assigner, cells: usize, stats: &[CellInfo]) {
+    let mut tris_of = vec![0u64; cells];
+    let mut box_of = vec![FBox::EMPTY; cells];
+    ing.work
+        .scan(|first, tris| {
+            for (k, t) in tris.iter().enumerate() {
+                let c = assign.cell(t, first + k as u64) as usize;
+                tris_of[c] += 1;
+                for v in t.p {
+                    box_of[c].grow(v);
+                }
+            }
+            Ok(())
+        })
+        .unwrap();
+    assert_eq!(stats.iter().map(|c| c.triangles).collect::<Vec<_>>(), tris_of);
+    for (c, info) in stats.iter().enumerate() {
+        if tris_of[c] > 0 {
+            assert_eq!(info.bounds, box_of[c].to_grid(&ing.work, &ing.grid), "cell {c}");
+        }
     }
 }
