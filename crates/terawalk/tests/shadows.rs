@@ -1,7 +1,7 @@
 //! `--light` end to end: `render` draws the shadows of a sun with both renderers (the point
-//! light is checked in tw-gpu and tw-frame), and their shadow masks agree away from the shadow edges; `bench --light` measures
-//! every strategy with and without shadows in one process; bad lights and shadow options are
-//! refused with a message naming them.
+//! light is checked in tw-gpu and tw-frame), and their shadow masks agree away from the shadow
+//! edges; `bench --light` measures every strategy with and without shadows in one process; bad
+//! lights and shadow options are refused with a message naming them.
 
 use std::path::Path;
 use std::process::Output;
