@@ -16,7 +16,7 @@
 //!    sort, stable: input order within a cell), and [`Bucket::mesh`] builds a cell's
 //!    [`CellMesh`], its vertices deduplicated by exact grid position (an open-addressing table with
 //!    a fixed hash; vertices numbered in order of first use, so deterministic). `mesh` takes `&self`, so cells of a bucket can be built
-//!    in parallel. [`CellFiles::for_each_cell`] hands out every cell in cell order.
+//!    in parallel. `CellFiles::for_each_cell` hands out every cell in cell order.
 //!
 //! Bucket record, 35 bytes little endian: nine grid coordinates of 24 bits (3 bytes each; grid
 //! points are at most [`GRID_STEPS`] = 2^24 − 1), the object id and the cell (`u32` each). The
@@ -104,7 +104,6 @@ pub struct CellFiles {
     /// Triangles per cell.
     cell_triangles: Vec<u64>,
     objects: u32,
-    memory_budget: u64,
 }
 
 impl CellFiles {
@@ -143,7 +142,7 @@ impl CellFiles {
             buckets.extend(write_group(ing, cells, work_dir, memory_budget, &bucket_of, first, group)?);
         }
         tracing::debug!(buckets = buckets.len(), cells = cell_triangles.len(), "distributed triangles");
-        Ok(CellFiles { buckets, cell_triangles, objects: ing.objects.len() as u32, memory_budget })
+        Ok(CellFiles { buckets, cell_triangles, objects: ing.objects.len() as u32 })
     }
 
     pub fn bucket_count(&self) -> usize {
@@ -167,10 +166,6 @@ impl CellFiles {
 
     pub fn cell_count(&self) -> usize {
         self.cell_triangles.len()
-    }
-
-    pub fn memory_budget(&self) -> u64 {
-        self.memory_budget
     }
 
     /// Reads bucket `b` and groups its triangles by cell.
@@ -222,6 +217,7 @@ impl CellFiles {
     }
 
     /// Calls `f` with every cell's mesh, in cell order. Memory: one bucket and one cell.
+    #[cfg(test)]
     pub fn for_each_cell(
         &self,
         mut f: impl FnMut(u32, CellMesh) -> Result<(), BuildError>,
@@ -357,12 +353,6 @@ impl Bucket {
     /// The cells of the bucket.
     pub fn cells(&self) -> Range<u32> {
         self.cells.clone()
-    }
-
-    /// Triangles of `cell` (a cell of this bucket).
-    pub fn triangles(&self, cell: u32) -> usize {
-        let k = (cell - self.cells.start) as usize;
-        self.start[k + 1] - self.start[k]
     }
 
     /// The indexed mesh of `cell` (a cell of this bucket): triangles in input order, vertices

@@ -36,6 +36,7 @@ pub fn canonical(t: GridTriangle) -> GridTriangle {
 }
 
 /// A sorted multiset of canonical triangles (with objects), for comparing meshes exactly.
+#[cfg(test)]
 pub fn triangle_multiset(tris: &[(GridTriangle, u32)]) -> Vec<(GridTriangle, u32)> {
     let mut v: Vec<_> = tris.iter().map(|&(t, o)| (canonical(t), o)).collect();
     v.sort_unstable();
@@ -84,6 +85,7 @@ fn edges_where(tris: &[GridTriangle], keep: impl Fn(usize) -> bool) -> Vec<([u32
 /// in general the input's [`open_edges`] (its boundary, and non-manifold edges, which the
 /// simplifier keeps but may leave with fewer triangles when an attached part is simplified
 /// away). Returns the number of offending edges in the error.
+#[cfg(test)]
 pub fn check_no_cracks(cut: &[GridTriangle], allowed: &[([u32; 3], [u32; 3])]) -> Result<(), String> {
     let bad: Vec<_> = boundary_edges(cut).into_iter().filter(|e| allowed.binary_search(e).is_err()).collect();
     match bad.first() {

@@ -150,6 +150,7 @@ impl Hierarchy {
     /// exactly one parent, internal nodes have two children and no item, parents' bounds are the
     /// union of their children's, leaves hold one item whose box is the leaf's bounds, and every
     /// item of `boxes` is in exactly one leaf.
+    #[cfg(test)]
     pub fn validate(&self, boxes: &[GridBox]) -> Result<(), String> {
         if self.nodes.is_empty() {
             return if boxes.is_empty() { Ok(()) } else { Err("empty tree over items".into()) };

@@ -56,7 +56,7 @@ const REPAIR_ROUNDS: usize = 8;
 /// grows it; simplifying a curved surface shrinks it).
 const MAX_AREA_GROWTH: f64 = 1.01;
 
-/// Parameters of [`build_hlod`].
+/// Parameters of `build_hlod`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct HlodParams {
     /// Target triangles of a node relative to its children's root triangles.
@@ -178,7 +178,7 @@ impl HlodNode {
 /// Builds the HLOD clusters of one hierarchy node from its children's roots. Deterministic.
 ///
 /// `external(p)` tells whether grid point `p` is shared with a cell outside this node's subtree
-/// (the pipeline knows each seam position's first and last cell; [`seam_positions`] is the
+/// (the pipeline knows each seam position's first and last cell; `seam_positions` is the
 /// conservative scene-wide set); such vertices on the merged mesh's open edges are locked, so that a
 /// cut that is coarse here and fine in a neighbouring subtree does not crack. Everything else,
 /// open object borders included, may be simplified.
@@ -823,6 +823,7 @@ impl<'a> EdgeCheck<'a> {
 /// the seams of split objects. A node's `external` predicate can test membership (it is
 /// conservative to use the scene-wide set for every node: only vertices on the merged mesh's
 /// own open edges are locked).
+#[cfg(test)]
 pub fn seam_positions(cells: &[&crate::types::CellMesh]) -> Vec<[u32; 3]> {
     shared_positions(cells.iter().flat_map(|m| open_positions(m)).collect())
 }
@@ -843,6 +844,7 @@ pub fn open_positions(mesh: &crate::types::CellMesh) -> Vec<[u32; 3]> {
 
 /// The positions that occur more than once in `all` (the concatenated [`open_positions`] of
 /// several cells), sorted. The sort runs on the current rayon pool.
+#[cfg(test)]
 pub fn shared_positions(mut all: Vec<[u32; 3]>) -> Vec<[u32; 3]> {
     use rayon::slice::ParallelSliceMut;
     all.par_sort_unstable();
@@ -884,6 +886,7 @@ fn enclosing_sphere(spheres: &[Sphere]) -> Sphere {
 
 /// Appends a cell's DAG to a scene-wide DAG (reindexing its groups and `refined_from`);
 /// returns the scene id of the cell's group 0.
+#[cfg(test)]
 pub fn append_cell(scene: &mut LodDag, cell: &LodDag) -> u32 {
     let gbase = scene.groups.len() as u32;
     let cbase = scene.clusters.len() as u32;
@@ -903,6 +906,7 @@ pub fn append_cell(scene: &mut LodDag, cell: &LodDag) -> u32 {
 /// Applies an HLOD node to a scene-wide DAG: the replaced groups get the node's error and
 /// sphere, and the node's clusters and groups are appended (their `refined_from` already holds
 /// scene ids). Returns the scene id of the node's group 0.
+#[cfg(test)]
 pub fn append_node(scene: &mut LodDag, node: &HlodNode) -> u32 {
     for &id in &node.replaced {
         if let Some(g) = scene.groups.get_mut(id as usize) {

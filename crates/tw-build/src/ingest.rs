@@ -56,7 +56,7 @@ use crate::workio::SpillWriter;
 /// Bytes per triangle in the working file: 9 × f32 + u32 object id.
 pub const RECORD_BYTES: usize = 40;
 
-/// Triangles decoded per chunk by [`WorkFile::scan`] (2.5 MiB of records).
+/// Triangles decoded per chunk by `WorkFile::scan` (2.5 MiB of records).
 pub const SCAN_CHUNK: usize = 1 << 16;
 
 /// Triangles of a [`TriangleBatch`] that one task of the pool converts to records.
@@ -125,11 +125,12 @@ impl WorkFile {
 
     /// Reads every record in order, handing out chunks of up to [`SCAN_CHUNK`] triangles with the
     /// index of the chunk's first triangle. Memory: one chunk.
+    #[cfg(test)]
     pub fn scan(&self, f: impl FnMut(u64, &[WorkTri]) -> Result<(), BuildError>) -> Result<(), BuildError> {
         crate::workio::read_ahead(&self.path, self.triangles, RECORD_BYTES, SCAN_CHUNK, WorkTri::decode, f)
     }
 
-    /// Like [`WorkFile::scan`], but hands out each chunk's raw records ([`RECORD_BYTES`] each;
+    /// Like `WorkFile::scan`, but hands out each chunk's raw records ([`RECORD_BYTES`] each;
     /// [`WorkTri::decode`], [`record_object`]) undecoded: the reader thread only reads, and the
     /// caller decodes and processes the chunk on the pool ([`crate::workio::map_sub_chunks`]).
     pub fn scan_raw(&self, f: impl FnMut(u64, &[u8]) -> Result<(), BuildError>) -> Result<(), BuildError> {
@@ -186,6 +187,7 @@ pub struct Ingested {
 /// Streams `scene` into a working file created in `work_dir` (which must exist). `progress` is
 /// called now and then with how far the reading has got. Batches of triangles
 /// ([`TriangleSink::batch`]) are converted on rayon's global pool.
+#[cfg(test)]
 pub fn ingest(
     scene: Scene,
     work_dir: &Path,
@@ -197,6 +199,7 @@ pub fn ingest(
 /// [`ingest`], converting batches on `pool` (the global pool when `None`), and taking
 /// redefinition's centroid samples with `sampler` on the way. The working file is the same
 /// whatever the pool.
+#[cfg(test)]
 pub fn ingest_in(
     scene: Scene,
     work_dir: &Path,
@@ -207,7 +210,7 @@ pub fn ingest_in(
     ingest_voting(scene, work_dir, pool, sampler, false, progress)
 }
 
-/// [`ingest_in`], also taking the `--up auto` statistic when `up_votes` (one cross product
+/// `ingest_in`, also taking the `--up auto` statistic when `up_votes` (one cross product
 /// per triangle, in the in-order append step, so the votes are the same whatever the pool).
 pub fn ingest_voting(
     scene: Scene,

@@ -56,7 +56,7 @@
 //! only onto a neighbour on the same border, so a cut's boundary edges still join input border
 //! vertices). Measured on the generated 2M-triangle plant, whose objects are open (uncapped
 //! pipes, plates): locking every open border stalled the cell DAGs at 21% of the input
-//! (419k root triangles, 3 levels); with seams only, 5% (106k). [`build_cell_lod`] alone still
+//! (419k root triangles, 3 levels); with seams only, 5% (106k). `build_cell_lod` alone still
 //! locks every open-border vertex.
 //!
 //! Object ids: level-0 triangles keep their input object. Simplified triangles get the object
@@ -79,7 +79,7 @@ pub const MIN_ERROR: f32 = f32::MIN_POSITIVE;
 pub const MAX_CLUSTER_TRIANGLES: usize = 128;
 pub const MAX_CLUSTER_VERTICES: usize = 255;
 
-/// Parameters of [`build_cell_lod`].
+/// Parameters of `build_cell_lod`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LodParams {
     /// Triangles per cluster, 4..=128 (a multiple of 4).
@@ -104,11 +104,12 @@ impl LodParams {
 }
 
 /// Builds the cluster DAG of one cell. Deterministic; memory is proportional to the cell.
+#[cfg(test)]
 pub fn build_cell_lod(mesh: &CellMesh, grid: &Grid, params: &LodParams) -> LodDag {
     build_cell_lod_with_seams(mesh, grid, params, &|_| true)
 }
 
-/// [`build_cell_lod`], locking of the cell's open border only the vertices that `seam` says are
+/// `build_cell_lod`, locking of the cell's open border only the vertices that `seam` says are
 /// shared with another cell (and every vertex on a non-manifold or inconsistently wound edge).
 /// The rest of the open border (object borders inside the cell) is simplified along itself, as
 /// meshopt does with borders: a border vertex collapses only onto a neighbour on the same border.

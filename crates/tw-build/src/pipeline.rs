@@ -10,7 +10,7 @@
 //!    with a cell outside the node's cell range, where a neighbouring subtree may be drawn finer
 //!    ([`crate::hlod::build_hlod`]); each bucket reads its own seams, and a subtree passes up
 //!    only those at its roots' vertices;
-//! 5. one pass over all cells: LOD of the cells on the pool ([`crate::lod::build_cell_lod`],
+//! 5. one pass over all cells: LOD of the cells on the pool (`crate::lod::build_cell_lod`,
 //!    their clusters encoded there too) while, on the calling thread (the consumer), in leaf
 //!    order as they become ready, the cells' groups go to pages ([`crate::pages`]) and their
 //!    roots up the tree. A node whose children are complete has its HLOD built by the pool

@@ -145,6 +145,7 @@ impl OnlineSampler {
     }
 
     /// Whether the sampler gave up (the caller may stop feeding it).
+    #[cfg(test)]
     pub fn gave_up(&self) -> bool {
         self.gave_up
     }

@@ -60,12 +60,9 @@ impl SeamTable {
         SeamTable::from_unsorted(tables.into_iter().flat_map(|t| t.entries()).collect())
     }
 
+    #[cfg(test)]
     pub fn len(&self) -> usize {
         self.positions.len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.positions.is_empty()
     }
 
     fn entries(&self) -> impl Iterator<Item = ([u32; 3], (u32, u32))> + '_ {

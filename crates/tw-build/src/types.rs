@@ -72,6 +72,7 @@ impl GridBox {
         b
     }
 
+    #[cfg(test)]
     pub fn contains(&self, o: &GridBox) -> bool {
         (0..3).all(|i| self.min[i] <= o.min[i] && o.max[i] <= self.max[i])
     }
@@ -115,6 +116,7 @@ pub struct CellMesh {
 }
 
 impl CellMesh {
+    #[cfg(test)]
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }

@@ -1,6 +1,6 @@
 //! Working-file I/O off the calling thread: the build's early phases stream gigabytes through
 //! their working files (40 bytes per triangle, the buckets 35). [`SpillWriter`] hands full
-//! buffers to a writer thread; [`read_ahead`] reads and decodes the next chunks of a record file
+//! buffers to a writer thread; `read_ahead` reads and decodes the next chunks of a record file
 //! on a reader thread. Both bypass the page cache where the file system allows
 //! ([`tw_core::direct_io`]: on this project's VMs, page-cache pages of new files cost ~7 s of
 //! system time per GB). Both keep the bytes and their order exactly as a plain buffered writer
@@ -20,7 +20,7 @@ use crate::error::BuildError;
 /// Full buffers queued for the writer thread beyond the ones being filled.
 pub const WRITES_IN_FLIGHT: usize = 4;
 
-/// Buffer of [`read_ahead`]'s direct reads.
+/// Buffer of `read_ahead`'s direct reads.
 const READ_BUFFER: usize = 4 << 20;
 
 /// What the writer thread gives back: the files, or the index of the file that failed and why.
@@ -50,6 +50,7 @@ pub struct SpillWriter {
 impl SpillWriter {
     /// A writer over open `files` (named by `paths`, for errors), written from their start
     /// through the page cache, with buffers of `buffer` bytes.
+    #[cfg(test)]
     pub fn new(files: Vec<File>, paths: Vec<PathBuf>, buffer: usize) -> SpillWriter {
         assert_eq!(files.len(), paths.len());
         SpillWriter::spawn(files.into_iter().map(DirectWriter::buffered).collect(), paths, buffer)
@@ -195,6 +196,7 @@ pub fn temp_path(dir: &Path, prefix: &str) -> Result<TempPath, BuildError> {
 /// with `decode` on a reader thread, and calls `f(first record index, records)` for each chunk
 /// in order on the calling thread, with direct reads where the file system allows. Memory: three
 /// chunks, raw and decoded, and three read buffers of up to 4 MiB.
+#[cfg(test)]
 pub fn read_ahead<T, D, F>(
     path: &Path,
     records: u64,
@@ -241,7 +243,7 @@ where
     })
 }
 
-/// Like [`read_ahead`], but hands out the raw bytes of each chunk (whole records, `size` bytes
+/// Like `read_ahead`, but hands out the raw bytes of each chunk (whole records, `size` bytes
 /// each) without decoding them, so that the caller can decode and process a chunk in parallel
 /// ([`map_sub_chunks`], [`for_each_lane`]) while the reader thread only reads. Memory: three
 /// chunks of bytes and three read buffers of up to 4 MiB.

@@ -22,12 +22,11 @@
 
 use std::path::{Path, PathBuf};
 
-use tw_build::cut::{
-    boundary_edges, check_complete, check_complete_with, check_dag, cut_triangles, open_edges, GridTriangle,
+use tw_build::{
+    boundary_edges, build, check_complete, check_complete_with, check_dag, cut_triangles, open_edges,
+    BuildError, BuildOptions, BuildReport, Grid, GridTriangle, LodCluster, LodDag, LodGroup, NoProgress,
+    RedefineParams, Sphere,
 };
-use tw_build::redefine::RedefineParams;
-use tw_build::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
-use tw_build::{build, BuildError, BuildOptions, BuildReport, NoProgress};
 use tw_io::generate::{AssemblyObjects, AssemblyParams, AssemblySource, PlantParams, PlantSource};
 use tw_io::write::create_writer;
 use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Scene, SceneOptions, Triangle, TriangleSink};
@@ -301,7 +300,7 @@ fn check_full_resolution(store: &Store, dag: &LodDag, input: &[(GridTriangle, u3
     for c in &dag.clusters {
         if c.level == 0 {
             assert_eq!(c.self_error, 0.0, "level-0 cluster with a self error");
-            level0.extend(tw_build::cut::cluster_triangles(c));
+            level0.extend(tw_build::cluster_triangles(c));
         } else {
             assert!(c.self_error > 0.0, "level-{} cluster with self error {}", c.level, c.self_error);
         }
@@ -424,7 +423,7 @@ fn describe_crack(
     );
     for &ci in cut {
         let c = &dag.clusters[ci as usize];
-        if tw_build::cut::cluster_triangles(c).any(|(t, _)| has(&t)) {
+        if tw_build::cluster_triangles(c).any(|(t, _)| has(&t)) {
             let g = &store.groups()[c.group as usize];
             let leaf = store.nodes()[g.node as usize].child_count == 0;
             out += &format!(
@@ -487,7 +486,7 @@ fn check_cuts(
     let mut counts = Vec::new();
     for tau in thresholds(dag) {
         check_complete(dag, tau).unwrap_or_else(|e| panic!("cut at tau {tau}: {e}"));
-        let cut = tw_build::cut::extract_cut(dag, tau);
+        let cut = tw_build::extract_cut(dag, tau);
         let tris: Vec<GridTriangle> = cut_triangles(dag, &cut).into_iter().map(|t| t.0).collect();
         if tau < crack_limit {
             let bad = crack_edges(&tris, &allowed, &border_vertices);
@@ -868,10 +867,8 @@ fn small_store(dir: &Path) -> PathBuf {
     let obj = dir.join("sphere.obj");
     write_file(&obj, &[icosphere("ball", [0.0; 3], 1.0, 4)]);
     let out = dir.join("scene.tw");
-    let opts = BuildOptions {
-        pages: tw_build::pages::PageParams { page_triangles: 1024 },
-        ..options(small_cells(2048))
-    };
+    let opts =
+        BuildOptions { pages: tw_build::PageParams { page_triangles: 1024 }, ..options(small_cells(2048)) };
     run_build(open_scene(&[obj]), &out, &opts);
     out
 }

@@ -113,13 +113,13 @@ pub fn build_store(args: &BuildArgs, output: &std::path::Path, quiet: bool) -> R
 
 /// The inputs as the importers get them: those in a format terawalk does not read (IFC, STEP,
 /// FBX, ...: `tw_io::convert`) converted into a working directory like the build's own
-/// (`tw_build::pipeline::WorkDir`: removed when this is dropped, on a signal, and after a kill
+/// (`tw_build::WorkDir`: removed when this is dropped, on a signal, and after a kill
 /// by the next build), which lives until the build has read them.
 struct Prepared {
     inputs: Vec<PathBuf>,
     /// The units of the coordinates when every input was converted by tools that agree on them.
     units: Option<&'static str>,
-    _work: Option<tw_build::pipeline::WorkDir>,
+    _work: Option<tw_build::WorkDir>,
 }
 
 /// Converts the inputs that need it (see [`Prepared`]), reporting each tool's command and time.
@@ -128,8 +128,8 @@ fn convert_inputs(args: &BuildArgs, output: &Path, quiet: bool) -> Result<Prepar
     if converters.iter().all(Option::is_none) {
         return Ok(Prepared { inputs: args.inputs.clone(), units: None, _work: None });
     }
-    let root = tw_build::pipeline::work_root(output, args.work_dir.as_deref());
-    let work = tw_build::pipeline::WorkDir::create(&root)?;
+    let root = tw_build::work_root(output, args.work_dir.as_deref());
+    let work = tw_build::WorkDir::create(&root)?;
     let options = convert_options()?;
     let (mut inputs, mut units) = (Vec::new(), Vec::new());
     for (i, (input, converter)) in args.inputs.iter().zip(converters).enumerate() {

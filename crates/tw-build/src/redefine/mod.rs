@@ -166,7 +166,7 @@ pub struct RedefineParams {
     pub neighbours: usize,
     /// Centroid samples kept in memory for planning splits (12 bytes each): between this and
     /// twice this, plus up to twice `min_samples_per_object` for each sampled object (ingest
-    /// holds up to 8 times this while streaming: [`crate::sampling`]).
+    /// holds up to 8 times this while streaming: `sampling`).
     pub max_samples: u64,
     /// Every object of more than `t1` triangles keeps at least this many samples.
     pub min_samples_per_object: u64,
@@ -182,7 +182,7 @@ impl RedefineParams {
     /// The thesis table: t1 1000, s1 0.1 × model dimension, r1 2.5, D 0.1 × largest dimension,
     /// K 1500, V 10⁻³ × scene volume, s2 2·s1, t2 10·t1, r2 0.5·r1; plus terawalk's cell cap.
     /// The rule of redefinition's centroid samples ([`crate::sampling`]).
-    pub fn sample_rule(&self) -> SampleRule {
+    pub(crate) fn sample_rule(&self) -> SampleRule {
         SampleRule {
             t1: self.t1,
             max_samples: self.max_samples,
