@@ -1,5 +1,6 @@
 //! A pinhole camera: where it is, what it looks at, and how to frame a bounding box.
 
+use glam::DVec3;
 use tw_core::Aabb;
 
 /// A perspective camera in the scene's own coordinates (f64, so that georeferenced scenes with
@@ -48,10 +49,11 @@ impl Camera {
             let r = 0.5 * bounds.diagonal();
             (bounds.center(), if r > 0.0 { r } else { 1.0 })
         };
-        let dir =
-            normalize(direction).unwrap_or_else(|| normalize([1.0, 1.0, 1.0]).unwrap_or([0.0, 0.0, 1.0]));
-        let up = normalize(up).unwrap_or([0.0, 0.0, 1.0]);
-        let up = if dot(dir, up).abs() > 0.999 {
+        let dir = DVec3::from(direction)
+            .try_normalize()
+            .unwrap_or_else(|| DVec3::ONE.try_normalize().unwrap_or(DVec3::Z));
+        let up = DVec3::from(up).try_normalize().unwrap_or(DVec3::Z);
+        let up = if dir.dot(up).abs() > 0.999 {
             // Looking along up: any perpendicular axis will do; prefer the one least aligned.
             least_aligned_axis(up)
         } else {
@@ -60,13 +62,9 @@ impl Camera {
         let half = (FRAMING_FOVY_DEG * 0.5).to_radians();
         let distance = radius / half.sin() * 1.02;
         Camera {
-            eye: [
-                center[0] + dir[0] * distance,
-                center[1] + dir[1] * distance,
-                center[2] + dir[2] * distance,
-            ],
+            eye: (DVec3::from(center) + dir * distance).to_array(),
             target: center,
-            up,
+            up: up.to_array(),
             fovy_deg: FRAMING_FOVY_DEG,
         }
     }
@@ -81,24 +79,24 @@ impl Camera {
             return cam;
         }
         let b = cam.basis();
-        let center = cam.target;
+        let center = DVec3::from(cam.target);
         let tan_y = (cam.fovy() * 0.5).tan() * 0.95;
         let tan_x = tan_y * aspect;
         let mut distance: f64 = 0.0;
         for i in 0..8 {
-            let corner = [
+            let corner = DVec3::new(
                 if i & 1 == 0 { bounds.min[0] } else { bounds.max[0] },
                 if i & 2 == 0 { bounds.min[1] } else { bounds.max[1] },
                 if i & 4 == 0 { bounds.min[2] } else { bounds.max[2] },
-            ];
-            let c = sub(corner, center);
+            );
+            let c = corner - center;
             // The eye is at center - forward * d; the corner's depth is d + c·forward.
-            let need_x = dot(c, b.right).abs() / tan_x - dot(c, b.forward);
-            let need_y = dot(c, b.up).abs() / tan_y - dot(c, b.forward);
+            let need_x = c.dot(b.right).abs() / tan_x - c.dot(b.forward);
+            let need_y = c.dot(b.up).abs() / tan_y - c.dot(b.forward);
             distance = distance.max(need_x).max(need_y);
         }
         if distance.is_finite() && distance > 0.0 {
-            cam.eye = sub(center, scale(b.forward, distance));
+            cam.eye = (center - b.forward * distance).to_array();
         }
         cam
     }
@@ -107,11 +105,11 @@ impl Camera {
     /// up). Degenerate inputs fall back: eye = target looks along −Z, `up` parallel to the view
     /// direction picks another up.
     pub fn basis(&self) -> Basis {
-        let f = normalize(sub(self.target, self.eye)).unwrap_or([0.0, 0.0, -1.0]);
-        let up = normalize(self.up).unwrap_or([0.0, 1.0, 0.0]);
-        let ortho = |u: [f64; 3]| normalize(sub(u, scale(f, dot(u, f))));
-        let u = ortho(up).or_else(|| ortho(least_aligned_axis(f))).unwrap_or([0.0, 1.0, 0.0]);
-        let r = cross(f, u);
+        let f = (DVec3::from(self.target) - DVec3::from(self.eye)).try_normalize().unwrap_or(DVec3::NEG_Z);
+        let up = DVec3::from(self.up).try_normalize().unwrap_or(DVec3::Y);
+        let ortho = |u: DVec3| (u - f * u.dot(f)).try_normalize();
+        let u = ortho(up).or_else(|| ortho(least_aligned_axis(f))).unwrap_or(DVec3::Y);
+        let r = f.cross(u);
         Basis { right: r, up: u, forward: f }
     }
 
@@ -123,8 +121,7 @@ impl Camera {
 
     /// Distance from eye to target (0 if they coincide or are not finite).
     pub fn target_distance(&self) -> f64 {
-        let d = sub(self.target, self.eye);
-        let l = dot(d, d).sqrt();
+        let l = (DVec3::from(self.target) - DVec3::from(self.eye)).length();
         if l.is_finite() {
             l
         } else {
@@ -136,42 +133,29 @@ impl Camera {
 /// The camera's orthonormal axes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Basis {
-    pub right: [f64; 3],
-    pub up: [f64; 3],
-    pub forward: [f64; 3],
+    pub right: DVec3,
+    pub up: DVec3,
+    pub forward: DVec3,
 }
 
-pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-pub(crate) fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-/// The unit vector along `a`, or `None` for a zero or non-finite vector.
-pub(crate) fn normalize(a: [f64; 3]) -> Option<[f64; 3]> {
-    let l = dot(a, a).sqrt();
-    (l > 0.0 && l.is_finite()).then(|| scale(a, 1.0 / l))
+impl Basis {
+    /// `v` (a scene-space direction or offset from the eye) in camera coordinates: its
+    /// components along right, up and forward.
+    #[inline]
+    pub fn to_camera(&self, v: DVec3) -> DVec3 {
+        DVec3::new(v.dot(self.right), v.dot(self.up), v.dot(self.forward))
+    }
 }
 
 /// The coordinate axis least aligned with `v`.
-pub(crate) fn least_aligned_axis(v: [f64; 3]) -> [f64; 3] {
-    let a = v.map(f64::abs);
-    if a[0] <= a[1] && a[0] <= a[2] {
-        [1.0, 0.0, 0.0]
-    } else if a[1] <= a[2] {
-        [0.0, 1.0, 0.0]
+pub(crate) fn least_aligned_axis(v: DVec3) -> DVec3 {
+    let a = v.abs();
+    if a.x <= a.y && a.x <= a.z {
+        DVec3::X
+    } else if a.y <= a.z {
+        DVec3::Y
     } else {
-        [0.0, 0.0, 1.0]
+        DVec3::Z
     }
 }
 
@@ -179,30 +163,30 @@ pub(crate) fn least_aligned_axis(v: [f64; 3]) -> [f64; 3] {
 mod tests {
     use super::*;
 
-    fn close(a: [f64; 3], b: [f64; 3]) -> bool {
-        (0..3).all(|i| (a[i] - b[i]).abs() < 1e-12)
+    fn close(a: DVec3, b: DVec3) -> bool {
+        (a - b).abs().max_element() < 1e-12
     }
 
     #[test]
     fn basis_is_orthonormal_and_right_handed() {
         let c = Camera { eye: [0.0, 0.0, 5.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], fovy_deg: 60.0 };
         let b = c.basis();
-        assert!(close(b.forward, [0.0, 0.0, -1.0]));
-        assert!(close(b.up, [0.0, 1.0, 0.0]));
-        assert!(close(b.right, [1.0, 0.0, 0.0]));
+        assert!(close(b.forward, DVec3::NEG_Z));
+        assert!(close(b.up, DVec3::Y));
+        assert!(close(b.right, DVec3::X));
     }
 
     #[test]
     fn degenerate_cameras_get_a_usable_basis() {
         let same = Camera { eye: [1.0; 3], target: [1.0; 3], up: [0.0; 3], fovy_deg: f64::NAN };
         let b = same.basis();
-        assert!(close(b.forward, [0.0, 0.0, -1.0]));
-        assert!((dot(b.up, b.up) - 1.0).abs() < 1e-12 && dot(b.up, b.forward).abs() < 1e-12);
+        assert!(close(b.forward, DVec3::NEG_Z));
+        assert!((b.up.length_squared() - 1.0).abs() < 1e-12 && b.up.dot(b.forward).abs() < 1e-12);
         assert_eq!(same.fovy(), 45f64.to_radians());
         let parallel =
             Camera { eye: [0.0; 3], target: [0.0, 0.0, -3.0], up: [0.0, 0.0, 2.0], fovy_deg: 400.0 };
         let b = parallel.basis();
-        assert!(dot(b.up, b.forward).abs() < 1e-12 && (dot(b.right, b.right) - 1.0).abs() < 1e-12);
+        assert!(b.up.dot(b.forward).abs() < 1e-12 && (b.right.length_squared() - 1.0).abs() < 1e-12);
         assert_eq!(parallel.fovy(), 170f64.to_radians());
     }
 
@@ -216,7 +200,7 @@ mod tests {
         // Straight down: up must change.
         let top = Camera::look_at_bounds(&b, [0.0, 0.0, 1.0]);
         assert!(top.eye[2] > 6.0);
-        assert!(dot(top.up, [0.0, 0.0, 1.0]).abs() < 1e-12);
+        assert!(DVec3::from(top.up).dot(DVec3::Z).abs() < 1e-12);
     }
 
     #[test]

@@ -33,11 +33,12 @@ mod raster;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+use glam::DVec3;
 use tw_core::Rgba8;
 use tw_io::write::AtomicFile;
 use tw_io::{ImportError, MeshChunk, ObjectId, ObjectInfo, Triangle, TriangleSink};
 
-use camera::{cross, dot, least_aligned_axis, normalize, sub};
+use camera::least_aligned_axis;
 pub use camera::{Basis, Camera};
 use raster::{Class, Projector};
 
@@ -98,7 +99,7 @@ pub struct Preview {
     basis: Basis,
     proj: Projector,
     /// Fixed sun direction in camera space (unit, towards the light).
-    sun: [f64; 3],
+    sun: DVec3,
     mode: ColorMode,
     /// RGBA, row-major from the top row.
     color: Vec<[u8; 4]>,
@@ -132,16 +133,12 @@ impl Preview {
         let proj = Projector::new(width, height, camera.fovy(), near);
         // The sun: from above (the camera's up, which is the scene's up), tilted towards a
         // horizontal direction fixed in the scene.
-        let world_up = normalize(camera.up).unwrap_or(basis.up);
-        let h1 = normalize(sub(
-            least_aligned_axis(world_up),
-            scale(world_up, dot(least_aligned_axis(world_up), world_up)),
-        ))
-        .unwrap_or(basis.right);
-        let h2 = cross(world_up, h1);
-        let sun_world =
-            normalize(add3(scale(world_up, 0.8), scale(h1, 0.45), scale(h2, 0.3))).unwrap_or(world_up);
-        let sun = [dot(sun_world, basis.right), dot(sun_world, basis.up), dot(sun_world, basis.forward)];
+        let world_up = DVec3::from(camera.up).try_normalize().unwrap_or(basis.up);
+        let axis = least_aligned_axis(world_up);
+        let h1 = (axis - world_up * axis.dot(world_up)).try_normalize().unwrap_or(basis.right);
+        let h2 = world_up.cross(h1);
+        let sun_world = (world_up * 0.8 + h1 * 0.45 + h2 * 0.3).try_normalize().unwrap_or(world_up);
+        let sun = basis.to_camera(sun_world);
         let n = width as usize * height as usize;
         let mut p = Preview {
             camera,
@@ -229,16 +226,14 @@ impl Preview {
 
     #[inline]
     fn to_camera(&self, p: [f64; 3]) -> [f64; 3] {
-        let d = sub(p, self.camera.eye);
-        [dot(d, self.basis.right), dot(d, self.basis.up), dot(d, self.basis.forward)]
+        self.basis.to_camera(DVec3::from(p) - DVec3::from(self.camera.eye)).to_array()
     }
 
     /// Sky above the horizon, ground below, by the elevation of each pixel's view ray.
-    fn fill_sky(&mut self, world_up: [f64; 3]) {
+    fn fill_sky(&mut self, world_up: DVec3) {
         let (w, h) = (self.proj.width as usize, self.proj.height as usize);
-        let b = self.basis;
         // Elevation of a camera-space direction: its dot product with up, in camera space.
-        let up = [dot(world_up, b.right), dot(world_up, b.up), dot(world_up, b.forward)];
+        let up = self.basis.to_camera(world_up);
         let lerp = |a: [f64; 3], c: [f64; 3], t: f64| [0, 1, 2].map(|i| a[i] + (c[i] - a[i]) * t);
         const ZENITH: [f64; 3] = [0.33, 0.52, 0.80];
         const HORIZON: [f64; 3] = [0.86, 0.90, 0.95];
@@ -251,7 +246,7 @@ impl Preview {
             for i in 0..w {
                 let x = ((i as f64 + 0.5) - 0.5 * w as f64) / self.proj.focal;
                 let len = (x * x + y * y + 1.0).sqrt();
-                let e = (x * up[0] + y * up[1] + up[2]) / len;
+                let e = (x * up.x + y * up.y + up.z) / len;
                 let c = if e >= 0.0 {
                     lerp(HORIZON, ZENITH, e.sqrt())
                 } else {
@@ -364,19 +359,20 @@ fn memo_key(c: &[[f64; 3]; 3]) -> [u64; 9] {
 
 /// Flat shading of a camera-space triangle: ambient + headlight + sun (`sun`: unit, camera
 /// space), both sides lit alike.
-fn shade(c: &[[f64; 3]; 3], base: [f64; 3], sun: [f64; 3]) -> [u8; 4] {
-    let n = cross(sub(c[1], c[0]), sub(c[2], c[0]));
-    let centroid = [0, 1, 2].map(|i| (c[0][i] + c[1][i] + c[2][i]) / 3.0);
-    let light = match normalize(n) {
+fn shade(c: &[[f64; 3]; 3], base: [f64; 3], sun: DVec3) -> [u8; 4] {
+    let c = c.map(DVec3::from);
+    let n = (c[1] - c[0]).cross(c[2] - c[0]);
+    let centroid = (c[0] + c[1] + c[2]) / 3.0;
+    let light = match n.try_normalize() {
         Some(mut n) => {
             // Face the eye: the side we see is the side we light.
-            if dot(n, centroid) > 0.0 {
-                n = [-n[0], -n[1], -n[2]];
+            if n.dot(centroid) > 0.0 {
+                n = -n;
             }
             // The headlight shines along the view axis (not towards each triangle), so that
             // coplanar triangles get the same shade.
-            let head = n[2].abs();
-            let sun = dot(n, sun).max(0.0);
+            let head = n.z.abs();
+            let sun = n.dot(sun).max(0.0);
             0.18 + 0.55 * head + 0.35 * sun
         }
         None => 0.6,
@@ -422,14 +418,6 @@ impl TriangleSink for Preview {
         self.scratch = cam;
         Ok(())
     }
-}
-
-fn scale(a: [f64; 3], s: f64) -> [f64; 3] {
-    [a[0] * s, a[1] * s, a[2] * s]
-}
-
-fn add3(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0] + c[0], a[1] + b[1] + c[1], a[2] + b[2] + c[2]]
 }
 
 fn to_u8(v: f64) -> u8 {

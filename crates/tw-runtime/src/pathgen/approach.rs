@@ -27,6 +27,7 @@
 //!
 //! No randomness: the same store, frame count and field of view give the same path.
 
+use glam::DVec3;
 use tw_store::Store;
 
 use super::cameras::{from_yaw_pitch, yaw_pitch};
@@ -163,22 +164,21 @@ fn overview_distance(lo: [f64; 3], hi: [f64; 3], dir: [f64; 3], up: usize, fovy:
     let radius = 0.5 * dist3(lo, hi);
     let sphere = if radius > 0.0 { radius } else { 1.0 } / half.sin() * 1.02;
     // The view basis: forward (towards the centre), up made orthogonal to it, right = f × u.
-    let forward = dir.map(|c| -c);
-    let mut upv = [0.0; 3];
+    let forward = -DVec3::from(dir);
+    let mut upv = DVec3::ZERO;
     upv[up] = 1.0;
-    let along = dot(upv, forward);
-    let u = normalized([0, 1, 2].map(|a| upv[a] - forward[a] * along));
-    let right = cross(forward, u);
+    let u = normalized(upv - forward * upv.dot(forward));
+    let right = forward.cross(u);
     let tan_y = half.tan() * FRAME_MARGIN;
     let tan_x = tan_y * OVERVIEW_ASPECT;
-    let centre = lerp3(lo, hi, 0.5);
+    let centre = DVec3::from(lerp3(lo, hi, 0.5));
     let mut distance: f64 = 0.0;
     for i in 0..8 {
         let corner = [0, 1, 2].map(|a| if i & (1 << a) == 0 { lo[a] } else { hi[a] });
-        let c = [0, 1, 2].map(|a| corner[a] - centre[a]);
+        let c = DVec3::from(corner) - centre;
         // The eye is at centre − forward · d; the corner's depth is d + c · forward.
-        let need_x = dot(c, right).abs() / tan_x - dot(c, forward);
-        let need_y = dot(c, u).abs() / tan_y - dot(c, forward);
+        let need_x = c.dot(right).abs() / tan_x - c.dot(forward);
+        let need_y = c.dot(u).abs() / tan_y - c.dot(forward);
         distance = distance.max(need_x).max(need_y);
     }
     if distance.is_finite() && distance > 0.0 {
@@ -188,18 +188,11 @@ fn overview_distance(lo: [f64; 3], hi: [f64; 3], dir: [f64; 3], up: usize, fovy:
     }
 }
 
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
 /// `a` scaled to unit length (`a` is never zero here: the iso direction is never vertical).
-fn normalized(a: [f64; 3]) -> [f64; 3] {
-    let l = dot(a, a).sqrt();
-    a.map(|c| c / l)
+/// Divides by the length, as the paths were always made, rather than multiplying by its
+/// reciprocal (`DVec3::normalize`), which can differ in the last bit.
+fn normalized(a: DVec3) -> DVec3 {
+    a / a.length()
 }
 
 #[cfg(test)]
@@ -230,10 +223,6 @@ mod tests {
         generate_path(store, &options, &mut |_, _, _| {}).unwrap()
     }
 
-    fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-        [0, 1, 2].map(|i| a[i] - b[i])
-    }
-
     /// The first frame looks at the bounds' centre from the iso direction, and the bounds'
     /// corners just fit a 16:9 view with the margin (at least one on its edge, none outside).
     fn assert_overview(store: &Store, f: &PathFrame) {
@@ -242,22 +231,24 @@ mod tests {
         let centre = lerp3(h.bounds_min, h.bounds_max, 0.5);
         assert!(dist3(f.target, centre) < 1e-9 * dist3(f.eye, centre), "{f:?}");
         let d = dist3(f.eye, f.target);
-        let to_eye = sub(f.eye, f.target).map(|c| c / d);
-        assert!(dist3(to_eye, iso_direction(up)) < 1e-12, "{to_eye:?}");
+        let eye = DVec3::from(f.eye);
+        let to_eye = (eye - DVec3::from(f.target)) / d;
+        assert!(dist3(to_eye.to_array(), iso_direction(up)) < 1e-12, "{to_eye:?}");
         assert!(to_eye[up] > 0.0, "the overview looks down: {to_eye:?}");
-        let forward = to_eye.map(|c| -c);
-        let u = normalized(sub(f.up, forward.map(|c| c * dot(f.up, forward))));
-        let right = cross(forward, u);
+        let forward = -to_eye;
+        let fup = DVec3::from(f.up);
+        let u = normalized(fup - forward * fup.dot(forward));
+        let right = forward.cross(u);
         let tan_y = (f.fovy.to_radians() / 2.0).tan() * FRAME_MARGIN;
         let mut fill: f64 = 0.0;
         for i in 0..8 {
             let corner = [0, 1, 2].map(|a| if i & (1 << a) == 0 { h.bounds_min[a] } else { h.bounds_max[a] });
-            let c = sub(corner, f.eye);
-            let depth = dot(c, forward);
+            let c = DVec3::from(corner) - eye;
+            let depth = c.dot(forward);
             assert!(depth > 0.0, "corner {i} behind the eye");
             fill = fill
-                .max(dot(c, u).abs() / depth / tan_y)
-                .max(dot(c, right).abs() / depth / (tan_y * 16.0 / 9.0));
+                .max(c.dot(u).abs() / depth / tan_y)
+                .max(c.dot(right).abs() / depth / (tan_y * 16.0 / 9.0));
         }
         assert!((fill - 1.0).abs() < 1e-9, "the corners fill {fill} of the margin");
     }
