@@ -13,16 +13,10 @@ use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
 use tw_runtime::{Camera, ClusterRef, PageCache, SelectOptions, Selector};
 use tw_store::Store;
 
-fn plant() -> (tempfile::TempDir, Store) {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("plant.tw");
-    let params = tw_io::generate::PlantParams { triangles: 200_000, seed: 3 };
-    let source = tw_io::generate::PlantSource::new(params).unwrap();
-    let scene = tw_io::Scene::from_sources(vec![Box::new(source)]);
+/// The 200 k-triangle plant (seed 3), built once per process (tw-testkit).
+fn plant() -> Arc<Store> {
     let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    let store = Store::open(&path).unwrap();
-    (dir, store)
+    tw_testkit::plant(200_000, 3, options).store()
 }
 
 /// Every level-0 cluster of the store (the full-detail model).
@@ -42,7 +36,7 @@ fn full_detail(store: &Store) -> Vec<ClusterRef> {
 
 #[test]
 fn the_capsule_along_a_plant_walk_never_penetrates_the_full_detail_geometry() {
-    let (_dir, store) = plant();
+    let store = plant();
     let options = PathOptions { frames: 240, part: PathPart::Walk, seed: 2, ..Default::default() };
     let path = generate_path(&store, &options, &mut |_, _, _| {}).unwrap().path;
     let cameras: Vec<Camera> = path.frames.iter().map(|f| f.to_scene(store.header()).unwrap()).collect();

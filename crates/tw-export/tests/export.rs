@@ -1,8 +1,7 @@
 //! End to end over a store built from a generated plant: the GLB of a cut and of a region read
 //! back through tw-io's glTF importer, and the tileset's structure.
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
 
 use tw_export::cut::Region;
 use tw_export::{export_glb, export_tiles, GlbSelection, TilesOptions};
@@ -11,32 +10,21 @@ use tw_io::{ImportError, ObjectId, ObjectInfo, Triangle, TriangleSink};
 use tw_runtime::{Camera, PageCache};
 use tw_store::Store;
 
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
-/// A 30k-triangle plant built with this up axis and these units.
-fn build_plant(up: u8, units: &str) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("plant.tw");
-    let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: 30_000, seed: 1 })
-        .unwrap();
+/// A 30k-triangle plant (seed 1) built with this up axis and these units, once per process
+/// for each (tw-testkit).
+fn build_plant(up: u8, units: &str) -> &'static tw_testkit::Built {
     let options = tw_build::BuildOptions {
         memory: 256 << 20,
         up: tw_io::up::UpRequest::Axis(up),
         units: units.into(),
         ..Default::default()
     };
-    let scene = tw_io::Scene::from_sources(vec![Box::new(src)]);
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
+    tw_testkit::plant(30_000, 1, options)
 }
 
 /// The plant as generated (z-up, no units), built once for all tests.
 fn plant() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT.get_or_init(|| build_plant(2, "")).path
+    build_plant(2, "").path()
 }
 
 /// What the importer reads back: triangles, their bounds, object names.

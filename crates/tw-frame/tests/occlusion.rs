@@ -12,7 +12,7 @@
 //! and Vulkan (lavapipe); without an adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1`
 //! (CI), where they fail.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_frame::{FrameSettings, Occlusion};
 use tw_gpu::wgpu;
@@ -23,19 +23,17 @@ use tw_store::Store;
 
 mod common;
 
-use common::{gpu_lock, Built};
+use common::gpu_lock;
 
 /// The plant of the walk and the teleports.
 fn plant() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(200_000, 3)).store.clone()
+    common::plant(200_000, 3)
 }
 
 /// The assembly of the approach: 300 k triangles, a few boards in one cabinet, small enough for
 /// a debug test build.
 fn assembly() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_assembly(300_000, 1)).store.clone()
+    common::assembly(300_000, 1)
 }
 
 /// A walk at eye height inside the plant (smooth), every third frame of 72.

@@ -15,8 +15,7 @@ use common::gpu_lock;
 
 #[test]
 fn popping_is_zero_for_a_still_camera_and_seen_along_a_path() {
-    let built = common::build_plant(150_000, 7);
-    let store: Arc<tw_store::Store> = built.store.clone();
+    let store: Arc<tw_store::Store> = common::plant(150_000, 7);
     let _lock = gpu_lock();
     let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "popping", 256 << 20)
     else {

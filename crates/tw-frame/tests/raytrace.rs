@@ -8,7 +8,7 @@
 //! of evicted pages are dropped. Vulkan (lavapipe) for the rasterizer; without an adapter the
 //! tests are skipped unless `TERAWALK_REQUIRE_GPU=1` (CI), where they fail.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_frame::traced::TracedWalkthrough;
 use tw_frame::FrameSettings;
@@ -20,16 +20,14 @@ use tw_store::Store;
 
 mod common;
 
-use common::{gpu_lock, Built, H, W};
+use common::{gpu_lock, H, W};
 
 fn plant() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(200_000, 3)).store.clone()
+    common::plant(200_000, 3)
 }
 
 fn assembly() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_assembly(300_000, 1)).store.clone()
+    common::assembly(300_000, 1)
 }
 
 fn path_cameras(store: &Store, part: PathPart, frames: usize, step: usize) -> Vec<Camera> {

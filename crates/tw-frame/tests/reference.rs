@@ -4,7 +4,7 @@
 //! what a frame draws; the reference drawn in chunks under a small memory budget equals the one
 //! drawn under a large budget.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_frame::{FrameSettings, Occlusion};
 use tw_gpu::wgpu;
@@ -14,11 +14,10 @@ use tw_store::Store;
 
 mod common;
 
-use common::{gpu_lock, Built};
+use common::gpu_lock;
 
 fn store() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(100_000, 5)).store.clone()
+    common::plant(100_000, 5)
 }
 
 /// A few cameras of the default path (walk and fly-over).

@@ -3,7 +3,7 @@
 //! `draw_clusters` gives that frame's image (no culling of its own, nothing left out). GPU parts
 //! on Vulkan (lavapipe), skipped without an adapter unless `TERAWALK_REQUIRE_GPU=1`.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_frame::remote::ClusterIds;
 use tw_frame::{FrameSettings, Occlusion};
@@ -14,11 +14,10 @@ use tw_store::Store;
 
 mod common;
 
-use common::{gpu_lock, Built};
+use common::gpu_lock;
 
 fn plant() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(100_000, 5)).store.clone()
+    common::plant(100_000, 5)
 }
 
 #[test]

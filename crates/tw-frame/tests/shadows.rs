@@ -9,7 +9,7 @@
 //! Vulkan (lavapipe); without an adapter the tests are skipped unless `TERAWALK_REQUIRE_GPU=1`.
 
 use std::collections::HashSet;
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_frame::shadow::ShadowOptions;
 use tw_frame::{FrameSettings, Occlusion, ShadowSettings};
@@ -20,11 +20,10 @@ use tw_store::Store;
 
 mod common;
 
-use common::{gpu_lock, Built, H, W};
+use common::{gpu_lock, H, W};
 
 fn plant() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(200_000, 5)).store.clone()
+    common::plant(200_000, 5)
 }
 
 fn cameras(store: &Store, part: PathPart, frames: usize, step: usize) -> Vec<Camera> {

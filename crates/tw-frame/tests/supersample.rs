@@ -29,8 +29,7 @@ fn hard_edges(image: &Image) -> usize {
 
 #[test]
 fn supersampled_reference_is_the_reference_at_one_sample_and_smoother_at_sixteen() {
-    let built = common::build_plant(100_000, 5);
-    let store: Arc<tw_store::Store> = built.store.clone();
+    let store: Arc<tw_store::Store> = common::plant(100_000, 5);
     let _lock = gpu_lock();
     let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "supersample", 256 << 20)
     else {
@@ -73,7 +72,7 @@ fn supersampled_reference_is_the_reference_at_one_sample_and_smoother_at_sixteen
 
 #[test]
 fn a_grid_beyond_the_largest_texture_is_a_clear_error() {
-    let built = common::build_plant(20_000, 3);
+    let store = common::plant(20_000, 3);
     let _lock = gpu_lock();
     let renderer = match Renderer::new_headless_with(4096, 16, wgpu::Backends::VULKAN) {
         Ok(r) => r,
@@ -84,14 +83,13 @@ fn a_grid_beyond_the_largest_texture_is_a_clear_error() {
         Err(e) => panic!("{e}"),
     };
     let max = renderer.device().0.limits().max_texture_dimension_2d;
-    let mut walk = Walkthrough::new(built.store.clone(), renderer, StreamOptions::default()).unwrap();
-    let camera =
-        generate_path(&built.store, &PathOptions { frames: 2, ..Default::default() }, &mut |_, _, _| {})
-            .unwrap()
-            .path
-            .frames[0]
-            .to_scene(built.store.header())
-            .unwrap();
+    let mut walk = Walkthrough::new(store.clone(), renderer, StreamOptions::default()).unwrap();
+    let camera = generate_path(&store, &PathOptions { frames: 2, ..Default::default() }, &mut |_, _, _| {})
+        .unwrap()
+        .path
+        .frames[0]
+        .to_scene(store.header())
+        .unwrap();
     if 4096 * 8 <= max {
         eprintln!("SKIPPED: this device's largest texture is {max}");
         return;

@@ -4,7 +4,7 @@
 //! the whole eye-LOD cut pixel for pixel, while the eye's frustum-culled cut alone misses shadows;
 //! primary rays see the same in all three. No GPU needed.
 
-use std::sync::{Arc, OnceLock};
+use std::sync::Arc;
 
 use tw_core::color::{ColorMode, SHADOW_BLOCKED, SHADOW_LIT};
 use tw_frame::mask::compare_shadow_masks;
@@ -19,11 +19,10 @@ use tw_store::Store;
 #[allow(dead_code)]
 mod common;
 
-use common::{Built, H, W};
+use common::{H, W};
 
 fn plant() -> Arc<Store> {
-    static STORE: OnceLock<Built> = OnceLock::new();
-    STORE.get_or_init(|| common::build_plant(200_000, 3)).store.clone()
+    common::plant(200_000, 3)
 }
 
 fn walk_cameras(store: &Store) -> Vec<Camera> {

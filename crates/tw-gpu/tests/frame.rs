@@ -6,8 +6,8 @@
 //! fails. Vulkan on machines without a GPU: `apt-get install mesa-vulkan-drivers` and
 //! `VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json`.
 
-use std::path::{Path, PathBuf};
-use std::sync::{Mutex, OnceLock};
+use std::path::Path;
+use std::sync::Mutex;
 
 use glam::Vec3;
 use tw_gpu::{ColorMode, DrawMode, GpuError, Image, Renderer, Target};
@@ -44,28 +44,10 @@ fn renderer(backends: wgpu::Backends, w: u32, h: u32) -> Option<Renderer> {
     }
 }
 
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
+/// A 20 k-triangle plant (seed 3), built once per process (tw-testkit).
 fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let dir = tempfile::tempdir().unwrap();
-            let path = dir.path().join("plant.tw");
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            let source = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 20_000,
-                seed: 3,
-            })
-            .unwrap();
-            let scene = tw_io::Scene::from_sources(vec![Box::new(source)]);
-            tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-            Built { _dir: dir, path }
-        })
-        .path
+    let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+    tw_testkit::plant(20_000, 3, options).path()
 }
 
 /// Cameras around the plant (scene space), from oblique directions.

@@ -8,8 +8,8 @@
 //! `VK_ICD_FILENAMES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json`; GL uses Mesa's llvmpipe.
 
 use std::collections::HashSet;
-use std::path::{Path, PathBuf};
-use std::sync::{Mutex, OnceLock};
+use std::path::Path;
+use std::sync::Mutex;
 
 use tw_gpu::{ColorMode, GpuError, Image, Renderer};
 use tw_runtime::{Camera, PageCache, SelectOptions, Selector};
@@ -19,28 +19,15 @@ const W: u32 = 640;
 const H: u32 = 400;
 const PLANT_TRIANGLES: u64 = 50_000;
 
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
 fn plant_source() -> tw_io::generate::PlantSource {
     tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: PLANT_TRIANGLES, seed: 1 })
         .unwrap()
 }
 
+/// The plant, built once per process (tw-testkit).
 fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let dir = tempfile::tempdir().unwrap();
-            let path = dir.path().join("plant.tw");
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            let scene = tw_io::Scene::from_sources(vec![Box::new(plant_source())]);
-            tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-            Built { _dir: dir, path }
-        })
-        .path
+    let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+    tw_testkit::plant(PLANT_TRIANGLES, 1, options).path()
 }
 
 /// The oblique camera of the tests, in input coordinates (tw-preview) and scene space.

@@ -4,37 +4,19 @@
 //! fly-around; bad options are clear errors.
 
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart, RegionKind, WalkGrid, WalkParams};
 use tw_store::Store;
 
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
+/// How every store of these tests is built.
+fn build_options() -> tw_build::BuildOptions {
+    tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }
 }
 
-fn build(scene: tw_io::Scene, name: &str) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(name);
-    let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
-}
-
+/// The 50 k-triangle plant (seed 1), built once per process (tw-testkit).
 fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant.tw")
-        })
-        .path
+    tw_testkit::plant(50_000, 1, build_options()).path()
 }
 
 /// One closed icosphere (a stand-in for a scanned statue).
@@ -58,11 +40,9 @@ impl TriangleSource for Sphere {
 }
 
 fn sphere_path(r: f64) -> PathBuf {
-    static SMALL: OnceLock<Built> = OnceLock::new();
-    static LARGE: OnceLock<Built> = OnceLock::new();
-    let cell = if r < 2.0 { &SMALL } else { &LARGE };
-    cell.get_or_init(|| {
-        build(tw_io::Scene::from_sources(vec![Box::new(Sphere([3.0, -2.0, 1.0], r))]), "s.tw")
+    // Once per radius, as the tests call it with a small and a large one.
+    tw_testkit::once(format!("tw-runtime pathgen sphere {r}"), || {
+        tw_testkit::build(Box::new(Sphere([3.0, -2.0, 1.0], r)), &build_options())
     })
     .path
     .clone()

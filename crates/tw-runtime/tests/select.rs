@@ -3,40 +3,16 @@
 //! the page cache under a moving camera, corrupt pages.
 
 use std::collections::{HashMap, HashSet};
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
 
 use glam::Vec3;
 use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 use tw_runtime::{Camera, PageCache, ResidentPage, SelectOptions, Selection, Selector};
 use tw_store::Store;
 
-/// A built store that lives for the whole test run.
-struct Built {
-    _dir: tempfile::TempDir,
-    path: PathBuf,
-}
-
-fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(name);
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
-}
-
+/// The 50 k-triangle plant (seed 1), built once per process (tw-testkit).
 fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let src = tw_io::generate::PlantSource::new(tw_io::generate::PlantParams {
-                triangles: 50_000,
-                seed: 1,
-            })
-            .unwrap();
-            let options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant.tw", options)
-        })
-        .path
+    tw_testkit::plant(50_000, 1, tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }).path()
 }
 
 /// A source made of whole icospheres (closed, manifold), one object each.
@@ -68,18 +44,16 @@ impl TriangleSource for Spheres {
 /// A big sphere split over several cells (small `max_cell_triangles`), beside a row of small
 /// ones that HLOD merges: closed input, so no cut may have a boundary edge.
 fn spheres_path() -> &'static Path {
-    static SPHERES: OnceLock<Built> = OnceLock::new();
-    &SPHERES
-        .get_or_init(|| {
-            let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
-            for i in 0..6 {
-                list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
-            }
-            let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            options.redefine.max_cell_triangles = 8192;
-            build(tw_io::Scene::from_sources(vec![Box::new(Spheres(list))]), "spheres.tw", options)
-        })
-        .path
+    tw_testkit::once("tw-runtime select spheres".into(), || {
+        let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
+        for i in 0..6 {
+            list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
+        }
+        let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+        options.redefine.max_cell_triangles = 8192;
+        tw_testkit::build(Box::new(Spheres(list)), &options)
+    })
+    .path()
 }
 
 fn open(path: &Path) -> Store {
@@ -502,7 +476,7 @@ fn bench_selection_1m_plant() {
         tw_io::generate::PlantSource::new(tw_io::generate::PlantParams { triangles: 1_000_000, seed: 1 })
             .unwrap();
     let options = tw_build::BuildOptions { memory: 1 << 30, ..Default::default() };
-    let built = build(tw_io::Scene::from_sources(vec![Box::new(src)]), "plant1m.tw", options);
+    let built = tw_testkit::build(Box::new(src), &options);
     let store = open(&built.path);
     eprintln!(
         "built in {:.1} s: {} nodes, {} groups, {} pages, {} bytes",

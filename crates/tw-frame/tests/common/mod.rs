@@ -12,39 +12,22 @@ use tw_store::Store;
 pub const W: u32 = 480;
 pub const H: u32 = 270;
 
-/// A built store; the directory lives as long as the store is used.
-pub struct Built {
-    _dir: tempfile::TempDir,
-    pub store: Arc<Store>,
+/// How the stores of these tests are built, in `units` (empty when unknown).
+fn options(units: &str) -> tw_build::BuildOptions {
+    tw_build::BuildOptions { memory: 256 << 20, units: units.to_string(), ..Default::default() }
 }
 
-/// Generates a plant of `triangles` with `seed` and builds it.
-pub fn build_plant(triangles: u64, seed: u64) -> Built {
-    let params = tw_io::generate::PlantParams { triangles, seed };
-    let source = tw_io::generate::PlantSource::new(params).unwrap();
-    build(Box::new(source), "")
+/// The generated plant of `triangles` with `seed`, built once per process (tw-testkit).
+pub fn plant(triangles: u64, seed: u64) -> Arc<Store> {
+    tw_testkit::plant(triangles, seed, options("")).store()
 }
 
-/// Generates a CAD assembly (millimetres) of `triangles` with `seed` as one object, as
+/// The generated CAD assembly (millimetres) of `triangles` with `seed` as one object, as
 /// `terawalk generate assembly --one-object` writes it (thousands of small closed parts with
-/// no ids), and builds it.
+/// no ids), built once per process (tw-testkit).
 #[allow(dead_code)] // Each test binary compiles this module; not every one builds an assembly.
-pub fn build_assembly(triangles: u64, seed: u64) -> Built {
-    use tw_io::generate::{AssemblyObjects, AssemblyParams, AssemblySource};
-    let params = AssemblyParams { triangles, seed, objects: AssemblyObjects::One };
-    let source = AssemblySource::new(params).unwrap();
-    build(Box::new(source), "mm")
-}
-
-/// Builds `source` (in `units`, empty when unknown) into a store in a temporary directory.
-fn build(source: Box<dyn tw_io::TriangleSource>, units: &str) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("scene.tw");
-    let scene = tw_io::Scene::from_sources(vec![source]);
-    let options =
-        tw_build::BuildOptions { memory: 256 << 20, units: units.to_string(), ..Default::default() };
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { store: Arc::new(Store::open(&path).unwrap()), _dir: dir }
+pub fn assembly(triangles: u64, seed: u64) -> Arc<Store> {
+    tw_testkit::assembly(triangles, seed, tw_io::generate::AssemblyObjects::One, options("mm")).store()
 }
 
 /// One GPU test at a time: software rasterizers use every core.

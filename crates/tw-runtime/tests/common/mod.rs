@@ -3,49 +3,21 @@
 //! icospheres.
 #![allow(dead_code)] // each test binary uses some of them
 
-use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
+use std::path::Path;
 
 use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 
-pub struct Built {
-    _dir: tempfile::TempDir,
-    pub path: PathBuf,
-}
-
-pub fn build(scene: tw_io::Scene, name: &str, options: tw_build::BuildOptions) -> Built {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join(name);
-    tw_build::build(scene, &path, &options, &mut tw_build::NoProgress).unwrap();
-    Built { _dir: dir, path }
-}
-
-/// The 50 k-triangle plant (seed 1) built with `options`.
-fn plant(name: &str, options: tw_build::BuildOptions) -> Built {
-    let params = tw_io::generate::PlantParams { triangles: 50_000, seed: 1 };
-    let src = tw_io::generate::PlantSource::new(params).unwrap();
-    build(tw_io::Scene::from_sources(vec![Box::new(src)]), name, options)
-}
-
+/// The 50 k-triangle plant (seed 1), built once per process (tw-testkit).
 pub fn plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| plant("plant.tw", tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }))
-        .path
+    tw_testkit::plant(50_000, 1, tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }).path()
 }
 
 /// The plant with small pages (1024 triangles) and only the top two levels in root pages:
 /// many pages, so that a walk keeps needing new ones.
 pub fn small_pages_plant_path() -> &'static Path {
-    static PLANT: OnceLock<Built> = OnceLock::new();
-    &PLANT
-        .get_or_init(|| {
-            let mut options =
-                tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
-            options.pages.page_triangles = 1024;
-            plant("plant-small-pages.tw", options)
-        })
-        .path
+    let mut options = tw_build::BuildOptions { memory: 256 << 20, root_depth: 2, ..Default::default() };
+    options.pages.page_triangles = 1024;
+    tw_testkit::plant(50_000, 1, options).path()
 }
 
 /// Whole icospheres (closed, manifold), one object each.
@@ -73,16 +45,14 @@ impl TriangleSource for Spheres {
 /// The same closed scene as tests/select.rs: a big sphere over several cells beside a row of
 /// small ones that HLOD merges.
 pub fn spheres_path() -> &'static Path {
-    static SPHERES: OnceLock<Built> = OnceLock::new();
-    &SPHERES
-        .get_or_init(|| {
-            let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
-            for i in 0..6 {
-                list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
-            }
-            let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-            options.redefine.max_cell_triangles = 8192;
-            build(tw_io::Scene::from_sources(vec![Box::new(Spheres(list))]), "spheres.tw", options)
-        })
-        .path
+    tw_testkit::once("tw-runtime spheres".into(), || {
+        let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
+        for i in 0..6 {
+            list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
+        }
+        let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+        options.redefine.max_cell_triangles = 8192;
+        tw_testkit::build(Box::new(Spheres(list)), &options)
+    })
+    .path()
 }
