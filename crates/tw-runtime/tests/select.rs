@@ -6,55 +6,11 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use glam::Vec3;
-use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
 use tw_runtime::{Camera, PageCache, ResidentPage, SelectOptions, Selection, Selector};
 use tw_store::Store;
 
-/// The 50 k-triangle plant (seed 1), built once per process (tw-testkit).
-fn plant_path() -> &'static Path {
-    tw_testkit::plant(50_000, 1, tw_build::BuildOptions { memory: 256 << 20, ..Default::default() }).path()
-}
-
-/// A source made of whole icospheres (closed, manifold), one object each.
-struct Spheres(Vec<([f64; 3], f64, u32)>);
-
-fn icosphere(center: [f64; 3], r: f64, level: u32) -> Vec<[[f64; 3]; 3]> {
-    let (v, f) = tw_io::generate::icosphere(center, r, level);
-    f.iter().map(|t| t.map(|i| v[i as usize])).collect()
-}
-
-impl TriangleSource for Spheres {
-    fn name(&self) -> String {
-        "spheres".into()
-    }
-    fn progress_total(&self) -> Option<u64> {
-        None
-    }
-    fn stream(self: Box<Self>, sink: &mut dyn TriangleSink) -> Result<SourceSummary, ImportError> {
-        for (o, &(c, r, level)) in self.0.iter().enumerate() {
-            sink.object(o as u32, &ObjectInfo::default())?;
-            for t in icosphere(c, r, level) {
-                sink.triangle(&Triangle::new(t, o as u32))?;
-            }
-        }
-        Ok(SourceSummary { objects: self.0.len() as u32, ..Default::default() })
-    }
-}
-
-/// A big sphere split over several cells (small `max_cell_triangles`), beside a row of small
-/// ones that HLOD merges: closed input, so no cut may have a boundary edge.
-fn spheres_path() -> &'static Path {
-    tw_testkit::once("tw-runtime select spheres".into(), || {
-        let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
-        for i in 0..6 {
-            list.push(([15.0 + 3.0 * i as f64, 0.0, 0.0], 1.0, 3));
-        }
-        let mut options = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
-        options.redefine.max_cell_triangles = 8192;
-        tw_testkit::build(Box::new(Spheres(list)), &options)
-    })
-    .path()
-}
+mod common;
+use common::{plant_path, spheres_path};
 
 fn open(path: &Path) -> Store {
     Store::open(path).unwrap()

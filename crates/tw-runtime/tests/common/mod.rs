@@ -1,4 +1,4 @@
-//! Stores shared by the streaming and coherence tests, built once per test binary with
+//! Stores shared by the selection, streaming and coherence tests, built once per test binary with
 //! tw-build: a 50 k-triangle plant (default pages and small ones) and a closed scene of
 //! icospheres.
 #![allow(dead_code)] // each test binary uses some of them
@@ -42,8 +42,8 @@ impl TriangleSource for Spheres {
     }
 }
 
-/// The same closed scene as tests/select.rs: a big sphere over several cells beside a row of
-/// small ones that HLOD merges.
+/// A big sphere split over several cells (small `max_cell_triangles`), beside a row of small
+/// ones that HLOD merges: closed input, so no cut may have a boundary edge.
 pub fn spheres_path() -> &'static Path {
     tw_testkit::once("tw-runtime spheres".into(), || {
         let mut list = vec![([0.0, 0.0, 0.0], 10.0, 6)];
