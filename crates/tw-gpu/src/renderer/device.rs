@@ -190,6 +190,7 @@ impl Renderer {
             indirect: IndirectArgs::default(),
             draw_mode: if indirect_supported { DrawMode::Indirect } else { DrawMode::Direct },
             indirect_supported,
+            first_instance_supported: device.features().contains(wgpu::Features::INDIRECT_FIRST_INSTANCE),
             depth_copy: None,
             box_queries: None,
             gpu_cull: None,

@@ -117,6 +117,9 @@ pub struct Renderer {
     indirect: IndirectArgs,
     draw_mode: DrawMode,
     pub(crate) indirect_supported: bool,
+    /// The device has `INDIRECT_FIRST_INSTANCE` (asked once: the shaded passes check it per
+    /// partly shadowed cluster).
+    pub(crate) first_instance_supported: bool,
     depth_copy: Option<depth::DepthCopy>,
     box_queries: Option<query::BoxQueries>,
     pub(crate) gpu_cull: Option<gpu_cull::GpuCull>,
@@ -165,8 +168,7 @@ impl Renderer {
     /// ([`Renderer::set_shadow_triangle_classes`]): they need indirect draws with a first
     /// instance (renderer/classified.rs). The GPU-culled pass draws clusters whole.
     pub fn refines_shadow_classes(&self) -> bool {
-        self.draw_mode == DrawMode::Indirect
-            && self.device.features().contains(wgpu::Features::INDIRECT_FIRST_INSTANCE)
+        self.draw_mode == DrawMode::Indirect && self.first_instance_supported
     }
 
     /// Whether the item buffer has triangle ids (`Features::PRIMITIVE_INDEX`).
