@@ -6,6 +6,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 
 use tw_frame::shadow::ShadowOptions;
 
+use crate::generate_spec::{parse_generate_spec, GenerateSpec};
 use crate::units::{parse_bytes, parse_count, parse_page_budget};
 
 #[derive(Parser, Debug)]
@@ -61,8 +62,17 @@ pub enum Command {
     #[command(after_help = "Examples:\n  terawalk build plant.ply              # writes plant.tw\n  \
                             terawalk build part1.obj part2.glb -o site.tw --memory 1G --threads 2\n  \
                             terawalk build scan.ply.gz -o scan.tw --up y\n  \
-                            terawalk build plant.ply -o fine.tw --cluster-triangles 64")]
+                            terawalk build plant.ply -o fine.tw --cluster-triangles 64\n  \
+                            terawalk build --generate plant:1G -o plant.tw --memory 2G\n  \
+                            terawalk build plant.ply -o plant.tw --plan /shared/plan --submit slurm\n  \
+                            terawalk build plant.ply -o plant.tw --jobs local:2")]
     Build(BuildArgs),
+    /// Run one job of a build plan (`terawalk build --plan DIR`); idempotent and restartable.
+    #[command(after_help = "Examples:\n  terawalk build plant.ply -o plant.tw --plan plan\n  \
+                            terawalk build-job plan prepare\n  \
+                            terawalk build-job plan cells-000\n  \
+                            terawalk build-job plan pack")]
+    BuildJob(BuildJobArgs),
     /// Describe a store file; `--verify` checks every checksum and invariant.
     #[command(after_help = "Examples:\n  terawalk info plant.tw\n  terawalk info plant.tw --verify")]
     Info(InfoArgs),
@@ -918,8 +928,14 @@ mod tests {
 #[derive(Args, Debug)]
 pub struct BuildArgs {
     /// Model files (.obj .ply .stl .gltf .glb, each optionally .gz); several form one scene.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "generate")]
     pub inputs: Vec<PathBuf>,
+    /// Build a generated scene instead of files, streamed straight into the build (no model
+    /// file on disk): `plant:COUNT` or `assembly:COUNT`, optionally `,seed=N` and, for the
+    /// assembly, `,one-object` (e.g. plant:1G, assembly:10M,seed=2). Units: m for the plant,
+    /// mm for the assembly, unless `--units`. Needs -o.
+    #[arg(long, value_name = "SPEC", value_parser = parse_generate_spec, conflicts_with = "inputs")]
+    pub generate: Option<GenerateSpec>,
     /// The store file to write (conventionally .tw). Default: the input's name with the
     /// extension .tw, beside it (`scan.ply.gz` → `scan.tw`); several inputs need it.
     #[arg(short, long)]
@@ -952,6 +968,59 @@ pub struct BuildArgs {
     pub cluster_triangles: u32,
     #[command(flatten)]
     pub import: ImportArgs,
+    #[command(flatten)]
+    pub plan: PlanArgs,
+}
+
+/// `build`'s flags for a build as a plan of jobs (docs/BUILD.md, "A plan of jobs").
+#[derive(Args, Debug, Clone, Default)]
+pub struct PlanArgs {
+    /// Write the build as a plan of jobs into DIR (a shared directory on a cluster) instead of
+    /// building: `terawalk build-job DIR JOB` runs one job; `--jobs` or `--submit` run them all.
+    #[arg(long, value_name = "DIR")]
+    pub plan: Option<PathBuf>,
+    /// Run the plan on this machine: `local` (one job at a time) or `local:N` (N at once, each
+    /// with the whole `--memory`). Without `--plan` the plan lives in a temporary directory.
+    #[arg(long, value_name = "local[:N]", value_parser = parse_local_jobs)]
+    pub jobs: Option<usize>,
+    /// Submit the plan written to `--plan DIR` to a scheduler: `slurm` (sbatch jobs with
+    /// dependencies) or `k8s` (writes DIR/k8s.yaml, Kubernetes Jobs).
+    #[arg(long, value_enum, requires = "plan")]
+    pub submit: Option<SubmitTarget>,
+    /// Cell shards: the plan's LOD jobs, each over a range of cells (default: one per ~10^7
+    /// input triangles, estimated from the inputs' sizes).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub shards: Option<u32>,
+}
+
+/// Where `build --submit` sends a plan.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SubmitTarget {
+    /// Slurm: `sbatch` jobs with `afterok` dependencies over the shared plan directory.
+    Slurm,
+    /// Kubernetes: a manifest of Jobs over a shared volume, written to DIR/k8s.yaml.
+    K8s,
+}
+
+/// `--jobs local[:N]`: N ≥ 1 workers (1 without `:N`).
+fn parse_local_jobs(s: &str) -> Result<usize, String> {
+    let rest = s.trim().strip_prefix("local").ok_or_else(|| format!("`{s}`: expected local or local:N"))?;
+    match rest.strip_prefix(':') {
+        None if rest.is_empty() => Ok(1),
+        Some(n) => match n.parse::<usize>() {
+            Ok(n) if (1..=256).contains(&n) => Ok(n),
+            _ => Err(format!("`{s}`: N must be a number of workers from 1 to 256")),
+        },
+        None => Err(format!("`{s}`: expected local or local:N")),
+    }
+}
+
+#[derive(Args, Debug)]
+pub struct BuildJobArgs {
+    /// The plan directory written by `terawalk build --plan DIR`.
+    pub dir: PathBuf,
+    /// The job to run (its id in DIR/plan.json, e.g. prepare, cells-003, merge-1-000, pack).
+    pub job: String,
 }
 
 #[derive(Args, Debug)]

@@ -6,6 +6,7 @@
 mod out;
 mod cli;
 mod commands;
+mod generate_spec;
 mod progress;
 mod units;
 
@@ -31,6 +32,7 @@ fn main() {
         cli::Command::Generate(a) => commands::generate::run(a),
         cli::Command::Preview(a) => commands::preview::run(a),
         cli::Command::Build(a) => commands::build::run(a, cli.quiet),
+        cli::Command::BuildJob(a) => commands::build_job::run(a, cli.quiet),
         cli::Command::Info(a) => commands::info::run(a),
         cli::Command::Render(a) => commands::render::run(a, cli.quiet),
         cli::Command::Bench(a) => commands::bench::run(a).map(|_| ()),

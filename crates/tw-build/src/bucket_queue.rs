@@ -7,7 +7,8 @@ use crate::seams::SeamTable;
 
 /// A bucket of cells and its seams, read ahead of the cells that need them.
 pub(crate) struct LoadedBucket {
-    pub bucket: crate::cells::Bucket,
+    /// The triangles (`None` where the cells' DAGs are read from a build plan's files instead).
+    pub bucket: Option<crate::cells::Bucket>,
     pub seams: SeamTable,
 }
 
@@ -16,6 +17,8 @@ pub(crate) struct LoadedBucket {
 pub(crate) struct BucketQueue {
     state: std::sync::Mutex<QueueState>,
     cond: std::sync::Condvar,
+    /// The buckets this queue reads (a build plan's job reads a range of them).
+    range: std::ops::Range<usize>,
 }
 
 /// Buckets the loader may read beyond the one the consumer is in.
@@ -32,16 +35,18 @@ struct QueueState {
 }
 
 impl BucketQueue {
-    pub(crate) fn new(buckets: usize) -> BucketQueue {
+    /// A queue over buckets `range` of `buckets`.
+    pub(crate) fn new(buckets: usize, range: std::ops::Range<usize>) -> BucketQueue {
         BucketQueue {
             state: std::sync::Mutex::new(QueueState {
                 slots: vec![None; buckets],
-                loaded: 0,
-                released: 0,
+                loaded: range.start,
+                released: range.start,
                 error: None,
                 stop: false,
             }),
             cond: std::sync::Condvar::new(),
+            range,
         }
     }
 
@@ -55,8 +60,8 @@ impl BucketQueue {
         &self,
         load: impl Fn(usize) -> Result<LoadedBucket, BuildError>,
     ) -> Result<(), BuildError> {
-        let n = self.lock().slots.len();
-        for b in 0..n {
+        let n = self.range.end;
+        for b in self.range.clone() {
             {
                 let mut st = self.lock();
                 while !st.stop && b > st.released + BUCKETS_AHEAD {

@@ -36,12 +36,13 @@ use std::ops::Range;
 use std::path::Path;
 
 use tempfile::TempPath;
+use tw_core::release_behind::ReleaseBehind;
 
 use crate::error::BuildError;
 use crate::ingest::Ingested;
 use crate::redefine::Redefined;
 use crate::types::{CellMesh, GRID_STEPS};
-use crate::workio::{map_sub_chunks, temp_path, SpillWriter};
+use crate::workio::{map_sub_chunks, temp_path, SpillWriter, WorkPath};
 
 /// Bytes per triangle in a bucket file.
 pub const RECORD_BYTES: usize = 35;
@@ -93,9 +94,17 @@ impl Rec {
 }
 
 struct BucketFile {
-    path: TempPath,
+    path: WorkPath,
     cells: Range<u32>,
     triangles: u64,
+}
+
+/// [`CellFiles`] kept on disk for a build plan: each bucket's file name, cells and triangles.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct CellFilesMeta {
+    buckets: Vec<(String, u32, u32, u64)>,
+    cell_triangles: Vec<u64>,
+    objects: u32,
 }
 
 /// The triangles of every cell, in bucket files on disk (deleted when dropped).
@@ -109,6 +118,8 @@ pub struct CellFiles {
 impl CellFiles {
     /// Writes every triangle of `ing` to the bucket of its cell. `memory_budget` (bytes) bounds
     /// what reading one bucket and building one of its cells takes (see the module docs).
+    /// Consumes the working file: its last pass gives its disk back behind the reader
+    /// (`tw_core::release_behind`), so afterwards it reads as zeros; the caller removes it.
     pub fn distribute(
         ing: &Ingested,
         cells: &Redefined,
@@ -147,6 +158,43 @@ impl CellFiles {
 
     pub fn bucket_count(&self) -> usize {
         self.buckets.len()
+    }
+
+    /// Deletes bucket `b`'s file once its cells are built (a plain build's; a plan keeps its
+    /// prepared files for the jobs that read them, and re-runs).
+    pub fn discard_bucket(&self, b: usize) {
+        self.buckets[b].path.discard();
+    }
+
+    /// Keeps the bucket files (see [`WorkPath::keep`]) and describes them by name, for a
+    /// build plan's later jobs ([`CellFiles::reopen`]).
+    pub fn keep(self) -> Result<CellFilesMeta, BuildError> {
+        let mut buckets = Vec::with_capacity(self.buckets.len());
+        for b in self.buckets {
+            let path = b.path.keep()?;
+            let name = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+            buckets.push((name, b.cells.start, b.cells.end, b.triangles));
+        }
+        Ok(CellFilesMeta { buckets, cell_triangles: self.cell_triangles, objects: self.objects })
+    }
+
+    /// The bucket files [`CellFiles::keep`] described, in `dir`; they are not deleted on drop.
+    pub fn reopen(meta: &CellFilesMeta, dir: &Path) -> CellFiles {
+        let buckets = meta
+            .buckets
+            .iter()
+            .map(|(name, start, end, triangles)| BucketFile {
+                path: WorkPath::Kept(dir.join(name)),
+                cells: *start..*end,
+                triangles: *triangles,
+            })
+            .collect();
+        CellFiles { buckets, cell_triangles: meta.cell_triangles.clone(), objects: meta.objects }
+    }
+
+    /// Triangles per cell.
+    pub fn cell_triangles(&self) -> &[u64] {
+        &self.cell_triangles
     }
 
     /// The cells of bucket `b`.
@@ -284,6 +332,13 @@ fn write_group(
     let mut writer = SpillWriter::direct(paths.iter().map(|p| p.to_path_buf()).collect(), buf_size)?;
     let end = first + group.len();
     let (work, grid) = (&ing.work, &ing.grid);
+    // The last group's pass is the working file's last read (the pipeline removes it next):
+    // its disk is released behind the reader, so that it and the buckets are not both on disk
+    // in full. Buckets hold cells in order, so the last cell's bucket is the last bucket.
+    let last_pass = bucket_of.last().is_none_or(|&b| (b as usize) < end);
+    // Tests release every 64 KiB, so that their small builds go through it too.
+    let step = if cfg!(test) { 64 << 10 } else { tw_core::release_behind::RELEASE_STEP };
+    let mut release = last_pass.then(|| ReleaseBehind::with_step(work.path(), step));
     // The pool decodes, assigns, quantizes and encodes each sub-chunk of the working file, its
     // records grouped by bucket (stable: file order within a bucket); this thread only appends
     // each sub-chunk's runs, in order, so every bucket file gets its triangles in file order.
@@ -308,13 +363,22 @@ fn write_group(
                 }
             }
         }
+        let read = chunk_start * crate::ingest::RECORD_BYTES as u64 + bytes.len() as u64;
+        release.iter_mut().for_each(|r| r.consumed(read));
         Ok(())
     })?;
+    if release.is_some_and(|r| r.keeps_file()) {
+        tracing::debug!("the working file's disk is kept to the end of distribute (no hole punching here)");
+    }
     drop(writer.finish()?);
     Ok(paths
         .into_iter()
         .zip(group)
-        .map(|(path, (cells, triangles))| BucketFile { path, cells: cells.clone(), triangles: *triangles })
+        .map(|(path, (cells, triangles))| BucketFile {
+            path: WorkPath::Temp(path),
+            cells: cells.clone(),
+            triangles: *triangles,
+        })
         .collect())
 }
 
@@ -572,11 +636,25 @@ pub(crate) mod tests {
     #[test]
     fn every_triangle_lands_in_exactly_one_cell() {
         let dir = tempfile::tempdir().unwrap();
-        let (ing, files) = plant_cells(dir.path(), 200_000, 4 << 20);
+        let ing = ingest_plant(dir.path(), 200_000);
+        // Read before distributing: distribute releases the working file's disk as it reads it.
+        let expected = direct_triangles(&ing);
+        let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
+        r.order_by_hierarchy();
+        let files = CellFiles::distribute(&ing, &r, dir.path(), 4 << 20).unwrap();
         assert!(files.bucket_count() > 1);
         let got = mesh_triangles(&files);
         assert_eq!(got.len(), 200_000);
-        assert_eq!(got, direct_triangles(&ing));
+        assert_eq!(got, expected);
+        // Released in the tests' 64 KiB steps (where the file system can punch holes): all but
+        // the last partial step.
+        let meta = std::fs::metadata(ing.work.path()).unwrap();
+        let probe = std::fs::File::create(dir.path().join("probe")).unwrap();
+        if tw_core::release_behind::punch_hole(&probe, 0, 4096).is_ok() {
+            use std::os::unix::fs::MetadataExt;
+            let kept = meta.blocks() * 512;
+            assert!(kept <= 2 * (64 << 10), "{kept} of {} bytes kept", meta.len());
+        }
     }
 
     #[test]
@@ -648,8 +726,9 @@ pub(crate) mod tests {
     #[test]
     fn distribution_is_deterministic() {
         let dir = tempfile::tempdir().unwrap();
-        let ing = ingest_plant(dir.path(), 60_000);
         let run = || {
+            // A working file per run: distribute releases it as it reads it.
+            let ing = ingest_plant(dir.path(), 60_000);
             let mut r = redefine(&ing, &RedefineParams::default()).unwrap();
             r.order_by_hierarchy();
             let files = CellFiles::distribute(&ing, &r, dir.path(), 1 << 20).unwrap();

@@ -20,7 +20,7 @@
 use crate::types::GridBox;
 
 /// One node of the tree.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct HNode {
     /// Contains the bounds of every item below the node (equal to their union).
     pub bounds: GridBox,
@@ -43,7 +43,7 @@ impl HNode {
 }
 
 /// A binary AABB tree (see the module docs for the layout).
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct Hierarchy {
     pub nodes: Vec<HNode>,
 }
@@ -196,6 +196,57 @@ impl Hierarchy {
             return Err(format!("item {c} is in no leaf"));
         }
         Ok(())
+    }
+}
+
+/// Lookups over a [`Hierarchy`] that phase 5 needs per node: parent, depth, the leaf of each
+/// cell and the cells under each node.
+pub(crate) struct TreeIndex {
+    /// `u32::MAX` for the root.
+    pub parent: Vec<u32>,
+    pub depth: Vec<u32>,
+    pub leaf_of_cell: Vec<u32>,
+    /// The cells (leaf order) under each node: `first..last + 1`.
+    pub cell_range: Vec<(u32, u32)>,
+}
+
+impl TreeIndex {
+    pub fn new(hierarchy: &Hierarchy) -> TreeIndex {
+        let n = hierarchy.nodes.len();
+        let mut parent = vec![u32::MAX; n];
+        let mut depth = vec![0u32; n];
+        let mut leaf_of_cell = vec![u32::MAX; hierarchy.leaf_count()];
+        for (i, node) in hierarchy.nodes.iter().enumerate() {
+            for c in node.children() {
+                parent[c] = i as u32;
+                depth[c] = depth[i] + 1;
+            }
+            if let Some(cell) = node.cell {
+                leaf_of_cell[cell as usize] = i as u32;
+            }
+        }
+        // Children come after parents: a reverse sweep sees every child before its parent.
+        let mut cell_range = vec![(u32::MAX, 0u32); n];
+        for i in (0..n).rev() {
+            let node = &hierarchy.nodes[i];
+            if let Some(cell) = node.cell {
+                cell_range[i] = (cell, cell + 1);
+            }
+            for c in node.children() {
+                let (lo, hi) = cell_range[c];
+                cell_range[i] = (cell_range[i].0.min(lo), cell_range[i].1.max(hi));
+            }
+        }
+        TreeIndex { parent, depth, leaf_of_cell, cell_range }
+    }
+
+    /// `node`'s index among its parent's children (0 for the root): its provisional group ids'
+    /// slot (`crate::provisional`).
+    pub fn slot(&self, hierarchy: &Hierarchy, node: u32) -> u32 {
+        match self.parent[node as usize] {
+            u32::MAX => 0,
+            p => node - hierarchy.nodes[p as usize].first_child,
+        }
     }
 }
 

@@ -121,7 +121,7 @@ pub fn roots_of(dag: &LodDag, group_base: u32) -> Roots {
 }
 
 /// What [`build_hlod`] made at one node.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HlodNode {
     /// The node's clusters and groups; the groups are roots (error = ∞). The clusters'
     /// `refined_from` holds the caller's ids of the replaced groups (`replaced`).
@@ -136,7 +136,7 @@ pub struct HlodNode {
 }
 
 /// How one node's simplification went.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub enum HlodOutcome {
     /// Nothing to simplify (no triangles, or already at or below the target).
     #[default]
@@ -150,7 +150,7 @@ pub enum HlodOutcome {
 }
 
 /// Triangles in and out of one node, and how they were reduced.
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct HlodStats {
     pub triangles_in: usize,
     pub target: usize,

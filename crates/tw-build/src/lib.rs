@@ -9,6 +9,8 @@
 //! 5. `pages`: clusters packed into compressed, checksummed pages.
 //! 6. write: the store file, atomically; [`build`] runs all phases (`pipeline`).
 //!
+//! [`plan`] runs the same phases as separate jobs (a build plan for a cluster's scheduler).
+//!
 //! Beside them: `cells` (triangles distributed into their cells, out of core), `seams` (seams
 //! between cells), `sampling` (the centroid samples redefinition plans its splits from), `cut`
 //! (cut extraction and the checks of the cluster DAG model), `types` (plain data handed between
@@ -20,6 +22,7 @@
 #![warn(unnameable_types)]
 
 mod bucket_queue;
+mod cell_pass;
 mod cells;
 mod clusterlod;
 mod cut;
@@ -33,6 +36,8 @@ mod lod;
 mod pages;
 mod parts;
 mod pipeline;
+pub mod plan;
+mod provisional;
 mod redefine;
 mod sampling;
 mod seams;

@@ -31,19 +31,20 @@ use tw_io::up::{UpChoice, UpRequest};
 use tw_io::Scene;
 use tw_store::{EncodedCluster, StoreInfo, StoreWriter};
 
-use crate::bucket_queue::{BucketQueue, LoadedBucket};
+use crate::cell_pass::{BuiltCell, CellPass, CellSource};
 use crate::cells::CellFiles;
 use crate::error::BuildError;
-use crate::hierarchy::Hierarchy;
-use crate::hlod::{roots_of, HlodOutcome, HlodParams, Roots};
+use crate::hierarchy::{Hierarchy, TreeIndex};
+use crate::hlod::{roots_of, HlodNode, HlodOutcome, HlodParams, Roots};
 use crate::hlod_jobs::{HlodBuilt, HlodInput, HlodJob, HlodJobs};
-use crate::in_order::{for_each_in_order, Window};
+use crate::in_order::Window;
 use crate::ingest::Ingested;
-use crate::lod::{build_cell_lod_with_seams, LodParams};
-use crate::pages::{encode_clusters, PagePacker, PageParams};
+use crate::lod::LodParams;
+use crate::pages::{PagePacker, PageParams};
+use crate::plan::CellRecords;
 use crate::redefine::{redefine, RedefineParams, RedefineReport, Redefined};
 use crate::seams::{SeamFiles, SeamTable};
-use crate::types::{LodDag, LodGroup};
+use crate::types::{Grid, LodDag, LodGroup};
 
 /// The most worker threads a build starts: 4 per core. More cannot run at once and only add
 /// contention and memory (each LOD worker holds a cell's working set; 10,000 threads on 2 cores
@@ -180,13 +181,17 @@ impl BuildReport {
     }
 }
 
-struct Timer<'a> {
+pub(crate) struct Timer<'a> {
     report: &'a mut BuildReport,
     start: Instant,
 }
 
-impl Timer<'_> {
-    fn lap(&mut self, name: &str) {
+impl<'a> Timer<'a> {
+    pub(crate) fn new(report: &'a mut BuildReport) -> Timer<'a> {
+        Timer { report, start: Instant::now() }
+    }
+
+    pub(crate) fn lap(&mut self, name: &str) {
         let now = Instant::now();
         self.report.phases.push((name.to_string(), (now - self.start).as_secs_f64()));
         self.start = now;
@@ -214,7 +219,7 @@ const WORK_DIR_PREFIX: &str = ".terawalk-build-";
 /// Removes what earlier builds killed without a chance to clean up (SIGKILL, a crash) left in
 /// the working folder and beside the output: working directories and temporary stores that no
 /// live build holds (`tw_store::cleanup::remove_stale`). Each is logged: they may be gigabytes.
-fn remove_stale_temporaries(output: &Path, work_root: &Path) {
+pub(crate) fn remove_stale_temporaries(output: &Path, work_root: &Path) {
     let mut removed = tw_store::cleanup::remove_stale(work_root, &[WORK_DIR_PREFIX]);
     let out_dir = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     if let Some(name) = output.file_name() {
@@ -253,6 +258,16 @@ impl WorkDir {
     pub fn path(&self) -> &Path {
         self.dir.path()
     }
+
+    /// Renames the directory to `to` (on the same file system) and keeps it: a build plan's
+    /// prepared files, complete. Until then it is removed like any working directory.
+    pub(crate) fn persist(self, to: &Path) -> Result<(), BuildError> {
+        std::fs::rename(self.dir.path(), to).map_err(|e| BuildError::io(to, e))?;
+        let WorkDir { dir, _cleanup, _lock } = self;
+        let _ = dir.keep();
+        drop(std::fs::remove_file(to.join(tw_store::cleanup::DIR_LOCK)));
+        Ok(())
+    }
 }
 
 /// The folder a build's working directories go into: `work_dir`, else the output's folder.
@@ -275,32 +290,105 @@ fn build_with_pool(
     let work_root = work_root(output, options.work_dir.as_deref());
     remove_stale_temporaries(output, &work_root);
     let work = WorkDir::create(&work_root)?;
-    let mut writer = StoreWriter::create(output).map_err(BuildError::store)?;
+    let writer = StoreWriter::create(output).map_err(BuildError::store)?;
     let mut t = Timer { report: &mut report, start: Instant::now() };
+    let prepared = prepare(scene, work.path(), options, progress, pool, &mut t)?;
+    let source = CellSource::Build { grid: &prepared.facts.grid, params: &options.lod };
+    finish(&prepared, source, writer, options, progress, pool, &mut t)?;
+    Ok(report)
+}
 
-    let (ing, up) = ingest_phase(scene, work.path(), options, progress, pool)?;
+/// What phases 1–4 leave for the rest: the scene's figures, the hierarchy over the cells, and
+/// the cells and their seams on disk. A build plan's `prepare` job keeps it (`crate::plan`).
+pub(crate) struct Prepared {
+    pub facts: SceneFacts,
+    pub hierarchy: Hierarchy,
+    pub cells: CellFiles,
+    pub seams: SeamFiles,
+}
+
+/// The figures of the scene that phases 5–6 and the report need.
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
+pub(crate) struct SceneFacts {
+    pub grid: Grid,
+    pub min: [f64; 3],
+    pub max: [f64; 3],
+    /// Input triangles (degenerate ones dropped).
+    pub triangles: u64,
+    /// Every input object: name, colour, triangles.
+    pub objects: Vec<(String, Option<[u8; 4]>, u64)>,
+    pub up_axis: u8,
+    pub up_reason: String,
+    pub degenerate: u64,
+    pub redefine: RedefineReport,
+    /// The units recorded in the store (`--units`, or what the inputs are known to be in).
+    pub units: String,
+}
+
+impl SceneFacts {
+    fn of(ing: &Ingested, red: &Redefined, up: UpChoice, units: &str) -> SceneFacts {
+        SceneFacts {
+            grid: ing.grid,
+            min: ing.min,
+            max: ing.max,
+            triangles: ing.triangles,
+            objects: ing.objects.iter().map(|o| (o.name.clone(), o.color, o.triangles)).collect(),
+            up_axis: up.axis,
+            up_reason: up.reason,
+            degenerate: ing.summary.degenerate,
+            redefine: red.report.clone(),
+            units: units.to_string(),
+        }
+    }
+}
+
+/// Phases 1–4: ingest, redefine and hierarchy, distribute, seams; working files in `work_dir`.
+pub(crate) fn prepare(
+    scene: Scene,
+    work_dir: &Path,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+    t: &mut Timer,
+) -> Result<Prepared, BuildError> {
+    let (ing, up) = ingest_phase(scene, work_dir, options, progress, pool)?;
     t.lap("ingest");
     let (red, hierarchy) = redefine_phase(&ing, options, progress, pool)?;
     t.lap("redefine+hierarchy");
-    let cells = distribute_phase(&ing, &red, work.path(), options, progress, pool)?;
+    let cells = distribute_phase(&ing, &red, work_dir, options, progress, pool)?;
     t.lap("distribute");
-    let seams = seams_phase(&cells, work.path(), options, progress, pool)?;
+    let seams = seams_phase(&cells, work_dir, options, progress, pool)?;
     t.lap("seams");
-    let lod = LodInputs { hierarchy: &hierarchy, ing: &ing, red: &red, cells: &cells, seams: &seams };
-    let (state, duplicates) = lod_phase(&lod, options, &mut writer, progress, pool)?;
+    Ok(Prepared { facts: SceneFacts::of(&ing, &red, up, &options.units), hierarchy, cells, seams })
+}
+
+/// Phases 5–6: LOD, HLOD and pages over the cells from `source`, then the store's tables and
+/// the file; the figures go to `t`'s report.
+pub(crate) fn finish<'h>(
+    prepared: &'h Prepared,
+    source: CellSource<'h>,
+    mut writer: StoreWriter,
+    options: &BuildOptions,
+    progress: &mut dyn BuildProgress,
+    pool: &rayon::ThreadPool,
+    t: &mut Timer,
+) -> Result<(), BuildError> {
+    let (state, duplicates) = lod_phase(prepared, source, options, &mut writer, progress, pool)?;
     t.lap("lod+hlod+pages");
     log_lod_figures(&state);
-    let written = write_phase(state, &ing, up.axis, options, writer, progress)?;
+    let written = write_phase(state, &prepared.facts, options, writer, progress)?;
     t.lap("write");
 
-    report.input_triangles = ing.triangles;
-    report.up = up;
-    report.degenerate_dropped = ing.summary.degenerate;
+    let facts = &prepared.facts;
+    let report = &mut *t.report;
+    report.input_triangles = facts.triangles;
+    report.up = UpChoice { axis: facts.up_axis, reason: facts.up_reason.clone() };
+    report.degenerate_dropped = facts.degenerate;
     report.duplicate_dropped = duplicates;
-    report.objects = ing.objects.len() as u64;
-    report.redefine = red.report.clone();
+    report.objects = facts.objects.len() as u64;
+    report.redefine = facts.redefine.clone();
     report.nodes = written.nodes;
-    report.depth = hierarchy.depth() as u64;
+    report.depth = prepared.hierarchy.depth() as u64;
     report.groups = written.groups;
     report.clusters = written.clusters;
     report.stored_triangles = written.stored_triangles;
@@ -309,7 +397,7 @@ fn build_with_pool(
     report.file_bytes = written.file_bytes;
     report.peak_rss = tw_core::mem::peak_rss_bytes();
     report.hlod = written.hlod;
-    Ok(report)
+    Ok(())
 }
 
 /// Phase 1: reads the scene into the working file, taking redefinition's samples on the way
@@ -399,101 +487,46 @@ fn seams_phase(
     Ok(seams)
 }
 
-/// What phase 5 reads: the results of phases 1–4.
-struct LodInputs<'a> {
-    hierarchy: &'a Hierarchy,
-    ing: &'a Ingested,
-    red: &'a Redefined,
-    cells: &'a CellFiles,
-    seams: &'a SeamFiles,
-}
-
-/// A cell's DAG and its encoded clusters, built on the pool (`None`: its bucket failed to load).
-type BuiltCell = Option<(LodDag, Result<Vec<EncodedCluster>, String>)>;
-
 /// Phase 5: LOD, HLOD and pages in one pass over every cell (cells are numbered in bucket
-/// order). The pool builds the cells' DAGs, taking cells in order, and the HLOD nodes this
-/// thread starts; this thread consumes the DAGs in cell order ([`CellConsumer`]: pages; HLOD
-/// nodes started and emitted) as they come, so the sequential part overlaps the parallel one.
-/// A loader thread reads the next bucket and its seams while the current one is built, so the
-/// pool neither waits for the read nor drains at a bucket's end (at most two buckets are held).
-/// Returns the bottom-up state, for the tables, and the duplicate triangles the cells dropped.
+/// order; [`CellPass`]). The pool makes the cells' DAGs, taking cells in order, and builds the
+/// HLOD nodes this thread starts; this thread consumes the DAGs in cell order
+/// ([`CellConsumer`]: pages; HLOD nodes started and emitted) as they come, so the sequential
+/// part overlaps the parallel one. Returns the bottom-up state, for the tables, and the
+/// duplicate triangles the cells dropped.
 fn lod_phase<'h>(
-    lod: &LodInputs<'h>,
+    prepared: &'h Prepared,
+    source: CellSource<'h>,
     options: &BuildOptions,
     writer: &mut StoreWriter,
     progress: &mut dyn BuildProgress,
     pool: &rayon::ThreadPool,
 ) -> Result<(LodState<'h>, u64), BuildError> {
-    progress.phase("lod", lod.ing.triangles, "triangles");
-    let cells = lod.cells;
-    let queue = BucketQueue::new(cells.bucket_count());
-    let jobs = HlodJobs::new(&lod.ing.grid, &options.hlod);
-    // Summed on the pool: the total does not depend on the order.
-    let duplicates = std::sync::atomic::AtomicU64::new(0);
+    progress.phase("lod", prepared.facts.triangles, "triangles");
+    let cells = &prepared.cells;
+    let jobs = HlodJobs::new(&prepared.facts.grid, &options.hlod);
     let mut consumer = CellConsumer {
-        state: LodState::new(lod.hierarchy, options),
+        state: LodState::new(&prepared.hierarchy, options, source.records()),
         writer,
         progress: &mut *progress,
-        queue: &queue,
         jobs: &jobs,
-        cells,
-        red: lod.red,
+        cell_triangles: cells.cell_triangles(),
         done_triangles: 0,
+        duplicates: 0,
         busy: std::time::Duration::ZERO,
     };
-    std::thread::scope(|scope| -> Result<(), BuildError> {
-        let loader = scope.spawn(|| {
-            queue.load_all(|b| {
-                Ok(LoadedBucket { bucket: cells.read_bucket(b)?, seams: lod.seams.read_bucket(b)? })
-            })
-        });
-        let result = for_each_in_order(
-            pool,
-            cells.cell_count(),
-            lod_window(options.memory),
-            |i| build_cell(i, cells, &queue, &lod.ing.grid, &options.lod, &duplicates),
-            &|| jobs.run_one(),
-            built_cell_bytes,
-            |i, cell| consumer.take(i, cell),
-        );
-        queue.stop();
-        let loaded = loader.join().map_err(|_| BuildError::Internal("the bucket loader panicked".into()))?;
-        let held = result?;
-        consumer.finish(held)?;
-        loaded
-    })?;
+    let pass = CellPass {
+        cells,
+        seams: &prepared.seams,
+        buckets: 0..cells.bucket_count(),
+        window: lod_window(options.memory),
+        source,
+    };
+    let held = pass.run(pool, &|| jobs.run_one(), |i, cell, seams| consumer.take(i, cell, seams))?;
+    consumer.finish(held)?;
+    let duplicates = consumer.duplicates;
     let state = consumer.state;
     progress.end_phase();
-    Ok((state, duplicates.into_inner()))
-}
-
-/// Builds cell `i`'s DAG (its seams locked) and encodes its clusters, on the pool: the
-/// consumer only sets their group ids and concatenates them into pages.
-fn build_cell(
-    i: usize,
-    cells: &CellFiles,
-    queue: &BucketQueue,
-    grid: &crate::types::Grid,
-    params: &LodParams,
-    duplicates: &std::sync::atomic::AtomicU64,
-) -> BuiltCell {
-    let b = cells.bucket_of_cell(i as u32);
-    let loaded = queue.get(b)?;
-    let external = |p: [u32; 3]| loaded.seams.contains(p);
-    let mesh = loaded.bucket.mesh(i as u32);
-    duplicates.fetch_add(mesh.duplicates, std::sync::atomic::Ordering::Relaxed);
-    let dag = build_cell_lod_with_seams(&mesh, grid, params, &external);
-    let encoded = encode_clusters(&dag);
-    Some((dag, encoded))
-}
-
-/// The heap a built cell holds while it waits for the consumer: its DAG and encoded clusters.
-fn built_cell_bytes(cell: &BuiltCell) -> usize {
-    cell.as_ref().map_or(0, |(dag, encoded)| {
-        let encoded_bytes = encoded.as_ref().map_or(0, |e| e.iter().map(|c| c.bytes.capacity()).sum());
-        dag.heap_bytes() + encoded_bytes
-    })
+    Ok((state, duplicates))
 }
 
 /// Phase 5's consumer, on the calling thread: takes the built cells in cell order.
@@ -501,52 +534,36 @@ struct CellConsumer<'a, 'h> {
     state: LodState<'h>,
     writer: &'a mut StoreWriter,
     progress: &'a mut dyn BuildProgress,
-    queue: &'a BucketQueue,
     jobs: &'a HlodJobs<'a>,
-    cells: &'a CellFiles,
-    red: &'a Redefined,
+    cell_triangles: &'a [u64],
     /// Input triangles of the cells taken so far (the phase's progress).
     done_triangles: u64,
+    /// Duplicate triangles the cells' meshes left out.
+    duplicates: u64,
     /// The consumer's working time: the floor of this phase however many cores the pool has.
     busy: std::time::Duration,
 }
 
 impl CellConsumer<'_, '_> {
-    /// Takes cell `i`: its groups to pages, its roots up the tree, the HLOD nodes it completes
-    /// started and those due emitted; frees its bucket after the bucket's last cell. On an
-    /// error (or a bucket that failed to load) stops the loader, so that workers waiting for a
-    /// bucket it will not read wake up.
-    fn take(&mut self, i: usize, cell: BuiltCell) -> Result<(), BuildError> {
-        let cell_index = i as u32;
-        let b = self.cells.bucket_of_cell(cell_index);
-        let (Some((dag, encoded)), Some(loaded)) = (cell, self.queue.get(b)) else {
-            self.queue.stop();
-            return Err(self.queue.take_error());
-        };
+    /// Takes cell `i`: its groups to pages, its roots up the tree (with `seams`, its bucket's),
+    /// the HLOD nodes it completes started and those due emitted.
+    fn take(&mut self, i: u32, cell: BuiltCell, seams: &SeamTable) -> Result<(), BuildError> {
         let state = &mut self.state;
-        let leaf = state.leaf_of_cell[cell_index as usize];
+        let leaf = state.index.leaf_of_cell[i as usize];
         let busy_since = Instant::now();
-        let r = encoded
+        self.duplicates += cell.duplicates;
+        let r = cell
+            .encoded
             .map_err(|m| invalid_cluster(leaf, m))
-            .and_then(|encoded| state.add_cell(self.writer, leaf, dag, encoded, &loaded.seams))
+            .and_then(|encoded| state.add_cell(self.writer, leaf, cell.dag, encoded, seams))
             .and_then(|()| {
-                state.start_parent(leaf, i + HLOD_LAG, self.jobs);
-                state.emit_due(self.writer, Some(i), self.jobs)
+                state.start_parent(leaf, i as usize + HLOD_LAG, self.jobs);
+                state.emit_due(self.writer, Some(i as usize), self.jobs)
             });
         self.busy += busy_since.elapsed();
-        if r.is_err() {
-            self.queue.stop();
-            return r;
-        }
-        self.done_triangles += self.red.cells[cell_index as usize].triangles;
+        r?;
+        self.done_triangles += self.cell_triangles[i as usize];
         self.progress.advance(self.done_triangles);
-        if cell_index + 1 == self.cells.bucket_cells(b).end {
-            drop(loaded);
-            self.queue.release(b);
-            // A bucket's meshes and DAGs are freed: give their pages back, or the
-            // fragments between live blocks stay resident (one heap for all threads).
-            tw_core::mem::return_free_heap_pages();
-        }
         Ok(())
     }
 
@@ -573,6 +590,7 @@ impl CellConsumer<'_, '_> {
 fn log_lod_figures(state: &LodState) {
     let (cell_count, cell_triangles, cell_root_triangles) = state.cell_counts;
     tracing::info!(cells = cell_count, cell_triangles, cell_root_triangles, "cell lod roots");
+    tracing::info!(built_here = state.hlod_built, read_from_plan_shards = state.hlod_read, "hlod nodes");
     for (depth, d) in state.hlod.iter().enumerate().filter(|(_, d)| d.nodes > 0) {
         tracing::info!(
             depth,
@@ -608,8 +626,7 @@ struct Written {
 /// tables and the header's scene description, then the file, atomically.
 fn write_phase(
     state: LodState,
-    ing: &Ingested,
-    up_axis: u8,
+    facts: &SceneFacts,
     options: &BuildOptions,
     mut writer: StoreWriter,
     progress: &mut dyn BuildProgress,
@@ -626,20 +643,24 @@ fn write_phase(
         g.first_cluster = p.first_cluster;
     }
     let nodes = store_nodes(hierarchy, &node_groups, &table);
-    let objects: Vec<tw_store::Object> = ing
+    let objects: Vec<tw_store::Object> = facts
         .objects
         .iter()
-        .map(|o| tw_store::Object { name: o.name.clone(), color: o.color, triangles: o.triangles })
+        .map(|(name, color, triangles)| tw_store::Object {
+            name: name.clone(),
+            color: *color,
+            triangles: *triangles,
+        })
         .collect();
     let info = StoreInfo {
-        bounds_min: ing.min,
-        bounds_max: ing.max,
-        grid_origin: ing.grid.origin,
-        grid_step: ing.grid.step,
-        units: options.units.clone(),
-        up_axis,
+        bounds_min: facts.min,
+        bounds_max: facts.max,
+        grid_origin: facts.grid.origin,
+        grid_step: facts.grid.step,
+        units: facts.units.clone(),
+        up_axis: facts.up_axis,
         build_options: options.describe(),
-        input_triangles: ing.triangles,
+        input_triangles: facts.triangles,
     };
     let summary = writer.finish(&info, &objects, &nodes, &table, &sources).map_err(BuildError::store)?;
     progress.end_phase();
@@ -659,23 +680,21 @@ fn write_phase(
 /// Under load the consumer (HLOD, pages) falls behind the pool and the window fills; at 10^8
 /// triangles and `--memory 256M`, 16 DAGs of the largest cells (65,536 triangles, ~2.5 MB each)
 /// would be 40 MB of a 268 MB budget.
-fn lod_window(memory: u64) -> Window {
+pub(crate) fn lod_window(memory: u64) -> Window {
     Window { results: 16, bytes: (memory / 16).min(usize::MAX as u64) as usize }
 }
 
 /// Cells the consumer takes between starting an HLOD node and emitting it: the time the pool
 /// has to build it. Emitting at a point fixed by the cell order keeps the store independent of
 /// the threads; a node not built by then is built by the consumer itself.
-const HLOD_LAG: usize = 8;
+pub(crate) const HLOD_LAG: usize = 8;
 
 /// The bottom-up state of phase 5.
 struct LodState<'h> {
     hierarchy: &'h Hierarchy,
-    parent: Vec<u32>,
-    depth: Vec<u32>,
-    leaf_of_cell: Vec<u32>,
-    /// The cells (leaf order) under each node: `first..last + 1`.
-    cell_range: Vec<(u32, u32)>,
+    index: TreeIndex,
+    /// HLOD nodes built by a build plan's `cells` jobs (read back instead of built here).
+    prebuilt: Option<&'h CellRecords>,
     /// Roots of completed subtrees, by node, with the seams at their vertices that are shared
     /// with a cell outside the subtree.
     roots: Vec<Option<(Roots, SeamTable)>>,
@@ -693,42 +712,32 @@ struct LodState<'h> {
     /// Cells, their level-0 triangles and their root groups' triangles (where the cell DAG stops).
     cell_counts: (u64, u64, u64),
     /// HLOD nodes started and not yet emitted, with the cell after which each is due.
-    pending: std::collections::VecDeque<(usize, std::sync::Arc<HlodJob>)>,
+    pending: std::collections::VecDeque<(usize, PendingNode)>,
+    /// HLOD nodes built here and read back from a plan's shards (`prebuilt`).
+    hlod_built: u64,
+    hlod_read: u64,
+}
+
+/// An HLOD node started by phase 5's consumer.
+enum PendingNode {
+    /// Being built on the pool (or by the consumer when due).
+    Job(std::sync::Arc<HlodJob>),
+    /// Built by a build plan's `cells` job: read back when due.
+    Prebuilt(u32),
 }
 
 impl<'h> LodState<'h> {
-    fn new(hierarchy: &'h Hierarchy, options: &BuildOptions) -> LodState<'h> {
+    fn new(
+        hierarchy: &'h Hierarchy,
+        options: &BuildOptions,
+        prebuilt: Option<&'h CellRecords>,
+    ) -> LodState<'h> {
         let n = hierarchy.nodes.len();
-        let mut parent = vec![u32::MAX; n];
-        let mut depth = vec![0u32; n];
-        let mut leaf_of_cell = vec![u32::MAX; hierarchy.leaf_count()];
-        for (i, node) in hierarchy.nodes.iter().enumerate() {
-            for c in node.children() {
-                parent[c] = i as u32;
-                depth[c] = depth[i] + 1;
-            }
-            if let Some(cell) = node.cell {
-                leaf_of_cell[cell as usize] = i as u32;
-            }
-        }
-        // Children come after parents: a reverse sweep sees every child before its parent.
-        let mut cell_range = vec![(u32::MAX, 0u32); n];
-        for i in (0..n).rev() {
-            let node = &hierarchy.nodes[i];
-            if let Some(cell) = node.cell {
-                cell_range[i] = (cell, cell + 1);
-            }
-            for c in node.children() {
-                let (lo, hi) = cell_range[c];
-                cell_range[i] = (cell_range[i].0.min(lo), cell_range[i].1.max(hi));
-            }
-        }
+        let index = TreeIndex::new(hierarchy);
         LodState {
             hierarchy,
-            parent,
-            depth,
-            leaf_of_cell,
-            cell_range,
+            index,
+            prebuilt,
             roots: vec![None; n],
             groups: Vec::new(),
             sources: Vec::new(),
@@ -740,6 +749,8 @@ impl<'h> LodState<'h> {
             hlod: Vec::new(),
             cell_counts: (0, 0, 0),
             pending: std::collections::VecDeque::new(),
+            hlod_built: 0,
+            hlod_read: 0,
         }
     }
 
@@ -762,7 +773,7 @@ impl<'h> LodState<'h> {
         }
         let base = self.groups.len() as u32;
         let mut group_sources: Vec<u32> = Vec::new();
-        let root = (self.depth[node as usize] as usize) <= self.root_depth
+        let root = (self.index.depth[node as usize] as usize) <= self.root_depth
             && !self.hierarchy.nodes[node as usize].is_leaf();
         for (gi, g) in dag.groups.iter().enumerate() {
             let id = base + gi as u32;
@@ -807,9 +818,9 @@ impl<'h> LodState<'h> {
         encoded: Vec<EncodedCluster>,
         seams: &SeamTable,
     ) -> Result<(), BuildError> {
-        let base = self.emit(writer, leaf, &dag, encoded, true)?;
-        let roots = roots_of(&dag, base);
-        let root_seams = seams.retain(root_positions(&roots), self.cell_range[leaf as usize]);
+        self.emit(writer, leaf, &dag, encoded, true)?;
+        let roots = roots_of(&dag, self.provisional_base(leaf, dag.groups.len())?);
+        let root_seams = seams.retain(root_positions(&roots), self.index.cell_range[leaf as usize]);
         let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
         self.cell_counts.0 += 1;
         self.cell_counts.1 += level0 as u64;
@@ -821,7 +832,7 @@ impl<'h> LodState<'h> {
     /// Starts the HLOD of `node`'s parent if all its children are complete, to be emitted when
     /// the consumer has taken cell `due` (or at the end).
     fn start_parent(&mut self, node: u32, due: usize, jobs: &HlodJobs) {
-        let parent = self.parent[node as usize];
+        let parent = self.index.parent[node as usize];
         if parent == u32::MAX {
             return;
         }
@@ -829,11 +840,16 @@ impl<'h> LodState<'h> {
         if children.clone().any(|c| self.roots[c].is_none()) {
             return;
         }
+        if self.prebuilt.is_some_and(|p| p.has_node(parent)) {
+            children.for_each(|c| self.roots[c] = None);
+            self.pending.push_back((due, PendingNode::Prebuilt(parent)));
+            return;
+        }
         let (children, child_seams): (Vec<Roots>, Vec<SeamTable>) =
             children.map(|c| self.roots[c].take().expect("checked above")).unzip();
-        let range = self.cell_range[parent as usize];
+        let range = self.index.cell_range[parent as usize];
         let job = jobs.start(HlodInput { node: parent, children, child_seams, range });
-        self.pending.push_back((due, job));
+        self.pending.push_back((due, PendingNode::Job(job)));
     }
 
     /// Emits the started HLOD nodes that are due once cell `cell` has been taken, in the order
@@ -849,11 +865,37 @@ impl<'h> LodState<'h> {
             if cell.is_some_and(|c| *due > c) {
                 return Ok(());
             }
-            let (_, job) = self.pending.pop_front().expect("checked above");
-            let built = jobs.result(&job).map_err(BuildError::Internal)?;
+            let built = match self.pending.pop_front().expect("checked above").1 {
+                PendingNode::Job(job) => {
+                    self.hlod_built += 1;
+                    jobs.result(&job).map_err(BuildError::Internal)?
+                }
+                PendingNode::Prebuilt(node) => {
+                    self.hlod_read += 1;
+                    Box::new(self.prebuilt.expect("prebuilt nodes come from it").read_node(node)?)
+                }
+            };
             let node = built.node;
             self.emit_hlod(writer, *built)?;
             self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG, jobs);
+        }
+        Ok(())
+    }
+
+    /// The provisional id of `node`'s group 0 as its parent's HLOD sees it ([`crate::provisional`]).
+    fn provisional_base(&self, node: u32, groups: usize) -> Result<u32, BuildError> {
+        crate::provisional::base(self.index.slot(self.hierarchy, node), groups)
+    }
+
+    /// Gives an HLOD node's replaced groups and its clusters' sources their scene ids (its
+    /// children have been emitted: their first groups' ids are known).
+    fn resolve_provisional(&self, node: u32, hl: &mut HlodNode) -> Result<(), BuildError> {
+        let bases: Vec<u32> =
+            self.hierarchy.nodes[node as usize].children().map(|c| self.node_groups[c].0).collect();
+        for id in
+            hl.replaced.iter_mut().chain(hl.dag.clusters.iter_mut().flat_map(|c| c.refined_from.iter_mut()))
+        {
+            *id = crate::provisional::resolve(*id, &bases)?;
         }
         Ok(())
     }
@@ -862,7 +904,7 @@ impl<'h> LodState<'h> {
     /// replaces, its groups (to pages), and its roots for its parent.
     fn emit_hlod(&mut self, writer: &mut StoreWriter, built: HlodBuilt) -> Result<(), BuildError> {
         let HlodBuilt { node, hl, encoded, seams, range } = built;
-        let depth = self.depth[node as usize] as usize;
+        let depth = self.index.depth[node as usize] as usize;
         if self.hlod.len() <= depth {
             self.hlod.resize(depth + 1, HlodDepthStats::default());
         }
@@ -880,14 +922,16 @@ impl<'h> LodState<'h> {
         }
         d.max_error = d.max_error.max(st.error);
         d.pruned += st.pruned as u64;
+        let mut hl = hl;
+        self.resolve_provisional(node, &mut hl)?;
         for &g in &hl.replaced {
             let e = &mut self.groups[g as usize];
             e.error = hl.error;
             e.sphere = [hl.sphere.center[0], hl.sphere.center[1], hl.sphere.center[2], hl.sphere.radius];
         }
         let encoded = encoded.map_err(|m| invalid_cluster(node, m))?;
-        let base = self.emit(writer, node, &hl.dag, encoded, false)?;
-        let roots = hl.roots(base);
+        self.emit(writer, node, &hl.dag, encoded, false)?;
+        let roots = hl.roots(self.provisional_base(node, hl.dag.groups.len())?);
         let root_seams = seams.retain(root_positions(&roots), range);
         self.roots[node as usize] = Some((roots, root_seams));
         Ok(())
@@ -895,7 +939,7 @@ impl<'h> LodState<'h> {
 }
 
 /// Every vertex position of `roots`' clusters (repeats included).
-fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
+pub(crate) fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
     roots.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
 }
 

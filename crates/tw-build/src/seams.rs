@@ -31,7 +31,7 @@ use tempfile::TempPath;
 
 use crate::cells::{read_records, CellFiles};
 use crate::error::BuildError;
-use crate::workio::{temp_path, SpillWriter};
+use crate::workio::{temp_path, SpillWriter, WorkPath};
 
 /// Bytes of one (position, cell) record in a partition file.
 const OPEN_RECORD_BYTES: usize = 16;
@@ -40,7 +40,7 @@ const SEAM_RECORD_BYTES: usize = 20;
 
 /// Seams of some cells (sorted by position, each once) with the first and last cell that has
 /// each.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct SeamTable {
     positions: Vec<[u32; 3]>,
     cells: Vec<(u32, u32)>,
@@ -97,9 +97,18 @@ impl SeamTable {
     }
 }
 
+/// [`SeamFiles`] kept on disk for a build plan: each bucket's seam file name and seam count.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SeamFilesMeta {
+    buckets: Vec<(String, u64)>,
+    open_positions: u64,
+    seams: u64,
+    partitions: usize,
+}
+
 /// The seams of every bucket, one file each (deleted when dropped).
 pub struct SeamFiles {
-    buckets: Vec<(TempPath, u64)>,
+    buckets: Vec<(WorkPath, u64)>,
     /// Open positions over all cells, and seams over the scene (a seam counts once).
     pub open_positions: u64,
     pub seams: u64,
@@ -149,8 +158,34 @@ impl SeamFiles {
         let BucketSeams { files, counts, seams } = outs;
         drop(files.finish()?);
         lap.step("partitions");
-        let buckets = out_paths.into_iter().zip(counts).collect();
+        let buckets = out_paths.into_iter().map(WorkPath::Temp).zip(counts).collect();
         Ok(SeamFiles { buckets, open_positions, seams, partitions })
+    }
+
+    /// Deletes bucket `b`'s seam file once its cells are built (see [`CellFiles::discard_bucket`]).
+    pub fn discard_bucket(&self, b: usize) {
+        self.buckets[b].0.discard();
+    }
+
+    /// Keeps the seam files for a build plan's later jobs ([`SeamFiles::reopen`]).
+    pub fn keep(self) -> Result<SeamFilesMeta, BuildError> {
+        let mut buckets = Vec::with_capacity(self.buckets.len());
+        for (path, n) in self.buckets {
+            let path = path.keep()?;
+            buckets.push((path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(), n));
+        }
+        let (open_positions, seams, partitions) = (self.open_positions, self.seams, self.partitions);
+        Ok(SeamFilesMeta { buckets, open_positions, seams, partitions })
+    }
+
+    /// The seam files [`SeamFiles::keep`] described, in `dir`; they are not deleted on drop.
+    pub fn reopen(meta: &SeamFilesMeta, dir: &Path) -> SeamFiles {
+        SeamFiles {
+            buckets: meta.buckets.iter().map(|(name, n)| (WorkPath::Kept(dir.join(name)), *n)).collect(),
+            open_positions: meta.open_positions,
+            seams: meta.seams,
+            partitions: meta.partitions,
+        }
     }
 
     /// The seams of the cells of bucket `b`.

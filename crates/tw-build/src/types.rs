@@ -2,7 +2,7 @@
 
 /// The scene-wide quantization grid. Every position after ingest is a `[u32; 3]` grid point;
 /// scene space (f32, what the runtime uses) is `grid * step`, relative to `origin`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Grid {
     /// Input coordinates of grid point (0, 0, 0): the scene bounds' minimum.
     pub origin: [f64; 3],
@@ -43,7 +43,7 @@ impl Grid {
 }
 
 /// An axis-aligned box in grid coordinates (inclusive).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 pub struct GridBox {
     pub min: [u32; 3],
     pub max: [u32; 3],
@@ -123,14 +123,14 @@ impl CellMesh {
 }
 
 /// A bounding sphere in scene space (f32, relative to the grid origin).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sphere {
     pub center: [f32; 3],
     pub radius: f32,
 }
 
 /// One cluster of the LOD DAG: ≤ 128 triangles, ≤ 255 vertices.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LodCluster {
     /// Grid positions of the cluster's vertices.
     pub positions: Vec<[u32; 3]>,
@@ -155,7 +155,7 @@ pub struct LodCluster {
 }
 
 /// One group of the LOD DAG: clusters simplified together.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LodGroup {
     /// Error (scene units) of the coarser clusters that replace this group; `f32::INFINITY` for a
     /// root group (nothing replaces it). Always ≥ the `self_error` of each member cluster.
@@ -169,7 +169,7 @@ pub struct LodGroup {
 }
 
 /// A cluster DAG: the LOD of one cell, or of an HLOD node together with what it was built from.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LodDag {
     pub clusters: Vec<LodCluster>,
     pub groups: Vec<LodGroup>,

@@ -183,6 +183,45 @@ impl Drop for SpillWriter {
 }
 
 /// A new empty working file `PREFIX….work` in `dir`, deleted when the path is dropped.
+/// A working file: temporary (deleted when dropped: a plain build's) or kept (a build plan's
+/// prepared files, read by later jobs, and deleted with the plan directory).
+#[derive(Debug)]
+pub enum WorkPath {
+    Temp(TempPath),
+    Kept(std::path::PathBuf),
+}
+
+impl WorkPath {
+    /// Keeps the file past this value's life; returns its path.
+    pub fn keep(self) -> Result<std::path::PathBuf, BuildError> {
+        match self {
+            WorkPath::Temp(t) => {
+                let path = t.to_path_buf();
+                t.keep().map_err(|e| BuildError::io(&path, e.error))
+            }
+            WorkPath::Kept(p) => Ok(p),
+        }
+    }
+
+    /// Deletes a temporary file now (its data is no longer needed; frees the disk early). A
+    /// kept file stays.
+    pub fn discard(&self) {
+        if let WorkPath::Temp(t) = self {
+            drop(std::fs::remove_file(t));
+        }
+    }
+}
+
+impl std::ops::Deref for WorkPath {
+    type Target = Path;
+    fn deref(&self) -> &Path {
+        match self {
+            WorkPath::Temp(t) => t,
+            WorkPath::Kept(p) => p,
+        }
+    }
+}
+
 pub fn temp_path(dir: &Path, prefix: &str) -> Result<TempPath, BuildError> {
     let f = tempfile::Builder::new()
         .prefix(prefix)

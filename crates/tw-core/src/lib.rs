@@ -26,6 +26,7 @@ pub mod mem;
 pub mod output;
 pub mod printable;
 pub mod regular_file;
+pub mod release_behind;
 pub mod rng;
 
 pub use bounds::Aabb;

@@ -14,9 +14,15 @@ use crate::progress;
 use crate::units::{fmt_bytes, fmt_count, fmt_count_rate};
 
 /// Progress bars for the build's phases.
-struct Bars {
+pub struct Bars {
     bar: Option<ProgressBar>,
     quiet: bool,
+}
+
+impl Bars {
+    pub fn new(quiet: bool) -> Bars {
+        Bars { bar: None, quiet }
+    }
 }
 
 impl BuildProgress for Bars {
@@ -90,6 +96,9 @@ fn import_options(args: &BuildArgs) -> tw_io::format::ImportOptions {
 fn output_path(args: &BuildArgs) -> Result<PathBuf> {
     match (&args.output, args.inputs.as_slice()) {
         (Some(o), _) => Ok(o.clone()),
+        (None, _) if args.generate.is_some() => {
+            anyhow::bail!("--generate needs -o: name the store to write (e.g. -o plant.tw)")
+        }
         (None, [input]) => Ok(crate::commands::store_name_for(input)),
         (None, _) => {
             anyhow::bail!("{} inputs make one store: name it with -o (e.g. -o scene.tw)", args.inputs.len())
@@ -101,25 +110,51 @@ fn output_path(args: &BuildArgs) -> Result<PathBuf> {
 /// `terawalk build` and the commands opening a model directly (`commands::open`) share. The
 /// store appears atomically (tw-build writes a temporary file and renames it).
 pub fn build_store(args: &BuildArgs, output: &std::path::Path, quiet: bool) -> Result<tw_build::BuildReport> {
-    let prepared = convert_inputs(args, output, quiet)?;
-    let scene = Scene::open(&prepared.inputs, SceneOptions { import: import_options(args) })?;
-    let mut opts = options(args);
-    if opts.units.is_empty() {
-        opts.units = prepared.units.unwrap_or_default().to_string();
-    }
+    let (scene, opts, _prepared) = open_scene(args, output, quiet)?;
     let mut bars = Bars { bar: None, quiet };
     tw_build::build(scene, output, &opts, &mut bars).with_context(|| format!("building {}", output.display()))
+}
+
+/// The build's scene and options from its arguments: the generator of `--generate`, or the
+/// input files (converted first where terawalk does not read their format), with `--units`
+/// defaulting to what the scene is known to be in. Every way of building (`build`, a plan's
+/// jobs, the commands that open a model directly) opens its scene here, so they agree on it.
+/// The [`Prepared`] inputs must live until the build has read the scene.
+pub fn open_scene(args: &BuildArgs, output: &Path, quiet: bool) -> Result<(Scene, BuildOptions, Prepared)> {
+    let mut opts = options(args);
+    let (scene, units, prepared) = match &args.generate {
+        Some(spec) => {
+            let source = spec.source().with_context(|| format!("--generate {spec}"))?;
+            (Scene::from_sources(vec![source]), Some(spec.units()), Prepared::nothing())
+        }
+        None => {
+            let prepared = convert_inputs(args, output, quiet)?;
+            let scene = Scene::open(&prepared.inputs, SceneOptions { import: import_options(args) })?;
+            (scene, prepared.units, prepared)
+        }
+    };
+    if opts.units.is_empty() {
+        opts.units = units.unwrap_or_default().to_string();
+    }
+    Ok((scene, opts, prepared))
 }
 
 /// The inputs as the importers get them: those in a format terawalk does not read (IFC, STEP,
 /// FBX, ...: `tw_io::convert`) converted into a working directory like the build's own
 /// (`tw_build::WorkDir`: removed when this is dropped, on a signal, and after a kill
 /// by the next build), which lives until the build has read them.
-struct Prepared {
+pub struct Prepared {
     inputs: Vec<PathBuf>,
     /// The units of the coordinates when every input was converted by tools that agree on them.
     units: Option<&'static str>,
     _work: Option<tw_build::WorkDir>,
+}
+
+impl Prepared {
+    /// No input files (a generated scene).
+    fn nothing() -> Prepared {
+        Prepared { inputs: Vec::new(), units: None, _work: None }
+    }
 }
 
 /// Converts the inputs that need it (see [`Prepared`]), reporting each tool's command and time.
@@ -207,8 +242,17 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         max_written: args.temp_space.unwrap_or(u64::MAX),
         ..Default::default()
     });
+    if args.plan.plan.is_some() || args.plan.jobs.is_some() {
+        return crate::commands::build_plan::run(&args, &output, quiet);
+    }
     let r = build_store(&args, &output, quiet)?;
-    let secs = start.elapsed().as_secs_f64();
+    print_report(&output, &r, start.elapsed().as_secs_f64(), args.memory);
+    Ok(())
+}
+
+/// The build's summary: what was written, the redefinition's and the LOD's figures, the phases'
+/// times, the throughput and the peak memory against the budget.
+pub fn print_report(output: &Path, r: &tw_build::BuildReport, secs: f64, memory: u64) {
     outln!("wrote {} ({})", output.display(), fmt_bytes(r.file_bytes));
     outln!("  up: {}", r.up);
     outln!(
@@ -251,7 +295,6 @@ pub fn run(args: BuildArgs, quiet: bool) -> Result<()> {
         secs,
         fmt_count_rate(r.input_triangles, secs, "input triangles"),
         r.peak_rss.map(fmt_bytes).unwrap_or_else(|| "unknown".into()),
-        fmt_bytes(args.memory)
+        fmt_bytes(memory)
     );
-    Ok(())
 }

@@ -2,6 +2,9 @@
 
 pub mod bench;
 pub mod build;
+pub mod build_job;
+pub mod build_plan;
+pub mod build_submit;
 pub mod collide;
 pub mod cull_client;
 pub mod cull_server;

@@ -231,7 +231,7 @@ impl RedefineParams {
 }
 
 /// Counts after each step (the papers' Table 1), and what the cells came to.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct RedefineReport {
     /// Input objects with at least one triangle.
     pub objects: u64,

@@ -1,0 +1,93 @@
+//! A `cells` job's HLOD: the hierarchy nodes whose cells all lie in the job's shard, built as
+//! the shard's cells come in, as phase 5's consumer builds them in a plain build
+//! (`crate::pipeline`, `LodState`), and written to the shard's file for `pack`.
+//!
+//! The roots handed up carry provisional group ids (`crate::provisional`), so a node built here
+//! is the node a plain build makes, byte for byte, once `pack` resolves its ids; nodes that
+//! span shards are left to `pack`, which builds them from the roots of the shards' top nodes.
+
+use std::collections::{HashMap, VecDeque};
+use std::sync::Arc;
+
+use crate::error::BuildError;
+use crate::hierarchy::{Hierarchy, TreeIndex};
+use crate::hlod::{roots_of, Roots};
+use crate::hlod_jobs::{HlodInput, HlodJob, HlodJobs};
+use crate::pipeline::{root_positions, HLOD_LAG};
+use crate::seams::SeamTable;
+use crate::types::LodDag;
+
+use super::records::ShardWriter;
+
+/// The shard's HLOD in progress.
+pub(crate) struct ShardHlod<'a> {
+    hierarchy: &'a Hierarchy,
+    index: TreeIndex,
+    /// The shard's cells, `first..last + 1`.
+    cells: (u32, u32),
+    /// Roots (and their seams) of completed subtrees whose parent is not started yet.
+    roots: HashMap<u32, (Roots, SeamTable)>,
+    jobs: &'a HlodJobs<'a>,
+    /// Nodes started, with the cell after which each is taken (as the plain build's consumer
+    /// does, so the pool has time to build them).
+    pending: VecDeque<(usize, Arc<HlodJob>)>,
+    pub nodes: u64,
+}
+
+impl<'a> ShardHlod<'a> {
+    pub fn new(hierarchy: &'a Hierarchy, cells: (u32, u32), jobs: &'a HlodJobs<'a>) -> ShardHlod<'a> {
+        let index = TreeIndex::new(hierarchy);
+        ShardHlod { hierarchy, index, cells, roots: HashMap::new(), jobs, pending: VecDeque::new(), nodes: 0 }
+    }
+
+    /// Cell `i` built (`seams`: its bucket's): its roots up, its parent started if complete.
+    pub fn add_cell(&mut self, i: u32, dag: &LodDag, seams: &SeamTable) -> Result<(), BuildError> {
+        let leaf = self.index.leaf_of_cell[i as usize];
+        let roots =
+            roots_of(dag, crate::provisional::base(self.index.slot(self.hierarchy, leaf), dag.groups.len())?);
+        let root_seams = seams.retain(root_positions(&roots), self.index.cell_range[leaf as usize]);
+        self.roots.insert(leaf, (roots, root_seams));
+        self.start_parent(leaf, i as usize + HLOD_LAG);
+        Ok(())
+    }
+
+    /// Starts the HLOD of `node`'s parent when the parent lies in the shard and all its
+    /// children are complete.
+    fn start_parent(&mut self, node: u32, due: usize) {
+        let parent = self.index.parent[node as usize];
+        if parent == u32::MAX {
+            return;
+        }
+        let range = self.index.cell_range[parent as usize];
+        let children = self.hierarchy.nodes[parent as usize].children();
+        let inside = self.cells.0 <= range.0 && range.1 <= self.cells.1;
+        if !inside || children.clone().any(|c| !self.roots.contains_key(&(c as u32))) {
+            return;
+        }
+        let (children, child_seams): (Vec<Roots>, Vec<SeamTable>) =
+            children.map(|c| self.roots.remove(&(c as u32)).expect("checked above")).unzip();
+        let job = self.jobs.start(HlodInput { node: parent, children, child_seams, range });
+        self.pending.push_back((due, job));
+    }
+
+    /// Writes the started nodes due once cell `cell` was taken (`None`: all, and the ancestors
+    /// they complete), handing their roots up.
+    pub fn write_due(&mut self, cell: Option<usize>, out: &mut ShardWriter) -> Result<(), BuildError> {
+        while let Some((due, _)) = self.pending.front() {
+            if cell.is_some_and(|c| *due > c) {
+                return Ok(());
+            }
+            let (_, job) = self.pending.pop_front().expect("checked above");
+            let built = self.jobs.result(&job).map_err(BuildError::Internal)?;
+            let node = built.node;
+            let slot = self.index.slot(self.hierarchy, node);
+            let roots = built.hl.roots(crate::provisional::base(slot, built.hl.dag.groups.len())?);
+            let root_seams = built.seams.retain(root_positions(&roots), built.range);
+            out.append_node(*built)?;
+            self.nodes += 1;
+            self.roots.insert(node, (roots, root_seams));
+            self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG);
+        }
+        Ok(())
+    }
+}
