@@ -88,14 +88,9 @@ impl Default for HlodParams {
 pub struct Roots {
     /// Only root groups; clusters' `group` indexes `dag.groups`.
     pub dag: LodDag,
-    /// The caller's (scene-wide) id of each group in `dag.groups`.
+    /// The id each group of `dag.groups` goes by: in the pipeline a provisional one
+    /// (`crate::provisional`), resolved to the scene's when the node is emitted.
     pub group_ids: Vec<u32>,
-}
-
-impl Roots {
-    pub fn triangle_count(&self) -> usize {
-        self.dag.clusters.iter().map(|c| c.indices.len() / 3).sum()
-    }
 }
 
 /// The roots of `dag` (its groups with infinite error); `group_base` is the caller's id of

@@ -819,14 +819,18 @@ impl<'h> LodState<'h> {
         seams: &SeamTable,
     ) -> Result<(), BuildError> {
         self.emit(writer, leaf, &dag, encoded, true)?;
-        let roots = roots_of(&dag, self.provisional_base(leaf, dag.groups.len())?);
-        let root_seams = seams.retain(root_positions(&roots), self.index.cell_range[leaf as usize]);
         let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
+        let root_triangles: usize = dag
+            .clusters
+            .iter()
+            .filter(|c| dag.groups[c.group as usize].error == f32::INFINITY)
+            .map(|c| c.indices.len() / 3)
+            .sum();
         self.cell_counts.0 += 1;
         self.cell_counts.1 += level0 as u64;
-        self.cell_counts.2 += roots.triangle_count() as u64;
-        self.roots[leaf as usize] = Some((roots, root_seams));
-        Ok(())
+        self.cell_counts.2 += root_triangles as u64;
+        let range = self.index.cell_range[leaf as usize];
+        self.hand_up(leaf, &dag, seams, range)
     }
 
     /// Starts the HLOD of `node`'s parent if all its children are complete, to be emitted when
@@ -931,7 +935,24 @@ impl<'h> LodState<'h> {
         }
         let encoded = encoded.map_err(|m| invalid_cluster(node, m))?;
         self.emit(writer, node, &hl.dag, encoded, false)?;
-        let roots = hl.roots(self.provisional_base(node, hl.dag.groups.len())?);
+        self.hand_up(node, &hl.dag, &seams, range)
+    }
+
+    /// Records `node` as complete, with its roots (from `dag`) and their seams for its parent's
+    /// HLOD: empty when the parent was built by a build plan's shard (nobody reads them).
+    fn hand_up(
+        &mut self,
+        node: u32,
+        dag: &LodDag,
+        seams: &SeamTable,
+        range: (u32, u32),
+    ) -> Result<(), BuildError> {
+        let parent = self.index.parent[node as usize];
+        if self.prebuilt.is_some_and(|p| parent != u32::MAX && p.has_node(parent)) {
+            self.roots[node as usize] = Some((Roots::default(), SeamTable::default()));
+            return Ok(());
+        }
+        let roots = roots_of(dag, self.provisional_base(node, dag.groups.len())?);
         let root_seams = seams.retain(root_positions(&roots), range);
         self.roots[node as usize] = Some((roots, root_seams));
         Ok(())

@@ -29,6 +29,10 @@ pub struct PlanFile {
     /// The build's arguments after `terawalk`, absolute paths, which every job parses again.
     pub command: Vec<String>,
     pub shards: u32,
+    /// Each input file's path, size and modification time: a plan written again for the same
+    /// build over unchanged inputs resumes (jobs done stay done); otherwise it starts over.
+    #[serde(default)]
+    pub inputs: Vec<String>,
     /// In an order where each job comes after those in its `after`.
     pub jobs: Vec<PlanJob>,
 }
@@ -63,6 +67,15 @@ impl PlanFile {
         let plan: PlanFile = serde_json::from_value(root)?;
         check_graph(&plan.jobs)?;
         Ok(plan)
+    }
+
+    /// Whether `other` is this plan's build: the same command, shards, inputs and jobs.
+    fn same_build(&self, other: &PlanFile) -> bool {
+        self.command == other.command
+            && self.shards == other.shards
+            && self.inputs == other.inputs
+            && self.output == other.output
+            && self.jobs == other.jobs
     }
 
     pub fn job(&self, id: &str) -> Option<&PlanJob> {
@@ -127,10 +140,12 @@ pub fn run(args: &BuildArgs, output: &Path, quiet: bool) -> Result<()> {
     let start = Instant::now();
     let output = std::path::absolute(output).with_context(|| format!("{}", output.display()))?;
     let (dir, _temporary) = plan_dir(args, &output)?;
-    let plan = write_plan(args, &output, &dir)?;
+    let (plan, resumed) = write_plan(args, &output, &dir)?;
     if !quiet {
+        let done = plan.jobs.iter().filter(|j| done_marker(&dir, &j.id).exists()).count();
+        let state = if resumed { format!("; the same build: {done} done, resuming") } else { String::new() };
         outln!(
-            "wrote {} ({} jobs, {} shards)",
+            "wrote {} ({} jobs, {} shards{state})",
             dir.join("plan.json").display(),
             plan.jobs.len(),
             plan.shards
@@ -164,17 +179,17 @@ fn plan_dir(args: &BuildArgs, output: &Path) -> Result<(PathBuf, Option<tw_build
     if let Some(dir) = &args.plan.plan {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating the plan directory {}", dir.display()))?;
-        let dir = std::path::absolute(dir)?;
-        drop(std::fs::remove_dir_all(dir.join("done")));
-        return Ok((dir, None));
+        return Ok((std::path::absolute(dir)?, None));
     }
     let root = tw_build::work_root(output, args.work_dir.as_deref());
     let work = tw_build::WorkDir::create(&root)?;
     Ok((work.path().to_path_buf(), Some(work)))
 }
 
-/// Writes DIR/plan.json for `args` (atomically).
-fn write_plan(args: &BuildArgs, output: &Path, dir: &Path) -> Result<PlanFile> {
+/// Writes DIR/plan.json for `args` (atomically). When DIR already holds the plan of the same
+/// build over unchanged inputs, its finished jobs stay finished (returns true: resumed);
+/// otherwise its done markers are removed, so every job runs again.
+fn write_plan(args: &BuildArgs, output: &Path, dir: &Path) -> Result<(PlanFile, bool)> {
     let estimate = estimate(args)?;
     let shards = args.plan.shards.unwrap_or_else(|| default_shards(estimate.triangles));
     let jobs = job_graph(shards, &estimate).iter().map(plan_job).collect();
@@ -185,14 +200,35 @@ fn write_plan(args: &BuildArgs, output: &Path, dir: &Path) -> Result<PlanFile> {
         output: output.to_path_buf(),
         command: command_of(args, output)?,
         shards,
+        inputs: fingerprints(&args.inputs),
         jobs,
     };
+    let resumed = PlanFile::read(dir).is_ok_and(|old| old.same_build(&plan));
+    if !resumed {
+        drop(std::fs::remove_dir_all(dir.join("done")));
+    }
     let path = dir.join("plan.json");
     let tmp = dir.join("plan.json.tmp");
     std::fs::write(&tmp, serde_json::to_string_pretty(&plan)? + "\n")
         .and_then(|()| std::fs::rename(&tmp, &path))
         .with_context(|| format!("writing {}", path.display()))?;
-    Ok(plan)
+    Ok((plan, resumed))
+}
+
+/// "path size mtime" of each input (unreadable metadata leaves the time out).
+fn fingerprints(inputs: &[PathBuf]) -> Vec<String> {
+    inputs
+        .iter()
+        .map(|p| {
+            let m = std::fs::metadata(p).ok();
+            let modified = m
+                .as_ref()
+                .and_then(|m| m.modified().ok())
+                .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok());
+            let abs = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+            format!("{} {} {}", abs.display(), m.map_or(0, |m| m.len()), modified.map_or(0, |d| d.as_nanos()))
+        })
+        .collect()
 }
 
 fn plan_job(j: &JobSpec) -> PlanJob {
