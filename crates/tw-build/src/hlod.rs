@@ -93,6 +93,13 @@ pub struct Roots {
     pub group_ids: Vec<u32>,
 }
 
+#[cfg(test)]
+impl Roots {
+    pub fn triangle_count(&self) -> usize {
+        self.dag.clusters.iter().map(|c| c.indices.len() / 3).sum()
+    }
+}
+
 /// The roots of `dag` (its groups with infinite error); `group_base` is the caller's id of
 /// `dag.groups[0]` (ids are `group_base + index`).
 pub fn roots_of(dag: &LodDag, group_base: u32) -> Roots {
