@@ -205,12 +205,17 @@ pub fn build(
     options: &BuildOptions,
     progress: &mut dyn BuildProgress,
 ) -> Result<BuildReport, BuildError> {
+    build_with_pool(scene, output, options, progress, &worker_pool(options)?)
+}
+
+/// The build's worker threads: `options.threads` (at most [`max_worker_threads`]), else one
+/// per core.
+pub(crate) fn worker_pool(options: &BuildOptions) -> Result<rayon::ThreadPool, BuildError> {
     let mut pool = rayon::ThreadPoolBuilder::new();
     if let Some(n) = options.threads {
         pool = pool.num_threads(n.clamp(1, max_worker_threads()));
     }
-    let pool = pool.build().map_err(|e| BuildError::Param(format!("thread pool: {e}")))?;
-    build_with_pool(scene, output, options, progress, &pool)
+    pool.build().map_err(|e| BuildError::Param(format!("thread pool: {e}")))
 }
 
 /// The name prefix of a build's working directory.

@@ -62,9 +62,9 @@ pub struct Estimate {
     pub cpus: u32,
 }
 
-/// Bytes per input triangle: the prepared bucket files (35) and seams; the cells' DAGs and
-/// encoded clusters (measured 2.0× the input in triangles over all levels, ~30 B each); the
-/// store (≤ 12).
+/// Disk per input triangle, with a margin over what the 10^8 plant measured (docs/SCALE.md):
+/// the prepared buckets and seams (33 B), the shards' DAGs and encoded clusters (39 B), the
+/// store (10 B).
 const PREPARED_BYTES_PER_TRIANGLE: u64 = 40;
 const CELLS_BYTES_PER_TRIANGLE: u64 = 60;
 const STORE_BYTES_PER_TRIANGLE: u64 = 12;

@@ -18,8 +18,8 @@ use crate::error::BuildError;
 use crate::hierarchy::Hierarchy;
 use crate::hlod_jobs::HlodJobs;
 use crate::pipeline::{
-    finish, lod_window, prepare, remove_stale_temporaries, BuildOptions, BuildProgress, BuildReport,
-    Prepared, SceneFacts, Timer, WorkDir,
+    finish, lod_window, prepare, remove_stale_temporaries, worker_pool, BuildOptions, BuildProgress,
+    BuildReport, Prepared, SceneFacts, Timer, WorkDir,
 };
 use crate::seams::{SeamFiles, SeamFilesMeta};
 
@@ -41,14 +41,6 @@ struct PreparedState {
     phases: Vec<(String, f64)>,
 }
 
-fn pool(options: &BuildOptions) -> Result<rayon::ThreadPool, BuildError> {
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = options.threads {
-        pool = pool.num_threads(n.clamp(1, crate::pipeline::max_worker_threads()));
-    }
-    pool.build().map_err(|e| BuildError::Param(format!("thread pool: {e}")))
-}
-
 /// Job `prepare`: phases 1–4 of `scene` into `plan/prepared/`, which appears only when complete
 /// (it is built in a working directory beside it, removed on failure, and after a kill by the
 /// next run). Returns the phases' report.
@@ -58,7 +50,7 @@ pub fn run_prepare(
     options: &BuildOptions,
     progress: &mut dyn BuildProgress,
 ) -> Result<BuildReport, BuildError> {
-    let pool = pool(options)?;
+    let pool = worker_pool(options)?;
     let target = plan.join(PREPARED);
     remove_stale_temporaries(&target, plan);
     if target.exists() {
@@ -116,7 +108,7 @@ pub fn run_cells(
     progress: &mut dyn BuildProgress,
 ) -> Result<CellsReport, BuildError> {
     let start = Instant::now();
-    let pool = pool(options)?;
+    let pool = worker_pool(options)?;
     let (prepared, _) = open_prepared(plan)?;
     let cells = &prepared.cells;
     let bucket_triangles: Vec<u64> = (0..cells.bucket_count()).map(|b| cells.bucket_triangles(b)).collect();
@@ -168,7 +160,7 @@ pub fn run_pack(
     options: &BuildOptions,
     progress: &mut dyn BuildProgress,
 ) -> Result<BuildReport, BuildError> {
-    let pool = pool(options)?;
+    let pool = worker_pool(options)?;
     let (prepared, phases) = open_prepared(plan)?;
     let records = CellRecords::open(&plan.join(CELLS), shards, prepared.cells.cell_count())?;
     remove_stale_temporaries(output, &crate::pipeline::work_root(output, None));
