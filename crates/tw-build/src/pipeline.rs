@@ -823,14 +823,16 @@ impl<'h> LodState<'h> {
         encoded: Vec<EncodedCluster>,
         seams: &SeamTable,
     ) -> Result<(), BuildError> {
-        self.emit(writer, leaf, &dag, encoded, true)?;
-        let level0: usize = dag.clusters.iter().filter(|c| c.level == 0).map(|c| c.indices.len() / 3).sum();
+        // Counted from the encoded clusters: a plan's shards leave out the geometry nobody reads.
+        let level0: usize = encoded.iter().filter(|c| c.level == 0).map(|c| c.triangles).sum();
         let root_triangles: usize = dag
             .clusters
             .iter()
-            .filter(|c| dag.groups[c.group as usize].error == f32::INFINITY)
-            .map(|c| c.indices.len() / 3)
+            .zip(&encoded)
+            .filter(|(c, _)| dag.groups[c.group as usize].error == f32::INFINITY)
+            .map(|(_, e)| e.triangles)
             .sum();
+        self.emit(writer, leaf, &dag, encoded, true)?;
         self.cell_counts.0 += 1;
         self.cell_counts.1 += level0 as u64;
         self.cell_counts.2 += root_triangles as u64;

@@ -11,7 +11,7 @@ use tw_store::StoreWriter;
 
 use super::graph::shard_buckets;
 use super::records::{read_value, write_value, CellRecords, ShardWriter};
-use super::shard_hlod::ShardHlod;
+use super::shard_hlod::{strip_geometry, ShardHlod};
 use crate::cell_pass::{CellPass, CellSource};
 use crate::cells::{CellFiles, CellFilesMeta};
 use crate::error::BuildError;
@@ -134,6 +134,8 @@ pub fn run_cells(
         count += 1;
         progress.advance(done);
         hlod.add_cell(i, &built.dag, seams)?;
+        let mut built = built;
+        strip_geometry(&mut built.dag, hlod.pack_needs_roots_of_cell(i));
         writer.append(i, built)?;
         hlod.write_due(Some(i as usize), &mut writer)
     })?;

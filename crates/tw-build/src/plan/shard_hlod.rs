@@ -40,6 +40,23 @@ impl<'a> ShardHlod<'a> {
         ShardHlod { hierarchy, index, cells, roots: HashMap::new(), jobs, pending: VecDeque::new(), nodes: 0 }
     }
 
+    /// Whether `pack` reads the roots of cell `i`'s leaf: when its parent spans shards (a node
+    /// `pack` builds from them).
+    pub fn pack_needs_roots_of_cell(&self, i: u32) -> bool {
+        self.pack_needs_roots(self.index.leaf_of_cell[i as usize])
+    }
+
+    fn pack_needs_roots(&self, node: u32) -> bool {
+        let parent = self.index.parent[node as usize];
+        parent != u32::MAX && !self.inside(parent)
+    }
+
+    /// Whether `node`'s cells all lie in the shard.
+    fn inside(&self, node: u32) -> bool {
+        let range = self.index.cell_range[node as usize];
+        self.cells.0 <= range.0 && range.1 <= self.cells.1
+    }
+
     /// Cell `i` built (`seams`: its bucket's): its roots up, its parent started if complete.
     pub fn add_cell(&mut self, i: u32, dag: &LodDag, seams: &SeamTable) -> Result<(), BuildError> {
         let leaf = self.index.leaf_of_cell[i as usize];
@@ -60,8 +77,7 @@ impl<'a> ShardHlod<'a> {
         }
         let range = self.index.cell_range[parent as usize];
         let children = self.hierarchy.nodes[parent as usize].children();
-        let inside = self.cells.0 <= range.0 && range.1 <= self.cells.1;
-        if !inside || children.clone().any(|c| !self.roots.contains_key(&(c as u32))) {
+        if !self.inside(parent) || children.clone().any(|c| !self.roots.contains_key(&(c as u32))) {
             return;
         }
         let (children, child_seams): (Vec<Roots>, Vec<SeamTable>) =
@@ -83,11 +99,29 @@ impl<'a> ShardHlod<'a> {
             let slot = self.index.slot(self.hierarchy, node);
             let roots = built.hl.roots(crate::provisional::base(slot, built.hl.dag.groups.len())?);
             let root_seams = built.seams.retain(root_positions(&roots), built.range);
-            out.append_node(*built)?;
+            let mut built = *built;
+            strip_geometry(&mut built.hl.dag, self.pack_needs_roots(node));
+            out.append_node(built)?;
             self.nodes += 1;
             self.roots.insert(node, (roots, root_seams));
             self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG);
         }
         Ok(())
+    }
+}
+
+/// Drops the geometry `pack` does not read from a DAG before it is written: `pack` emits groups
+/// from the encoded clusters and reads a DAG's groups, its clusters' levels and sources; it
+/// needs the geometry of the root clusters only when `keep_roots` (the node's parent spans
+/// shards and `pack` builds it from them). Cuts the shards' files to about a third.
+pub(crate) fn strip_geometry(dag: &mut LodDag, keep_roots: bool) {
+    let LodDag { clusters, groups } = dag;
+    for c in clusters.iter_mut() {
+        if keep_roots && groups[c.group as usize].error == f32::INFINITY {
+            continue;
+        }
+        c.positions = Vec::new();
+        c.indices = Vec::new();
+        c.objects = Vec::new();
     }
 }
