@@ -153,8 +153,9 @@ pub fn run_cells(
     })
 }
 
-/// Job `pack`: HLOD, pages and tables over every shard's cells, in cell order, and the store
-/// at `output` (atomically): the plain build's phases 5–6 on the same inputs.
+/// Job `pack`: the plain build's phases 5–6 over every shard's cells and HLOD nodes, read back
+/// in cell order: the HLOD of the nodes that span shards, pages, tables, and the store at
+/// `output` (atomically).
 pub fn run_pack(
     plan: &Path,
     shards: u32,
