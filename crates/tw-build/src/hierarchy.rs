@@ -242,11 +242,28 @@ impl TreeIndex {
 
     /// `node`'s index among its parent's children (0 for the root): its provisional group ids'
     /// slot (`crate::provisional`).
-    pub fn slot(&self, hierarchy: &Hierarchy, node: u32) -> u32 {
+    fn slot(&self, hierarchy: &Hierarchy, node: u32) -> u32 {
         match self.parent[node as usize] {
             u32::MAX => 0,
             p => node - hierarchy.nodes[p as usize].first_child,
         }
+    }
+
+    /// What a complete `node` hands up to its parent's HLOD: the roots of `dag` (its DAG) under
+    /// provisional ids, and the seams among `seams` at their vertices that are shared with a cell
+    /// outside `range` (the node's cells).
+    pub fn subtree_roots(
+        &self,
+        hierarchy: &Hierarchy,
+        node: u32,
+        dag: &crate::types::LodDag,
+        seams: &crate::seams::SeamTable,
+        range: (u32, u32),
+    ) -> Result<(crate::hlod::Roots, crate::seams::SeamTable), crate::error::BuildError> {
+        let base = crate::provisional::base(self.slot(hierarchy, node), dag.groups.len())?;
+        let roots = crate::hlod::roots_of(dag, base);
+        let root_seams = seams.retain(roots.positions(), range);
+        Ok((roots, root_seams))
     }
 }
 

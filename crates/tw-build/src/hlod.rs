@@ -93,8 +93,13 @@ pub struct Roots {
     pub group_ids: Vec<u32>,
 }
 
-#[cfg(test)]
 impl Roots {
+    /// Every vertex position of the roots' clusters (repeats included).
+    pub fn positions(&self) -> impl Iterator<Item = [u32; 3]> + '_ {
+        self.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
+    }
+
+    #[cfg(test)]
     pub fn triangle_count(&self) -> usize {
         self.dag.clusters.iter().map(|c| c.indices.len() / 3).sum()
     }
@@ -170,6 +175,7 @@ pub struct HlodStats {
     pub area_ratio: f32,
 }
 
+#[cfg(test)]
 impl HlodNode {
     /// The node's roots, for its parent; `group_base` is the caller's id of `dag.groups[0]`.
     pub fn roots(&self, group_base: u32) -> Roots {

@@ -35,7 +35,7 @@ use crate::cell_pass::{BuiltCell, CellPass, CellSource};
 use crate::cells::CellFiles;
 use crate::error::BuildError;
 use crate::hierarchy::{Hierarchy, TreeIndex};
-use crate::hlod::{roots_of, HlodNode, HlodOutcome, HlodParams, Roots};
+use crate::hlod::{HlodNode, HlodOutcome, HlodParams, Roots};
 use crate::hlod_jobs::{HlodBuilt, HlodInput, HlodJob, HlodJobs};
 use crate::in_order::Window;
 use crate::ingest::Ingested;
@@ -296,7 +296,7 @@ fn build_with_pool(
     remove_stale_temporaries(output, &work_root);
     let work = WorkDir::create(&work_root)?;
     let writer = StoreWriter::create(output).map_err(BuildError::store)?;
-    let mut t = Timer { report: &mut report, start: Instant::now() };
+    let mut t = Timer::new(&mut report);
     let prepared = prepare(scene, work.path(), options, progress, pool, &mut t)?;
     let source = CellSource::Build { grid: &prepared.facts.grid, params: &options.lod };
     finish(&prepared, source, writer, options, progress, pool, &mut t)?;
@@ -763,7 +763,7 @@ impl<'h> LodState<'h> {
     /// `dag`, see [`encode_clusters`]) to pages and records the groups and
     /// their sources: the union of their clusters' `refined_from`, which are indices into `dag`
     /// when `local_sources` (a cell's DAG) and scene ids otherwise (an HLOD node's). Sources are
-    /// always groups emitted earlier (the store writer checks it). Returns the scene id of `dag.groups[0]`.
+    /// always groups emitted earlier (the store writer checks it).
     fn emit(
         &mut self,
         writer: &mut StoreWriter,
@@ -771,7 +771,7 @@ impl<'h> LodState<'h> {
         dag: &LodDag,
         mut encoded: Vec<EncodedCluster>,
         local_sources: bool,
-    ) -> Result<u32, BuildError> {
+    ) -> Result<(), BuildError> {
         if encoded.len() != dag.clusters.len() {
             let m = format!("{} encoded clusters for {}", encoded.len(), dag.clusters.len());
             return Err(invalid_cluster(node, m));
@@ -812,7 +812,7 @@ impl<'h> LodState<'h> {
             self.packer.add_group(writer, id, g.level, root, clusters)?;
         }
         self.node_groups[node as usize] = (base, dag.groups.len() as u32);
-        Ok(base)
+        Ok(())
     }
 
     fn add_cell(
@@ -893,11 +893,6 @@ impl<'h> LodState<'h> {
         Ok(())
     }
 
-    /// The provisional id of `node`'s group 0 as its parent's HLOD sees it ([`crate::provisional`]).
-    fn provisional_base(&self, node: u32, groups: usize) -> Result<u32, BuildError> {
-        crate::provisional::base(self.index.slot(self.hierarchy, node), groups)
-    }
-
     /// Gives an HLOD node's replaced groups and its clusters' sources their scene ids (its
     /// children have been emitted: their first groups' ids are known).
     fn resolve_provisional(&self, node: u32, hl: &mut HlodNode) -> Result<(), BuildError> {
@@ -959,16 +954,10 @@ impl<'h> LodState<'h> {
             self.roots[node as usize] = Some((Roots::default(), SeamTable::default()));
             return Ok(());
         }
-        let roots = roots_of(dag, self.provisional_base(node, dag.groups.len())?);
-        let root_seams = seams.retain(root_positions(&roots), range);
-        self.roots[node as usize] = Some((roots, root_seams));
+        self.roots[node as usize] =
+            Some(self.index.subtree_roots(self.hierarchy, node, dag, seams, range)?);
         Ok(())
     }
-}
-
-/// Every vertex position of `roots`' clusters (repeats included).
-pub(crate) fn root_positions(roots: &Roots) -> impl Iterator<Item = [u32; 3]> + '_ {
-    roots.dag.clusters.iter().flat_map(|c| c.positions.iter().copied())
 }
 
 /// A cluster the page codec refuses (a bug of the build, reported rather than written).

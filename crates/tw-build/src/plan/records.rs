@@ -34,7 +34,7 @@ pub(crate) fn write_value<T: Serialize>(path: &Path, value: &T) -> Result<(), Bu
         let mut f = File::create(&tmp)?;
         f.write_all(MAGIC)?;
         f.write_all(&VERSION.to_le_bytes())?;
-        f.write_all(&tw_store::format::checksum(&bytes).to_le_bytes())?;
+        f.write_all(&seal(&bytes))?;
         f.write_all(&bytes)?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)
@@ -50,16 +50,21 @@ pub(crate) fn read_value<T: DeserializeOwned>(path: &Path) -> Result<T, BuildErr
     let bytes = std::fs::read(path).map_err(|e| BuildError::io(path, e))?;
     let corrupt = |message: String| BuildError::Corrupt { path: path.to_path_buf(), message };
     let body = check_header(&bytes).map_err(corrupt)?;
-    if body.len() < 4 {
-        return Err(corrupt("truncated: run the job that wrote it again".into()));
-    }
-    let (sum, payload) = body.split_at(4);
-    if u32::from_le_bytes(sum.try_into().expect("4 bytes")) != tw_store::format::checksum(payload) {
-        return Err(corrupt(
-            "checksum mismatch: the file is damaged; run the job that wrote it again".into(),
-        ));
-    }
+    let payload = unseal(body).ok_or_else(|| {
+        corrupt("checksum mismatch: the file is damaged or truncated; run the job that wrote it again".into())
+    })?;
     postcard::from_bytes(payload).map_err(|e| corrupt(format!("cannot decode: {e}")))
+}
+
+/// What precedes a record's payload: its CRC-32C.
+fn seal(payload: &[u8]) -> [u8; 4] {
+    tw_store::format::checksum(payload).to_le_bytes()
+}
+
+/// The payload of a record (a [`seal`], then the payload), if its checksum holds.
+fn unseal(record: &[u8]) -> Option<&[u8]> {
+    let (sum, payload) = record.split_at_checked(4)?;
+    (sum == seal(payload)).then_some(payload)
 }
 
 /// The bytes after a plan file's magic and version, or why the file is not one of ours.
@@ -196,7 +201,7 @@ impl ShardWriter {
         let bytes = postcard::to_stdvec(value).map_err(|e| BuildError::Internal(format!("{what}: {e}")))?;
         let tmp = temporary_name(&self.bin);
         self.out
-            .write_all(&tw_store::format::checksum(&bytes).to_le_bytes())
+            .write_all(&seal(&bytes))
             .and_then(|()| self.out.write_all(&bytes))
             .map_err(|e| BuildError::io(&tmp, e))?;
         let at = (self.offset, bytes.len() as u64 + 4);
@@ -297,13 +302,8 @@ impl CellRecords {
         let corrupt = |message: String| BuildError::Corrupt { path: path.clone(), message };
         let mut bytes = vec![0u8; len as usize];
         tw_core::direct_io::read_exact_at(file, &mut bytes, offset).map_err(|e| BuildError::io(path, e))?;
-        if bytes.len() < 4 {
-            return Err(corrupt(format!("{what}: a record of {len} bytes")));
-        }
-        let (sum, payload) = bytes.split_at(4);
-        if u32::from_le_bytes(sum.try_into().expect("4 bytes")) != tw_store::format::checksum(payload) {
-            return Err(corrupt(format!("{what}: checksum mismatch; run its cells job again")));
-        }
+        let payload = unseal(&bytes)
+            .ok_or_else(|| corrupt(format!("{what}: checksum mismatch; run its cells job again")))?;
         postcard::from_bytes(payload).map_err(|e| corrupt(format!("{what}: {e}")))
     }
 

@@ -11,9 +11,9 @@ use std::sync::Arc;
 
 use crate::error::BuildError;
 use crate::hierarchy::{Hierarchy, TreeIndex};
-use crate::hlod::{roots_of, Roots};
+use crate::hlod::Roots;
 use crate::hlod_jobs::{HlodInput, HlodJob, HlodJobs};
-use crate::pipeline::{root_positions, HLOD_LAG};
+use crate::pipeline::HLOD_LAG;
 use crate::seams::SeamTable;
 use crate::types::LodDag;
 
@@ -60,10 +60,9 @@ impl<'a> ShardHlod<'a> {
     /// Cell `i` built (`seams`: its bucket's): its roots up, its parent started if complete.
     pub fn add_cell(&mut self, i: u32, dag: &LodDag, seams: &SeamTable) -> Result<(), BuildError> {
         let leaf = self.index.leaf_of_cell[i as usize];
-        let roots =
-            roots_of(dag, crate::provisional::base(self.index.slot(self.hierarchy, leaf), dag.groups.len())?);
-        let root_seams = seams.retain(root_positions(&roots), self.index.cell_range[leaf as usize]);
-        self.roots.insert(leaf, (roots, root_seams));
+        let range = self.index.cell_range[leaf as usize];
+        let handed_up = self.index.subtree_roots(self.hierarchy, leaf, dag, seams, range)?;
+        self.roots.insert(leaf, handed_up);
         self.start_parent(leaf, i as usize + HLOD_LAG);
         Ok(())
     }
@@ -96,14 +95,13 @@ impl<'a> ShardHlod<'a> {
             let (_, job) = self.pending.pop_front().expect("checked above");
             let built = self.jobs.result(&job).map_err(BuildError::Internal)?;
             let node = built.node;
-            let slot = self.index.slot(self.hierarchy, node);
-            let roots = built.hl.roots(crate::provisional::base(slot, built.hl.dag.groups.len())?);
-            let root_seams = built.seams.retain(root_positions(&roots), built.range);
+            let handed_up =
+                self.index.subtree_roots(self.hierarchy, node, &built.hl.dag, &built.seams, built.range)?;
             let mut built = *built;
             strip_geometry(&mut built.hl.dag, self.pack_needs_roots(node));
             out.append_node(built)?;
             self.nodes += 1;
-            self.roots.insert(node, (roots, root_seams));
+            self.roots.insert(node, handed_up);
             self.start_parent(node, cell.unwrap_or(0) + HLOD_LAG);
         }
         Ok(())
