@@ -406,8 +406,8 @@ pub(crate) fn finish<'h>(
 }
 
 /// Phase 1: reads the scene into the working file, taking redefinition's samples on the way
-/// (no pass over the working file for them) in an eighth of the budget (the importers'
-/// vertices take a quarter), and settles the up axis (voted on the way when asked for `auto`).
+/// (no pass over the working file for them) with an eighth of the budget beyond the final
+/// samples (`crate::sampling`, "Memory"; the importers' vertices take a quarter), and settles the up axis (voted on the way when asked for `auto`).
 fn ingest_phase(
     scene: Scene,
     work_dir: &Path,

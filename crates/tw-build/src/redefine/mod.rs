@@ -166,7 +166,7 @@ pub struct RedefineParams {
     pub neighbours: usize,
     /// Centroid samples kept in memory for planning splits (12 bytes each): between this and
     /// twice this, plus up to twice `min_samples_per_object` for each sampled object (ingest
-    /// holds up to 8 times this while streaming: `sampling`).
+    /// holds about twice this more while streaming: `sampling`, "Memory").
     pub max_samples: u64,
     /// Every object of more than `t1` triangles keeps at least this many samples.
     pub min_samples_per_object: u64,
