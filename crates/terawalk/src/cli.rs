@@ -703,6 +703,11 @@ pub struct BenchArgs {
     /// of streaming: the same cut whatever the timing, for comparing images.
     #[arg(long)]
     pub wait: bool,
+    /// Streaming: raise the pixel error while the cut's pages would not fit --memory, back down
+    /// when there is room (on, the default: a cut that does not fit would reload pages every
+    /// frame); off keeps the asked-for --error whatever it costs. The report plots the factor.
+    #[arg(long, default_value = "on", value_parser = parse_on_off, value_name = "on|off", action = clap::ArgAction::Set)]
+    pub fit_memory: bool,
     /// queries: count a tested box visible only when more than N of its samples pass (the
     /// occlusion switch's visible-pixel cut-off; approximate above 0, measure with --compare).
     /// Vulkan only: GL's queries are booleans.

@@ -155,7 +155,7 @@ impl Bench {
             // after the first reference.
             tw_frame::supersample::check_grid(&renderer, o.reference_samples)?;
         }
-        let stream = StreamOptions { budget_bytes: o.memory, ..Default::default() };
+        let stream = StreamOptions { budget_bytes: o.memory, fit_budget: o.fit_memory, ..Default::default() };
         let mut walk = Walkthrough::new(Arc::new(store), renderer, stream)?;
         walk.set_color_mode(o.color);
         Ok((walk, adapter, samples))

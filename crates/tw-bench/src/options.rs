@@ -42,6 +42,8 @@ pub struct BenchOptions {
     pub exact: bool,
     /// Load every page a frame needs before drawing it.
     pub wait: bool,
+    /// Streaming: raise τ while the cut's pages would not fit `memory` (`tw_runtime::fit`).
+    pub fit_memory: bool,
     /// `queries`' visible-pixel cut-off.
     pub visible_pixels: u32,
     /// `hzb` without its per-triangle tests.

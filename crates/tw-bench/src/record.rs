@@ -42,6 +42,7 @@ pub fn record(i: usize, segment: &str, info: &FrameInfo) -> FrameRecord {
         pages_loaded: st.pages_loaded,
         pages_evicted: st.pages_evicted,
         stalls_avoided: st.stalls_avoided,
+        tau_scale: st.tau_scale as f64,
         groups_failed: info.select.groups_failed,
         shadow: (info.shadow.layers > 0).then(|| shadow_record(&info.shadow)),
         ..Default::default()

@@ -141,6 +141,10 @@ pub struct FrameRecord {
     pub pages_evicted: u64,
     /// Groups drawn from a coarser resident ancestor instead of waiting for a page.
     pub stalls_avoided: u64,
+    /// The factor τ was raised by so that the cut's pages fit the cache (1: as asked; 0: the
+    /// frame waited for its pages, `--wait`, where τ is never raised).
+    #[serde(default)]
+    pub tau_scale: f64,
     /// Groups whose page failed (checksum, decoding): drawn from a coarser ancestor where the
     /// store has one ([`BenchReport::damaged_pages`]).
     #[serde(default)]

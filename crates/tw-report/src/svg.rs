@@ -52,6 +52,7 @@ pub const SERIES: &[Series] = &[
     series!(pages_loaded, "Pages loaded", "pages"),
     series!(pages_evicted, "Pages evicted", "pages"),
     series!(stalls_avoided, "Stalls avoided (coarser ancestor drawn)", "groups"),
+    series!(tau_scale, "Pixel error raised to fit the memory budget", "× τ"),
     series!(psnr_db?, "PSNR against the reference", "dB"),
     series!(differing_pixels?, "Differing pixels", "share"),
     series!(supersampled_psnr_db?, "PSNR against the supersampled reference", "dB"),

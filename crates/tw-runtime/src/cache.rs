@@ -381,6 +381,22 @@ impl PageCache {
         self.room_sparing_frame(&self.lock(), bytes)
     }
 
+    /// Decoded bytes the current frame holds resident: the pages used or loaded since
+    /// [`begin_frame`](Self::begin_frame) and the pinned root pages (what a streamed cut needs
+    /// of the budget, `crate::fit`).
+    pub fn frame_bytes(&self) -> u64 {
+        let inner = self.lock();
+        let used: u64 = inner
+            .lru
+            .range(inner.frame_start + 1..)
+            .filter_map(|(_, &p)| match inner.slots.get(p as usize) {
+                Some(Slot::Resident { page, .. }) => Some(page.bytes() as u64),
+                _ => None,
+            })
+            .sum();
+        used + inner.stats.pinned_bytes
+    }
+
     /// Starts a frame: pages used or loaded from now on are in the current frame, which
     /// prefetched pages may not evict ([`Eviction::SparingThisFrame`]).
     pub fn begin_frame(&self) {

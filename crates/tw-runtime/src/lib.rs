@@ -13,6 +13,7 @@
 //! - [`cache`]: decoded pages under a memory budget, LRU, root pages pinned;
 //! - [`availability`]: the availability rule (what may be drawn while pages are missing);
 //! - [`stream`]: loader threads, per-frame requests by priority, selection that never waits;
+//! - [`fit`]: the τ a streamed cut is raised to when its pages would not fit the budget;
 //! - [`prefetch`]: the views whose pages the next frames will need;
 //! - [`path`]: camera paths (one camera per frame) as JSON, for `path`, `bench` and the viewer;
 //! - [`pathgen`]: automatic walkthrough paths (interior walk at eye height, fly-over).
@@ -49,6 +50,7 @@ pub mod availability;
 pub mod cache;
 pub mod camera;
 pub mod error;
+pub mod fit;
 pub mod frustum;
 pub mod fuzz;
 pub mod hzb;

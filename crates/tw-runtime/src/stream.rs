@@ -17,7 +17,10 @@
 //! 4. both lists *replace* the loaders' queues ([`Streamer::submit`]): stale requests of
 //!    earlier frames are dropped; pages resident, failed or being loaded are left out, so a
 //!    page is never loaded twice at once;
-//! 5. per-frame statistics ([`StreamStats`]).
+//! 5. per-frame statistics ([`StreamStats`]), and the fit of τ to the cache ([`crate::fit`]):
+//!    when the pages the cut draws from and asks for would not fit the budget, the next frames
+//!    select at a raised τ (the frame's light views at the same one), back down when there is
+//!    room.
 //!
 //! Loader threads (default 2) take the highest-priority page of the frame's queue, else of the
 //! prefetch queue, read and decode it without any lock held, and hand it to the cache:
@@ -47,6 +50,7 @@ use crate::availability::{Availability, Requests};
 use crate::cache::{CacheStats, Eviction, Inserted, PageCache, ResidentPage};
 use crate::camera::Camera;
 use crate::error::RuntimeError;
+use crate::fit::CacheFit;
 use crate::prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 use crate::select::{ClusterRef, SelectOptions, Selection, Selector};
 
@@ -58,16 +62,29 @@ pub struct StreamOptions {
     /// Background loader threads; 0: only [`Streamer::load_queued`] loads.
     pub loader_threads: usize,
     pub prefetch: PrefetchOptions,
+    /// Raise τ while the cut's pages would not fit the budget ([`crate::fit`]; on by default,
+    /// `--fit-memory off` turns it off).
+    #[serde(default = "fit_by_default")]
+    pub fit_budget: bool,
+}
+
+fn fit_by_default() -> bool {
+    true
 }
 
 impl Default for StreamOptions {
     fn default() -> Self {
-        StreamOptions { budget_bytes: 512 << 20, loader_threads: 2, prefetch: PrefetchOptions::default() }
+        StreamOptions {
+            budget_bytes: 512 << 20,
+            loader_threads: 2,
+            prefetch: PrefetchOptions::default(),
+            fit_budget: true,
+        }
     }
 }
 
 /// What streaming did in one frame (counts since the previous frame; resident figures now).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct StreamStats {
     /// Frame number, from 0.
     pub frame: u64,
@@ -103,6 +120,14 @@ pub struct StreamStats {
     pub failed_pages: u64,
     pub clusters: u64,
     pub triangles: u64,
+    /// The factor this frame's τ was raised by to fit the cache ([`crate::fit`]; 1: the
+    /// asked-for τ; 0 in frames that were not streamed).
+    #[serde(default)]
+    pub tau_scale: f32,
+    /// Decoded bytes of the pages the cut drew from plus those it asked for (what the fit
+    /// compares with the budget).
+    #[serde(default)]
+    pub cut_bytes: u64,
 }
 
 /// One streamed frame: the cut, the pages it draws (held, so eviction cannot take them away
@@ -267,6 +292,10 @@ pub struct Streamer {
     submitted: (Requests, Requests),
     /// Whether `availability` holds a frame's snapshot (a [`Streamer::frame`] began one).
     snapshot_taken: bool,
+    /// The scale of τ that keeps the cut within the budget, and the one the last frame used
+    /// (its light views use the same).
+    fit: CacheFit,
+    frame_scale: f32,
 }
 
 /// The prefetch views' selection on a thread of its own (module documentation, step 3): the
@@ -406,6 +435,8 @@ impl Streamer {
             generation: 0,
             submitted: Default::default(),
             snapshot_taken: false,
+            fit: CacheFit::default(),
+            frame_scale: 1.0,
         }
     }
 
@@ -441,6 +472,8 @@ impl Streamer {
     /// One frame: select without waiting, request, prefetch, statistics (module documentation).
     pub fn frame(&mut self, camera: &Camera, options: &SelectOptions) -> StreamFrame {
         let start = std::time::Instant::now();
+        self.frame_scale = if self.options.fit_budget { self.fit.scale() } else { 1.0 };
+        let options = &self.fitted(options);
         self.cache.begin_frame();
         self.availability.begin(&self.store);
         self.snapshot_taken = true;
@@ -465,6 +498,7 @@ impl Streamer {
         // frame).
         let fresh = self.prefetch_list.1.is_none_or(|f| self.frame >= f + every);
         let wanted = self.options.prefetch.enabled && demand.len() <= self.options.prefetch.idle_below;
+        let prefetch_options = self.prefetch_options();
         if let Some(worker) = &mut self.prefetch_worker {
             while let Ok((generation, list)) = worker.results.try_recv() {
                 worker.busy = false;
@@ -473,7 +507,7 @@ impl Streamer {
                 }
             }
             if wanted && fresh && !worker.busy {
-                let views = prefetch_views(camera, &self.history, options, &self.options.prefetch);
+                let views = prefetch_views(camera, &self.history, options, &prefetch_options);
                 let job = PrefetchJob { generation: self.generation, views };
                 if worker.jobs.as_ref().is_some_and(|j| j.send(job).is_ok()) {
                     worker.busy = true;
@@ -489,7 +523,7 @@ impl Streamer {
         } else if wanted {
             // Prefetch views do not refresh pages in the LRU order.
             self.availability.set_peek_only(true);
-            for (cam, opts) in prefetch_views(camera, &self.history, options, &self.options.prefetch) {
+            for (cam, opts) in prefetch_views(camera, &self.history, options, &prefetch_options) {
                 self.selector.select_available(
                     store,
                     cache,
@@ -507,11 +541,52 @@ impl Streamer {
         let times = StreamTimes { cut, prefetch: start.elapsed() - cut };
         self.history.push(*camera);
         let pages = self.held_pages(&selection.clusters);
+        let cut_bytes = self.cut_bytes(&demand);
+        if self.options.fit_budget {
+            self.fit.update(cut_bytes, self.options.budget_bytes, !demand.is_empty());
+        }
         let (pending, in_flight) = self.submit(&demand, &prefetch);
         let queues = (demand.len() as u64, prefetch.len() as u64, pending as u64, in_flight as u64);
         self.submitted = (demand, prefetch);
-        let stats = self.frame_stats(&selection, queues);
+        let mut stats = self.frame_stats(&selection, queues);
+        (stats.tau_scale, stats.cut_bytes) = (self.frame_scale, cut_bytes);
         StreamFrame { selection, times, pages, stats }
+    }
+
+    /// The prefetch views' options: while the fit has raised τ (the cache is what limits the
+    /// cut), no view asks for the next finer level, which would not fit either.
+    fn prefetch_options(&self) -> PrefetchOptions {
+        let p = self.options.prefetch;
+        if self.frame_scale > 1.0 {
+            PrefetchOptions { tau_scale: p.tau_scale.max(1.0), ..p }
+        } else {
+            p
+        }
+    }
+
+    /// `options` with the τ of the current frame's fit ([`crate::fit`]).
+    fn fitted(&self, options: &SelectOptions) -> SelectOptions {
+        SelectOptions { tau: options.tau * self.frame_scale, ..*options }
+    }
+
+    /// What the cut needs resident: the pages the frame holds (used or loaded since the
+    /// frame began, drawn from or only looked up on the way down, and the pinned root pages)
+    /// and the decoded sizes the store records for the pages `demand` asks for.
+    fn cut_bytes(&self, demand: &Requests) -> u64 {
+        let entries = self.store.pages();
+        let asked: u64 =
+            demand.0.keys().filter_map(|&p| entries.get(p as usize)).map(|e| e.uncompressed_len as u64).sum();
+        self.cache.frame_bytes() + asked
+    }
+
+    /// The factor τ is raised by to fit the cache now ([`crate::fit`]; 1 with
+    /// [`StreamOptions::fit_budget`] off).
+    pub fn tau_scale(&self) -> f32 {
+        if self.options.fit_budget {
+            self.fit.scale()
+        } else {
+            1.0
+        }
     }
 
     /// The pages of `clusters` from the frame's residency snapshot, sorted by page index.
@@ -550,6 +625,7 @@ impl Streamer {
         }
         let mut light = Requests::default();
         let mut selection = Selection::default();
+        let options = &self.fitted(options);
         self.selector.select_light_available(
             &self.store,
             &self.cache,
@@ -618,6 +694,9 @@ impl Streamer {
             failed_pages: now.failed_pages,
             clusters: selection.clusters.len() as u64,
             triangles: selection.triangles,
+            // Set by a streamed frame (`frame`).
+            tau_scale: 0.0,
+            cut_bytes: 0,
         };
         self.frame += 1;
         stats

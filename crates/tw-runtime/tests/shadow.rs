@@ -13,8 +13,8 @@ use glam::{Mat4, Vec3, Vec4};
 use tw_runtime::camera::look_at_rh;
 use tw_runtime::frustum::grid_box;
 use tw_runtime::{
-    Availability, Camera, Containment, Frustum, PageCache, PrefetchOptions, Requests, SelectOptions,
-    Selection, Selector, StreamOptions, Streamer,
+    Availability, Camera, Containment, Frustum, PageCache, Requests, SelectOptions, Selection, Selector,
+    StreamOptions, Streamer,
 };
 use tw_store::Store;
 
@@ -179,8 +179,7 @@ fn the_light_cut_is_the_eyes_cut_culled_by_the_layer() {
 fn streamed_light_views_request_their_pages_and_converge() {
     let store = Arc::new(open(spheres_path()));
     let (c, r) = scene_sphere(&store);
-    let options =
-        StreamOptions { budget_bytes: u64::MAX, loader_threads: 0, prefetch: PrefetchOptions::default() };
+    let options = StreamOptions { budget_bytes: u64::MAX, loader_threads: 0, ..Default::default() };
     // The eye looks away from the region the layer covers.
     let eye = camera(c + Vec3::new(0.3, 0.0, 0.1) * r, c + Vec3::new(2.0, 0.0, 0.1) * r);
     let layer = sun_layer(c - Vec3::new(0.5, 0.0, 0.0) * r, Vec3::new(0.1, 0.2, 1.0).normalize(), 0.5 * r, r);
@@ -218,8 +217,7 @@ fn streamed_light_views_request_their_pages_and_converge() {
 fn light_selection_before_any_frame_uses_the_root_pages() {
     let store = Arc::new(open(spheres_path()));
     let (c, r) = scene_sphere(&store);
-    let options =
-        StreamOptions { budget_bytes: u64::MAX, loader_threads: 0, prefetch: PrefetchOptions::default() };
+    let options = StreamOptions { budget_bytes: u64::MAX, loader_threads: 0, ..Default::default() };
     let mut streamer = Streamer::new(store, options).unwrap();
     let eye = camera(c + Vec3::new(3.0 * r, 0.0, 0.0), c);
     let (sel, pages) = streamer.select_light(&eye, &sun_layer(c, Vec3::Z, r, r), &opts(1.0));

@@ -35,8 +35,14 @@ fn opts(tau: f32, frustum: bool) -> SelectOptions {
     SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum }
 }
 
+/// No loader threads, and τ kept as asked (the fit is tested on its own).
 fn manual(budget: u64) -> StreamOptions {
-    StreamOptions { budget_bytes: budget, loader_threads: 0, prefetch: PrefetchOptions::default() }
+    StreamOptions {
+        budget_bytes: budget,
+        loader_threads: 0,
+        prefetch: PrefetchOptions::default(),
+        fit_budget: false,
+    }
 }
 
 #[allow(dead_code)]
@@ -372,4 +378,67 @@ fn a_blocking_frame_reports_what_it_read_and_holds() {
     assert_eq!((again.pages_loaded, again.bytes_read), (0, 0), "{again:?}");
     assert_eq!(again.resident_bytes, first.resident_bytes);
     assert_eq!(again.frame, first.frame + 1);
+}
+
+/// A cut whose pages do not fit the cache: without the fit of τ it thrashes (every frame asks
+/// for pages and evicts others, for ever); with it the streamed cut settles at a raised τ, where
+/// it asks for no page, loads none but prefetched ones, stays within the budget, and is exactly
+/// the render rule's blocking cut at that τ (`tw_runtime::fit`). On the closed spheres the
+/// settled cut is closed too.
+#[test]
+fn a_cut_too_big_for_the_cache_settles_at_a_raised_tau_instead_of_thrashing() {
+    let spheres = open(spheres_path());
+    let (c, _) = scene_sphere(&spheres);
+    fit_settles(&spheres, camera(Vec3::new(0.0, 0.0, 10.5), c), 0.1, true);
+    let plant = open(small_pages_plant_path());
+    let (c, r) = scene_sphere(&plant);
+    fit_settles(&plant, camera(c + Vec3::new(0.6, -0.7, 0.3) * r * 0.8, c), 0.1, false);
+}
+
+fn fit_settles(store: &Arc<Store>, cam: Camera, tau: f32, closed: bool) {
+    let sizes = page_sizes(store);
+    let pinned: u64 = (0..sizes.len()).filter(|&p| store.pages()[p].is_root()).map(|p| sizes[p]).sum();
+    let o = opts(tau, false);
+    let exact = Streamer::new(store.clone(), manual(u64::MAX)).unwrap().select_blocking(&cam, &o);
+    let mut exact_pages: Vec<u32> = exact.clusters.iter().map(|k| k.page).collect();
+    exact_pages.sort();
+    exact_pages.dedup();
+    let exact_bytes: u64 = exact_pages.iter().map(|&p| sizes[p as usize]).sum();
+    let budget = exact_bytes / 2;
+    assert!(2 * budget > 3 * pinned, "the root pages leave room: {pinned} of {budget}");
+    let run = |fit: bool| {
+        let mut streamer =
+            Streamer::new(store.clone(), StreamOptions { fit_budget: fit, ..manual(budget) }).unwrap();
+        let mut frames = Vec::new();
+        for _ in 0..80 {
+            let f = streamer.frame(&cam, &o);
+            frames.push((f.stats, f.selection));
+            streamer.load_queued(usize::MAX);
+        }
+        (streamer, frames)
+    };
+    let (_, thrashing) = run(false);
+    let unsettled =
+        thrashing[60..].iter().filter(|(s, _)| s.pages_requested > 0 && s.pages_evicted > 0).count();
+    assert!(unsettled >= 15, "without the fit the cut thrashes: {:?}", thrashing.last().map(|f| f.0));
+    let (streamer, fitted) = run(true);
+    let (last, selection) = fitted.last().unwrap();
+    for (s, sel) in &fitted[60..] {
+        assert_eq!(s.pages_requested, 0, "settled: {s:?}");
+        assert_eq!(s.pages_loaded, s.prefetch_loaded, "only prefetched pages load: {s:?}");
+        assert!(s.resident_bytes <= budget && s.cut_bytes as f64 <= 0.85 * budget as f64, "{s:?}");
+        assert_eq!((s.tau_scale, sel), (last.tau_scale, selection));
+    }
+    assert!(last.tau_scale > 1.0, "{last:?}");
+    if closed {
+        let (open_edges, _) = boundary_and_area(store, selection);
+        assert_eq!(open_edges, 0, "the fitted cut is closed");
+    }
+    let at = opts(tau * last.tau_scale, false);
+    assert_eq!(selection, &streamer.select_blocking(&cam, &at), "the render rule's cut at the raised τ");
+    eprintln!(
+        "fit: budget {budget} of the exact cut's {exact_bytes} bytes: τ × {:.2}, cut {} bytes, {} triangles \
+         (exact {}); without the fit {unsettled} of the last 20 frames still loading",
+        last.tau_scale, last.cut_bytes, last.triangles, exact.triangles
+    );
 }

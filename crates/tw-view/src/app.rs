@@ -1150,6 +1150,7 @@ impl App {
             cull_ms: info.cull_ms,
             resident_bytes: ss.resident_bytes,
             memory_budget: self.scene.memory_budget(),
+            tau_scale: ss.tau_scale,
             gpu_bytes: self.scene.gpu_bytes(),
             gpu_budget: self.scene.gpu_budget(),
             pages_loading: self.scene.pages_loading(),

@@ -121,6 +121,9 @@ pub struct HudFrame {
     pub cull_ms: f32,
     pub resident_bytes: u64,
     pub memory_budget: u64,
+    /// The factor τ is raised by so that the cut's pages fit the budget (1 or 0: not raised;
+    /// `tw_runtime::fit`).
+    pub tau_scale: f32,
     /// Cluster geometry resident on the GPU.
     pub gpu_bytes: u64,
     /// The GPU pool's budget (0 before the first frame).
@@ -149,6 +152,16 @@ pub struct HudFrame {
 }
 
 impl HudFrame {
+    /// Resident bytes of the budget, and the detail lowered to fit it.
+    fn memory_text(&self) -> String {
+        let held = format!("{} / {}", bytes(self.resident_bytes), bytes(self.memory_budget));
+        if self.tau_scale > 1.0 {
+            format!("{held} (pixel error ×{:.1} to fit)", self.tau_scale)
+        } else {
+            held
+        }
+    }
+
     /// Labelled lines, in display order.
     pub fn lines(&self) -> Vec<(&'static str, String)> {
         let mut lines = vec![
@@ -177,7 +190,7 @@ impl HudFrame {
                     )
                 },
             ),
-            ("resident memory", format!("{} / {}", bytes(self.resident_bytes), bytes(self.memory_budget))),
+            ("resident memory", self.memory_text()),
             (
                 "GPU memory",
                 if self.gpu_budget > 0 {
@@ -345,6 +358,10 @@ mod tests {
         let get = |k: &str| lines.iter().find(|l| l.0 == k).unwrap().1.clone();
         assert_eq!(get("triangles drawn"), "1.50 M");
         assert_eq!(get("resident memory"), "3.0 MiB / 1.0 GiB");
+        let fitted = HudFrame { tau_scale: 1.64, ..h.clone() };
+        let fitted = fitted.lines();
+        let memory = &fitted.iter().find(|l| l.0 == "resident memory").unwrap().1;
+        assert_eq!(memory, "3.0 MiB / 1.0 GiB (pixel error ×1.6 to fit)");
         assert_eq!(get("GPU memory"), "0 B (no renderer yet)");
         assert_eq!(get("occlusion-culled"), "off");
         assert_eq!(get("position"), "0, 0, 0 units");

@@ -70,6 +70,7 @@ fn options(args: &BenchArgs) -> BenchOptions {
         reference_samples: args.reference_samples,
         exact: args.exact,
         wait: args.wait,
+        fit_memory: args.fit_memory,
         visible_pixels: args.visible_pixels,
         whole_clusters: args.whole_clusters,
         gpu_memory: args.gpu_memory,

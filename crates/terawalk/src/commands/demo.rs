@@ -148,6 +148,7 @@ fn bench_args(store: &Path, path_file: &Path, out: &Path) -> crate::cli::BenchAr
         reference_samples: 1,
         exact: false,
         wait: false,
+        fit_memory: true,
         visible_pixels: 0,
         whole_clusters: false,
         gpu_memory: 512 << 20,
