@@ -10,8 +10,10 @@
 //! 1280×720 screen, every page loaded, with frustum culling, and prints its triangles by level,
 //! by the cluster's own error and by its group's error (in pixels, half-octave buckets), by
 //! the ratio of the two (the size of the step the cut stands on), by the radius of the connected
-//! parts inside each cluster (in pixels), and how many are exact duplicates (the same three
-//! vertices as another triangle of their cluster).
+//! parts inside each cluster (in pixels), how many are exact duplicates (the same three
+//! vertices as another triangle of their cluster), and how much of the pages the cut needs it
+//! draws (decoded bytes of the drawn clusters against those of the pages it draws from and of
+//! every page the traversal looked up).
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
@@ -121,6 +123,9 @@ fn main() {
     // Triangles whose group's error, seen from the cluster's own sphere rather than the group's,
     // would be within τ: what the size of the group's sphere alone keeps in the cut.
     let (mut sphere_bound, mut sphere_bound_leaf) = (0u64, 0u64);
+    let touched = cache.stats().resident_bytes;
+    let mut drawn_pages: BTreeMap<u32, u64> = BTreeMap::new();
+    let mut drawn_bytes = 0u64;
     for c in &selection.clusters {
         let page = cache.get(&store, c.page).expect("page");
         let info = page.info()[c.index_in_page as usize];
@@ -128,6 +133,8 @@ fn main() {
         let (error, sphere) = page.steps()[info.step as usize];
         let g = &store.groups()[c.group as usize];
         let t = info.triangles as u64;
+        drawn_pages.insert(c.page, page.bytes() as u64);
+        drawn_bytes += 12 * cluster.positions.len() as u64 + 7 * t;
         let own_px = metric.sphere(error, sphere);
         let group_px = metric.sphere(g.error, g.sphere);
         *by_level.entry(cluster.level as i32).or_default() += t;
@@ -179,4 +186,15 @@ fn main() {
          triangles, {sphere_bound_leaf} of them in groups of cells"
     );
     println!("exact duplicate triangles (same vertices in one cluster): {duplicate}");
+    let from: u64 = drawn_pages.values().sum();
+    let mb = |b: u64| b as f64 / 1e6;
+    println!(
+        "pages: {:.1} MB decoded looked up by the traversal, {:.1} MB in the {} pages drawn from; \
+         the drawn clusters {:.1} MB ({:.1} % of the pages drawn from)",
+        mb(touched),
+        mb(from),
+        drawn_pages.len(),
+        mb(drawn_bytes),
+        100.0 * drawn_bytes as f64 / from.max(1) as f64
+    );
 }

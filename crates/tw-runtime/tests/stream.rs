@@ -426,7 +426,10 @@ fn fit_settles(store: &Arc<Store>, cam: Camera, tau: f32, closed: bool) {
     for (s, sel) in &fitted[60..] {
         assert_eq!(s.pages_requested, 0, "settled: {s:?}");
         assert_eq!(s.pages_loaded, s.prefetch_loaded, "only prefetched pages load: {s:?}");
-        assert!(s.resident_bytes <= budget && s.cut_bytes as f64 <= 0.85 * budget as f64, "{s:?}");
+        assert!(
+            s.resident_bytes <= budget && s.cut_bytes as f64 <= tw_runtime::fit::HIGH * budget as f64,
+            "{s:?}"
+        );
         assert_eq!((s.tau_scale, sel), (last.tau_scale, selection));
     }
     assert!(last.tau_scale > 1.0, "{last:?}");
