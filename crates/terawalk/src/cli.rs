@@ -614,6 +614,11 @@ pub struct ViewArgs {
     /// root pages are kept beyond it).
     #[arg(long, default_value = "1G", value_parser = parse_page_budget)]
     pub memory: u64,
+    /// Raise the pixel error while the cut's pages would not fit --memory, back down when
+    /// there is room (on, the default: the HUD shows the factor); off keeps the asked-for error
+    /// whatever it costs (pages reloaded every frame when the cut does not fit).
+    #[arg(long, default_value = "on", value_parser = parse_on_off, value_name = "on|off", action = clap::ArgAction::Set)]
+    pub fit_memory: bool,
     /// Scene resolution as a fraction of the window (0.25..=1; CPU rasterizers like 0.5).
     #[arg(long, default_value_t = 1.0)]
     pub render_scale: f32,

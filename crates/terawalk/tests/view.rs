@@ -267,8 +267,9 @@ fn walk_orbit_and_debug_view_run_under_xvfb() {
 #[test]
 fn occlusion_culling_under_xvfb_shows_the_model() {
     // hzb reads the own depth back and queries test against it: the frame is drawn into the
-    // renderer's own target and copied into the window's texture.
-    scripted_run_with("vulkan", &["--occlusion", "hzb"], true);
+    // renderer's own target and copied into the window's texture. With the cut kept at the
+    // asked-for τ whatever the cache holds (`--fit-memory off`).
+    scripted_run_with("vulkan", &["--occlusion", "hzb", "--fit-memory", "off"], true);
     // Queries in the third-person debug view (occluded node boxes in yellow).
     if let Some(dir) = scripted_run_with(
         "vulkan",

@@ -169,6 +169,8 @@ impl SceneGfx {
 pub struct Scene {
     store: Arc<Store>,
     memory_budget: u64,
+    /// Raise τ while the cut's pages would not fit the budget (`tw_runtime::fit`).
+    fit_memory: bool,
     gfx: Option<SceneGfx>,
     /// Made at the first frame (its own target has the frame's size).
     walk: Option<Walkthrough>,
@@ -224,6 +226,7 @@ impl Scene {
         Scene {
             store: Arc::new(store),
             memory_budget,
+            fit_memory: true,
             gfx: None,
             walk: None,
             traced: None,
@@ -377,6 +380,20 @@ impl Scene {
         Ok(())
     }
 
+    /// Whether τ is raised while the cut's pages would not fit the budget (`tw_runtime::fit`;
+    /// on by default): off keeps the asked-for τ whatever the cache holds.
+    pub fn set_fit_memory(&mut self, on: bool) -> Result<(), ViewError> {
+        if on != self.fit_memory {
+            self.fit_memory = on;
+            if let Some(w) = self.walk.as_mut() {
+                let options = StreamOptions { fit_budget: on, ..*w.streamer().options() };
+                w.set_stream_options(options)?;
+            }
+            self.key = None;
+        }
+        Ok(())
+    }
+
     /// The last selected cut (before occlusion culling).
     pub fn selection(&self) -> Option<&Selection> {
         match (&self.walk, &self.traced) {
@@ -481,7 +498,11 @@ impl Scene {
         // The walkthrough, its own target at the frame's size.
         if self.walk.is_none() {
             let renderer = g.renderer(size, settings.gpu_budget)?;
-            let options = StreamOptions { budget_bytes: self.memory_budget, ..Default::default() };
+            let options = StreamOptions {
+                budget_bytes: self.memory_budget,
+                fit_budget: self.fit_memory,
+                ..Default::default()
+            };
             self.walk = Some(Walkthrough::new(self.store.clone(), renderer, options)?);
             self.gpu_request = settings.gpu_budget;
             self.key = None;

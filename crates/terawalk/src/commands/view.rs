@@ -35,6 +35,7 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
     let settings = settings(&args, occlusion, shadows);
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut scene = Scene::new(store, args.memory);
+    scene.set_fit_memory(args.fit_memory)?;
     if let Some(axis) = args.up {
         scene.set_up_axis(axis);
     }
