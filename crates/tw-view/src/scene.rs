@@ -369,13 +369,9 @@ impl Scene {
     pub fn set_memory_budget(&mut self, bytes: u64) -> Result<(), ViewError> {
         if bytes != self.memory_budget {
             self.memory_budget = bytes;
-            if let Some(w) = self.walk.as_mut() {
-                let options = StreamOptions { budget_bytes: bytes, ..*w.streamer().options() };
-                w.set_stream_options(options)?;
-            }
+            self.restream(|o| StreamOptions { budget_bytes: bytes, ..o })?;
             // The ray tracer splits the budget between pages and BVHs: made again at its next frame.
             self.traced = None;
-            self.key = None;
         }
         Ok(())
     }
@@ -385,12 +381,18 @@ impl Scene {
     pub fn set_fit_memory(&mut self, on: bool) -> Result<(), ViewError> {
         if on != self.fit_memory {
             self.fit_memory = on;
-            if let Some(w) = self.walk.as_mut() {
-                let options = StreamOptions { fit_budget: on, ..*w.streamer().options() };
-                w.set_stream_options(options)?;
-            }
-            self.key = None;
+            self.restream(|o| StreamOptions { fit_budget: on, ..o })?;
         }
+        Ok(())
+    }
+
+    /// A new streamer with the walkthrough's options changed by `change` (none is made before
+    /// the first frame), and the next frame drawn anew.
+    fn restream(&mut self, change: impl FnOnce(StreamOptions) -> StreamOptions) -> Result<(), ViewError> {
+        if let Some(w) = self.walk.as_mut() {
+            w.set_stream_options(change(*w.streamer().options()))?;
+        }
+        self.key = None;
         Ok(())
     }
 
