@@ -3,11 +3,11 @@
 //! docs/benchmarks-log.md, "Assemblies", session 26).
 //!
 //! ```text
-//! cargo run --release -p tw-runtime --example cut_profile -- STORE PATH.json [FRAME] [TAU]
+//! cargo run --release -p tw-runtime --example cut_profile -- STORE PATH.json [FRAME] [TAU] [nofrustum]
 //! ```
 //!
 //! Selects the cut of frame `FRAME` (default 0) of the camera path at τ = `TAU` (default 1) on a
-//! 1280×720 screen, every page loaded, with frustum culling, and prints its triangles by level,
+//! 1280×720 screen, every page loaded, with frustum culling (unless `nofrustum`), and prints its triangles by level,
 //! by the cluster's own error and by its group's error (in pixels, half-octave buckets), by
 //! the ratio of the two (the size of the step the cut stands on), by the radius of the connected
 //! parts inside each cluster (in pixels), how many are exact duplicates (the same three
@@ -97,7 +97,7 @@ fn duplicates(c: &PageCluster) -> u64 {
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: cut_profile STORE PATH.json [FRAME] [TAU]");
+        eprintln!("usage: cut_profile STORE PATH.json [FRAME] [TAU] [nofrustum]");
         std::process::exit(2);
     }
     let store = Arc::new(Store::open(std::path::Path::new(&args[1])).expect("store"));
@@ -106,7 +106,8 @@ fn main() {
     let tau: f32 = args.get(4).map_or(1.0, |s| s.parse().expect("TAU"));
     let camera = path.frames.get(frame).expect("no such frame").to_scene(store.header()).expect("camera");
     let cache = PageCache::new(&store, u64::MAX / 4);
-    let options = SelectOptions { tau, ..SelectOptions::default() };
+    let frustum_culling = args.get(5).is_none_or(|s| s != "nofrustum");
+    let options = SelectOptions { tau, frustum_culling, ..SelectOptions::default() };
     let selection = Selector::new(&store).select(&store, &cache, &camera, &options);
     let metric = LodMetric::new(&camera, options.viewport[1] as f32);
     let step = store.header().grid_step;
@@ -126,6 +127,8 @@ fn main() {
     let touched = cache.stats().resident_bytes;
     let mut drawn_pages: BTreeMap<u32, u64> = BTreeMap::new();
     let mut drawn_bytes = 0u64;
+    // Per page level: (decoded bytes of the pages drawn from, bytes of the clusters drawn).
+    let mut page_use: BTreeMap<u8, (u64, u64)> = BTreeMap::new();
     for c in &selection.clusters {
         let page = cache.get(&store, c.page).expect("page");
         let info = page.info()[c.index_in_page as usize];
@@ -133,8 +136,13 @@ fn main() {
         let (error, sphere) = page.steps()[info.step as usize];
         let g = &store.groups()[c.group as usize];
         let t = info.triangles as u64;
-        drawn_pages.insert(c.page, page.bytes() as u64);
-        drawn_bytes += 12 * cluster.positions.len() as u64 + 7 * t;
+        let level = store.pages()[c.page as usize].level_max;
+        if drawn_pages.insert(c.page, page.bytes() as u64).is_none() {
+            page_use.entry(level).or_default().0 += page.bytes() as u64;
+        }
+        let bytes = 12 * cluster.positions.len() as u64 + 7 * t;
+        drawn_bytes += bytes;
+        page_use.entry(level).or_default().1 += bytes;
         let own_px = metric.sphere(error, sphere);
         let group_px = metric.sphere(g.error, g.sphere);
         *by_level.entry(cluster.level as i32).or_default() += t;
@@ -197,4 +205,12 @@ fn main() {
         mb(drawn_bytes),
         100.0 * drawn_bytes as f64 / from.max(1) as f64
     );
+    for (level, (pages, drawn)) in &page_use {
+        println!(
+            "  pages of level {level}: {:.1} MB drawn from, {:.1} MB drawn ({:.1} %)",
+            mb(*pages),
+            mb(*drawn),
+            100.0 * *drawn as f64 / (*pages).max(1) as f64
+        );
+    }
 }
