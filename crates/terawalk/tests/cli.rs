@@ -293,6 +293,27 @@ fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
     assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
     assert!(stderr(&o).contains("cluster-triangles"), "{}", stderr(&o));
     assert!(!dir.path().join("c.tw").exists());
+    // Smaller pages: recorded too, more of them, and the store verifies.
+    let o = terawalk(&["build", "p.obj", "-o", "p1k.tw", "--page-triangles", "1024"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = terawalk(&["info", "p1k.tw", "--verify"], dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("page_triangles=1024") && stdout(&o).contains("verify: OK"),
+        "{}",
+        stdout(&o)
+    );
+    // info's first line ends "…, N pages".
+    let pages = |store: &str| -> u64 {
+        let out = stdout(&terawalk(&["info", store], dir.path()));
+        let line = out.lines().find(|l| l.trim_end().ends_with(" pages")).expect("a line of counts");
+        let count = line.trim_end().trim_end_matches(" pages").rsplit(' ').next().unwrap();
+        count.replace(',', "").parse().expect("a page count")
+    };
+    assert!(pages("p1k.tw") > pages("p.tw"), "smaller pages, more of them");
+    let o = terawalk(&["build", "p.obj", "-o", "c.tw", "--page-triangles", "100"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("page-triangles"), "{}", stderr(&o));
 
     // Flip one byte in the middle of the pages: verify names the store and fails.
     let path = dir.path().join("p.tw");

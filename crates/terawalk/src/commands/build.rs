@@ -64,6 +64,7 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     let cluster = (args.cluster_triangles as usize / 4) * 4;
     o.lod.max_triangles = cluster;
     o.hlod.max_triangles = cluster;
+    o.pages.page_triangles = args.page_triangles as usize;
     o
 }
 

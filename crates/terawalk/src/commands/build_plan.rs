@@ -295,6 +295,7 @@ pub fn command_of(args: &BuildArgs, output: &Path) -> Result<Vec<String>> {
         flag("temp-space", t.to_string());
     }
     flag("cluster-triangles", args.cluster_triangles.to_string());
+    flag("page-triangles", args.page_triangles.to_string());
     flag("vertex-memory", args.import.vertex_memory.to_string());
     if let Some(d) = &args.import.spill_dir {
         flag("spill-dir", abs(d)?);
