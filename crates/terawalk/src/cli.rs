@@ -977,10 +977,10 @@ pub struct BuildArgs {
     #[arg(long, default_value_t = 128, value_parser = clap::value_parser!(u32).range(4..=128))]
     pub cluster_triangles: u32,
     /// Triangles per page, the unit the runtime loads and keeps (clusters of one LOD level from
-    /// neighbouring cells): smaller pages hold less that a frame does not draw (at 2048 the 10^8
-    /// plant's cuts need ~35 % fewer decoded bytes, docs/benchmarks-log.md, session 33) but make
-    /// more, smaller reads and a larger page table.
-    #[arg(long, default_value_t = 8192, value_parser = clap::value_parser!(u32).range(256..=65_536))]
+    /// neighbouring cells): smaller pages hold less that a frame does not draw (2048 against
+    /// 8192: the 10^8 plant's cuts need ~35 % fewer decoded bytes, docs/benchmarks-log.md,
+    /// session 33) but make more, smaller reads and a larger page table.
+    #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(256..=65_536))]
     pub page_triangles: u32,
     #[command(flatten)]
     pub import: ImportArgs,

@@ -18,13 +18,17 @@ use crate::types::{LodCluster, LodDag};
 #[derive(Clone, Copy, Debug)]
 pub struct PageParams {
     /// A page is written once it holds this many triangles (a group is never split; a single
-    /// group larger than this gets a page of its own). 8192 triangles encode to ~40–60 KiB.
+    /// group larger than this gets a page of its own). 2048 triangles encode to ~10–15 KiB.
+    /// Smaller pages hold less that a frame does not draw: a cut draws 16–18 % of the bytes of
+    /// 8192-triangle pages it draws from and 35–41 % of 2048-triangle ones, so the 10^9 plant's
+    /// walk at τ = 1 fits `--memory 1G` with 2048 and needed ~3G with 8192, at the same build
+    /// time and frame times at 10^8 (docs/benchmarks-log.md, session 33).
     pub page_triangles: usize,
 }
 
 impl Default for PageParams {
     fn default() -> Self {
-        PageParams { page_triangles: 8192 }
+        PageParams { page_triangles: 2048 }
     }
 }
 
