@@ -279,41 +279,34 @@ fn build_then_info_verify_and_a_corrupt_store_is_an_error() {
     assert!(out.contains("30,000 input triangles") && out.contains("verify: OK"), "{out}");
     assert!(out.contains("cluster_triangles=128"), "{out}");
 
-    // Smaller clusters: recorded in the store, which verifies; out of range is a usage error.
-    let o = terawalk(&["build", "p.obj", "-o", "c32.tw", "--cluster-triangles", "32"], dir.path());
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = terawalk(&["info", "c32.tw", "--verify"], dir.path());
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stdout(&o).contains("cluster_triangles=32") && stdout(&o).contains("verify: OK"),
-        "{}",
-        stdout(&o)
-    );
-    let o = terawalk(&["build", "p.obj", "-o", "c.tw", "--cluster-triangles", "200"], dir.path());
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("cluster-triangles"), "{}", stderr(&o));
-    assert!(!dir.path().join("c.tw").exists());
-    // Smaller pages: recorded too, more of them, and the store verifies.
-    let o = terawalk(&["build", "p.obj", "-o", "p1k.tw", "--page-triangles", "1024"], dir.path());
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = terawalk(&["info", "p1k.tw", "--verify"], dir.path());
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(
-        stdout(&o).contains("page_triangles=1024") && stdout(&o).contains("verify: OK"),
-        "{}",
-        stdout(&o)
-    );
-    // info's first line ends "…, N pages".
+    // Smaller clusters and pages: recorded in the store, which verifies; out of range is a
+    // usage error that writes nothing.
+    let sized = |flag: &str, value: &str, out: &str| {
+        let o = terawalk(&["build", "p.obj", "-o", out, &format!("--{flag}"), value], dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+        let o = terawalk(&["info", out, "--verify"], dir.path());
+        let recorded = format!("{}={value}", flag.replace('-', "_"));
+        assert!(o.status.success() && stdout(&o).contains(&recorded), "{}", stdout(&o));
+        assert!(stdout(&o).contains("verify: OK"), "{}", stdout(&o));
+    };
+    let refused = |flag: &str, value: &str| {
+        let o = terawalk(&["build", "p.obj", "-o", "c.tw", &format!("--{flag}"), value], dir.path());
+        assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+        assert!(stderr(&o).contains(flag), "{}", stderr(&o));
+        assert!(!dir.path().join("c.tw").exists());
+    };
+    sized("cluster-triangles", "32", "c32.tw");
+    refused("cluster-triangles", "200");
+    sized("page-triangles", "512", "p512.tw");
+    refused("page-triangles", "100");
+    // info's first line ends "…, N pages": smaller pages, more of them.
     let pages = |store: &str| -> u64 {
         let out = stdout(&terawalk(&["info", store], dir.path()));
         let line = out.lines().find(|l| l.trim_end().ends_with(" pages")).expect("a line of counts");
         let count = line.trim_end().trim_end_matches(" pages").rsplit(' ').next().unwrap();
         count.replace(',', "").parse().expect("a page count")
     };
-    assert!(pages("p1k.tw") > pages("p.tw"), "smaller pages, more of them");
-    let o = terawalk(&["build", "p.obj", "-o", "c.tw", "--page-triangles", "100"], dir.path());
-    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
-    assert!(stderr(&o).contains("page-triangles"), "{}", stderr(&o));
+    assert!(pages("p512.tw") > pages("p.tw"), "smaller pages, more of them");
 
     // Flip one byte in the middle of the pages: verify names the store and fails.
     let path = dir.path().join("p.tw");
