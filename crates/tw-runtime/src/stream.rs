@@ -124,8 +124,9 @@ pub struct StreamStats {
     /// asked-for τ; 0 in frames that were not streamed).
     #[serde(default)]
     pub tau_scale: f32,
-    /// Decoded bytes of the pages the cut drew from plus those it asked for (what the fit
-    /// compares with the budget).
+    /// Decoded bytes the cut needs resident: the pages the frame used (drawn from or looked up
+    /// on the way down), the pinned root pages and the pages it asked for (what the fit compares
+    /// with the budget).
     #[serde(default)]
     pub cut_bytes: u64,
 }
@@ -472,7 +473,7 @@ impl Streamer {
     /// One frame: select without waiting, request, prefetch, statistics (module documentation).
     pub fn frame(&mut self, camera: &Camera, options: &SelectOptions) -> StreamFrame {
         let start = std::time::Instant::now();
-        self.frame_scale = if self.options.fit_budget { self.fit.scale() } else { 1.0 };
+        self.frame_scale = self.tau_scale();
         let options = &self.fitted(options);
         self.cache.begin_frame();
         self.availability.begin(&self.store);
