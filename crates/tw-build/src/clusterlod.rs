@@ -11,21 +11,20 @@
 //! `crate::hlod`, takes its clusters further).
 //!
 //! **Why a loop of our own.** clusterlod's simplification step is fixed inside its C++ loop, and
-//! assemblies of many small disconnected parts (pins, screws, SMD parts, in one object) need two
-//! things from it that it does not do:
+//! assemblies of many small disconnected parts (pins, screws, SMD parts, in one object) need more
+//! from it than it does:
 //!
 //! 1. *Removal of whole parts.* When a group's parts are closed and already at their few
 //!    triangles (a 12-triangle box cannot be simplified without collapsing it), the simplifier
-//!    stops above the target and the group becomes terminal. Here, whole *free* parts (no locked
-//!    vertex: the part is entirely inside the group) are then removed, smallest first, until the
-//!    group is at its target; free parts whose radius is within the error the simplifier reached
-//!    anyway are removed too (they cost nothing). meshopt's own `Prune` option ignores locks (a
-//!    part cut by a group border would lose one half: a crack), so it is not used.
+//!    stops above the target and the group becomes terminal. Here, whole parts are then removed,
+//!    smallest bound first, until the group is at its target; parts whose bound is within the
+//!    error the simplifier reached anyway are removed too (they cost nothing). meshopt's own
+//!    `Prune` option ignores locks and charges nothing for what it removes, so it is not used.
 //! 2. *Errors that bound what vanished.* A removed part is charged how far the input points it
 //!    stands for lie from a set with no area: the radius of the input part it is made of (half
 //!    its box diagonal: every point lies within it of the centre), or, when smaller, the
 //!    largest distance of that input part's vertices from its principal axis, a line
-//!    ([`input_part_bound`]). Removing the part is collapsing it onto that point or line, a
+//!    ([`input_parts`]). Removing the part is collapsing it onto that point or line, a
 //!    deviation the cut allows anywhere else, and a part narrower than τ pixels covers no more
 //!    than a τ-pixel band. The line matters on real assemblies: pins, rails, pipes, cable trays
 //!    and beams are far thinner than they are long, and the radius charged them their length
@@ -53,24 +52,35 @@
 //!    gave 1.34 M, but 2.29× on the KiCad boards, whose levels then shrink too slowly
 //!    (docs/benchmarks-log.md, "Assemblies", session 26).
 //!
-//! Parts with an *anchored* vertex (shared with another group of the round, frozen, or on a
-//! seam with another cell) are never removed, so the group's border, and a cell's seams, stay as
-//! they were: the cut stays crack-free. A vertex on a tangled edge (non-manifold, inconsistently
-//! wound) is locked for the simplifier but anchors nothing: a part whose only locks are its own
-//! tangled edges lies wholly inside the group and is removed whole like any other (on the 24 M
-//! assembly, where touching boxes weld into non-manifold edges, 2.6 M kept triangles were such
-//! parts). A group whose output would be empty keeps its largest part whole (clusterlod keeps
-//! one triangle, whose edges would be open).
+//! 4. *Thin parts across borders.* A part with an *anchored* vertex (shared with another group
+//!    of the round, frozen, or on a seam with another cell) is removed like a free one, charged
+//!    the same bound. Its other half, across the border, may stay in a cut beside the coarser
+//!    level: what opens there is the part's own cross-section, within the bound of the line
+//!    the part collapses onto, so the gap is no wider than the part, which the cut already
+//!    allows to vanish (a pipe thinner than τ pixels may be missing; its open end is as thin).
+//!    Cracks elsewhere stay closed: a part as wide as the error is never removed, and what is
+//!    kept keeps its locked border. Locking seams and group borders for good held the plant's
+//!    pipes, cut by cell planes into pieces, at full section up to the top of the hierarchy:
+//!    HLOD nodes whose every triangle touched a seam, and levels that shrank by a tenth
+//!    instead of a half (docs/benchmarks-log.md, "Thin parts across seams", session 34).
+//!    The cut checks allow exactly these openings (`crate::cut::ThinPieces`).
+//!
+//! A vertex on a tangled edge (non-manifold, inconsistently wound) is locked for the simplifier
+//! but anchors nothing: a part whose only locks are its own tangled edges lies wholly inside the
+//! group and is free (on the 24 M assembly, where touching boxes weld into non-manifold edges,
+//! 2.6 M kept triangles were such parts). A group whose output would be empty keeps its largest
+//! part whole (clusterlod keeps one triangle, whose edges would be open).
 //!
 //! **Locks.** As in clusterlod, a vertex used by two groups of a round is locked for that round.
 //! Unlike clusterlod, a vertex of a terminal group's clusters stays locked in every later round:
-//! those clusters are never replaced, so a later group that moved (or removed) a vertex it shares
-//! with them would open a crack between the two (clusterlod forgets such locks after the round;
-//! with pruning, the other half of a part cut by a terminal group would be removed whole).
+//! those clusters are never replaced, so a later group that moved a vertex it shares with them
+//! would open a crack between the two (clusterlod forgets such locks after the round). Such a
+//! vertex anchors its part: the part goes only whole, under rule 4.
 //!
 //! Deterministic: every step is (meshopt's simplifier, clusterizer and partitioner are), and ties
 //! among parts go to the first triangle.
 
+use crate::part_shape::part_shapes;
 use crate::union_find::UnionFind;
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 
@@ -170,7 +180,7 @@ pub(crate) fn build_dag(
     mut output: impl FnMut(DagBounds, &[DagCluster<'_>]) -> i32,
 ) -> DagStats {
     let vertices = crate::lod::adapter(positions);
-    let input_radius = input_part_bound(positions, indices);
+    let input = input_parts(positions, indices);
     let mut stats = DagStats::default();
     let mut cluster_indices: Vec<u32> = Vec::new();
     let mut clusters: Vec<Cluster> = Vec::new();
@@ -225,7 +235,7 @@ pub(crate) fn build_dag(
                 &merged,
                 &mut locks,
                 &mut part_table,
-                (&anchored, &input_radius),
+                (&anchored, &input),
                 target,
                 bounds.error,
                 config,
@@ -400,13 +410,13 @@ fn simplify_group(
     merged: &[u32],
     locks: &mut [SimplifyVertex],
     part_table: &mut PartTable,
-    (anchored, input_radius): (&[bool], &[f32]),
+    (anchored, input): (&[bool], &[InputPart]),
     target: usize,
     child_error: f32,
     config: &DagConfig,
     stats: &mut DagStats,
 ) -> (Vec<u32>, f32) {
-    let parts = Parts::new(part_table, merged, anchored, input_radius);
+    let parts = Parts::new(part_table, merged, anchored, input);
     let accept = (merged.len() / 3) as f32 * config.accept;
     let limits = config.growth.iter().filter(|_| child_error > 0.0).map(|g| child_error * g);
     let mut kept = None;
@@ -434,7 +444,7 @@ fn simplify_parts(
     limit: f32,
 ) -> (Vec<u32>, f32, usize) {
     // The simplifier may reduce a free part but not make it vanish (one of its triangles is
-    // locked): parts go only by `prune_free`, smallest first, each charged its bound. Left to
+    // locked): parts go only by `Parts::prune`, smallest first, each charged its bound. Left to
     // itself, the simplifier collapses whole parts wherever that is cheapest in its quadric
     // measure, whatever their size.
     let pinned: Vec<u32> = parts.first_triangles(merged);
@@ -458,23 +468,29 @@ fn simplify_parts(
     // A part the simplifier collapsed away is gone as if it had been removed: its bound holds
     // the error there (meshopt's quadric error is an estimate, lower on a collapsed part).
     error = error.max(parts.vanished_radius(&count));
-    let (removed, radius) = parts.prune_free(&mut out, &count, target, error, limit);
+    let (removed, radius) = parts.prune(&mut out, &count, target, error, limit);
     (out, error.max(radius), removed)
 }
 
-/// Per vertex: how far the input points of the connected input part it belongs to lie from a
-/// set with no area (0 for a vertex on no triangle): the smaller of the part's radius (half its
-/// box diagonal: from its centre) and the largest distance of its vertices from its principal
-/// axis (from a line; a pin, a rail, a pipe or a beam is far thinner than it is long). Removing
-/// the part is collapsing it onto that point or line, so this bounds the deviation (module
-/// comment, rule 2). Simplification only moves vertices onto others of their part, so a part of
-/// any level is made of one input part, and the bound holds however the part was simplified
-/// before (the simplifier's error is a quadric estimate: a part it shrank would read smaller
-/// than what it stands for).
+/// What a part charges when it goes, and whether it may go across a border.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct InputPart {
+    /// The input part's [`PartShape::bound`](crate::part_shape::PartShape::bound), rounded up.
+    bound: f32,
+    /// Whether the input part is a rod ([`PartShape::is_rod`](crate::part_shape::PartShape::is_rod)): it may go where it continues
+    /// across a group border or a cell seam (rule 4).
+    rod: bool,
+}
+
+/// Per vertex: the [`InputPart`] of the connected input part it belongs to (the default for a
+/// vertex on no triangle). Removing a part is collapsing it onto its centre or its axis, so
+/// its bound bounds the deviation (module comment, rule 2). Simplification only moves
+/// vertices onto others of their part, so a part of any level is made of one input part, and
+/// the bound holds however the part was simplified before (the simplifier's error is a quadric
+/// estimate: a part it shrank would read smaller than what it stands for).
 ///
-/// Walks the used vertices, not the indices (a vertex is on about six triangles): once for the
-/// parts' boxes and moments, once for the distances from their axes.
-fn input_part_bound(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
+/// Walks the used vertices, not the indices (a vertex is on about six triangles).
+fn input_parts(positions: &[[f32; 3]], indices: &[u32]) -> Vec<InputPart> {
     let mut union = UnionFind::new(positions.len());
     union.union_triangles(indices, |v| v);
     let mut used = vec![false; positions.len()];
@@ -492,100 +508,14 @@ fn input_part_bound(positions: &[[f32; 3]], indices: &[u32]) -> Vec<f32> {
         }
         part[v] = part[root];
     }
-    let mut boxes = vec![([f32::MAX; 3], [f32::MIN; 3]); count as usize];
-    let mut moments = vec![Moments::default(); count as usize];
-    for v in (0..positions.len()).filter(|&v| used[v]) {
-        let (p, q) = (part[v] as usize, positions[v]);
-        let (lo, hi) = &mut boxes[p];
-        *lo = std::array::from_fn(|i| lo[i].min(q[i]));
-        *hi = std::array::from_fn(|i| hi[i].max(q[i]));
-        moments[p].add(q);
-    }
-    let axes: Vec<Axis> = moments.iter().map(Moments::axis).collect();
-    let mut off_axis = vec![0.0f64; count as usize];
-    for v in (0..positions.len()).filter(|&v| used[v]) {
-        let p = part[v] as usize;
-        off_axis[p] = off_axis[p].max(axes[p].distance(positions[v]));
-    }
-    let bound: Vec<f32> = boxes
+    let shapes = part_shapes(count as usize, || {
+        (0..positions.len()).filter(|&v| used[v]).map(|v| (part[v] as usize, positions[v]))
+    });
+    let parts: Vec<InputPart> = shapes
         .iter()
-        .zip(&off_axis)
-        .map(|((lo, hi), &line)| {
-            let d2: f64 = (0..3).map(|i| (hi[i] as f64 - lo[i] as f64).powi(2)).sum();
-            crate::lod::round_up((d2.sqrt() * 0.5).min(line))
-        })
+        .map(|s| InputPart { bound: crate::lod::round_up(s.bound()), rod: s.is_rod() })
         .collect();
-    part.iter().map(|&p| bound.get(p as usize).copied().unwrap_or(0.0)).collect()
-}
-
-/// Sums of a point set's coordinates and their products: its centroid and covariance. The
-/// coordinates are taken relative to the first point, so that the covariance (a difference of
-/// two sums) keeps its digits far from the origin.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Moments {
-    n: f64,
-    first: [f64; 3],
-    sum: [f64; 3],
-    products: [[f64; 3]; 3],
-}
-
-impl Moments {
-    pub(crate) fn add(&mut self, q: [f32; 3]) {
-        let q = q.map(f64::from);
-        if self.n == 0.0 {
-            self.first = q;
-        }
-        let q: [f64; 3] = std::array::from_fn(|i| q[i] - self.first[i]);
-        self.n += 1.0;
-        for i in 0..3 {
-            self.sum[i] += q[i];
-            for j in 0..3 {
-                self.products[i][j] += q[i] * q[j];
-            }
-        }
-    }
-
-    /// The line through the centroid along the principal direction (power iteration on the
-    /// covariance, started from the coordinate axis of largest variance). Any line gives a
-    /// valid bound in [`Axis::distance`]; this one makes it small for long thin parts.
-    pub(crate) fn axis(&self) -> Axis {
-        let n = self.n.max(1.0);
-        let c = self.sum.map(|s| s / n);
-        let cov: [[f64; 3]; 3] =
-            std::array::from_fn(|i| std::array::from_fn(|j| self.products[i][j] / n - c[i] * c[j]));
-        let widest = (0..3).max_by(|&a, &b| cov[a][a].total_cmp(&cov[b][b])).unwrap_or(0);
-        let mut d = [0.0f64; 3];
-        d[widest] = 1.0;
-        for _ in 0..24 {
-            let next: [f64; 3] = std::array::from_fn(|i| (0..3).map(|j| cov[i][j] * d[j]).sum());
-            let len = next.iter().map(|x| x * x).sum::<f64>().sqrt();
-            if !(len > 0.0 && len.is_finite()) {
-                break;
-            }
-            d = next.map(|x| x / len);
-        }
-        Axis { origin: std::array::from_fn(|i| c[i] + self.first[i]), direction: d }
-    }
-}
-
-/// A line: a point and a unit direction.
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Axis {
-    origin: [f64; 3],
-    direction: [f64; 3],
-}
-
-impl Axis {
-    /// Distance of `q` from the line. A part whose vertices are all within r of a line lies
-    /// within r of it everywhere (a triangle's points are convex combinations of its corners,
-    /// and the distance to a line is convex): removing it is collapsing it onto that line,
-    /// which has no area, within r (module comment, rule 2).
-    pub(crate) fn distance(&self, q: [f32; 3]) -> f64 {
-        let v: [f64; 3] = std::array::from_fn(|i| q[i] as f64 - self.origin[i]);
-        let along: f64 = (0..3).map(|i| v[i] * self.direction[i]).sum();
-        let d2: f64 = (0..3).map(|i| (v[i] - along * self.direction[i]).powi(2)).sum();
-        d2.max(0.0).sqrt()
-    }
+    part.iter().map(|&p| parts.get(p as usize).copied().unwrap_or_default()).collect()
 }
 
 /// Per vertex of the mesh: its part in the group being simplified (`u32::MAX`: not in the
@@ -602,24 +532,25 @@ impl PartTable {
     }
 }
 
-/// The connected parts of a group's input triangles: per part, its bounding radius and whether
-/// it has a locked vertex. Parts are numbered in order of their first triangle.
+/// The connected parts of a group's input triangles: per part, its bound, whether it has an
+/// anchored vertex and whether it is a rod. Parts are numbered in order of their first triangle.
 struct Parts<'a> {
     /// Per vertex of the mesh: its part (the group's vertices), `u32::MAX` (the others).
     table: &'a mut PartTable,
     /// The group's vertices, in order of first use (the entries of `table` to clear).
     vertices: Vec<u32>,
-    /// Per part: the bound of the input part it is made of ([`input_part_bound`]), whether a
-    /// vertex is anchored, its first triangle.
+    /// Per part: the bound of the input part it is made of ([`input_parts`]), whether a
+    /// vertex is anchored, whether that input part is a rod, its first triangle.
     radius: Vec<f32>,
     locked: Vec<bool>,
+    rod: Vec<bool>,
     first: Vec<usize>,
 }
 
 impl<'a> Parts<'a> {
     /// `table` must be clear (all `u32::MAX`) for the vertices of `merged`; it is again once
     /// the returned value is dropped.
-    fn new(table: &'a mut PartTable, merged: &[u32], anchored: &[bool], input_radius: &[f32]) -> Parts<'a> {
+    fn new(table: &'a mut PartTable, merged: &[u32], anchored: &[bool], input: &[InputPart]) -> Parts<'a> {
         // Union-find over the group's vertices, numbered densely in order of first use (the
         // table holds the dense number until the parts are known).
         let mut vertices: Vec<u32> = Vec::new();
@@ -636,6 +567,7 @@ impl<'a> Parts<'a> {
         let mut number = vec![u32::MAX; vertices.len()];
         let mut radius: Vec<f32> = Vec::new();
         let mut locked: Vec<bool> = Vec::new();
+        let mut rod: Vec<bool> = Vec::new();
         let mut first: Vec<usize> = Vec::new();
         for (ti, t) in merged.chunks_exact(3).enumerate() {
             let root = parts.find(local[t[0] as usize]) as usize;
@@ -643,18 +575,20 @@ impl<'a> Parts<'a> {
                 number[root] = radius.len() as u32;
                 radius.push(0.0);
                 locked.push(false);
+                rod.push(true);
                 first.push(ti);
             }
         }
-        // Every vertex is on a triangle, so every root has its number. A part's radius and
-        // lock are those of its vertices, each looked at once (not once per corner).
+        // Every vertex is on a triangle, so every root has its number. A part's bound, lock and
+        // shape are those of its vertices, each looked at once (not once per corner).
         for (i, &v) in vertices.iter().enumerate() {
             let p = number[parts.find(i as u32) as usize];
             table.part[v as usize] = p;
-            radius[p as usize] = radius[p as usize].max(input_radius[v as usize]);
+            radius[p as usize] = radius[p as usize].max(input[v as usize].bound);
             locked[p as usize] |= anchored[v as usize];
+            rod[p as usize] &= input[v as usize].rod;
         }
-        Parts { table, vertices, radius, locked, first }
+        Parts { table, vertices, radius, locked, rod, first }
     }
 
     fn part(&self, v: u32) -> usize {
@@ -697,10 +631,10 @@ impl<'a> Parts<'a> {
         }
     }
 
-    /// Removes whole free parts from `out`, smallest bound first (ties: first triangle), until
-    /// at most `target` triangles are left, never the last part (rule 2). Returns the triangles
-    /// removed and the largest removed bound.
-    fn prune_free(
+    /// Removes whole parts from `out`, free ones and anchored rods (rule 4), smallest bound
+    /// first (ties: first triangle), until at most `target` triangles are left, never the last
+    /// part (rule 2). Returns the triangles removed and the largest removed bound.
+    fn prune(
         &self,
         out: &mut Vec<u32>,
         count: &[usize],
@@ -708,7 +642,8 @@ impl<'a> Parts<'a> {
         free_below: f32,
         limit: f32,
     ) -> (usize, f32) {
-        let mut order: Vec<usize> = (0..count.len()).filter(|&p| count[p] > 0 && !self.locked[p]).collect();
+        let mut order: Vec<usize> =
+            (0..count.len()).filter(|&p| count[p] > 0 && (!self.locked[p] || self.rod[p])).collect();
         order.sort_by(|&a, &b| {
             self.radius[a].total_cmp(&self.radius[b]).then(self.first[a].cmp(&self.first[b]))
         });
@@ -817,14 +752,18 @@ mod tests {
         push_box(&mut positions, &mut indices, [1e6, 2e6, 3e6], [1e6 + 10.0, 2e6 + 1.0, 3e6 + 1.0]);
         push_box(&mut positions, &mut indices, [0.0; 3], [2.0; 3]);
         positions.push([5.0; 3]);
-        let bound = input_part_bound(&positions, &indices);
-        // The beam: half its cross-section's diagonal from its axis, not half its length.
+        let parts = input_parts(&positions, &indices);
+        let bound: Vec<f32> = parts.iter().map(|p| p.bound).collect();
+        // The beam: half its cross-section's diagonal from its axis, not half its length; it
+        // is 5 / 0.71 = 7 times longer than thick, a rod.
         let beam = 0.5f32.hypot(0.5);
         assert!(bound[..8].iter().all(|&b| (b - beam).abs() < 1e-3), "{:?}", &bound[..8]);
+        assert!(parts[..8].iter().all(|p| p.rod));
         // The cube: no line is better than its centre by much; the x axis through the centre
-        // gives √2, less than the radius √3.
+        // gives √2, less than the radius √3. No rod.
         assert!(bound[8..16].iter().all(|&b| (b - 2f32.sqrt()).abs() < 1e-4), "{:?}", &bound[8..16]);
-        assert_eq!(bound[16], 0.0, "a vertex on no triangle");
+        assert!(parts[8..16].iter().all(|p| !p.rod));
+        assert_eq!(parts[16], InputPart::default(), "a vertex on no triangle");
     }
 
     #[test]
@@ -833,20 +772,22 @@ mod tests {
         let merged = [10, 11, 12, 20, 21, 22, 12, 11, 13];
         let mut anchored = vec![false; 30];
         anchored[21] = true;
-        let radius: Vec<f32> = (0..30).map(|v| if v >= 20 { 2.0 } else { 1.0 }).collect();
+        let input: Vec<InputPart> =
+            (0..30).map(|v| InputPart { bound: if v >= 20 { 2.0 } else { 1.0 }, rod: v >= 20 }).collect();
         let mut table = PartTable::new(30);
         {
-            let parts = Parts::new(&mut table, &merged, &anchored, &radius);
+            let parts = Parts::new(&mut table, &merged, &anchored, &input);
             assert_eq!((parts.part(13), parts.part(22), parts.part(5)), (0, 1, usize::MAX));
             assert_eq!(parts.radius, [1.0, 2.0]);
             assert_eq!(parts.locked, [false, true]);
+            assert_eq!(parts.rod, [false, true]);
             assert_eq!(parts.first, [0, 1]);
             assert_eq!(parts.count(&[13, 12, 11, 20, 21, 22, 10, 11, 12]), [2, 1]);
             assert_eq!(parts.first_triangles(&merged), [10, 11, 12], "the free part's first triangle");
         }
         assert!(table.part.iter().all(|&p| p == u32::MAX), "cleared for the next group");
         // The next group sees only its own vertices.
-        let parts = Parts::new(&mut table, &[20, 21, 22], &anchored, &radius);
+        let parts = Parts::new(&mut table, &[20, 21, 22], &anchored, &input);
         assert_eq!((parts.part(20), parts.part(10)), (0, usize::MAX));
     }
 }

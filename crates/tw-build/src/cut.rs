@@ -81,16 +81,115 @@ fn edges_where(tris: &[GridTriangle], keep: impl Fn(usize) -> bool) -> Vec<([u32
     out
 }
 
-/// Crack check: every boundary edge of `cut` must be an allowed edge: on a closed input, none;
-/// in general the input's [`open_edges`] (its boundary, and non-manifold edges, which the
-/// simplifier keeps but may leave with fewer triangles when an attached part is simplified
-/// away). Returns the number of offending edges in the error.
+/// Crack check of a cut at `tau`: every boundary edge of `cut` must be an allowed edge (on a
+/// closed input, none; in general the input's [`open_edges`]: its boundary, and non-manifold
+/// edges, which the simplifier keeps but may leave with fewer triangles when an attached part
+/// is simplified away) or an opening of a thin part ([`ThinPieces`]). Returns the number of
+/// offending edges in the error.
 #[cfg(test)]
-pub fn check_no_cracks(cut: &[GridTriangle], allowed: &[([u32; 3], [u32; 3])]) -> Result<(), String> {
-    let bad: Vec<_> = boundary_edges(cut).into_iter().filter(|e| allowed.binary_search(e).is_err()).collect();
+pub fn check_no_cracks(
+    cut: &[GridTriangle],
+    allowed: &[([u32; 3], [u32; 3])],
+    thin: &ThinPieces,
+    tau: f32,
+) -> Result<(), String> {
+    let bad: Vec<_> = boundary_edges(cut)
+        .into_iter()
+        .filter(|&e| allowed.binary_search(&e).is_err() && !thin.is_opening(e, tau))
+        .collect();
     match bad.first() {
         None => Ok(()),
-        Some(e) => Err(format!("{} crack edges in the cut, e.g. {:?}", bad.len(), e)),
+        Some(&e) => Err(format!(
+            "{} crack edges in the cut, e.g. {e:?} (the thinnest input piece on it: {:?})",
+            bad.len(),
+            thin.bound(e)
+        )),
+    }
+}
+
+/// What a cut may leave open besides the input's own open edges: the section of a thin part
+/// whose other half, across a cell seam or a group border, was removed at a coarser level
+/// (rule 4 of `crate::clusterlod`; `crate::hlod`, `prune_components`). The input is split into
+/// *pieces*, the connected parts (triangles sharing a grid point) of each cell, and every piece
+/// that is a rod (`crate::part_shape`) gets the bound the build charges for removing a part:
+/// its radius or, when less, its vertices' largest distance from its principal axis. A boundary edge of a cut at τ is an
+/// opening, not a crack, if both its ends are vertices of one piece whose bound is within
+/// [`OPENING_SLACK`] × τ (the section of what is left may itself be simplified later, along
+/// its new border, so its edges need not be input edges). A crack along a wide surface (a seam
+/// of a floor or a shell that one side moved) has no such piece and is still found.
+pub struct ThinPieces {
+    /// Every input grid point with a piece it belongs to (two or more on a seam), sorted.
+    points: Vec<([u32; 3], u32)>,
+    /// Each piece's bound (scene units; infinite for a piece that is no rod).
+    bounds: Vec<f64>,
+}
+
+/// How far beyond τ a piece's bound may be where a cut opens: the build measures the bound on
+/// the part as it was when removed (in HLOD, a simplified union of pieces whose error is
+/// accumulated into τ) and from that part's own principal axis, which need not be the line that
+/// fits the input piece best.
+pub const OPENING_SLACK: f64 = 2.0;
+
+impl ThinPieces {
+    /// The pieces of the input given cell by cell; `step` is the grid step (scene units).
+    pub fn new<'a>(cells: impl IntoIterator<Item = &'a [GridTriangle]>, step: f64) -> ThinPieces {
+        let mut thin = ThinPieces { points: Vec::new(), bounds: Vec::new() };
+        for cell in cells {
+            thin.add_cell(cell, step);
+        }
+        thin.points.sort_unstable();
+        thin.points.dedup();
+        thin
+    }
+
+    fn add_cell(&mut self, cell: &[GridTriangle], step: f64) {
+        let mut points: Vec<[u32; 3]> = cell.iter().flatten().copied().collect();
+        points.sort_unstable();
+        points.dedup();
+        let id = |p: &[u32; 3]| points.binary_search(p).unwrap_or(0) as u32;
+        let mut parts = crate::union_find::UnionFind::new(points.len());
+        for t in cell {
+            parts.union(id(&t[0]), id(&t[1]));
+            parts.union(id(&t[0]), id(&t[2]));
+        }
+        let root: Vec<usize> = (0..points.len() as u32).map(|v| parts.find(v) as usize).collect();
+        let shapes = crate::part_shape::part_shapes(points.len(), || {
+            points.iter().enumerate().map(|(v, p)| (root[v], p.map(|c| c as f32)))
+        });
+        // Pieces numbered after those of earlier cells, in order of their roots; a piece that
+        // is no rod may not open at any τ.
+        let mut number = vec![u32::MAX; points.len()];
+        for (v, p) in points.iter().enumerate() {
+            let r = root[v];
+            if number[r] == u32::MAX {
+                number[r] = self.bounds.len() as u32;
+                let s = shapes[r];
+                self.bounds.push(if s.is_rod() { s.bound() * step } else { f64::INFINITY });
+            }
+            self.points.push((*p, number[r]));
+        }
+    }
+
+    /// The pieces that grid point `p` belongs to.
+    fn pieces(&self, p: [u32; 3]) -> &[([u32; 3], u32)] {
+        let from = self.points.partition_point(|x| x.0 < p);
+        let to = self.points.partition_point(|x| x.0 <= p);
+        &self.points[from..to]
+    }
+
+    /// The smallest bound (scene units) of a piece that has both ends of `e` as vertices.
+    pub fn bound(&self, e: ([u32; 3], [u32; 3])) -> Option<f64> {
+        let ends = self.pieces(e.1);
+        self.pieces(e.0)
+            .iter()
+            .filter(|a| ends.iter().any(|b| b.1 == a.1))
+            .map(|a| self.bounds[a.1 as usize])
+            .min_by(f64::total_cmp)
+    }
+
+    /// Whether boundary edge `e` of a cut at `tau` (scene units) is an opening.
+    pub fn is_opening(&self, e: ([u32; 3], [u32; 3]), tau: f32) -> bool {
+        self.bound(e).is_some_and(|b| b <= OPENING_SLACK * tau as f64)
     }
 }
 
@@ -518,9 +617,45 @@ mod tests {
         let tet: Vec<GridTriangle> =
             vec![[p[0], p[2], p[1]], [p[0], p[1], p[3]], [p[1], p[2], p[3]], [p[0], p[3], p[2]]];
         assert!(boundary_edges(&tet).is_empty());
-        check_no_cracks(&tet, &[]).unwrap();
-        let err = check_no_cracks(&tet[1..], &[]).unwrap_err();
+        let thin = ThinPieces::new([tet.as_slice()], 1.0);
+        check_no_cracks(&tet, &[], &thin, 0.0).unwrap();
+        let err = check_no_cracks(&tet[1..], &[], &thin, 0.0).unwrap_err();
         assert!(err.starts_with("3 crack edges"), "{err}");
+    }
+
+    /// A thin rod cut in two cells: where its half is missing, the other half's open end is an
+    /// opening once τ reaches its thickness (within the slack), never before; a wide plate cut
+    /// the same way stays a crack at that τ.
+    #[test]
+    fn thin_openings_are_bounded_by_the_pieces_thickness() {
+        // A square tube along x, 2 units thick, 40 long, split at x = 20 (open ends at x = 0
+        // and 40 are the input's border; the ring at x = 20 is the seam).
+        let ring = |x: u32| [[x, 0, 0], [x, 2, 0], [x, 2, 2], [x, 0, 2]];
+        let tube = |x0: u32, x1: u32| -> Vec<GridTriangle> {
+            let (a, b) = (ring(x0), ring(x1));
+            (0..4)
+                .flat_map(|k| [[a[k], b[k], b[(k + 1) % 4]], [a[k], b[(k + 1) % 4], a[(k + 1) % 4]]])
+                .collect()
+        };
+        let (left, right) = (tube(0, 20), tube(20, 40));
+        let input: Vec<GridTriangle> = left.iter().chain(&right).copied().collect();
+        let allowed = open_edges(&input);
+        let thin = ThinPieces::new([left.as_slice(), right.as_slice()], 1.0);
+        // The pieces' bound: every vertex within √2 of the axis (the radius is ~10).
+        let seam_edge = ([20, 0, 0], [20, 2, 0]);
+        assert!((thin.bound(seam_edge).unwrap() - 2f64.sqrt()).abs() < 1e-6);
+        // The right half removed: the seam ring opens.
+        assert!(check_no_cracks(&left, &allowed, &thin, 0.5).unwrap_err().starts_with("4 crack edges"));
+        check_no_cracks(&left, &allowed, &thin, 1.0).unwrap();
+        // A plate 40 wide cut the same way is no thin piece.
+        let plate = |x0: u32, x1: u32| -> Vec<GridTriangle> {
+            vec![[[x0, 0, 0], [x1, 0, 0], [x1, 40, 0]], [[x0, 0, 0], [x1, 40, 0], [x0, 40, 0]]]
+        };
+        let (pl, pr) = (plate(0, 20), plate(20, 40));
+        let plate_input: Vec<GridTriangle> = pl.iter().chain(&pr).copied().collect();
+        let thin = ThinPieces::new([pl.as_slice(), pr.as_slice()], 1.0);
+        let err = check_no_cracks(&pl, &open_edges(&plate_input), &thin, 1.0).unwrap_err();
+        assert!(err.starts_with("1 crack edges"), "{err}");
     }
 
     #[test]

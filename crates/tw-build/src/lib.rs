@@ -34,6 +34,7 @@ mod in_order;
 mod ingest;
 mod lod;
 mod pages;
+mod part_shape;
 mod parts;
 mod pipeline;
 pub mod plan;
@@ -47,7 +48,7 @@ mod workio;
 
 pub use cut::{
     boundary_edges, check_complete, check_complete_with, check_dag, cluster_triangles, cut_triangles,
-    extract_cut, open_edges, GridTriangle,
+    extract_cut, open_edges, GridTriangle, ThinPieces, OPENING_SLACK,
 };
 pub use error::BuildError;
 pub use hlod::HlodParams;

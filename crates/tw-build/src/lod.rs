@@ -645,10 +645,12 @@ mod tests {
         );
         let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
         let boundary = open_edges(&input_tris);
+        let thin = ThinPieces::new([input_tris.as_slice()], grid.step);
         for tau in taus(dag) {
             check_complete(dag, tau).unwrap();
             let cut = extract_cut(dag, tau);
-            check_no_cracks(&grid_tris(dag, &cut), &boundary).unwrap_or_else(|e| panic!("tau {tau}: {e}"));
+            check_no_cracks(&grid_tris(dag, &cut), &boundary, &thin, tau)
+                .unwrap_or_else(|e| panic!("tau {tau}: {e}"));
         }
     }
 
@@ -871,26 +873,13 @@ mod tests {
                     continue;
                 }
                 missing_somewhere += 1;
-                let (mut lo, mut hi) = ([u32::MAX; 3], [0u32; 3]);
-                for &v in part {
-                    let p = mesh.positions[v as usize];
-                    for i in 0..3 {
-                        lo[i] = lo[i].min(p[i]);
-                        hi[i] = hi[i].max(p[i]);
-                    }
-                }
-                let d2: f64 = (0..3).map(|i| ((hi[i] - lo[i]) as f64 * grid.step).powi(2)).sum();
-                let radius = d2.sqrt() * 0.5;
-                let mut moments = crate::clusterlod::Moments::default();
                 // Each vertex once (the part lists one per triangle corner), in the order of the
                 // builder's sweep: the same moments, so the same axis.
                 let vertices: std::collections::BTreeSet<u32> = part.iter().copied().collect();
-                let points: Vec<[f32; 3]> =
-                    vertices.iter().map(|&v| mesh.positions[v as usize].map(|c| c as f32)).collect();
-                points.iter().for_each(|&q| moments.add(q));
-                let axis = moments.axis();
-                let off_axis = points.iter().map(|&q| axis.distance(q)).fold(0.0, f64::max) * grid.step;
-                let deviation = radius.min(off_axis);
+                let shape = crate::part_shape::part_shapes(1, || {
+                    vertices.iter().map(|&v| (0, mesh.positions[v as usize].map(|c| c as f32)))
+                })[0];
+                let deviation = shape.bound() * grid.step;
                 assert!(
                     deviation <= tau as f64 * (1.0 + 1e-6),
                     "τ {tau}: a part {deviation} from a point or a line is missing"

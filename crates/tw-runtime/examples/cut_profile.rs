@@ -116,6 +116,9 @@ fn main() {
     let (mut own, mut group, mut ratio, mut parts) =
         (BTreeMap::new(), BTreeMap::new(), BTreeMap::new(), BTreeMap::new());
     let mut duplicate = 0;
+    // Triangles whose group is replaced by a group of another node (a subtree's root, replaced
+    // by HLOD) against those replaced inside their own node.
+    let (mut replaced_by_hlod, mut replaced_inside) = (0u64, 0u64);
     // Groups of leaf nodes (cells) and of inner nodes (HLOD), and the step ratios of each.
     let nodes = store.nodes();
     let (mut cell_ratio, mut hlod_ratio) = (BTreeMap::new(), BTreeMap::new());
@@ -146,6 +149,12 @@ fn main() {
         let own_px = metric.sphere(error, sphere);
         let group_px = metric.sphere(g.error, g.sphere);
         *by_level.entry(cluster.level as i32).or_default() += t;
+        let parents = store.group_parents(c.group);
+        if parents.iter().any(|&p| store.groups()[p as usize].node != g.node) {
+            replaced_by_hlod += t;
+        } else {
+            replaced_inside += t;
+        }
         *own.entry(bucket(own_px)).or_default() += t;
         *group.entry(bucket(group_px)).or_default() += t;
         if own_px > 0.0 {
@@ -177,6 +186,10 @@ fn main() {
         duplicate += duplicates(cluster);
     }
     println!("cut at τ = {tau}: {} clusters, {} triangles", selection.clusters.len(), selection.triangles);
+    println!(
+        "by the next step: {replaced_by_hlod} triangles in a subtree's roots (replaced by HLOD), \
+         {replaced_inside} in groups replaced inside their node"
+    );
     println!("by level:");
     for (k, v) in &by_level {
         println!("  L{k}: {v}");
