@@ -7,7 +7,9 @@
 //! ```
 //!
 //! Selects the cut of frame `FRAME` (default 0) of the camera path at τ = `TAU` (default 1) on a
-//! 1280×720 screen, every page loaded, with frustum culling (unless `nofrustum`), and prints its triangles by level,
+//! 1280×720 screen, every page loaded, with frustum culling (unless `nofrustum`), and prints its
+//! triangles by whether their next step is an HLOD step (a subtree's roots) or one inside their
+//! node, by level,
 //! by the cluster's own error and by its group's error (in pixels, half-octave buckets), by
 //! the ratio of the two (the size of the step the cut stands on), by the radius of the connected
 //! parts inside each cluster (in pixels), how many are exact duplicates (the same three
