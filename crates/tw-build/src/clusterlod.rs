@@ -63,7 +63,8 @@
 //!    pipes, cut by cell planes into pieces, at full section up to the top of the hierarchy:
 //!    HLOD nodes whose every triangle touched a seam, and levels that shrank by a tenth
 //!    instead of a half (docs/benchmarks-log.md, "Thin parts across seams", session 34).
-//!    The cut checks allow exactly these openings (`crate::cut::ThinPieces`).
+//!    The cut checks allow such openings, and only where the missing input lies within twice
+//!    the cut's error of a line (`crate::cut::ThinPieces`).
 //!
 //! A vertex on a tangled edge (non-manifold, inconsistently wound) is locked for the simplifier
 //! but anchors nothing: a part whose only locks are its own tangled edges lies wholly inside the
@@ -509,7 +510,7 @@ fn input_parts(positions: &[[f32; 3]], indices: &[u32]) -> Vec<InputPart> {
         part[v] = part[root];
     }
     let shapes = part_shapes(count as usize, || {
-        (0..positions.len()).filter(|&v| used[v]).map(|v| (part[v] as usize, positions[v]))
+        (0..positions.len()).filter(|&v| used[v]).map(|v| (part[v] as usize, positions[v], false))
     });
     let parts: Vec<InputPart> = shapes
         .iter()

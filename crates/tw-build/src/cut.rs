@@ -109,18 +109,23 @@ pub fn check_no_cracks(
 
 /// What a cut may leave open besides the input's own open edges: the section of a thin part
 /// whose other half, across a cell seam or a group border, was removed at a coarser level
-/// (rule 4 of `crate::clusterlod`; `crate::hlod`, `prune_components`). The input is split into
-/// *pieces*, the connected parts (triangles sharing a grid point) of each cell, and every piece
-/// that is a rod (`crate::part_shape`) gets the bound the build charges for removing a part:
-/// its radius or, when less, its vertices' largest distance from its principal axis. A boundary edge of a cut at τ is an
-/// opening, not a crack, if both its ends are vertices of one piece whose bound is within
-/// [`OPENING_SLACK`] × τ (the section of what is left may itself be simplified later, along
-/// its new border, so its edges need not be input edges). A crack along a wide surface (a seam
-/// of a floor or a shell that one side moved) has no such piece and is still found.
+/// (rule 4 of `crate::clusterlod`; `crate::hlod`, `prune_components`). The input is given as
+/// *regions* (each cell, and the cells under each hierarchy node, where HLOD removes parts
+/// made of several cells' pieces), and split into *pieces*, the connected parts (triangles
+/// sharing a grid point) of each region; every piece gets the bound the build charges for
+/// removing a part ([`PartShape::bound`](crate::part_shape::PartShape::bound)): its radius or,
+/// when less, its vertices' largest distance from its principal axis. A boundary edge of a cut
+/// at τ is an opening, not a crack, if both its ends are vertices of one piece whose bound is
+/// within [`OPENING_SLACK`] × τ (the section of what is left may itself be simplified later,
+/// along its new border, so its edges need not be input edges): what is missing there lies
+/// within that of a line. A crack along a wide surface (a seam of a floor or a shell that one
+/// side moved) has no such piece and is still found. That the build opens only rods, never a
+/// shell, is its policy (`crate::part_shape`), checked where the input is closed (the
+/// runtime's cuts of closed spheres).
 pub struct ThinPieces {
     /// Every input grid point with a piece it belongs to (two or more on a seam), sorted.
     points: Vec<([u32; 3], u32)>,
-    /// Each piece's bound (scene units; infinite for a piece that is no rod).
+    /// Each piece's bound (scene units).
     bounds: Vec<f64>,
 }
 
@@ -131,40 +136,39 @@ pub struct ThinPieces {
 pub const OPENING_SLACK: f64 = 2.0;
 
 impl ThinPieces {
-    /// The pieces of the input given cell by cell; `step` is the grid step (scene units).
-    pub fn new<'a>(cells: impl IntoIterator<Item = &'a [GridTriangle]>, step: f64) -> ThinPieces {
+    /// The pieces of the input given region by region; `step` is the grid step (scene units).
+    pub fn new<'a>(regions: impl IntoIterator<Item = &'a [GridTriangle]>, step: f64) -> ThinPieces {
         let mut thin = ThinPieces { points: Vec::new(), bounds: Vec::new() };
-        for cell in cells {
-            thin.add_cell(cell, step);
+        for region in regions {
+            thin.add_region(region, step);
         }
         thin.points.sort_unstable();
         thin.points.dedup();
         thin
     }
 
-    fn add_cell(&mut self, cell: &[GridTriangle], step: f64) {
-        let mut points: Vec<[u32; 3]> = cell.iter().flatten().copied().collect();
+    fn add_region(&mut self, region: &[GridTriangle], step: f64) {
+        let mut points: Vec<[u32; 3]> = region.iter().flatten().copied().collect();
         points.sort_unstable();
         points.dedup();
         let id = |p: &[u32; 3]| points.binary_search(p).unwrap_or(0) as u32;
         let mut parts = crate::union_find::UnionFind::new(points.len());
-        for t in cell {
+        for t in region {
             parts.union(id(&t[0]), id(&t[1]));
             parts.union(id(&t[0]), id(&t[2]));
         }
         let root: Vec<usize> = (0..points.len() as u32).map(|v| parts.find(v) as usize).collect();
         let shapes = crate::part_shape::part_shapes(points.len(), || {
-            points.iter().enumerate().map(|(v, p)| (root[v], p.map(|c| c as f32)))
+            points.iter().enumerate().map(|(v, p)| (root[v], p.map(|c| c as f32), false))
         });
-        // Pieces numbered after those of earlier cells, in order of their roots; a piece that
-        // is no rod may not open at any τ.
+        // Pieces numbered after those of earlier regions, in order of their roots.
         let mut number = vec![u32::MAX; points.len()];
         for (v, p) in points.iter().enumerate() {
             let r = root[v];
             if number[r] == u32::MAX {
                 number[r] = self.bounds.len() as u32;
                 let s = shapes[r];
-                self.bounds.push(if s.is_rod() { s.bound() * step } else { f64::INFINITY });
+                self.bounds.push(s.bound() * step);
             }
             self.points.push((*p, number[r]));
         }

@@ -597,8 +597,12 @@ fn mesh_area(positions: &[[f32; 3]], indices: &[u32]) -> f64 {
 /// leave fewer than half the target. A part's bound is its [`PartShape::bound`](crate::part_shape::PartShape::bound) in local units:
 /// removing it is collapsing it onto its centre or its axis (as in the cells,
 /// `crate::clusterlod`, rule 2). A part with a vertex `pinned` (shared with a cell outside the
-/// node) goes only if it is a rod: that cell's half then ends open across the rod's own
-/// section, within the bound (rule 4 of `crate::clusterlod`). Returns the largest removed
+/// node) goes only if it is a rod pinned at its ends alone
+/// ([`PartShape::is_rod_held_at_ends`](crate::part_shape::PartShape::is_rod_held_at_ends)): that
+/// cell's half then ends open across the rod's own section, within the bound (rule 4 of
+/// `crate::clusterlod`). Unlike the cells, HLOD sees only simplified parts, not the input
+/// pieces they stand for, so a part that simplification left long and thin is no rod if a
+/// seam holds it along its length. Returns the largest removed
 /// bound and the triangles removed. A removed part shares no edge with what is left.
 /// Deterministic (ties by first triangle).
 fn prune_components(
@@ -631,15 +635,14 @@ fn prune_components(
         tri_part.push(part_of[r]);
     }
     let corners = || {
-        indices
-            .chunks_exact(3)
-            .zip(&tri_part)
-            .flat_map(|(t, &p)| t.iter().map(move |&v| (p as usize, local[v as usize])))
+        indices.chunks_exact(3).zip(&tri_part).flat_map(|(t, &p)| {
+            t.iter().map(move |&v| (p as usize, local[v as usize], pinned.get(v as usize) == Some(&true)))
+        })
     };
     let shapes = part_shapes(parts.len(), corners);
     let bounds: Vec<f32> = shapes.iter().map(|s| round_up(s.bound())).collect();
     let mut order: Vec<usize> =
-        (0..parts.len()).filter(|&i| !parts[i].pinned || shapes[i].is_rod()).collect();
+        (0..parts.len()).filter(|&i| !parts[i].pinned || shapes[i].is_rod_held_at_ends()).collect();
     order.sort_by(|&a, &b| bounds[a].total_cmp(&bounds[b]).then(parts[a].first.cmp(&parts[b].first)));
     let mut count = indices.len() / 3;
     let keep_at_least = (target / 2).max(1);

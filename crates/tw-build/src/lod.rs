@@ -877,7 +877,7 @@ mod tests {
                 // builder's sweep: the same moments, so the same axis.
                 let vertices: std::collections::BTreeSet<u32> = part.iter().copied().collect();
                 let shape = crate::part_shape::part_shapes(1, || {
-                    vertices.iter().map(|&v| (0, mesh.positions[v as usize].map(|c| c as f32)))
+                    vertices.iter().map(|&v| (0, mesh.positions[v as usize].map(|c| c as f32), false))
                 })[0];
                 let deviation = shape.bound() * grid.step;
                 assert!(

@@ -13,6 +13,12 @@
 /// sphere is about as long as it is thick).
 pub(crate) const ROD_ELONGATION: f64 = 4.0;
 
+/// How far from an end of a rod, in multiples of its thickness (its largest distance from the
+/// axis), a held point may lie: a section cut at 45° to the axis spans twice the thickness
+/// along it. On the Stanford dragon, HLOD found long thin components in its simplified surface,
+/// held along their length by seams with finer cells: removing them opened the shell.
+pub(crate) const END_REACH: f64 = 2.0;
+
 /// What [`part_shapes`] finds of one part (in the units of its points).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub(crate) struct PartShape {
@@ -22,6 +28,9 @@ pub(crate) struct PartShape {
     pub off_axis: f64,
     /// Half the extent of the points along the principal axis.
     pub half_length: f64,
+    /// The largest distance, along the axis, of a *held* point (one the caller marks: on a
+    /// seam) from the nearer end of the part (0 when none is held).
+    pub held_inside: f64,
 }
 
 impl PartShape {
@@ -36,18 +45,26 @@ impl PartShape {
     pub(crate) fn is_rod(&self) -> bool {
         self.half_length >= ROD_ELONGATION * self.off_axis
     }
+
+    /// Whether the part is a rod held only at its ends: every held point within
+    /// [`END_REACH`] times the rod's thickness of an end. A rod cut across by a seam is held
+    /// at its section; a strip of a wide surface that simplification left long and thin is held
+    /// along its length (where the rest of the surface goes on) and must stay.
+    pub(crate) fn is_rod_held_at_ends(&self) -> bool {
+        self.is_rod() && self.held_inside <= END_REACH * self.off_axis
+    }
 }
 
-/// The shapes of `parts` parts from their points: `points()` yields `(part, point)` pairs
-/// (`part < parts`; repeats allowed) and is walked twice, once for the boxes and moments and
-/// once for the distances from the axes and the extents along them.
+/// The shapes of `parts` parts from their points: `points()` yields `(part, point, held)`
+/// (`part < parts`; repeats allowed) and is walked three times: for the boxes and moments, for
+/// the distances from the axes and the extents along them, and for the held points.
 pub(crate) fn part_shapes<I>(parts: usize, points: impl Fn() -> I) -> Vec<PartShape>
 where
-    I: Iterator<Item = (usize, [f32; 3])>,
+    I: Iterator<Item = (usize, [f32; 3], bool)>,
 {
     let mut boxes = vec![([f32::MAX; 3], [f32::MIN; 3]); parts];
     let mut moments = vec![Moments::default(); parts];
-    for (p, q) in points() {
+    for (p, q, _) in points() {
         let (lo, hi) = &mut boxes[p];
         *lo = std::array::from_fn(|i| lo[i].min(q[i]));
         *hi = std::array::from_fn(|i| hi[i].max(q[i]));
@@ -56,10 +73,15 @@ where
     let axes: Vec<Axis> = moments.iter().map(Moments::axis).collect();
     let mut off_axis = vec![0.0f64; parts];
     let mut along = vec![(f64::MAX, f64::MIN); parts];
-    for (p, q) in points() {
+    for (p, q, _) in points() {
         let (t, d) = axes[p].coordinates(q);
         off_axis[p] = off_axis[p].max(d);
         along[p] = (along[p].0.min(t), along[p].1.max(t));
+    }
+    let mut held_inside = vec![0.0f64; parts];
+    for (p, q, _) in points().filter(|x| x.2) {
+        let t = axes[p].coordinates(q).0;
+        held_inside[p] = held_inside[p].max((t - along[p].0).min(along[p].1 - t));
     }
     (0..parts)
         .map(|p| {
@@ -70,6 +92,7 @@ where
                 radius: d2.max(0.0).sqrt() * 0.5,
                 off_axis: off_axis[p],
                 half_length: if t1 >= t0 { (t1 - t0) * 0.5 } else { 0.0 },
+                held_inside: held_inside[p],
             }
         })
         .collect()

@@ -412,14 +412,25 @@ fn crack_edges(
         .collect()
 }
 
-/// The input's pieces ([`ThinPieces`]), cell by cell: the level-0 clusters of each leaf node.
+/// The input's pieces ([`ThinPieces`]) in the regions where the build removes parts: each cell
+/// (the level-0 clusters of a leaf node) and the cells under each inner node (HLOD).
 fn thin_pieces(store: &Store, dag: &LodDag) -> ThinPieces {
-    let mut by_node: std::collections::BTreeMap<u32, Vec<GridTriangle>> = Default::default();
-    for c in dag.clusters.iter().filter(|c| c.level == 0) {
-        let node = store.groups()[c.group as usize].node;
-        by_node.entry(node).or_default().extend(tw_build::cluster_triangles(c).map(|t| t.0));
+    let nodes = store.nodes();
+    let mut parent = vec![u32::MAX; nodes.len()];
+    for (i, n) in nodes.iter().enumerate() {
+        for c in n.first_child..n.first_child + n.child_count {
+            parent[c as usize] = i as u32;
+        }
     }
-    ThinPieces::new(by_node.values().map(Vec::as_slice), store.header().grid_step)
+    let mut regions: Vec<Vec<GridTriangle>> = vec![Vec::new(); nodes.len()];
+    for c in dag.clusters.iter().filter(|c| c.level == 0) {
+        let mut node = store.groups()[c.group as usize].node;
+        while node != u32::MAX {
+            regions[node as usize].extend(tw_build::cluster_triangles(c).map(|t| t.0));
+            node = parent[node as usize];
+        }
+    }
+    ThinPieces::new(regions.iter().map(Vec::as_slice), store.header().grid_step)
 }
 
 /// The largest own error of the clusters of `cut`: the τ its openings are checked against (a
