@@ -113,7 +113,7 @@ pub fn check_no_cracks(
 /// *regions* (each cell, and the cells under each hierarchy node, where HLOD removes parts
 /// made of several cells' pieces), and split into *pieces*, the connected parts (triangles
 /// sharing a grid point) of each region; every piece gets the bound the build charges for
-/// removing a part ([`PartShape::bound`](crate::part_shape::PartShape::bound)): its radius or,
+/// removing a part (`PartShape::bound` in `part_shape.rs`): its radius or,
 /// when less, its vertices' largest distance from its principal axis. A boundary edge of a cut
 /// at τ is an opening, not a crack, if both its ends are vertices of one piece whose bound is
 /// within [`OPENING_SLACK`] × τ (the section of what is left may itself be simplified later,
