@@ -164,3 +164,30 @@ impl Axis {
         (along, d2.max(0.0).sqrt())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The corners of a 1×1 square section at `x`, as points of part 0, `held` or not.
+    fn ring(x: f32, held: bool) -> Vec<(usize, [f32; 3], bool)> {
+        [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]].iter().map(|&[y, z]| (0, [x, y, z], held)).collect()
+    }
+
+    #[test]
+    fn a_rod_held_at_its_ends_may_go_and_one_held_along_its_length_may_not() {
+        // A bar 20 long, 1×1 across: √½ from its axis, half-length 10, a rod.
+        let held_at_ends: Vec<_> = (0..=20).flat_map(|x| ring(x as f32, x == 0 || x == 20)).collect();
+        let s = part_shapes(1, || held_at_ends.iter().copied())[0];
+        assert!((s.off_axis - 0.5f64.sqrt()).abs() < 1e-6 && (s.half_length - 10.0).abs() < 1e-6, "{s:?}");
+        assert!(s.is_rod() && s.is_rod_held_at_ends(), "{s:?}");
+        assert!((s.bound() - 0.5f64.sqrt()).abs() < 1e-6, "its thickness, not its length");
+        // The same bar held in its middle (a seam along it): a rod, but it stays.
+        let held_inside: Vec<_> = (0..=20).flat_map(|x| ring(x as f32, x == 10)).collect();
+        let s = part_shapes(1, || held_inside.iter().copied())[0];
+        assert!(s.is_rod() && !s.is_rod_held_at_ends(), "{s:?}");
+        // A cube is no rod.
+        let cube: Vec<_> = (0..=1).flat_map(|x| ring(x as f32, false)).collect();
+        assert!(!part_shapes(1, || cube.iter().copied())[0].is_rod());
+    }
+}
