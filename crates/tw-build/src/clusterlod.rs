@@ -52,13 +52,14 @@
 //!    gave 1.34 M, but 2.29× on the KiCad boards, whose levels then shrink too slowly
 //!    (docs/benchmarks-log.md, "Assemblies", session 26).
 //!
-//! 4. *Thin parts across borders.* A part with an *anchored* vertex (shared with another group
-//!    of the round, frozen, or on a seam with another cell) is removed like a free one, charged
-//!    the same bound. Its other half, across the border, may stay in a cut beside the coarser
-//!    level: what opens there is the part's own cross-section, within the bound of the line
-//!    the part collapses onto, so the gap is no wider than the part, which the cut already
-//!    allows to vanish (a pipe thinner than τ pixels may be missing; its open end is as thin).
-//!    Cracks elsewhere stay closed: a part as wide as the error is never removed, and what is
+//! 4. *Thin parts across borders.* A *rod* (an input part far longer than thick,
+//!    `crate::part_shape`) with an *anchored* vertex (shared with another group of the round,
+//!    frozen, or on a seam with another cell) is removed like a free part, charged the same
+//!    bound. Its other half, across the border, may stay in a cut beside the coarser level:
+//!    what opens there is the rod's own cross-section, within the bound of the line it
+//!    collapses onto, so the gap is no wider than the rod, which the cut already allows to
+//!    vanish (a pipe thinner than τ pixels may be missing; its open end is as thin). Cracks
+//!    elsewhere stay closed: an anchored part that is no rod is never removed, and what is
 //!    kept keeps its locked border. Locking seams and group borders for good held the plant's
 //!    pipes, cut by cell planes into pieces, at full section up to the top of the hierarchy:
 //!    HLOD nodes whose every triangle touched a seam, and levels that shrank by a tenth
@@ -478,8 +479,9 @@ fn simplify_parts(
 struct InputPart {
     /// The input part's [`PartShape::bound`](crate::part_shape::PartShape::bound), rounded up.
     bound: f32,
-    /// Whether the input part is a rod ([`PartShape::is_rod`](crate::part_shape::PartShape::is_rod)): it may go where it continues
-    /// across a group border or a cell seam (rule 4).
+    /// Whether the input part is a rod
+    /// ([`PartShape::is_rod`](crate::part_shape::PartShape::is_rod)): it may go where it
+    /// continues across a group border or a cell seam (rule 4).
     rod: bool,
 }
 

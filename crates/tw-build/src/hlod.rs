@@ -594,17 +594,18 @@ fn mesh_area(positions: &[[f32; 3]], indices: &[u32]) -> f64 {
 
 /// Removes whole connected parts of `indices` (triangles sharing vertices), smallest bound
 /// first, until at most `target` triangles are left; a part is skipped if removing it would
-/// leave fewer than half the target. A part's bound is its [`PartShape::bound`](crate::part_shape::PartShape::bound) in local units:
-/// removing it is collapsing it onto its centre or its axis (as in the cells,
-/// `crate::clusterlod`, rule 2). A part with a vertex `pinned` (shared with a cell outside the
-/// node) goes only if it is a rod pinned at its ends alone
-/// ([`PartShape::is_rod_held_at_ends`](crate::part_shape::PartShape::is_rod_held_at_ends)): that
-/// cell's half then ends open across the rod's own section, within the bound (rule 4 of
+/// leave fewer than half the target. A part's bound is its
+/// [`PartShape::bound`](crate::part_shape::PartShape::bound) in local units: removing it is
+/// collapsing it onto its centre or its axis (as in the cells, `crate::clusterlod`, rule 2).
+/// A part with a vertex `pinned` (shared with a cell outside the node) goes only if it is a
+/// rod pinned at its ends alone
+/// ([`PartShape::is_rod_held_at_ends`](crate::part_shape::PartShape::is_rod_held_at_ends)):
+/// that cell's half then ends open across the rod's own section, within the bound (rule 4 of
 /// `crate::clusterlod`). Unlike the cells, HLOD sees only simplified parts, not the input
 /// pieces they stand for, so a part that simplification left long and thin is no rod if a
-/// seam holds it along its length. Returns the largest removed
-/// bound and the triangles removed. A removed part shares no edge with what is left.
-/// Deterministic (ties by first triangle).
+/// seam holds it along its length. Returns the largest removed bound and the triangles
+/// removed. A removed part shares no edge with what is left. Deterministic (ties by first
+/// triangle).
 fn prune_components(
     indices: &mut Vec<u32>,
     local: &[[f32; 3]],

@@ -500,7 +500,7 @@ fn thresholds(dag: &LodDag) -> Vec<f32> {
 fn check_cuts(
     store: &Store,
     dag: &LodDag,
-    input: &[(GridTriangle, u32)],
+    (input, thin): (&[(GridTriangle, u32)], &ThinPieces),
     closed: bool,
     min_area: f64,
     crack_limit: f32,
@@ -508,7 +508,6 @@ fn check_cuts(
     let step = store.header().grid_step;
     let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
     let allowed = open_edges(&input_tris);
-    let thin = thin_pieces(store, dag);
     if closed {
         assert!(allowed.is_empty(), "the input is not closed: {} open edges", allowed.len());
     }
@@ -525,7 +524,7 @@ fn check_cuts(
         let cut = tw_build::extract_cut(dag, tau);
         let tris: Vec<GridTriangle> = cut_triangles(dag, &cut).into_iter().map(|t| t.0).collect();
         if tau < crack_limit {
-            let bad = crack_edges(&tris, &allowed, &border_vertices, (&thin, cut_error(dag, &cut)));
+            let bad = crack_edges(&tris, &allowed, &border_vertices, (thin, cut_error(dag, &cut)));
             if let Some(&e) = bad.first() {
                 panic!(
                     "cut at tau {tau}: {} crack edges, e.g. {}",
@@ -599,12 +598,16 @@ fn resident_page(seed: u64, page: u32) -> bool {
 /// links only, for a few τ and a few sets of resident pages (root pages and the pages of root
 /// groups always resident): the cut it draws holds only resident groups and is complete (the
 /// replay of [`check_complete_with`]) and, below `crack_limit`, has no cracks.
-fn check_availability(store: &Store, dag: &LodDag, input: &[(GridTriangle, u32)], crack_limit: f32) {
+fn check_availability(
+    store: &Store,
+    dag: &LodDag,
+    (input, thin): (&[(GridTriangle, u32)], &ThinPieces),
+    crack_limit: f32,
+) {
     let groups = store.groups();
     let n = groups.len();
     let input_tris: Vec<GridTriangle> = input.iter().map(|t| t.0).collect();
     let allowed = open_edges(&input_tris);
-    let thin = thin_pieces(store, dag);
     let mut border_vertices: Vec<[u32; 3]> = allowed.iter().flat_map(|&(a, b)| [a, b]).collect();
     border_vertices.sort_unstable();
     border_vertices.dedup();
@@ -672,7 +675,7 @@ fn check_availability(store: &Store, dag: &LodDag, input: &[(GridTriangle, u32)]
                 .unwrap_or_else(|e| panic!("tau {tau}, seed {seed}: availability cut: {e}"));
             if tau < crack_limit {
                 let tris: Vec<GridTriangle> = cut_triangles(dag, &cut).into_iter().map(|t| t.0).collect();
-                let bad = crack_edges(&tris, &allowed, &border_vertices, (&thin, cut_error(dag, &cut)));
+                let bad = crack_edges(&tris, &allowed, &border_vertices, (thin, cut_error(dag, &cut)));
                 assert!(
                     bad.is_empty(),
                     "tau {tau}, seed {seed}: availability cut has {} crack edges",
@@ -721,8 +724,9 @@ fn check_store(out: &Path, reference: &Reference, kind: Input) -> (Store, Vec<(f
         Input::Open { cracks: Cracks::BelowRoot } => (false, 0.0, max_finite),
         Input::Open { cracks: Cracks::Unchecked } => (false, 0.0, f32::NEG_INFINITY),
     };
-    let counts = check_cuts(&store, &dag, &input, closed, min_area, crack_limit);
-    check_availability(&store, &dag, &input, crack_limit);
+    let thin = thin_pieces(&store, &dag);
+    let counts = check_cuts(&store, &dag, (&input, &thin), closed, min_area, crack_limit);
+    check_availability(&store, &dag, (&input, &thin), crack_limit);
     (store, counts)
 }
 
