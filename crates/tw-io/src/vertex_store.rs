@@ -9,7 +9,6 @@
 
 use std::fs::File;
 use std::io;
-use std::os::unix::fs::FileExt;
 use std::path::PathBuf;
 
 use tw_core::Rgba8;
@@ -237,7 +236,7 @@ impl<T: Record> VertexStore<T> {
             // Spilled vertices count against the process's disk limits like the build's
             // working files (a small .gz can hold billions of vertices).
             let result = tw_core::disk_space::check(file, scratch.len() as u64)
-                .and_then(|()| file.write_all_at(&scratch, offset));
+                .and_then(|()| tw_core::direct_io::write_all_at(file, &scratch, offset));
             self.scratch = scratch;
             result?;
             self.blocks[b].on_disk = true;
@@ -256,11 +255,8 @@ impl<T: Record> VertexStore<T> {
         self.scratch.resize(BLOCK_LEN * T::SIZE, 0);
         let offset = (b * BLOCK_LEN * T::SIZE) as u64;
         let mut scratch = std::mem::take(&mut self.scratch);
-        let result = self
-            .spill
-            .as_ref()
-            .expect("a non-resident block was spilled")
-            .read_exact_at(&mut scratch, offset);
+        let spill = self.spill.as_ref().expect("a non-resident block was spilled");
+        let result = tw_core::direct_io::read_exact_at(spill, &mut scratch, offset);
         self.scratch = scratch;
         result?;
         let data: Box<[T]> =

@@ -156,13 +156,15 @@ impl CameraPath {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),
         };
-        let mut builder = tempfile::Builder::new();
+        let builder = tempfile::Builder::new();
         // The usual permissions of a new file (0666 less the umask), not a temporary file's 0600.
         #[cfg(unix)]
-        {
+        let builder = {
             use std::os::unix::fs::PermissionsExt;
+            let mut builder = builder;
             builder.permissions(std::fs::Permissions::from_mode(0o666));
-        }
+            builder
+        };
         let mut tmp = builder
             .tempfile_in(dir)
             .map_err(|e| err(format!("cannot create a temporary file in {}: {e}", dir.display())))?;

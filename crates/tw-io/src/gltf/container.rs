@@ -8,7 +8,6 @@
 
 use std::fs::File;
 use std::io::{self, Read, Write};
-use std::os::unix::fs::FileExt;
 use std::path::{Path, PathBuf};
 
 use crate::error::{ImportError, Position};
@@ -189,8 +188,7 @@ impl RandomFile {
             ));
         }
         let mut buf = vec![0u8; len];
-        self.file
-            .read_exact_at(&mut buf, at - self.base)
+        tw_core::direct_io::read_exact_at(&self.file, &mut buf, at - self.base)
             .map_err(|e| ImportError::io(&self.path, Position::Byte(at), e))?;
         Ok(buf)
     }

@@ -38,9 +38,7 @@
 pub(crate) mod mtl;
 
 use std::collections::{HashMap, HashSet};
-use std::ffi::OsStr;
 use std::io::{self, BufRead};
-use std::os::unix::ffi::OsStrExt;
 use std::path::{Path, PathBuf};
 
 use tw_core::Rgba8;
@@ -558,10 +556,10 @@ impl<'s> Parser<'s> {
     /// Resolves a material library name relative to the OBJ's directory; a Windows path
     /// (backslashes) that does not exist as written is tried with slashes.
     fn mtl_path(&self, name: &[u8]) -> PathBuf {
-        let path = self.dir.join(OsStr::from_bytes(name));
+        let path = self.dir.join(path_from_bytes(name));
         if !path.is_file() && name.contains(&b'\\') {
             let slashed: Vec<u8> = name.iter().map(|&b| if b == b'\\' { b'/' } else { b }).collect();
-            return self.dir.join(OsStr::from_bytes(&slashed));
+            return self.dir.join(path_from_bytes(&slashed));
         }
         path
     }
@@ -754,6 +752,20 @@ pub(crate) fn parse_f64(s: &[u8]) -> Option<f64> {
         return Some(if negative { -v } else { v });
     }
     std::str::from_utf8(s).ok()?.parse().ok()
+}
+
+/// A file name as an OBJ file spells it. On Unix a path is bytes, so any name is kept exactly;
+/// elsewhere paths are Unicode and a name that is not UTF-8 is read with replacement characters
+/// (such a file then is not found, which is reported like any missing material library).
+#[cfg(unix)]
+fn path_from_bytes(name: &[u8]) -> PathBuf {
+    PathBuf::from(<std::ffi::OsStr as std::os::unix::ffi::OsStrExt>::from_bytes(name))
+}
+
+/// A file name as an OBJ file spells it (see the Unix version).
+#[cfg(not(unix))]
+fn path_from_bytes(name: &[u8]) -> PathBuf {
+    PathBuf::from(String::from_utf8_lossy(name).into_owned())
 }
 
 #[cfg(test)]
