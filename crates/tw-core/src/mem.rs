@@ -1,14 +1,40 @@
-//! Process memory figures from /proc (Linux): the peak resident set (VmHWM) that every memory
-//! budget in terawalk is checked against, and the current resident set.
+//! Process memory figures: the peak resident set that every memory budget in terawalk is
+//! checked against, and the current resident set. On Linux from /proc (VmHWM, VmRSS), on
+//! Windows from the process's memory counters (peak and current working set: the same
+//! measure, the process's pages held in physical memory).
 
-/// Peak resident set size in bytes (VmHWM), or `None` where /proc is unavailable.
+/// Peak resident set size in bytes, or `None` where the system does not say.
 pub fn peak_rss_bytes() -> Option<u64> {
+    #[cfg(windows)]
+    return windows::counters().map(|c| c.PeakWorkingSetSize as u64);
+    #[cfg(not(windows))]
     status_field("VmHWM:")
 }
 
-/// Current resident set size in bytes (VmRSS), or `None` where /proc is unavailable.
+/// Current resident set size in bytes, or `None` where the system does not say.
 pub fn rss_bytes() -> Option<u64> {
+    #[cfg(windows)]
+    return windows::counters().map(|c| c.WorkingSetSize as u64);
+    #[cfg(not(windows))]
     status_field("VmRSS:")
+}
+
+#[cfg(windows)]
+mod windows {
+    use windows_sys::Win32::System::ProcessStatus::{K32GetProcessMemoryInfo, PROCESS_MEMORY_COUNTERS};
+    use windows_sys::Win32::System::Threading::GetCurrentProcess;
+
+    /// The current process's memory counters (`K32GetProcessMemoryInfo`, kernel32 since Windows 7).
+    pub(super) fn counters() -> Option<PROCESS_MEMORY_COUNTERS> {
+        let size = std::mem::size_of::<PROCESS_MEMORY_COUNTERS>() as u32;
+        // SAFETY: the structure is plain data (all zeros is a valid value), `cb` tells the call its
+        // size, and the pseudo-handle of the current process needs no closing.
+        unsafe {
+            let mut counters: PROCESS_MEMORY_COUNTERS = std::mem::zeroed();
+            counters.cb = size;
+            (K32GetProcessMemoryInfo(GetCurrentProcess(), &mut counters, size) != 0).then_some(counters)
+        }
+    }
 }
 
 /// Makes every thread allocate from one heap (glibc: `M_ARENA_MAX` = 1); call it before the
@@ -44,6 +70,7 @@ pub fn return_free_heap_pages() {
     }
 }
 
+#[cfg(not(windows))]
 fn status_field(key: &str) -> Option<u64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with(key))?;
