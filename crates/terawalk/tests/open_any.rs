@@ -274,6 +274,50 @@ fn video_pipes_raw_frames_into_ffmpeg() {
     assert!(partial.is_empty(), "{partial:?}");
 }
 
+/// With the real ffmpeg (Debian's, installed by `.ci/run`): the video holds every frame at the
+/// asked size, odd sides padded to even ones for 4:2:0 chroma (checked with ffprobe). Skipped
+/// without ffmpeg unless `TERAWALK_REQUIRE_CONVERTERS=1`, under which external tools must be there.
+#[test]
+fn video_encodes_every_frame_with_the_real_ffmpeg() {
+    let require = std::env::var("TERAWALK_REQUIRE_CONVERTERS").as_deref() == Ok("1");
+    let found = |name: &str| {
+        std::env::split_paths(&std::env::var_os("PATH").unwrap_or_default()).any(|d| d.join(name).is_file())
+    };
+    if !(found("ffmpeg") && found("ffprobe")) {
+        assert!(
+            !require,
+            "TERAWALK_REQUIRE_CONVERTERS is set but ffmpeg is missing (apt-get install ffmpeg)"
+        );
+        eprintln!("SKIPPED: ffmpeg or ffprobe not found (apt-get install ffmpeg)");
+        return;
+    }
+    let d = plant();
+    let out = tempfile::tempdir().unwrap();
+    for (name, size, padded) in [("walk.mp4", "64x36", "64,36"), ("odd.mkv", "63x35", "64,36")] {
+        let video = out.path().join(name);
+        let o = Command::new(env!("CARGO_BIN_EXE_terawalk"))
+            .args(["render", "p.tw", "--path", "path.json", "--video", video.to_str().unwrap()])
+            .args(["--size", size, "--fps", "12", "--frames", "5"])
+            .current_dir(d)
+            .env("TERAWALK_CACHE", out.path().join("cache"))
+            .output()
+            .unwrap();
+        if no_gpu(&o) {
+            return;
+        }
+        assert!(o.status.success(), "{}", stderr(&o));
+        let probe = Command::new("ffprobe")
+            .args(["-v", "error", "-select_streams", "v:0", "-count_frames"])
+            .args(["-show_entries", "stream=width,height,nb_read_frames", "-of", "csv=p=0"])
+            .arg(&video)
+            .output()
+            .unwrap();
+        assert!(probe.status.success(), "{}", String::from_utf8_lossy(&probe.stderr));
+        let fields = String::from_utf8_lossy(&probe.stdout).trim().to_string();
+        assert_eq!(fields, format!("{padded},5"), "{name}: width, height, frames");
+    }
+}
+
 /// `view` opens a model through the same cache: the first run builds, the second reuses (under
 /// Xvfb on Mesa's drivers; skipped without `xvfb-run`, a display or an adapter unless
 /// `TERAWALK_REQUIRE_GPU=1`).
