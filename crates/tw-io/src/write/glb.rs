@@ -4,7 +4,12 @@
 //! Scene structure: one node per object (named after it), and for every object with triangles
 //! one mesh with one primitive per *run* — a maximal sequence of consecutive triangles of that
 //! object in the stream (usually one run per object). Each run has its own POSITION accessor
-//! (f32 VEC3, with the `min`/`max` the specification requires) and index accessor (u32). One
+//! (f32 VEC3, with the `min`/`max` the specification requires), NORMAL accessor (f32 VEC3, unit
+//! length) and index accessor (u32). Normals make viewers shade the model (CesiumJS draws a
+//! primitive without them unlit, flat-coloured): a lone triangle gets its face normal, a mesh
+//! chunk's vertices the area-weighted sum of their triangles' normals within the chunk
+//! ([`chunk_normals`]), so memory stays bounded by the chunk; surfaces are smooth inside a chunk
+//! and may show a crease where two chunks meet. One
 //! material per distinct object colour: `baseColorFactor` is the sRGB colour converted to linear
 //! as glTF requires, metallic 0, double-sided (models are not consistently wound); objects
 //! without a colour share a grey default.
@@ -23,10 +28,10 @@
 //! ```text
 //! header (12)  | JSON chunk: length, "JSON", text padded with spaces to 4 bytes
 //!              | BIN chunk: length, "BIN\0", all positions (bufferView 0, stride 12),
-//!              |            then all indices (bufferView 1)
+//!              |            all normals (bufferView 1, stride 12), all indices (bufferView 2)
 //! ```
-//! The JSON must precede BIN but is known only at the end, so positions and indices stream into
-//! two unnamed temporary files; the JSON is serialised twice (once to measure its length), never held in
+//! The JSON must precede BIN but is known only at the end, so positions, normals and indices
+//! stream into three unnamed temporary files; the JSON is serialised twice (once to measure its length), never held in
 //! memory. GLB lengths are u32: a binary chunk that would pass 4 GiB is an error as soon as a
 //! triangle would cross it.
 
@@ -78,6 +83,7 @@ struct Run {
 pub struct GlbWriter {
     out: Output,
     positions: Spill,
+    normals: Spill,
     indices: Spill,
     objects: Objects,
     runs: Vec<Run>,
@@ -100,6 +106,7 @@ impl GlbWriter {
         Ok(GlbWriter {
             out: Output::create(path, false)?,
             positions: Spill::create(path)?,
+            normals: Spill::create(path)?,
             indices: Spill::create(path)?,
             objects: Objects::default(),
             runs: Vec::new(),
@@ -143,7 +150,7 @@ impl GlbWriter {
     /// Makes room for `vertices` and `indices` more in the current run of `object` (starting a
     /// run if the object changed); returns the index within the run of the first new vertex.
     fn reserve(&mut self, object: u32, vertices: u64, indices: u64) -> Result<u32, ImportError> {
-        let bin = (self.vertices + vertices) * 12 + (self.index_count + indices) * 4;
+        let bin = (self.vertices + vertices) * 24 + (self.index_count + indices) * 4;
         if bin > self.max_bin {
             return Err(ImportError::Sink(format!(
                 "{}: the GLB binary chunk would pass {} bytes (GLB lengths are 32-bit, 4 GiB at most); \
@@ -297,7 +304,7 @@ impl Layout<'_> {
     }
 
     /// The `meshes` array: a mesh per object with triangles, a primitive per run (each run's
-    /// accessors are `2 r` and `2 r + 1`).
+    /// accessors are `3 r`, `3 r + 1` and `3 r + 2`).
     fn write_meshes(
         &self,
         w: &mut impl Write,
@@ -323,10 +330,11 @@ impl Layout<'_> {
             for (k, &r) in runs.iter().enumerate() {
                 write!(
                     w,
-                    r#"{}{{"attributes":{{"POSITION":{}}},"indices":{},"material":{material}}}"#,
+                    r#"{}{{"attributes":{{"POSITION":{},"NORMAL":{}}},"indices":{},"material":{material}}}"#,
                     if k > 0 { "," } else { "" },
-                    2 * r,
-                    2 * r + 1
+                    3 * r,
+                    3 * r + 1,
+                    3 * r + 2
                 )?;
             }
             w.write_all(b"]}")?;
@@ -334,8 +342,8 @@ impl Layout<'_> {
         w.write_all(b"]")
     }
 
-    /// The `accessors` array (each run's positions and indices), the two buffer views (all
-    /// positions, then all indices) and the one buffer.
+    /// The `accessors` array (each run's positions, normals and indices), the three buffer views
+    /// (all positions, all normals, all indices) and the one buffer.
     fn write_accessors_and_buffers(&self, w: &mut impl Write) -> io::Result<()> {
         w.write_all(br#","accessors":["#)?;
         for (k, r) in self.runs.iter().enumerate() {
@@ -354,7 +362,13 @@ impl Layout<'_> {
             )?;
             write!(
                 w,
-                r#"{{"bufferView":1,"byteOffset":{},"componentType":5125,"count":{},"type":"SCALAR"}}"#,
+                r#"{{"bufferView":1,"byteOffset":{},"componentType":5126,"count":{},"type":"VEC3"}},"#,
+                r.first_vertex * 12,
+                r.vertices
+            )?;
+            write!(
+                w,
+                r#"{{"bufferView":2,"byteOffset":{},"componentType":5125,"count":{},"type":"SCALAR"}}"#,
                 r.first_index * 4,
                 r.indices
             )?;
@@ -363,8 +377,9 @@ impl Layout<'_> {
         let i = self.index_count * 4;
         write!(
             w,
-            r#"],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{p},"byteStride":12,"target":34962}},{{"buffer":0,"byteOffset":{p},"byteLength":{i},"target":34963}}],"buffers":[{{"byteLength":{}}}]"#,
-            p + i
+            r#"],"bufferViews":[{{"buffer":0,"byteOffset":0,"byteLength":{p},"byteStride":12,"target":34962}},{{"buffer":0,"byteOffset":{p},"byteLength":{p},"byteStride":12,"target":34962}},{{"buffer":0,"byteOffset":{},"byteLength":{i},"target":34963}}],"buffers":[{{"byteLength":{}}}]"#,
+            2 * p,
+            2 * p + i
         )
     }
 }
@@ -413,6 +428,43 @@ fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
+/// A triangle's normal, its length twice the triangle's area (right-handed winding).
+fn face_normal(p: &[[f32; 3]; 3]) -> [f32; 3] {
+    let (a, b) = (sub(p[1], p[0]), sub(p[2], p[0]));
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// `n` scaled to unit length; +Z where it has none (a degenerate triangle, or normals that
+/// cancel): glTF requires every normal to be of unit length.
+fn unit_or_up(n: [f32; 3]) -> [f32; 3] {
+    let len = (n[0] as f64).hypot(n[1] as f64).hypot(n[2] as f64);
+    if len.is_finite() && len > 1e-30 {
+        n.map(|x| (x as f64 / len) as f32)
+    } else {
+        [0.0, 0.0, 1.0]
+    }
+}
+
+/// Per vertex of a mesh chunk: the unit sum of its triangles' normals weighted by their areas
+/// (the cross products' lengths), so large faces dominate and slivers barely count. A vertex
+/// on no triangle, or whose triangles cancel (a fold), gets +Z.
+fn chunk_normals(points: &[[f32; 3]], indices: &[u32]) -> Vec<[f32; 3]> {
+    let mut sum = vec![[0.0f64; 3]; points.len()];
+    for t in indices.chunks_exact(3) {
+        let n = face_normal(&[points[t[0] as usize], points[t[1] as usize], points[t[2] as usize]]);
+        for &v in t {
+            for i in 0..3 {
+                sum[v as usize][i] += n[i] as f64;
+            }
+        }
+    }
+    sum.iter().map(|s| unit_or_up([s[0] as f32, s[1] as f32, s[2] as f32])).collect()
+}
+
 /// Counts bytes, to measure the JSON before writing it.
 struct Counter<W> {
     inner: W,
@@ -455,8 +507,16 @@ impl TriangleSink for GlbWriter {
         for k in 0..3 {
             idx[4 * k..4 * k + 4].copy_from_slice(&(base + k as u32).to_le_bytes());
         }
+        let normal = unit_or_up(face_normal(&pos));
+        let mut n = [0u8; 36];
+        for k in 0..3 {
+            for i in 0..3 {
+                n[12 * k + 4 * i..12 * k + 4 * i + 4].copy_from_slice(&normal[i].to_le_bytes());
+            }
+        }
         let err = io_err(self.out.target());
         self.positions.write_all(&v).map_err(&err)?;
+        self.normals.write_all(&n).map_err(&err)?;
         self.indices.write_all(&idx).map_err(&err)?;
         self.triangles += 1;
         Ok(())
@@ -483,6 +543,21 @@ impl TriangleSink for GlbWriter {
         }
         let err = io_err(&target);
         self.positions.write_all(&scratch).map_err(&err)?;
+        let points: Vec<[f32; 3]> = scratch
+            .chunks_exact(12)
+            .map(|q| {
+                std::array::from_fn(|i| {
+                    f32::from_le_bytes([q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]])
+                })
+            })
+            .collect();
+        scratch.clear();
+        for n in chunk_normals(&points, chunk.indices) {
+            for x in n {
+                scratch.extend_from_slice(&x.to_le_bytes());
+            }
+        }
+        self.normals.write_all(&scratch).map_err(&err)?;
         scratch.clear();
         for &i in chunk.indices {
             scratch.extend_from_slice(&(base + i).to_le_bytes());
@@ -499,6 +574,7 @@ impl SceneWriter for GlbWriter {
         let GlbWriter {
             out,
             positions,
+            normals,
             indices,
             objects,
             runs,
@@ -516,8 +592,8 @@ impl SceneWriter for GlbWriter {
         layout.write_json(&mut counter).map_err(&err)?;
         let json_len = counter.n;
         let json_padded = json_len.next_multiple_of(4);
-        let bin_len = positions.len() + indices.len();
-        debug_assert_eq!(bin_len, vertices * 12 + index_count * 4);
+        let bin_len = positions.len() + normals.len() + indices.len();
+        debug_assert_eq!(bin_len, vertices * 24 + index_count * 4);
         let total = 12 + 8 + json_padded + if bin_len > 0 { 8 + bin_len } else { 0 };
         if total > u32::MAX as u64 {
             return Err(ImportError::Sink(format!(
@@ -543,6 +619,7 @@ impl SceneWriter for GlbWriter {
             out.write_all(&(bin_len as u32).to_le_bytes()).map_err(&err)?;
             out.write_all(&CHUNK_BIN.to_le_bytes()).map_err(&err)?;
             positions.copy_into(&mut out).map_err(&err)?;
+            normals.copy_into(&mut out).map_err(&err)?;
             indices.copy_into(&mut out).map_err(&err)?;
         }
         if out.n != total {
@@ -605,7 +682,7 @@ mod tests {
     fn container_and_chunks_are_well_formed() {
         let (json, bin) = chunks(&sample());
         assert_eq!(json["asset"]["version"], "2.0");
-        assert_eq!(bin.len(), 13 * 12 + 15 * 4);
+        assert_eq!(bin.len(), 13 * 24 + 15 * 4);
         assert_eq!(json["buffers"][0]["byteLength"], bin.len());
     }
 
@@ -626,9 +703,10 @@ mod tests {
         let p0 = meshes[0]["primitives"].as_array().unwrap();
         assert_eq!(p0.len(), 2);
         assert_eq!(p0[0]["attributes"]["POSITION"], 0);
-        assert_eq!(p0[0]["indices"], 1);
-        assert_eq!(p0[1]["attributes"]["POSITION"], 4);
-        assert_eq!(meshes[1]["primitives"][0]["indices"], 3);
+        assert_eq!(p0[0]["attributes"]["NORMAL"], 1);
+        assert_eq!(p0[0]["indices"], 2);
+        assert_eq!(p0[1]["attributes"]["POSITION"], 6);
+        assert_eq!(meshes[1]["primitives"][0]["indices"], 5);
         // One root node holds the objects' nodes, turning the z-up scene to glTF's y-up.
         assert_eq!(json["scenes"][0]["nodes"], serde_json::json!([3]));
         assert_eq!(nodes[3]["children"], serde_json::json!([0, 1, 2]));
@@ -642,21 +720,27 @@ mod tests {
     fn accessors_have_min_max_and_point_into_the_views() {
         let (json, bin) = chunks(&sample());
         let acc = json["accessors"].as_array().unwrap();
-        assert_eq!(acc.len(), 6);
+        assert_eq!(acc.len(), 9);
         assert_eq!(acc[0]["count"], 4);
         assert_eq!(floats(&acc[0]["min"]), [0.0, 0.0, 0.0]);
         assert_eq!(floats(&acc[0]["max"]), [1.0, 1.0, 0.0]);
-        assert_eq!(acc[2]["byteOffset"], 48);
-        assert_eq!(floats(&acc[2]["min"]), [2.0, 0.0, -1.5]);
-        assert_eq!(floats(&acc[2]["max"]), [3.0, 2.0, 1.0]);
-        assert_eq!(acc[5]["byteOffset"], 12 * 4);
-        assert_eq!(acc[5]["count"], 3);
+        assert_eq!(
+            (&acc[1]["bufferView"], &acc[1]["count"], &acc[1]["type"]),
+            (&1.into(), &4.into(), &"VEC3".into())
+        );
+        assert_eq!(acc[3]["byteOffset"], 48);
+        assert_eq!(floats(&acc[3]["min"]), [2.0, 0.0, -1.5]);
+        assert_eq!(floats(&acc[3]["max"]), [3.0, 2.0, 1.0]);
+        assert_eq!(acc[4]["byteOffset"], 48);
+        assert_eq!(acc[8]["byteOffset"], 12 * 4);
+        assert_eq!(acc[8]["count"], 3);
         let views = json["bufferViews"].as_array().unwrap();
         assert_eq!(views[0]["byteStride"], 12);
-        assert_eq!(views[1]["byteOffset"], 13 * 12);
+        assert_eq!((&views[1]["byteOffset"], &views[1]["byteStride"]), (&(13 * 12).into(), &12.into()));
+        assert_eq!(views[2]["byteOffset"], 13 * 24);
         // Indices are relative to their run: the chunk's, then 0 1 2 3 4 5, then 0 1 2.
         let idx: Vec<u32> =
-            bin[13 * 12..].chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
+            bin[13 * 24..].chunks_exact(4).map(|c| u32::from_le_bytes(c.try_into().unwrap())).collect();
         assert_eq!(idx, [0, 1, 2, 0, 2, 3, 0, 1, 2, 3, 4, 5, 0, 1, 2]);
     }
 
@@ -690,6 +774,35 @@ mod tests {
         let first = doc.meshes().next().unwrap().primitives().next().unwrap();
         let r = first.reader(|buf| Some(&buffers[buf.index()]));
         assert_eq!(r.read_positions().unwrap().nth(2), Some([1.0, 1.0, 0.0]));
+    }
+
+    /// Every normal is of unit length (glTF requires it); a lone triangle's vertices carry its face
+    /// normal, a chunk's vertices the area-weighted mean of their triangles', and a degenerate
+    /// triangle +Z.
+    #[test]
+    fn normals_are_unit_face_or_area_weighted() {
+        let b = sample();
+        let (doc, buffers, _) = gltf::import_slice(&b).unwrap();
+        let mut normals = 0;
+        for prim in doc.meshes().flat_map(|m| m.primitives().collect::<Vec<_>>()) {
+            let r = prim.reader(|buf| Some(&buffers[buf.index()]));
+            let pos: Vec<[f32; 3]> = r.read_positions().unwrap().collect();
+            let nrm: Vec<[f32; 3]> = r.read_normals().unwrap().collect();
+            assert_eq!(pos.len(), nrm.len());
+            for n in &nrm {
+                let len = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+                assert!((len - 1.0).abs() < 1e-5, "{n:?}");
+            }
+            normals += nrm.len();
+        }
+        assert_eq!(normals, 13);
+        // Area weighting: a unit square in z = 0 and a tiny triangle standing up at one corner.
+        let points = [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [0., 0., 1e-3], [1e-3, 0., 0.]];
+        let n = chunk_normals(&points, &[0, 1, 2, 0, 2, 3, 0, 5, 4]);
+        assert_eq!(n[2], [0.0, 0.0, 1.0]);
+        assert!(n[0][2] > 0.999 && n[0][1] < 0.0, "the big faces dominate: {:?}", n[0]);
+        assert_eq!(n[4], [0.0, -1.0, 0.0]);
+        assert_eq!(unit_or_up(face_normal(&[[1.0; 3]; 3])), [0.0, 0.0, 1.0]);
     }
 
     #[test]
@@ -743,10 +856,10 @@ mod tests {
     fn binary_chunk_limit_is_an_error() {
         let dir = tempfile::tempdir().unwrap();
         let mut w = GlbWriter::create(&dir.path().join("a.glb")).unwrap();
-        w.max_bin = 100;
         w.object(0, &ObjectInfo::default()).unwrap();
-        w.triangle(&Triangle::new(test_scene::T1, 0)).unwrap(); // 48 bytes
-        w.triangle(&Triangle::new(test_scene::T2, 0)).unwrap(); // 96 bytes
+        w.max_bin = 170;
+        w.triangle(&Triangle::new(test_scene::T1, 0)).unwrap(); // 84 bytes: positions, normals, indices
+        w.triangle(&Triangle::new(test_scene::T2, 0)).unwrap(); // 168 bytes
         let e = w.triangle(&Triangle::new(test_scene::T3, 0)).unwrap_err();
         assert!(e.to_string().contains("4 GiB"), "{e}");
     }
