@@ -49,6 +49,16 @@ pub const SHADOW_BLOCKED: [u8; 4] = [0, 0, 0, 255];
 /// [`ColorMode::Shadow`]: a surface facing away from the light (sRGB).
 pub const SHADOW_AWAY: [u8; 4] = [128, 128, 128, 255];
 
+/// The picked object's tint (sRGB): its colour, in every colour mode, is drawn half-way to this
+/// orange ([`highlight`]).
+pub const HIGHLIGHT: [u8; 4] = [255, 140, 0, 255];
+
+/// `color` blended half-way to [`HIGHLIGHT`] (sRGB, per channel): how the rasterizer's shader
+/// and the ray tracer's picture tint the picked object.
+pub fn highlight(color: [u8; 4]) -> [u8; 4] {
+    std::array::from_fn(|i| ((color[i] as u16 + HIGHLIGHT[i] as u16) / 2) as u8)
+}
+
 /// Colour of objects without one in the store (sRGB).
 pub const DEFAULT_COLOR: [u8; 4] = [180, 180, 180, 255];
 

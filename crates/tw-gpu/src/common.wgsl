@@ -10,7 +10,8 @@ struct Uniforms {
     // xyz: unit direction towards the sun; w: unused (0).
     sun: vec4<f32>,
     // x: unused (0: the colour mode is the pipeline constant COLOR_MODE, draw.wgsl); y: object
-    // colours in the table; z: default colour (RGBA8).
+    // colours in the table; z: default colour (RGBA8); w: the highlighted object (0xffffffff:
+    // none; Renderer::set_highlight).
     params: vec4<u32>,
     // xyz: unit direction from the view's target towards the eye (the headlight).
     headlight: vec4<f32>,

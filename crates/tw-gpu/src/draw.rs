@@ -127,7 +127,7 @@ impl Pipelines {
         });
         let source = format!(
             "{}\n{}\n{}\n{}",
-            shadow_mask_constants(),
+            color_constants(),
             include_str!("common.wgsl"),
             include_str!("draw.wgsl"),
             include_str!("shadow.wgsl")
@@ -302,14 +302,18 @@ impl Pipelines {
 pub(crate) const SHADOW_DEPTH_BIAS: wgpu::DepthBiasState =
     wgpu::DepthBiasState { constant: 16, slope_scale: 2.0, clamp: 0.0 };
 
-/// WGSL constants of [`ColorMode::Shadow`]'s mask colours (sRGB, 0..1), from `tw_core::color`.
-fn shadow_mask_constants() -> String {
-    use tw_core::color::{SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT};
+/// WGSL constants of [`ColorMode::Shadow`]'s mask colours and of the highlight's tint (sRGB,
+/// 0..1), from `tw_core::color`.
+fn color_constants() -> String {
+    use tw_core::color::{HIGHLIGHT, SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT};
     let c = |name: &str, v: [u8; 4]| {
         let f = |b: u8| format!("{:?}", b as f32 / 255.0);
         format!("const {name}: vec3<f32> = vec3<f32>({}, {}, {});\n", f(v[0]), f(v[1]), f(v[2]))
     };
-    c("SHADOW_LIT", SHADOW_LIT) + &c("SHADOW_BLOCKED", SHADOW_BLOCKED) + &c("SHADOW_AWAY", SHADOW_AWAY)
+    c("SHADOW_LIT", SHADOW_LIT)
+        + &c("SHADOW_BLOCKED", SHADOW_BLOCKED)
+        + &c("SHADOW_AWAY", SHADOW_AWAY)
+        + &c("HIGHLIGHT", HIGHLIGHT)
 }
 
 fn pipeline(

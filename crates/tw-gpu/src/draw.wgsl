@@ -52,7 +52,14 @@ fn level_color(level: u32) -> vec3<f32> {
     return palette[level % 8u] / 255.0;
 }
 
+// The object's colour in the colour mode, the highlighted object's (u.params.w) half-way to
+// HIGHLIGHT (tw_core::color::highlight): a select on the object, not a branch on the uniform.
 fn base_color(object: u32, slot: u32) -> vec3<f32> {
+    let c = mode_color(object, slot);
+    return select(c, 0.5 * (c + HIGHLIGHT), object == u.params.w);
+}
+
+fn mode_color(object: u32, slot: u32) -> vec3<f32> {
     let mode = COLOR_MODE;
     if (mode == 1u) {
         return hash_color(object);

@@ -177,6 +177,54 @@ fn debug_color_modes_and_png() {
     assert_eq!(renderer.render_clusters(&camera, 1.0, &[]).unwrap().covered_pixels(), 0);
 }
 
+/// The highlighted object is tinted in every colour mode: exactly the pixels the item buffer
+/// gives to that object change, each towards the highlight's orange (less blue); clearing the
+/// highlight draws the first image again.
+#[test]
+fn highlight_tints_exactly_its_objects_pixels_in_every_mode() {
+    let _guard = gpu_lock();
+    let Some(mut renderer) = renderer(wgpu::Backends::all().with_env(), "highlight") else { return };
+    let store = Store::open(plant_path()).unwrap();
+    let (_, camera) = cameras(&store);
+    let cache = PageCache::new(&store, 1 << 30);
+    let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true };
+    let selection = Selector::new(&store).select(&store, &cache, &camera, &options);
+    let items = renderer.item_buffer_selection(&store, &cache, &camera, &selection).unwrap();
+    let visible = items.visible();
+    let (&object, &pixels) = visible.objects.iter().max_by_key(|(_, &p)| p).unwrap();
+    assert!(pixels > 100 && pixels < visible.covered_pixels, "{pixels} of {}", visible.covered_pixels);
+    for mode in [ColorMode::Material, ColorMode::Object, ColorMode::Level, ColorMode::Cluster] {
+        renderer.set_color_mode(mode);
+        renderer.set_highlight(None);
+        let plain = renderer.render_selection(&store, &cache, &camera, &selection).unwrap();
+        renderer.set_highlight(Some(object));
+        let tinted = renderer.render_selection(&store, &cache, &camera, &selection).unwrap();
+        let (mut changed, mut outside) = (0u64, 0u64);
+        for y in 0..H {
+            for x in 0..W {
+                let i = (y * W + x) as usize * 4;
+                let (a, b) = (&plain.rgba[i..i + 4], &tinted.rgba[i..i + 4]);
+                if a == b {
+                    continue;
+                }
+                match items.item(x, y) {
+                    Some(item) if item.object == object => {
+                        changed += 1;
+                        assert!(b[2] <= a[2], "{mode:?} ({x}, {y}): {a:?} -> {b:?} is not towards orange");
+                    }
+                    _ => outside += 1,
+                }
+            }
+        }
+        // Edge pixels may differ in coverage between the item buffer and the shaded pass.
+        assert!(changed as f64 > 0.9 * pixels as f64, "{mode:?}: {changed} of {pixels} pixels tinted");
+        assert!(outside * 100 < pixels, "{mode:?}: {outside} pixels of other objects changed");
+        renderer.set_highlight(None);
+        let again = renderer.render_selection(&store, &cache, &camera, &selection).unwrap();
+        assert_eq!(again.rgba, plain.rgba, "{mode:?}: no highlight, the plain image");
+    }
+}
+
 /// Frame times of the 50k plant at 1280×720, τ = 0 (run with `--ignored --nocapture`; pick the
 /// backend with WGPU_BACKEND).
 #[test]

@@ -26,7 +26,7 @@
 //!   of objects) and drawn again into the scene texture with a triangle mask per cluster (the
 //!   debug view's path, [`tw_gpu::Renderer::draw_masked`]): a cluster mixes objects, so the
 //!   filter works per triangle, and costs nothing while every object is shown. The picked
-//!   object is tinted through the renderer's object colour table (the material colouring).
+//!   object is tinted by the renderer in every colour mode ([`tw_gpu::Renderer::set_highlight`]).
 //! - **Shadows** ([`Settings::shadows`], [`crate::settings::ShadowControls`]): each frame's
 //!   `FrameSettings::shadows` is built from the controls — the sun's azimuth and elevation
 //!   around the scene's up axis (the store's or `--up`'s) turned into a scene-space direction the
@@ -91,15 +91,6 @@ struct SelectKey {
     occlusion: tw_frame::Occlusion,
     /// Selected with objects hidden (without occlusion culling).
     filtered: bool,
-}
-
-/// How the picked object is tinted: half its colour, half this orange (sRGB).
-pub const HIGHLIGHT: [u8; 4] = [255, 140, 0, 255];
-
-/// `color` (the store's, or the default) blended half-way to [`HIGHLIGHT`].
-pub fn tint(color: Option<[u8; 4]>) -> [u8; 4] {
-    let c = color.unwrap_or(tw_gpu::DEFAULT_COLOR);
-    std::array::from_fn(|i| ((c[i] as u16 + HIGHLIGHT[i] as u16) / 2) as u8)
 }
 
 /// Format of the scene's colour texture. The renderer's own target is `Rgba8Unorm` holding the
@@ -196,7 +187,6 @@ pub struct Scene {
     /// The object to tint, and the one the renderer's colour table tints now (a new renderer
     /// starts with the store's colours).
     highlight: Option<u32>,
-    tinted: Option<u32>,
     /// Where named viewpoints are saved (default: next to the store).
     views_file: std::path::PathBuf,
 }
@@ -241,7 +231,6 @@ impl Scene {
             up_axis,
             filter: ObjectFilter::default(),
             highlight: None,
-            tinted: None,
             views_file,
         }
     }
@@ -268,7 +257,7 @@ impl Scene {
         &self.filter
     }
 
-    /// The object to tint from the next frame on (material colouring).
+    /// The object to tint from the next frame on (every colour mode).
     pub fn set_highlight(&mut self, object: Option<u32>) {
         self.highlight = object;
     }
@@ -493,8 +482,7 @@ impl Scene {
     }
 
     /// Makes the walkthrough ready for a frame at `size`: made on the first frame, its renderer
-    /// made again at a new size, the object colours (with the highlight), GPU budget and colour
-    /// mode brought up to date.
+    /// made again at a new size, the highlight, GPU budget and colour mode brought up to date.
     fn prepare_walk(&mut self, settings: &Settings, size: [u32; 2]) -> Result<(), ViewError> {
         let g = self.gfx.as_mut().ok_or_else(|| ViewError::Gpu("no renderer attached".into()))?;
         // The walkthrough, its own target at the frame's size.
@@ -508,7 +496,6 @@ impl Scene {
             self.walk = Some(Walkthrough::new(self.store.clone(), renderer, options)?);
             self.gpu_request = settings.gpu_budget;
             self.key = None;
-            self.tinted = None;
         }
         let walk = self.walk.as_mut().expect("made above");
         let (ow, oh) = walk.renderer().size();
@@ -516,21 +503,8 @@ impl Scene {
             walk.replace_renderer(g.renderer(size, settings.gpu_budget)?);
             self.gpu_request = settings.gpu_budget;
             self.key = None;
-            self.tinted = None;
         }
-        if self.tinted != self.highlight {
-            let objects = self.store.objects();
-            let h = self.highlight;
-            let colors = objects.iter().enumerate().map(|(i, o)| {
-                if h == Some(i as u32) {
-                    Some(tint(o.color))
-                } else {
-                    o.color
-                }
-            });
-            walk.renderer_mut().set_object_colors(colors);
-            self.tinted = self.highlight;
-        }
+        walk.renderer_mut().set_highlight(self.highlight);
         if self.gpu_request != settings.gpu_budget {
             walk.renderer_mut().set_gpu_budget(settings.gpu_budget.max(tw_gpu::MIN_BUDGET));
             self.gpu_request = settings.gpu_budget;

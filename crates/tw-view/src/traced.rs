@@ -32,7 +32,6 @@ use tw_store::Store;
 
 use crate::accumulate::{sample_position, Accumulator, MAX_SAMPLES};
 use crate::error::ViewError;
-use crate::scene::HIGHLIGHT;
 use crate::settings::{Coloring, Settings};
 
 /// What the accumulated samples were traced from.
@@ -173,14 +172,14 @@ impl TracedScene {
     }
 }
 
-/// Tints the pixels that show `object` half-way to [`HIGHLIGHT`] (the rasterizer tints the
-/// object's colour before shading; here the shaded colour is tinted, which keeps the shading).
+/// Tints the pixels that show `object` half-way to `tw_core::color::HIGHLIGHT` (the rasterizer
+/// tints the object's colour before shading; here the shaded colour is tinted, which keeps the
+/// shading).
 fn tint(rgba: &mut [u8], objects: &[u32], object: Option<u32>) {
     let Some(h) = object else { return };
     for (p, _) in rgba.chunks_exact_mut(4).zip(objects).filter(|(p, &o)| o == h && p[3] != 0) {
-        for c in 0..3 {
-            p[c] = ((p[c] as u16 + HIGHLIGHT[c] as u16) / 2) as u8;
-        }
+        let tinted = tw_core::color::highlight([p[0], p[1], p[2], 255]);
+        p[..3].copy_from_slice(&tinted[..3]);
     }
 }
 

@@ -184,6 +184,7 @@ impl Renderer {
             uniforms,
             object_colors,
             object_color_count: 0,
+            highlight: None,
             bind_group,
             bind_generation: pool.generation,
             pool,

@@ -111,6 +111,8 @@ pub struct Renderer {
     pub(crate) uniforms: wgpu::Buffer,
     pub(crate) object_colors: wgpu::Buffer,
     object_color_count: u32,
+    /// The object drawn tinted ([`Renderer::set_highlight`]).
+    highlight: Option<u32>,
     pub(crate) bind_group: wgpu::BindGroup,
     pub(crate) bind_generation: u64,
     pub(crate) pool: ClusterPool,
@@ -225,6 +227,13 @@ impl Renderer {
         }
         self.object_colors = colors_buffer(&self.device, &self.queue, &packed);
         self.bind_generation = u64::MAX;
+    }
+
+    /// The object drawn tinted from the next frame on, in every colour mode: its colour
+    /// half-way to `tw_core::color::HIGHLIGHT` before shading ([`tw_core::color::highlight`]);
+    /// `None` tints nothing. A viewer's picked object.
+    pub fn set_highlight(&mut self, object: Option<u32>) {
+        self.highlight = object.filter(|&o| o != u32::MAX);
     }
 
     /// [`set_object_colors`](Self::set_object_colors) from the store's object table.

@@ -323,7 +323,12 @@ impl Renderer {
             view_proj: view_proj.to_cols_array_2d(),
             eye: camera.eye.extend(1.0).to_array(),
             sun: camera.sun_direction().extend(0.0).to_array(),
-            params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
+            params: [
+                0,
+                self.object_color_count,
+                color::pack(DEFAULT_COLOR),
+                self.highlight.unwrap_or(u32::MAX),
+            ],
             headlight: camera.headlight().extend(0.0).to_array(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
