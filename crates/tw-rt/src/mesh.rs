@@ -8,6 +8,7 @@ use crate::bvh::Bvh;
 use crate::image::Trace;
 use crate::ray::{Hit, Ray};
 use crate::simd::Simd;
+use crate::spatial_split::SpatialSplits;
 use crate::traverse::{prefetch, traverse, LeafVisitor, NodeRay, Visit};
 use crate::triangle::{Shear, TriGroup, GROUP};
 use crate::wide::Leaf;
@@ -35,6 +36,18 @@ impl TriangleBvh {
     /// triangles with non-finite vertices are kept but never hit. `Hit::prim` is an index into
     /// `triangles`.
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<TriangleBvh, MeshError> {
+        TriangleBvh::build_with(positions, triangles, None)
+    }
+
+    /// [`TriangleBvh::build`] with spatial splits (`Some`) or without (`None`). With them a
+    /// triangle that crosses a split plane may be copied into several leaves (up to the
+    /// budget), each leaf's box holding only its part: tighter boxes for long triangles at the
+    /// cost of a slower build and more memory.
+    pub fn build_with(
+        positions: &[[f32; 3]],
+        triangles: &[[u32; 3]],
+        spatial_splits: Option<SpatialSplits>,
+    ) -> Result<TriangleBvh, MeshError> {
         if triangles.len() >= (1 << 31) {
             return Err(MeshError::TooManyTriangles(triangles.len()));
         }
@@ -56,7 +69,10 @@ impl TriangleBvh {
             .collect::<Result<Vec<_>, _>>()?;
         let boxes: Vec<Aabb> = corners.iter().map(|c| Aabb::from_points(c)).collect();
         let options = BuildOptions { max_leaf_size: GROUP, block_size: GROUP, traversal_cost: 1.0 };
-        let bvh = Bvh::build_with(&boxes, &options);
+        let bvh = match spatial_splits {
+            Some(splits) => Bvh::build_spatial(&corners, &boxes, &options, &splits),
+            None => Bvh::build_with(&boxes, &options),
+        };
         let groups = bvh
             .leaves
             .iter()
