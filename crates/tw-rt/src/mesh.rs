@@ -36,7 +36,7 @@ impl TriangleBvh {
     /// triangles with non-finite vertices are kept but never hit. `Hit::prim` is an index into
     /// `triangles`.
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<TriangleBvh, MeshError> {
-        TriangleBvh::build_with(positions, triangles, None)
+        TriangleBvh::build_with(positions, triangles, Some(SpatialSplits::default()))
     }
 
     /// [`TriangleBvh::build`] with spatial splits (`Some`) or without (`None`). With them a
@@ -68,7 +68,12 @@ impl TriangleBvh {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let boxes: Vec<Aabb> = corners.iter().map(|c| Aabb::from_points(c)).collect();
-        let options = BuildOptions { max_leaf_size: GROUP, block_size: GROUP, traversal_cost: 1.0 };
+        let env = |k: &str, d: f32| std::env::var(k).ok().and_then(|a| a.parse().ok()).unwrap_or(d);
+        let options = BuildOptions {
+            max_leaf_size: env("TW_MAXLEAF", GROUP as f32) as usize,
+            block_size: env("TW_BLOCK", GROUP as f32) as usize,
+            traversal_cost: env("TW_TCOST", 1.0),
+        };
         let bvh = match spatial_splits {
             Some(splits) => Bvh::build_spatial(&corners, &boxes, &options, &splits),
             None => Bvh::build_with(&boxes, &options),
