@@ -138,3 +138,25 @@ impl PixelRays {
         std::array::from_fn(|lane| Ray::new(c.origin, Vec3::new(d[0][lane], d[1][lane], d[2][lane])))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every block path gives exactly the rays of [`PixelRays::ray`], which packets and single
+    /// rays rely on to return the same hits.
+    #[test]
+    fn blocks_equal_single_pixel_rays() {
+        let camera = Camera::look_at(Vec3::new(0.3, -2.0, 5.0), Vec3::new(0.1, 0.2, -0.4), Vec3::Y, 0.9, 1.7);
+        let gen = PixelRays::new(&camera, 1283, 721);
+        for (x0, y0) in [(0, 0), (4, 2), (640, 360), (1276, 718), (1000, 3)] {
+            let want: [Ray; 8] = std::array::from_fn(|k| gen.ray(x0 + k as u32 % 4, y0 + k as u32 / 4));
+            assert_eq!(gen.block(x0, y0), want, "block at {x0}, {y0}");
+            #[cfg(target_arch = "x86_64")]
+            if crate::Simd::detect() == crate::Simd::Avx2 {
+                // SAFETY: the CPU has AVX2 and FMA.
+                assert_eq!(unsafe { gen.block_avx2(x0, y0) }, want, "AVX2 block at {x0}, {y0}");
+            }
+        }
+    }
+}

@@ -100,7 +100,8 @@ pub(crate) fn build_binary_spatial(
     options: &BuildOptions,
     splits: &SpatialSplits,
 ) -> (Option<BuildNode>, Vec<u32>) {
-    let refs: Vec<Ref> = boxes.iter().enumerate().map(|(i, &bounds)| Ref { prim: i as u32, bounds }).collect();
+    let refs: Vec<Ref> =
+        boxes.iter().enumerate().map(|(i, &bounds)| Ref { prim: i as u32, bounds }).collect();
     if refs.is_empty() {
         return (None, Vec::new());
     }
@@ -134,7 +135,11 @@ fn build_node(ctx: &Ctx, refs: Vec<Ref>, budget: usize, depth: u32) -> RefNode {
             Some(o) if budget > 0 && o.overlap > ctx.min_overlap_area => spatial_split(&refs, &bounds, ctx),
             _ => None,
         };
-        let best = object.map(|o| o.cost).into_iter().chain(spatial.as_ref().map(|s| s.cost)).fold(f32::INFINITY, f32::min);
+        let best = object
+            .map(|o| o.cost)
+            .into_iter()
+            .chain(spatial.as_ref().map(|s| s.cost))
+            .fold(f32::INFINITY, f32::min);
         let area = bounds.half_area();
         let split_cost = if area > 0.0 { ctx.traversal_cost + best / area } else { f32::INFINITY };
         if n <= ctx.max_leaf && !(best.is_finite() && split_cost < ctx.blocks(n as u32)) {
@@ -297,8 +302,17 @@ impl Planes {
 /// last; a plane's left side holds the entries before it, its right side the exits after it.
 fn spatial_split(refs: &[Ref], bounds: &Aabb, ctx: &Ctx) -> Option<SpatialSplit> {
     let mut best: Option<SpatialSplit> = None;
+    let longest =
+        refs.iter().filter(|r| r.splittable()).fold(Vec3::ZERO, |m, r| m.max(r.bounds.max - r.bounds.min));
     for axis in 0..3 {
         let Some(planes) = Planes::new(bounds, axis) else { continue };
+        // With no reference longer than a bin, a spatial split would cut only the few that
+        // happen to straddle its plane: it can barely beat the object split, so skip the axis
+        // (this keeps builds of finely tessellated models like scans close to object-split
+        // build times).
+        if longest[axis] <= planes.width {
+            continue;
+        }
         let mut boxes = [Aabb::EMPTY; SPATIAL_BINS];
         let mut entries = [0u32; SPATIAL_BINS];
         let mut exits = [0u32; SPATIAL_BINS];
@@ -399,7 +413,8 @@ pub(crate) fn split_reference(tri: &[Vec3; 3], bounds: &Aabb, axis: usize, plane
             let t = ((plane - da) / (db - da)).clamp(0.0, 1.0);
             let mut p = a + (b - a) * t;
             p[axis] = plane;
-            let mut margin = a.abs().max(b.abs()) * (1.0 / (1u32 << 20) as f32) + Vec3::splat(f32::MIN_POSITIVE);
+            let mut margin =
+                a.abs().max(b.abs()) * (1.0 / (1u32 << 20) as f32) + Vec3::splat(f32::MIN_POSITIVE);
             margin[axis] = 0.0;
             let crossing = Aabb::new(p - margin, p + margin);
             left = left.union(crossing);
@@ -465,11 +480,12 @@ mod tests {
 
     #[test]
     fn long_triangles_are_split_within_budget() {
-        // Long slivers crossing a field of small triangles: the spatial splits must cut them.
+        // Long diagonal slivers crossing each other over a field of small triangles: any object
+        // split leaves their boxes overlapping, so the spatial splits must cut them.
         let mut tris = Vec::new();
         for i in 0..64 {
-            let y = i as f32;
-            tris.push([v(0.0, y, 0.0), v(100.0, y + 0.5, 0.0), v(0.0, y + 0.5, 0.1)]);
+            let y = i as f32 * 1.5;
+            tris.push([v(0.0, y, 0.5), v(96.0, 96.0 - y, 0.5), v(0.0, y + 0.5, 0.5)]);
         }
         for i in 0..512 {
             let (x, y) = ((i % 32) as f32 * 3.0, (i / 32) as f32 * 4.0);
