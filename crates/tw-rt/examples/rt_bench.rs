@@ -74,10 +74,7 @@ fn run() -> Result<(), String> {
         Some(b) => TriangleBvh::build_with(
             &positions,
             &triangles,
-            (b > 0.0).then_some(SpatialSplits {
-                budget: b,
-                min_overlap: std::env::var("TW_ALPHA").ok().and_then(|a| a.parse().ok()).unwrap_or(1e-5),
-            }),
+            (b > 0.0).then_some(SpatialSplits { budget: b, ..SpatialSplits::default() }),
         ),
     }
     .map_err(|e| format!("{}: {e}", args.model.display()))?;

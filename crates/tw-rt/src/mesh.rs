@@ -34,7 +34,9 @@ pub struct TriangleBvh {
 impl TriangleBvh {
     /// Builds over `triangles` (vertex indices into `positions`). Degenerate triangles and
     /// triangles with non-finite vertices are kept but never hit. `Hit::prim` is an index into
-    /// `triangles`.
+    /// `triangles`. Uses spatial splits ([`SpatialSplits::default`]): on a 24 M triangle CAD
+    /// assembly they made packets about 15 % faster, for a build 2 to 3 times as long; on the
+    /// Stanford dragon packets gained about 5 % and the build took 4 times as long.
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<TriangleBvh, MeshError> {
         TriangleBvh::build_with(positions, triangles, Some(SpatialSplits::default()))
     }
@@ -68,12 +70,7 @@ impl TriangleBvh {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let boxes: Vec<Aabb> = corners.iter().map(|c| Aabb::from_points(c)).collect();
-        let env = |k: &str, d: f32| std::env::var(k).ok().and_then(|a| a.parse().ok()).unwrap_or(d);
-        let options = BuildOptions {
-            max_leaf_size: env("TW_MAXLEAF", GROUP as f32) as usize,
-            block_size: env("TW_BLOCK", GROUP as f32) as usize,
-            traversal_cost: env("TW_TCOST", 1.0),
-        };
+        let options = BuildOptions { max_leaf_size: GROUP, block_size: GROUP, traversal_cost: 1.0 };
         let bvh = match spatial_splits {
             Some(splits) => Bvh::build_spatial(&corners, &boxes, &options, &splits),
             None => Bvh::build_with(&boxes, &options),
