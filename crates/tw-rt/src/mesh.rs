@@ -34,17 +34,19 @@ pub struct TriangleBvh {
 impl TriangleBvh {
     /// Builds over `triangles` (vertex indices into `positions`). Degenerate triangles and
     /// triangles with non-finite vertices are kept but never hit. `Hit::prim` is an index into
-    /// `triangles`. Uses spatial splits ([`SpatialSplits::default`]): on a 24 M triangle CAD
-    /// assembly they made packets about 15 % faster, for a build 2 to 3 times as long; on the
-    /// Stanford dragon packets gained about 5 % and the build took 4 times as long.
+    /// `triangles`. Object splits only: see [`TriangleBvh::build_with`] for spatial splits.
     pub fn build(positions: &[[f32; 3]], triangles: &[[u32; 3]]) -> Result<TriangleBvh, MeshError> {
-        TriangleBvh::build_with(positions, triangles, Some(SpatialSplits::default()))
+        TriangleBvh::build_with(positions, triangles, None)
     }
 
     /// [`TriangleBvh::build`] with spatial splits (`Some`) or without (`None`). With them a
     /// triangle that crosses a split plane may be copied into several leaves (up to the
     /// budget), each leaf's box holding only its part: tighter boxes for long triangles at the
-    /// cost of a slower build and more memory.
+    /// cost of a slower build and more memory. Not the default because it did not pay on the
+    /// models measured: on a 24 M triangle CAD assembly (`terawalk generate assembly
+    /// --one-object`) primary-ray packets were as fast as without (within 3 %, run to run) for
+    /// a build 3 times as long and 2.5 % more memory; on the Stanford dragon packets gained
+    /// 1 to 5 % for a build 4 times as long.
     pub fn build_with(
         positions: &[[f32; 3]],
         triangles: &[[u32; 3]],

@@ -37,9 +37,7 @@ impl ClusterBlas {
         let triangles: Vec<[u32; 3]> =
             cluster.indices.chunks_exact(3).map(|t| [t[0] as u32, t[1] as u32, t[2] as u32]).collect();
         let bounds = positions.iter().fold(Aabb::EMPTY, |b, &p| b.grown(Vec3::from(p)));
-        // Object splits only: clusters are built while the camera moves, where the build time
-        // of spatial splits (several times longer) costs more than their tighter boxes save.
-        let bvh = TriangleBvh::build_with(&positions, &triangles, None).unwrap_or_else(|e| {
+        let bvh = TriangleBvh::build(&positions, &triangles).unwrap_or_else(|e| {
             // A decoded page's indices were checked by the decoder: this is not reachable from
             // a store that opened, but a ray tracer must not take the process down for it.
             tracing::error!("cluster skipped by the ray tracer: {e}");
