@@ -46,7 +46,7 @@ impl TriangleBvh {
     /// models measured: on a 24 M triangle CAD assembly (`terawalk generate assembly
     /// --one-object`) primary-ray packets were as fast as without (within 3 %, run to run) for
     /// a build 3 times as long and 2.5 % more memory; on the Stanford dragon packets gained
-    /// 1 to 5 % for a build 4 times as long.
+    /// about 1 % for a build 4 times as long.
     pub fn build_with(
         positions: &[[f32; 3]],
         triangles: &[[u32; 3]],

@@ -134,7 +134,7 @@ impl<const N: usize> Packet<N> {
 /// True when all lanes of the directions `d` share the watertight permutation and the
 /// direction signs: one small code per lane (major axis and sign bits), computed branch-free
 /// for all lanes at once and compared with lane 0's. (Written lane by lane with
-/// `Shear::major_axis`'s branches, the packet set-up around this check was about a sixth of
+/// `Shear::major_axis`'s branches, the packet set-up around this check was about a fifth of
 /// the packet time on a 24 M triangle CAD model, by perf.)
 #[inline(always)]
 fn uniform_lanes<const N: usize>(d: &[[f32; N]; 3]) -> bool {
