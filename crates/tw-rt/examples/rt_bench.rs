@@ -9,6 +9,8 @@
 //!   --framing F    camera distance in bounding-sphere fits (default 0.5; see `frame`)
 //!   --no-obvhs     skip obvhs
 //!   --packet-only  time only tw-rt's packets (for profiling)
+//!   --splits B     spatial splits with a budget of B (a fraction of the triangles; 0: none)
+//!                  instead of `TriangleBvh::build`'s default
 //!   --dump FILE    write triangles, camera and image size for the Embree peer
 //!   --json FILE    write the results as JSON
 //! ```
@@ -22,7 +24,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use tw_rt::{trace_image_with, Aabb, Camera, TraceMode, TriangleBvh};
+use tw_rt::{trace_image_with, Aabb, Camera, SpatialSplits, TraceMode, TriangleBvh};
 
 struct Args {
     model: PathBuf,
@@ -33,6 +35,7 @@ struct Args {
     framing: f32,
     obvhs: bool,
     packet_only: bool,
+    splits: Option<f32>,
     dump: Option<PathBuf>,
     json: Option<PathBuf>,
 }
@@ -66,8 +69,15 @@ fn run() -> Result<(), String> {
         rayon::ThreadPoolBuilder::new().num_threads(args.threads).build().map_err(|e| e.to_string())?;
 
     let t = Instant::now();
-    let bvh =
-        TriangleBvh::build(&positions, &triangles).map_err(|e| format!("{}: {e}", args.model.display()))?;
+    let bvh = match args.splits {
+        None => TriangleBvh::build(&positions, &triangles),
+        Some(b) => TriangleBvh::build_with(
+            &positions,
+            &triangles,
+            (b > 0.0).then_some(SpatialSplits { budget: b, ..SpatialSplits::default() }),
+        ),
+    }
+    .map_err(|e| format!("{}: {e}", args.model.display()))?;
     let ours_build = t.elapsed().as_secs_f64();
     eprintln!(
         "tw-rt: {} wide nodes, {} leaves ({:.2} triangles per leaf)",
@@ -343,7 +353,7 @@ fn write_json(path: &Path, args: &Args, triangles: usize, hit: f64, rows: &[Row]
 }
 
 fn parse_args() -> Result<Args, String> {
-    let usage = "usage: rt_bench MODEL [--size WxH] [--threads N] [--runs N] [--framing F] [--no-obvhs] [--packet-only] [--dump FILE] [--json FILE]";
+    let usage = "usage: rt_bench MODEL [--size WxH] [--threads N] [--runs N] [--framing F] [--no-obvhs] [--packet-only] [--splits B] [--dump FILE] [--json FILE]";
     let mut it = std::env::args().skip(1);
     let mut args = Args {
         model: PathBuf::new(),
@@ -354,6 +364,7 @@ fn parse_args() -> Result<Args, String> {
         framing: 0.5,
         obvhs: true,
         packet_only: false,
+        splits: None,
         dump: None,
         json: None,
     };
@@ -385,6 +396,13 @@ fn parse_args() -> Result<Args, String> {
             }
             "--no-obvhs" => args.obvhs = false,
             "--packet-only" => (args.obvhs, args.packet_only) = (false, true),
+            "--splits" => {
+                let b: f32 = value()?.parse().map_err(|_| "--splits: expected a number".to_string())?;
+                if !(b >= 0.0 && b.is_finite()) {
+                    return Err("--splits: expected a budget of 0 or more".into());
+                }
+                args.splits = Some(b);
+            }
             "--dump" => args.dump = Some(value()?.into()),
             "--json" => args.json = Some(value()?.into()),
             _ if a.starts_with("--") => return Err(format!("unknown option {a}; {usage}")),

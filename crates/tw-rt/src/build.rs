@@ -10,12 +10,12 @@ use glam::Vec3;
 use crate::aabb::Aabb;
 
 /// Centroid bins per axis.
-const BINS: usize = 32;
+pub(crate) const BINS: usize = 32;
 /// Nodes with at least this many primitives build their two subtrees in parallel.
-const PARALLEL_MIN: usize = 8 * 1024;
+pub(crate) const PARALLEL_MIN: usize = 8 * 1024;
 /// Below this depth the builder takes SAH splits; at and beyond it, median splits (which halve
 /// the count), so no binary tree is deeper than `MEDIAN_DEPTH + 32` for `u32` counts.
-const MEDIAN_DEPTH: u32 = 40;
+pub(crate) const MEDIAN_DEPTH: u32 = 40;
 /// The deepest a binary (and so any collapsed wide) tree can be; traversal stacks are sized by it.
 pub(crate) const MAX_DEPTH: u32 = MEDIAN_DEPTH + 33;
 
@@ -201,7 +201,7 @@ fn sah_split(ctx: &Ctx, indices: &[u32], bounds: &Aabb, cbounds: &Aabb) -> SahCh
 }
 
 /// `(lower end, bins per unit)` of the centroid bins along `axis` (scale 0: flat extent).
-fn bin_mapping(cbounds: &Aabb, axis: usize) -> (f32, f32) {
+pub(crate) fn bin_mapping(cbounds: &Aabb, axis: usize) -> (f32, f32) {
     let lo = cbounds.min[axis];
     let extent = cbounds.max[axis] - lo;
     if extent > 0.0 && extent.is_finite() {
@@ -211,7 +211,7 @@ fn bin_mapping(cbounds: &Aabb, axis: usize) -> (f32, f32) {
     }
 }
 
-fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
+pub(crate) fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
 }
 

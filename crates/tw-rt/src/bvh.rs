@@ -5,6 +5,7 @@ use crate::build::{build_binary, BuildOptions};
 use crate::packet::{traverse_packet, Packet, PacketLeaves};
 use crate::ray::Ray;
 use crate::simd::Simd;
+use crate::spatial_split::{build_binary_spatial, SpatialSplits};
 use crate::traverse::{traverse, LeafVisitor, NodeRay, Visit};
 use crate::wide::{collapse, Leaf, WideNode};
 
@@ -30,7 +31,23 @@ impl Bvh {
     /// Builds with explicit options (e.g. `max_leaf_size: 1` for a top-level BVH over
     /// instances).
     pub fn build_with(boxes: &[Aabb], options: &BuildOptions) -> Bvh {
-        let (root, prim_indices) = build_binary(boxes, options);
+        Bvh::from_binary(build_binary(boxes, options))
+    }
+
+    /// Builds over triangles (`boxes[i]` the box of `tris[i]`) with spatial splits: a triangle
+    /// may then sit in several leaves, each box holding only its part there, so
+    /// [`Bvh::prim_indices`] can be longer than `boxes` (see `spatial_split`).
+    pub(crate) fn build_spatial(
+        tris: &[[glam::Vec3; 3]],
+        boxes: &[Aabb],
+        options: &BuildOptions,
+        splits: &SpatialSplits,
+    ) -> Bvh {
+        Bvh::from_binary(build_binary_spatial(tris, boxes, options, splits))
+    }
+
+    /// Collapses a binary build into the wide layout.
+    fn from_binary((root, prim_indices): (Option<crate::build::BuildNode>, Vec<u32>)) -> Bvh {
         let Some(root) = root else {
             return Bvh { nodes: Vec::new(), leaves: Vec::new(), prim_indices, bounds: Aabb::EMPTY };
         };

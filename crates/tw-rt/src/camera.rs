@@ -76,7 +76,7 @@ impl PixelRays {
 
     /// The rays of the 4x2 pixels from `(x0, y0)`, row by row; the same values as
     /// [`PixelRays::ray`] gives, computed lane-parallel.
-    #[inline]
+    #[inline(always)]
     pub fn block(&self, x0: u32, y0: u32) -> [Ray; 8] {
         let c = &self.camera;
         let (f, r, u) = (c.forward.to_array(), c.right.to_array(), c.up.to_array());
@@ -92,5 +92,71 @@ impl PixelRays {
             }
         }
         std::array::from_fn(|lane| Ray::new(c.origin, Vec3::new(d[0][lane], d[1][lane], d[2][lane])))
+    }
+
+    /// [`PixelRays::block`] in AVX2 registers: the same operations in the same order (no fused
+    /// multiply-adds; square root and division are exact in both), so the same rays. The
+    /// compiler kept the portable loop scalar, and ray generation was then a seventh of the
+    /// time of packet tracing a 24 M triangle model.
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    pub fn block_avx2(&self, x0: u32, y0: u32) -> [Ray; 8] {
+        use std::arch::x86_64::*;
+        let c = &self.camera;
+        let (f, r, u) = (c.forward.to_array(), c.right.to_array(), c.up.to_array());
+        let px = _mm256_cvtepi32_ps(_mm256_add_epi32(
+            _mm256_set1_epi32(x0 as i32),
+            _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3),
+        ));
+        let py = _mm256_cvtepi32_ps(_mm256_add_epi32(
+            _mm256_set1_epi32(y0 as i32),
+            _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1),
+        ));
+        let (half, one) = (_mm256_set1_ps(0.5), _mm256_set1_ps(1.0));
+        let sx = _mm256_mul_ps(
+            _mm256_sub_ps(_mm256_mul_ps(_mm256_add_ps(px, half), _mm256_set1_ps(self.scale_x)), one),
+            _mm256_set1_ps(self.half_w),
+        );
+        let sy = _mm256_mul_ps(
+            _mm256_sub_ps(one, _mm256_mul_ps(_mm256_add_ps(py, half), _mm256_set1_ps(self.scale_y))),
+            _mm256_set1_ps(self.half_h),
+        );
+        let v = [0, 1, 2].map(|a| {
+            let fr = _mm256_add_ps(_mm256_set1_ps(f[a]), _mm256_mul_ps(_mm256_set1_ps(r[a]), sx));
+            _mm256_add_ps(fr, _mm256_mul_ps(_mm256_set1_ps(u[a]), sy))
+        });
+        let dot = _mm256_add_ps(
+            _mm256_add_ps(_mm256_mul_ps(v[0], v[0]), _mm256_mul_ps(v[1], v[1])),
+            _mm256_mul_ps(v[2], v[2]),
+        );
+        let inv = _mm256_div_ps(one, _mm256_sqrt_ps(dot));
+        let mut d = [[0.0f32; 8]; 3];
+        for a in 0..3 {
+            // SAFETY: `d[a]` is 8 floats; the store is unaligned.
+            unsafe { _mm256_storeu_ps(d[a].as_mut_ptr(), _mm256_mul_ps(v[a], inv)) };
+        }
+        std::array::from_fn(|lane| Ray::new(c.origin, Vec3::new(d[0][lane], d[1][lane], d[2][lane])))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every block path gives exactly the rays of [`PixelRays::ray`], which packets and single
+    /// rays rely on to return the same hits.
+    #[test]
+    fn blocks_equal_single_pixel_rays() {
+        let camera = Camera::look_at(Vec3::new(0.3, -2.0, 5.0), Vec3::new(0.1, 0.2, -0.4), Vec3::Y, 0.9, 1.7);
+        let gen = PixelRays::new(&camera, 1283, 721);
+        for (x0, y0) in [(0, 0), (4, 2), (640, 360), (1276, 718), (1000, 3)] {
+            let want: [Ray; 8] = std::array::from_fn(|k| gen.ray(x0 + k as u32 % 4, y0 + k as u32 / 4));
+            assert_eq!(gen.block(x0, y0), want, "block at {x0}, {y0}");
+            #[cfg(target_arch = "x86_64")]
+            if crate::Simd::detect() == crate::Simd::Avx2 {
+                // SAFETY: the CPU has AVX2 and FMA.
+                assert_eq!(unsafe { gen.block_avx2(x0, y0) }, want, "AVX2 block at {x0}, {y0}");
+            }
+        }
     }
 }

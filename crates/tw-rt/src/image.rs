@@ -4,6 +4,7 @@ use rayon::prelude::*;
 
 use crate::camera::{Camera, PixelRays};
 use crate::ray::{Hit, Ray};
+use crate::simd::Simd;
 
 /// Anything rays can be traced against: a [`crate::TriangleBvh`], or a two-level scene.
 pub trait Trace: Sync {
@@ -57,13 +58,14 @@ pub fn trace_image_with(
     }
     let strip = w * TILE as usize;
     let gen = PixelRays::new(camera, width, height);
+    let simd = Simd::detect();
     ids.par_chunks_mut(strip).zip(depth.par_chunks_mut(strip)).enumerate().for_each(|(row, (ids, depth))| {
         let y0 = row as u32 * TILE;
         let mut rays = Vec::with_capacity((TILE * TILE) as usize);
         let mut pixels = Vec::with_capacity((TILE * TILE) as usize);
         let mut hits = vec![None; (TILE * TILE) as usize];
         for x0 in (0..width).step_by(TILE as usize) {
-            tile_rays(&gen, x0, y0, width, height, &mut rays, &mut pixels);
+            tile_rays(simd, &gen, x0, y0, width, height, &mut rays, &mut pixels);
             let hits = &mut hits[..rays.len()];
             match mode {
                 TraceMode::Single => {
@@ -87,7 +89,11 @@ pub fn trace_image_with(
 
 /// The rays of the tile at `(x0, y0)`, ordered block by block (4x2 pixels: one packet), with
 /// the pixel of each; pixels outside the image are left out.
+/// The rays of one tile in 4x2 blocks (row by row within a block), and their pixels. On AVX2
+/// a block's rays come from [`PixelRays::block_avx2`].
+#[allow(clippy::too_many_arguments)]
 fn tile_rays(
+    simd: Simd,
     gen: &PixelRays,
     x0: u32,
     y0: u32,
@@ -96,12 +102,47 @@ fn tile_rays(
     rays: &mut Vec<Ray>,
     pixels: &mut Vec<(u32, u32)>,
 ) {
+    #[cfg(target_arch = "x86_64")]
+    if simd == Simd::Avx2 {
+        // SAFETY: `Simd::detect` found AVX2 and FMA on this CPU.
+        return unsafe { tile_rays_avx2(gen, x0, y0, width, height, rays, pixels) };
+    }
+    let _ = simd;
+    tile_rays_impl(gen, x0, y0, width, height, rays, pixels, |x, y| gen.block(x, y))
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+unsafe fn tile_rays_avx2(
+    gen: &PixelRays,
+    x0: u32,
+    y0: u32,
+    width: u32,
+    height: u32,
+    rays: &mut Vec<Ray>,
+    pixels: &mut Vec<(u32, u32)>,
+) {
+    tile_rays_impl(gen, x0, y0, width, height, rays, pixels, |x, y| gen.block_avx2(x, y))
+}
+
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn tile_rays_impl(
+    gen: &PixelRays,
+    x0: u32,
+    y0: u32,
+    width: u32,
+    height: u32,
+    rays: &mut Vec<Ray>,
+    pixels: &mut Vec<(u32, u32)>,
+    block: impl Fn(u32, u32) -> [Ray; 8],
+) {
     rays.clear();
     pixels.clear();
     for by in (y0..y0 + TILE).step_by(BLOCK_H as usize) {
         for bx in (x0..x0 + TILE).step_by(BLOCK_W as usize) {
             if bx + BLOCK_W <= width && by + BLOCK_H <= height {
-                rays.extend_from_slice(&gen.block(bx, by));
+                rays.extend_from_slice(&block(bx, by));
                 pixels.extend((0..BLOCK_W * BLOCK_H).map(|k| (bx + k % BLOCK_W, by + k / BLOCK_W)));
                 continue;
             }

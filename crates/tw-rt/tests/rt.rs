@@ -5,7 +5,7 @@ use glam::Vec3;
 use tw_core::rng::Rng;
 use tw_rt::{
     intersect_triangle, trace_image_with, Aabb, BuildOptions, Bvh, Camera, Hit, MeshError, Ray, Simd,
-    TraceMode, TriangleBvh,
+    SpatialSplits, TraceMode, TriangleBvh,
 };
 
 /// Test randomness from the shared generator, as `f32`s and vectors.
@@ -218,18 +218,83 @@ fn subdivided_cube(n: u32) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
     (pos, tris)
 }
 
+/// Every way to build a triangle BVH: object splits only, the default, and spatial splits with
+/// a budget large enough that many triangles are split.
+const BUILDS: [Option<SpatialSplits>; 3] = [
+    None,
+    Some(SpatialSplits { budget: 0.2, min_overlap: 1e-5 }),
+    Some(SpatialSplits { budget: 4.0, min_overlap: 0.0 }),
+];
+
+/// How many triangle references beyond one per triangle the tree holds.
+fn duplicates(bvh: &TriangleBvh, triangles: usize) -> usize {
+    bvh.bvh().prim_indices().len() - triangles
+}
+
 #[test]
 fn closed_cube_is_watertight_at_edges_and_vertices() {
     let (pos, tris) = subdivided_cube(7);
-    let bvh = TriangleBvh::build(&pos, &tris).unwrap();
+    for build in BUILDS {
+        let bvh = TriangleBvh::build_with(&pos, &tris, build).unwrap();
+        bvh.validate(&pos, &tris).unwrap();
+        assert_watertight(&bvh, &pos, &tris, |rng| rng.v(-0.9, 0.9));
+    }
+}
+
+/// A long closed cylinder (length 50, radius 1, off the axes) of long thin triangles whose
+/// boxes all overlap: spatial splits cut them into many leaves, and the parts must still close
+/// the surface.
+#[test]
+fn split_long_cylinder_is_watertight() {
+    let (segments, length) = (24u32, 50.0f32);
+    let turn = glam::Quat::from_euler(glam::EulerRot::XYZ, 0.3, 0.5, 0.7);
+    let at = |x: f32, angle: f32| turn * Vec3::new(x, angle.cos(), angle.sin());
+    let mut pos = Vec::new();
+    for end in [0.0, length] {
+        for k in 0..segments {
+            pos.push(at(end, k as f32 / segments as f32 * std::f32::consts::TAU).to_array());
+        }
+    }
+    pos.push((turn * Vec3::ZERO).to_array());
+    pos.push((turn * Vec3::new(length, 0.0, 0.0)).to_array());
+    let (c0, c1) = (2 * segments, 2 * segments + 1);
+    let mut tris = Vec::new();
+    for k in 0..segments {
+        let (a, b) = (k, (k + 1) % segments);
+        tris.push([a, b, segments + b]);
+        tris.push([a, segments + b, segments + a]);
+        tris.push([c0, b, a]);
+        tris.push([c1, segments + a, segments + b]);
+    }
+    for build in BUILDS {
+        let bvh = TriangleBvh::build_with(&pos, &tris, build).unwrap();
+        bvh.validate(&pos, &tris).unwrap();
+        if build.is_some_and(|b| b.budget > 1.0) {
+            assert!(duplicates(&bvh, tris.len()) > 0, "{build:?}: no triangle was split");
+        }
+        assert_watertight(&bvh, &pos, &tris, |rng| {
+            turn * Vec3::new(rng.f(0.02, 0.98) * length, rng.f(-0.6, 0.6), rng.f(-0.6, 0.6))
+        });
+    }
+}
+
+/// Rays from inside and outside a closed mesh through every vertex and edge midpoint hit it on
+/// every traversal path.
+/// `inside` makes a random point inside the mesh.
+fn assert_watertight(
+    bvh: &TriangleBvh,
+    pos: &[[f32; 3]],
+    tris: &[[u32; 3]],
+    inside: impl Fn(&mut Rng) -> Vec3,
+) {
     let mut rng = Rng::new(3);
     let mut rays = Vec::new();
     // Rays from inside and outside through every vertex and every edge midpoint.
-    for t in &tris {
-        let c = corners(&pos, t);
+    for t in tris {
+        let c = corners(pos, t);
         for k in 0..3 {
             for target in [c[k], (c[k] + c[(k + 1) % 3]) * 0.5] {
-                let inside = rng.v(-0.9, 0.9);
+                let inside = inside(&mut rng);
                 rays.push(Ray::new(inside, target - inside));
                 // From outside, on the line from an interior point through the target: the
                 // ray enters the cube exactly there.
@@ -242,7 +307,7 @@ fn closed_cube_is_watertight_at_edges_and_vertices() {
         let mut packet = vec![None; rays.len()];
         bvh.intersect_packet_simd(&rays, &mut packet, simd);
         for (ray, p) in rays.iter().zip(&packet) {
-            assert!(brute(&pos, &tris, ray).is_some(), "brute force slipped through {ray:?}");
+            assert!(brute(pos, tris, ray).is_some(), "brute force slipped through {ray:?}");
             assert!(bvh.intersect_simd(ray, simd).is_some(), "{simd:?} slipped through {ray:?}");
             assert!(p.is_some(), "{simd:?} packet slipped through {ray:?}");
             assert!(bvh.occluded_simd(ray, simd));
@@ -336,21 +401,52 @@ fn coherent_rays(rng: &mut Rng, packets: usize) -> Vec<Ray> {
 fn bvh_matches_brute_force_single_and_packet() {
     let mut rng = Rng::new(9);
     let (pos, tris) = soup(&mut rng, 1500);
-    let bvh = TriangleBvh::build(&pos, &tris).unwrap();
-    bvh.bvh()
-        .validate(&tris.iter().map(|t| Aabb::from_points(&corners(&pos, t))).collect::<Vec<_>>())
-        .unwrap();
     let mut rays = random_rays(&mut rng, 600);
     rays.extend(coherent_rays(&mut rng, 60));
     // A ragged tail: the last packet is partial.
     rays.truncate(rays.len() - 3);
+    for build in BUILDS {
+        let bvh = TriangleBvh::build_with(&pos, &tris, build).unwrap();
+        bvh.bvh()
+            .validate(&tris.iter().map(|t| Aabb::from_points(&corners(&pos, t))).collect::<Vec<_>>())
+            .unwrap();
+        bvh.validate(&pos, &tris).unwrap();
+        assert_matches_brute_force(&bvh, &pos, &tris, &rays);
+    }
+}
+
+/// A soup of long slivers across small triangles, the case spatial splits are for: every path
+/// must still find the brute-force hits.
+#[test]
+fn split_slivers_match_brute_force() {
+    let mut rng = Rng::new(23);
+    let (mut pos, mut tris) = soup(&mut rng, 800);
+    for _ in 0..200 {
+        let (a, b) = (rng.v(-1.0, 1.0), rng.v(-1.0, 1.0));
+        let base = pos.len() as u32;
+        pos.extend([a, b, b + rng.v(-0.02, 0.02)].map(|p| p.to_array()));
+        tris.push([base, base + 1, base + 2]);
+    }
+    let mut rays = random_rays(&mut rng, 800);
+    rays.extend(coherent_rays(&mut rng, 80));
+    for build in BUILDS {
+        let bvh = TriangleBvh::build_with(&pos, &tris, build).unwrap();
+        bvh.validate(&pos, &tris).unwrap();
+        if build.is_some() {
+            assert!(duplicates(&bvh, tris.len()) > 0, "{build:?}: no sliver was split");
+        }
+        assert_matches_brute_force(&bvh, &pos, &tris, &rays);
+    }
+}
+
+fn assert_matches_brute_force(bvh: &TriangleBvh, pos: &[[f32; 3]], tris: &[[u32; 3]], rays: &[Ray]) {
     for simd in PATHS {
         let mut packet = vec![None; rays.len()];
-        bvh.intersect_packet_simd(&rays, &mut packet, simd);
+        bvh.intersect_packet_simd(rays, &mut packet, simd);
         for (ray, p) in rays.iter().zip(&packet) {
-            let want = brute(&pos, &tris, ray);
-            assert_same(&pos, &tris, ray, bvh.intersect_simd(ray, simd), want, &format!("{simd:?} single"));
-            assert_same(&pos, &tris, ray, *p, want, &format!("{simd:?} packet"));
+            let want = brute(pos, tris, ray);
+            assert_same(pos, tris, ray, bvh.intersect_simd(ray, simd), want, &format!("{simd:?} single"));
+            assert_same(pos, tris, ray, *p, want, &format!("{simd:?} packet"));
             assert_eq!(bvh.occluded_simd(ray, simd), want.is_some(), "{simd:?} occluded {ray:?}");
         }
     }
