@@ -64,12 +64,13 @@ impl PixelRays {
         }
     }
 
-    /// The ray through the centre of pixel `(px, py)`.
+    /// The ray through pixel `(px, py)` at the camera's [`subpixel`](Camera::subpixel) position.
     #[inline]
     pub fn ray(&self, px: u32, py: u32) -> Ray {
         let c = &self.camera;
-        let sx = ((px as f32 + 0.5) * self.scale_x - 1.0) * self.half_w;
-        let sy = (1.0 - (py as f32 + 0.5) * self.scale_y) * self.half_h;
+        let [ox, oy] = c.subpixel;
+        let sx = ((px as f32 + ox) * self.scale_x - 1.0) * self.half_w;
+        let sy = (1.0 - (py as f32 + oy) * self.scale_y) * self.half_h;
         let dir = c.forward + c.right * sx + c.up * sy;
         Ray::new(c.origin, dir * (1.0 / dir.length()))
     }
@@ -80,10 +81,11 @@ impl PixelRays {
     pub fn block(&self, x0: u32, y0: u32) -> [Ray; 8] {
         let c = &self.camera;
         let (f, r, u) = (c.forward.to_array(), c.right.to_array(), c.up.to_array());
+        let [ox, oy] = c.subpixel;
         let mut d = [[0.0f32; 8]; 3];
         for lane in 0..8 {
-            let sx = (((x0 + lane as u32 % 4) as f32 + 0.5) * self.scale_x - 1.0) * self.half_w;
-            let sy = (1.0 - ((y0 + lane as u32 / 4) as f32 + 0.5) * self.scale_y) * self.half_h;
+            let sx = (((x0 + lane as u32 % 4) as f32 + ox) * self.scale_x - 1.0) * self.half_w;
+            let sy = (1.0 - ((y0 + lane as u32 / 4) as f32 + oy) * self.scale_y) * self.half_h;
             // Grouped as glam groups `forward + right * sx + up * sy`.
             let v = [0, 1, 2].map(|a| f[a] + r[a] * sx + u[a] * sy);
             let inv = 1.0 / (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -112,13 +114,14 @@ impl PixelRays {
             _mm256_set1_epi32(y0 as i32),
             _mm256_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1),
         ));
-        let (half, one) = (_mm256_set1_ps(0.5), _mm256_set1_ps(1.0));
+        let (ox, oy) = (_mm256_set1_ps(c.subpixel[0]), _mm256_set1_ps(c.subpixel[1]));
+        let one = _mm256_set1_ps(1.0);
         let sx = _mm256_mul_ps(
-            _mm256_sub_ps(_mm256_mul_ps(_mm256_add_ps(px, half), _mm256_set1_ps(self.scale_x)), one),
+            _mm256_sub_ps(_mm256_mul_ps(_mm256_add_ps(px, ox), _mm256_set1_ps(self.scale_x)), one),
             _mm256_set1_ps(self.half_w),
         );
         let sy = _mm256_mul_ps(
-            _mm256_sub_ps(one, _mm256_mul_ps(_mm256_add_ps(py, half), _mm256_set1_ps(self.scale_y))),
+            _mm256_sub_ps(one, _mm256_mul_ps(_mm256_add_ps(py, oy), _mm256_set1_ps(self.scale_y))),
             _mm256_set1_ps(self.half_h),
         );
         let v = [0, 1, 2].map(|a| {
@@ -147,8 +150,32 @@ mod tests {
     /// rays rely on to return the same hits.
     #[test]
     fn blocks_equal_single_pixel_rays() {
-        let camera = Camera::look_at(Vec3::new(0.3, -2.0, 5.0), Vec3::new(0.1, 0.2, -0.4), Vec3::Y, 0.9, 1.7);
-        let gen = PixelRays::new(&camera, 1283, 721);
+        let mut camera =
+            Camera::look_at(Vec3::new(0.3, -2.0, 5.0), Vec3::new(0.1, 0.2, -0.4), Vec3::Y, 0.9, 1.7);
+        for subpixel in [[0.5, 0.5], [0.125, 0.875]] {
+            camera.subpixel = subpixel;
+            blocks_equal_rays(&camera);
+        }
+    }
+
+    /// The sub-pixel position moves the ray inside its pixel (progressive supersampling's
+    /// samples differ): a quarter of the way into pixel (10, 7) of a 640×360 image is the centre
+    /// of pixel (20, 14) at twice the resolution.
+    #[test]
+    fn rays_pass_through_the_subpixel_position() {
+        let mut camera =
+            Camera::look_at(Vec3::new(0.3, -2.0, 5.0), Vec3::new(0.1, 0.2, -0.4), Vec3::Y, 0.9, 1.7);
+        let centre = camera.pixel_ray(10, 7, 640, 360);
+        camera.subpixel = [0.25, 0.25];
+        let quarter = camera.pixel_ray(10, 7, 640, 360);
+        assert_ne!(quarter, centre);
+        camera.subpixel = [0.5, 0.5];
+        let fine = camera.pixel_ray(20, 14, 1280, 720);
+        assert!((quarter.dir - fine.dir).length() < 1e-6, "{quarter:?} against {fine:?}");
+    }
+
+    fn blocks_equal_rays(camera: &Camera) {
+        let gen = PixelRays::new(camera, 1283, 721);
         for (x0, y0) in [(0, 0), (4, 2), (640, 360), (1276, 718), (1000, 3)] {
             let want: [Ray; 8] = std::array::from_fn(|k| gen.ray(x0 + k as u32 % 4, y0 + k as u32 / 4));
             assert_eq!(gen.block(x0, y0), want, "block at {x0}, {y0}");
