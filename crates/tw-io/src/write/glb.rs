@@ -8,7 +8,7 @@
 //! length) and index accessor (u32). Normals make viewers shade the model (CesiumJS draws a
 //! primitive without them unlit, flat-coloured): a lone triangle gets its face normal, a mesh
 //! chunk's vertices the area-weighted sum of their triangles' normals within the chunk
-//! ([`chunk_normals`]), so memory stays bounded by the chunk; surfaces are smooth inside a chunk
+//! (`chunk_normals`), so memory stays bounded by the chunk; surfaces are smooth inside a chunk
 //! and may show a crease where two chunks meet. One
 //! material per distinct object colour: `baseColorFactor` is the sRGB colour converted to linear
 //! as glTF requires, metallic 0, double-sided (models are not consistently wound); objects
