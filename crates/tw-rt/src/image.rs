@@ -87,10 +87,9 @@ pub fn trace_image_with(
     (ids, depth)
 }
 
-/// The rays of the tile at `(x0, y0)`, ordered block by block (4x2 pixels: one packet), with
-/// the pixel of each; pixels outside the image are left out.
-/// The rays of one tile in 4x2 blocks (row by row within a block), and their pixels. On AVX2
-/// a block's rays come from [`PixelRays::block_avx2`].
+/// The rays of the tile at `(x0, y0)`, ordered block by block (4x2 pixels, row by row: one
+/// packet), with the pixel of each; pixels outside the image are left out. On AVX2 a block's
+/// rays come from [`PixelRays::block_avx2`].
 #[allow(clippy::too_many_arguments)]
 fn tile_rays(
     simd: Simd,
