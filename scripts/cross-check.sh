@@ -5,6 +5,9 @@
 # `#[cfg(unix)]` always has a counterpart that compiles elsewhere.
 #
 # Usage: scripts/cross-check.sh [TARGET ...]   (default: both targets above)
+# Exit status: 0 clean; 3 a target's standard library could not be installed
+# (rustup needs the Rust distribution server, which some build machines cannot reach); any
+# other non-zero status: a check failed.
 #
 # What it checks and what it does not: every crate of the workspace and every dependency is
 # type-checked for the target (Rust only; nothing is linked or run). The one C++ dependency,
@@ -27,8 +30,8 @@ for t in "${targets[@]}"; do
   if ! grep -qx "$t" <<<"$installed"; then
     echo "cross-check: installing the standard library for $t (rustup target add)"
     rustup target add "$t" >/dev/null || {
-      echo "cross-check: cannot install the $t target with rustup (offline?)" >&2
-      exit 1
+      echo "cross-check: cannot install the $t target with rustup (is the Rust distribution server reachable?)" >&2
+      exit 3
     }
   fi
 done
