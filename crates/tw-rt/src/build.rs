@@ -165,26 +165,15 @@ fn sah_split(ctx: &Ctx, indices: &[u32], bounds: &Aabb, cbounds: &Aabb) -> SahCh
         if scale == 0.0 {
             continue;
         }
-        let mut counts = [0u32; BINS];
-        let mut boxes = [Aabb::EMPTY; BINS];
-        for &i in indices {
-            let b = bin_of(ctx.centroids[i as usize][axis], lo, scale);
-            counts[b] += 1;
-            boxes[b] = boxes[b].union(ctx.boxes[i as usize]);
-        }
-        // Sweep from the right to get the right side's cost of every plane, then from the left.
-        let mut right_cost = [0.0f32; BINS];
-        let (mut rb, mut rn) = (Aabb::EMPTY, 0u32);
-        for k in (1..BINS).rev() {
-            rb = rb.union(boxes[k]);
-            rn += counts[k];
-            right_cost[k] = rb.half_area() * ctx.blocks(rn);
-        }
+        let items = indices.iter().map(|&i| (ctx.centroids[i as usize][axis], ctx.boxes[i as usize]));
+        let (counts, boxes) = fill_bins(items, lo, scale);
+        // The right side of every plane, then a sweep from the left.
+        let (right_box, right_n) = suffix_sums(&boxes, &counts);
         let (mut lb, mut ln) = (Aabb::EMPTY, 0u32);
         for k in 1..BINS {
             lb = lb.union(boxes[k - 1]);
             ln += counts[k - 1];
-            let cost = lb.half_area() * ctx.blocks(ln) + right_cost[k];
+            let cost = lb.half_area() * ctx.blocks(ln) + right_box[k].half_area() * ctx.blocks(right_n[k]);
             if cost < best.0 {
                 best = (cost, axis, k);
             }
@@ -213,6 +202,36 @@ pub(crate) fn bin_mapping(cbounds: &Aabb, axis: usize) -> (f32, f32) {
 
 pub(crate) fn bin_of(c: f32, lo: f32, scale: f32) -> usize {
     (((c - lo) * scale) as usize).min(BINS - 1)
+}
+
+/// Per centroid bin ([`bin_of`]): how many of `items` (centroid along the axis, box) fall in it
+/// and the union of their boxes.
+pub(crate) fn fill_bins(
+    items: impl Iterator<Item = (f32, Aabb)>,
+    lo: f32,
+    scale: f32,
+) -> ([u32; BINS], [Aabb; BINS]) {
+    let mut counts = [0u32; BINS];
+    let mut boxes = [Aabb::EMPTY; BINS];
+    for (c, b) in items {
+        let k = bin_of(c, lo, scale);
+        counts[k] += 1;
+        boxes[k] = boxes[k].union(b);
+    }
+    (counts, boxes)
+}
+
+/// `(union of boxes[k..], sum of counts[k..])` for every `k`: the right side of each plane.
+pub(crate) fn suffix_sums<const B: usize>(boxes: &[Aabb; B], counts: &[u32; B]) -> ([Aabb; B], [u32; B]) {
+    let mut sb = [Aabb::EMPTY; B];
+    let mut sn = [0u32; B];
+    let (mut b, mut n) = (Aabb::EMPTY, 0);
+    for k in (0..B).rev() {
+        b = b.union(boxes[k]);
+        n += counts[k];
+        (sb[k], sn[k]) = (b, n);
+    }
+    (sb, sn)
 }
 
 /// Moves the primitives of bins `< bin` to the front; returns how many there are.

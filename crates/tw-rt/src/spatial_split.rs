@@ -22,7 +22,9 @@
 use glam::Vec3;
 
 use crate::aabb::Aabb;
-use crate::build::{bin_mapping, bin_of, BuildNode, BuildOptions, BINS, MEDIAN_DEPTH, PARALLEL_MIN};
+use crate::build::{
+    bin_mapping, bin_of, fill_bins, suffix_sums, BuildNode, BuildOptions, BINS, MEDIAN_DEPTH, PARALLEL_MIN,
+};
 
 /// Spatial bins per axis.
 const SPATIAL_BINS: usize = 32;
@@ -199,13 +201,7 @@ fn object_split(refs: &[Ref], cbounds: &Aabb, ctx: &Ctx) -> Option<ObjectSplit> 
         if scale == 0.0 {
             continue;
         }
-        let mut counts = [0u32; BINS];
-        let mut boxes = [Aabb::EMPTY; BINS];
-        for r in refs {
-            let b = bin_of(r.centroid()[axis], lo, scale);
-            counts[b] += 1;
-            boxes[b] = boxes[b].union(r.bounds);
-        }
+        let (counts, boxes) = fill_bins(refs.iter().map(|r| (r.centroid()[axis], r.bounds)), lo, scale);
         let (right_box, right_n) = suffix_sums(&boxes, &counts);
         let (mut lb, mut ln) = (Aabb::EMPTY, 0u32);
         for k in 1..BINS {
@@ -219,19 +215,6 @@ fn object_split(refs: &[Ref], cbounds: &Aabb, ctx: &Ctx) -> Option<ObjectSplit> 
         }
     }
     best.filter(|b| b.cost.is_finite())
-}
-
-/// `(union of boxes[k..], sum of counts[k..])` for every `k`.
-fn suffix_sums<const B: usize>(boxes: &[Aabb; B], counts: &[u32; B]) -> ([Aabb; B], [u32; B]) {
-    let mut sb = [Aabb::EMPTY; B];
-    let mut sn = [0u32; B];
-    let (mut b, mut n) = (Aabb::EMPTY, 0);
-    for k in (0..B).rev() {
-        b = b.union(boxes[k]);
-        n += counts[k];
-        (sb[k], sn[k]) = (b, n);
-    }
-    (sb, sn)
 }
 
 fn intersection(a: &Aabb, b: &Aabb) -> Aabb {
