@@ -529,34 +529,18 @@ impl TriangleSink for GlbWriter {
         if chunk.indices.is_empty() {
             return Ok(());
         }
-        let mut scratch = std::mem::take(&mut self.scratch);
-        scratch.clear();
-        for p in chunk.positions {
-            for x in to_f32(&target, *p)? {
-                scratch.extend_from_slice(&x.to_le_bytes());
-            }
-        }
+        let points = chunk.positions.iter().map(|p| to_f32(&target, *p)).collect::<Result<Vec<_>, _>>()?;
         let base = self.reserve(object, chunk.positions.len() as u64, chunk.indices.len() as u64)?;
-        for q in scratch.chunks_exact(12) {
-            let f = |i: usize| f32::from_le_bytes([q[i], q[i + 1], q[i + 2], q[i + 3]]);
-            self.grow_bounds([f(0), f(4), f(8)]);
+        for &p in &points {
+            self.grow_bounds(p);
         }
         let err = io_err(&target);
-        self.positions.write_all(&scratch).map_err(&err)?;
-        let points: Vec<[f32; 3]> = scratch
-            .chunks_exact(12)
-            .map(|q| {
-                std::array::from_fn(|i| {
-                    f32::from_le_bytes([q[4 * i], q[4 * i + 1], q[4 * i + 2], q[4 * i + 3]])
-                })
-            })
-            .collect();
+        let mut scratch = std::mem::take(&mut self.scratch);
         scratch.clear();
-        for n in chunk_normals(&points, chunk.indices) {
-            for x in n {
-                scratch.extend_from_slice(&x.to_le_bytes());
-            }
-        }
+        scratch.extend(points.iter().flatten().flat_map(|x| x.to_le_bytes()));
+        self.positions.write_all(&scratch).map_err(&err)?;
+        scratch.clear();
+        scratch.extend(chunk_normals(&points, chunk.indices).iter().flatten().flat_map(|x| x.to_le_bytes()));
         self.normals.write_all(&scratch).map_err(&err)?;
         scratch.clear();
         for &i in chunk.indices {
