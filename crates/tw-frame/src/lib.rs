@@ -26,6 +26,7 @@
 mod gpu_hzb;
 pub mod mask;
 pub mod occlude;
+pub mod pipeline;
 pub mod popping;
 pub mod remote;
 pub mod shadow;
@@ -44,7 +45,8 @@ use tw_runtime::{
 };
 use tw_store::{PageCluster, Store};
 
-pub use occlude::{Occlusion, OcclusionStats};
+pub use occlude::{Occlusion, OcclusionStats, VisibleSet};
+pub use pipeline::{Pipe, Pipeline, PipelinedFrame};
 pub use shadow::{ShadowInfo, ShadowSettings};
 
 /// What a frame draws, apart from the camera.
@@ -150,6 +152,9 @@ pub enum FrameError {
     Gpu(#[from] GpuError),
     #[error(transparent)]
     Runtime(#[from] RuntimeError),
+    /// A parallel pipeline ([`pipeline`]) could not run, or stopped.
+    #[error("pipeline: {0}")]
+    Pipeline(String),
 }
 
 /// Exact visibility of one camera (full detail, no culling, item buffer).

@@ -242,63 +242,272 @@ pub fn draw_culled(
     if strategy == Occlusion::GpuHzb {
         return crate::gpu_hzb::draw_gpu_hzb(state, renderer, grid_step, camera, clusters, bounds);
     }
-    let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
-    let split = state.history.split(&refs);
-    let by_key = ClusterIndex::new(clusters);
-    let cluster_box =
-        |k: &ClusterRef| -> Option<(Vec3, Vec3)> { bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step)) };
-    let f = CullFrame { store, camera, grid_step, split: &split, by_key: &by_key, cluster_box: &cluster_box };
-
-    // Only `hzb` with triangle tests draws partial occluders (its second pass draws the rest
-    // that is visible); the others, and `hzb` after its triangle tests were turned off, draw
-    // their occluders whole whatever masks the history holds.
-    let partial_occluders = strategy == Occlusion::Hzb && state.triangle_culling;
-    let pass_one_masks = partial_occluders.then_some(&split.occluder_masks[..]);
-    renderer.draw_masked(
-        Target::Own,
-        camera,
-        grid_step,
-        &by_key.decoded(&split.occluders),
-        pass_one_masks,
-        true,
-    )?;
-    let mut stats = OcclusionStats {
-        occluders: split.occluders.len() as u64,
-        tested: split.candidates.len() as u64,
-        ..Default::default()
+    let cull = CullPlan::new(state, clusters);
+    cull.draw_first(strategy, state, renderer, camera, grid_step)?;
+    let tester = match strategy {
+        Occlusion::Hzb => Tester::Depth(DepthFrame::read(renderer)?),
+        _ => Tester::Queries(renderer),
     };
-    let cull_start = Instant::now();
-    let mut times = TestTimes::default();
-    let tested = match strategy {
-        Occlusion::None | Occlusion::GpuHzb => unreachable!("handled above"),
-        Occlusion::Hzb => hzb_tests(&f, state, renderer, &mut stats, &mut times)?,
-        Occlusion::Queries => query_tests(&f, state, renderer, &mut stats)?,
-    };
-    let mut cull_time = cull_start.elapsed();
-    let (second, second_masks): (Vec<ClusterRef>, Vec<TriangleMask>) = tested.second.into_iter().unzip();
-    renderer.draw_masked(
-        Target::Own,
-        camera,
-        grid_step,
-        &by_key.decoded(&second),
-        Some(&second_masks),
-        false,
-    )?;
+    let mut tested = cull.test(strategy, state, tester, store, camera, &bounds)?;
+    cull.draw_second(renderer, camera, grid_step, &tested.visible_set)?;
     let t = Instant::now();
-    state.history.update_masked(tested.history);
-    state.frames = state.frames.wrapping_add(1);
-    cull_time += t.elapsed();
-    let mut drawn = split.occluders;
-    drawn.extend_from_slice(&tested.visible);
-    Ok(Culled {
-        stats,
-        cull_time,
-        box_test_time: times.box_tests,
-        triangle_test_time: times.triangle_tests,
-        readback_time: times.readback,
-        drawn,
-        occluded: tested.occluded,
-    })
+    state.finish(&mut tested);
+    tested.culled.cull_time += t.elapsed();
+    Ok(tested.culled)
+}
+
+/// What a frame draws after occlusion culling, pass by pass: the first pass (the occluders,
+/// each with the triangles it draws there: all, `None`, or those of the history) and the
+/// second (the visible candidates and, with triangle tests, the occluders' visible triangles
+/// their first pass left out). Drawn in this order on any renderer, it gives the frame's image
+/// ([`crate::pipeline`]'s render stage draws a set culled on another renderer).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct VisibleSet {
+    pub first: Vec<ClusterRef>,
+    /// Per cluster of `first`, the triangles drawn; `None`: all of them.
+    pub first_masks: Option<Vec<TriangleMask>>,
+    pub second: Vec<ClusterRef>,
+    pub second_masks: Vec<TriangleMask>,
+}
+
+impl VisibleSet {
+    /// The whole cut in one pass (no occlusion culling).
+    pub fn whole(clusters: Vec<ClusterRef>) -> VisibleSet {
+        VisibleSet { first: clusters, ..Default::default() }
+    }
+
+    /// Clusters drawn in either pass (an occluder whose hidden triangles the second pass
+    /// draws counts once).
+    pub fn clusters(&self) -> usize {
+        self.first.len() + self.second.len()
+    }
+
+    /// Draws both passes of the set with `camera` into `renderer`'s own target (cleared first);
+    /// `clusters` are the frame's decoded clusters, in which every cluster of the set is.
+    pub fn draw(
+        &self,
+        renderer: &mut Renderer,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterRef, &PageCluster)],
+    ) -> Result<(), FrameError> {
+        let by_key = ClusterIndex::new(clusters);
+        renderer.begin_frame();
+        renderer.draw_masked(
+            Target::Own,
+            camera,
+            grid_step,
+            &by_key.decoded(&self.first),
+            self.first_masks.as_deref(),
+            true,
+        )?;
+        if !self.second.is_empty() {
+            renderer.draw_masked(
+                Target::Own,
+                camera,
+                grid_step,
+                &by_key.decoded(&self.second),
+                Some(&self.second_masks),
+                false,
+            )?;
+        }
+        Ok(())
+    }
+}
+
+/// How a frame's candidates are tested once its occluders are drawn: against the depth read
+/// back from the renderer that drew them (`hzb`), or with occlusion queries on that renderer
+/// (`queries`).
+pub(crate) enum Tester<'r> {
+    Depth(DepthFrame),
+    Queries(&'r mut Renderer),
+}
+
+/// The first pass's depth, read back, and what the HZB tests need to know of the renderer
+/// that drew it.
+pub(crate) struct DepthFrame {
+    depth: tw_gpu::DepthImage,
+    sample_positions: &'static [[f32; 2]],
+    depth_rounding: f32,
+    size: (u32, u32),
+    /// Waiting for the first pass and reading its depth.
+    readback: Duration,
+}
+
+impl DepthFrame {
+    /// Reads `renderer`'s depth back (waiting for its first pass to be drawn).
+    pub(crate) fn read(renderer: &mut Renderer) -> Result<DepthFrame, FrameError> {
+        let start = Instant::now();
+        let depth = renderer.read_depth()?;
+        Ok(DepthFrame {
+            depth,
+            sample_positions: renderer.sample_positions(),
+            depth_rounding: renderer.depth_rounding(),
+            size: renderer.size(),
+            readback: start.elapsed(),
+        })
+    }
+}
+
+/// One frame's occlusion culling of a cut, step by step, so that the steps can run on
+/// different renderers and threads ([`crate::pipeline`]): the split of the cut by the history
+/// ([`CullPlan::new`]), the occluders' pass ([`CullPlan::draw_first`]), the tests
+/// ([`CullPlan::test`]) and the second pass ([`CullPlan::draw_second`]); the history is
+/// updated last ([`OcclusionState::finish`]). [`draw_culled`] runs them in order on one
+/// renderer.
+pub(crate) struct CullPlan<'a> {
+    split: OcclusionSplit,
+    by_key: ClusterIndex<'a>,
+}
+
+/// What [`CullPlan::test`] found: the set to draw, next frame's history and the figures.
+pub(crate) struct CullOutcome {
+    pub(crate) visible_set: VisibleSet,
+    history: Vec<(ClusterRef, TriangleMask)>,
+    pub(crate) culled: Culled,
+}
+
+impl<'a> CullPlan<'a> {
+    /// Splits the frame's decoded cut into occluders (in `state`'s history) and candidates.
+    pub(crate) fn new(state: &OcclusionState, clusters: &[(ClusterRef, &'a PageCluster)]) -> CullPlan<'a> {
+        let refs: Vec<ClusterRef> = clusters.iter().map(|c| c.0).collect();
+        CullPlan::from_split(state.history.split(&refs), clusters)
+    }
+
+    /// A plan of `split`, made from another copy of the same cut (the split travels between
+    /// the pipeline's stages, the decoded clusters are looked up again by each).
+    pub(crate) fn from_split(
+        split: OcclusionSplit,
+        clusters: &[(ClusterRef, &'a PageCluster)],
+    ) -> CullPlan<'a> {
+        CullPlan { split, by_key: ClusterIndex::new(clusters) }
+    }
+
+    pub(crate) fn into_split(self) -> OcclusionSplit {
+        self.split
+    }
+
+    /// Whether the first pass draws only the occluders' triangles of the history: `hzb` with
+    /// triangle tests (its second pass draws the rest that is visible); the others, and `hzb`
+    /// after its triangle tests were turned off, draw their occluders whole whatever masks the
+    /// history holds.
+    fn partial_occluders(strategy: Occlusion, state: &OcclusionState) -> bool {
+        strategy == Occlusion::Hzb && state.triangle_culling
+    }
+
+    /// Draws the occluders into `renderer`'s own target, cleared first (colour and depth); the
+    /// caller has begun the renderer's frame.
+    pub(crate) fn draw_first(
+        &self,
+        strategy: Occlusion,
+        state: &OcclusionState,
+        renderer: &mut Renderer,
+        camera: &Camera,
+        grid_step: f64,
+    ) -> Result<(), FrameError> {
+        let masks = Self::partial_occluders(strategy, state).then_some(&self.split.occluder_masks[..]);
+        renderer.draw_masked(
+            Target::Own,
+            camera,
+            grid_step,
+            &self.by_key.decoded(&self.split.occluders),
+            masks,
+            true,
+        )?;
+        Ok(())
+    }
+
+    /// Tests the candidates (and, for `hzb`, the occluders) with `tester` against the drawn
+    /// occluders: the visible set, next frame's history and the frame's figures.
+    pub(crate) fn test<B>(
+        &self,
+        strategy: Occlusion,
+        state: &mut OcclusionState,
+        tester: Tester<'_>,
+        store: &Store,
+        camera: &Camera,
+        bounds: &B,
+    ) -> Result<CullOutcome, FrameError>
+    where
+        B: Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync,
+    {
+        let grid_step = store.header().grid_step;
+        let cluster_box = |k: &ClusterRef| -> Option<(Vec3, Vec3)> {
+            bounds(k).map(|(lo, hi)| grid_box(lo, hi, grid_step))
+        };
+        let f = CullFrame {
+            store,
+            camera,
+            grid_step,
+            split: &self.split,
+            by_key: &self.by_key,
+            cluster_box: &cluster_box,
+        };
+        let mut stats = OcclusionStats {
+            occluders: self.split.occluders.len() as u64,
+            tested: self.split.candidates.len() as u64,
+            ..Default::default()
+        };
+        let cull_start = Instant::now();
+        let mut times = TestTimes::default();
+        let tested = match (strategy, tester) {
+            (Occlusion::Hzb, Tester::Depth(depth)) => hzb_tests(&f, state, depth, &mut stats, &mut times)?,
+            (Occlusion::Queries, Tester::Queries(renderer)) => query_tests(&f, state, renderer, &mut stats)?,
+            (s, _) => unreachable!("{} is not tested by a CullPlan, or with another tester", s.name()),
+        };
+        // The depth was read before this step; its time counts as culling, as in one frame.
+        let cull_time = cull_start.elapsed() + times.readback;
+        let (second, second_masks): (Vec<ClusterRef>, Vec<TriangleMask>) = tested.second.into_iter().unzip();
+        let first_masks = Self::partial_occluders(strategy, state).then(|| self.split.occluder_masks.clone());
+        let mut drawn = self.split.occluders.clone();
+        drawn.extend_from_slice(&tested.visible);
+        Ok(CullOutcome {
+            visible_set: VisibleSet {
+                first: self.split.occluders.clone(),
+                first_masks,
+                second,
+                second_masks,
+            },
+            history: tested.history,
+            culled: Culled {
+                stats,
+                cull_time,
+                box_test_time: times.box_tests,
+                triangle_test_time: times.triangle_tests,
+                readback_time: times.readback,
+                drawn,
+                occluded: tested.occluded,
+            },
+        })
+    }
+
+    /// Draws the second pass of `set` on top of the first (same target, not cleared).
+    pub(crate) fn draw_second(
+        &self,
+        renderer: &mut Renderer,
+        camera: &Camera,
+        grid_step: f64,
+        set: &VisibleSet,
+    ) -> Result<(), FrameError> {
+        renderer.draw_masked(
+            Target::Own,
+            camera,
+            grid_step,
+            &self.by_key.decoded(&set.second),
+            Some(&set.second_masks),
+            false,
+        )?;
+        Ok(())
+    }
+}
+
+impl OcclusionState {
+    /// Takes a tested frame's visible set as the history that chooses the next frame's
+    /// occluders.
+    pub(crate) fn finish(&mut self, outcome: &mut CullOutcome) {
+        self.history.update_masked(std::mem::take(&mut outcome.history));
+        self.frames = self.frames.wrapping_add(1);
+    }
 }
 
 /// What [`draw_culled`]'s tests read: the frame's store, camera, first and second pass split,
@@ -337,22 +546,21 @@ struct TestTimes {
 fn hzb_tests<B>(
     f: &CullFrame<B>,
     state: &mut OcclusionState,
-    renderer: &mut Renderer,
+    frame: DepthFrame,
     stats: &mut OcclusionStats,
     times: &mut TestTimes,
 ) -> Result<Tested, FrameError>
 where
     B: Fn(&ClusterRef) -> Option<(Vec3, Vec3)> + Sync,
 {
-    let readback_start = Instant::now();
-    let depth = renderer.read_depth()?;
-    times.readback = readback_start.elapsed();
+    times.readback = frame.readback;
+    let depth = &frame.depth;
     // With multisampling the depth is each pixel's farthest sample, and a pixel is its
     // samples to the tests (tw_gpu::msaa).
     let hzb = Hzb::build(&depth.depth, depth.width, depth.height)
         .map_err(|e| tw_gpu::GpuError::Gpu(format!("HZB: {e}")))?
-        .with_samples(renderer.sample_positions());
-    let (w, h) = renderer.size();
+        .with_samples(frame.sample_positions);
+    let (w, h) = frame.size;
     let view_proj = f.camera.projection_reverse_z(w as f32 / h as f32) * f.camera.view();
     let box_tests_start = Instant::now();
     let t = hzb_candidates(f, state, &hzb, &view_proj, stats);
@@ -365,7 +573,7 @@ where
     stats.no_pixels = t.no_pixels.len() as u64;
     if state.triangle_culling {
         let hzb_view = (&hzb, &view_proj);
-        Ok(hzb_triangle_tests(f, state.frames, renderer, hzb_view, t, &o_still, o_visible, times))
+        Ok(hzb_triangle_tests(f, state.frames, frame.depth_rounding, hzb_view, t, &o_still, o_visible, times))
     } else {
         let second = t.visible.iter().map(|k| (*k, u128::MAX)).collect();
         let history = t.visible.iter().chain(&o_visible).map(|k| (*k, u128::MAX)).collect();
@@ -425,7 +633,7 @@ where
 fn hzb_triangle_tests<B>(
     f: &CullFrame<B>,
     frame: u64,
-    renderer: &Renderer,
+    depth_rounding: f32,
     (hzb, view_proj): (&Hzb, &glam::Mat4),
     t: OcclusionTest,
     o_still: &[usize],
@@ -434,7 +642,7 @@ fn hzb_triangle_tests<B>(
 ) -> Tested {
     let triangles = |list: &[ClusterRef], assumed: Option<&[TriangleMask]>| {
         let clusters: Vec<&PageCluster> = f.by_key.decoded(list).into_iter().map(|(_, c)| c).collect();
-        let rounding = renderer.depth_rounding() as f64;
+        let rounding = depth_rounding as f64;
         test_triangles(&clusters, assumed, f.grid_step, hzb, view_proj, rounding)
     };
     // What each still visible occluder drew in the first pass.

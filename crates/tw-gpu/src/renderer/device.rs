@@ -69,6 +69,29 @@ impl Renderer {
         Ok(r)
     }
 
+    /// Another headless renderer like this one, on a device of its own: the same backend,
+    /// size, samples per pixel, GPU budget, draw mode and colours. The occlusion contexts of
+    /// the parallel frame pipelines (tw-frame's `pipeline`) draw on such devices; on Mesa's CPU
+    /// drivers each device has its own rasterizer threads, so two of them draw at once. Fails
+    /// when the backend's first adapter is not this renderer's (the occlusion tests must see
+    /// the depth this renderer's device would draw).
+    pub fn sibling(&self) -> Result<Renderer, GpuError> {
+        let mut r =
+            Renderer::new_headless_with(self.width, self.height, wgpu::Backends::from(self.info.backend))?;
+        if (r.info.name.as_str(), r.info.device_type) != (self.info.name.as_str(), self.info.device_type) {
+            return Err(GpuError::Gpu(format!(
+                "a second device of {} opened {} instead",
+                adapter_summary(&self.info),
+                adapter_summary(&r.info)
+            )));
+        }
+        r.set_samples(self.samples)?;
+        r.set_gpu_budget(self.gpu_budget());
+        r.set_draw_mode(self.draw_mode);
+        r.mode = self.mode;
+        Ok(r)
+    }
+
     /// Refuses an adapter that cannot run the draw shaders: their vertex stage reads the slot
     /// table and the object colours from storage buffers (common.wgsl). wgpu's GL backend on
     /// NVIDIA's EGL driver offered a GLSL version without them (docs/benchmarks-log.md, "On a real

@@ -1,0 +1,387 @@
+//! The stages of the parallel pipelines (see the module above): each a loop on a scoped thread
+//! that takes a frame from the channel before it, does its step and hands the frame on.
+//!
+//! - [`select`] (S): the cut of each camera and the pages it holds.
+//! - [`occluders`] (GigaWalk's OR): the cut split by the visible set of two frames before, the
+//!   occluders drawn on the OR device, its depth read back.
+//! - [`cull`] (GigaWalk's STC): the HZB of that depth and the tests; the visible set goes to
+//!   RVG and, as the history, back to OR.
+//! - [`context`] (one of the switch's two occlusion contexts): occluders, then the tests, on
+//!   one device that keeps its own history.
+//! - [`render`] (RVG): the visible set drawn on the walkthrough's renderer, the image read back.
+
+use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
+use std::sync::Arc;
+use std::thread::Scope;
+use std::time::{Duration, Instant};
+
+use tw_gpu::Renderer;
+use tw_runtime::{
+    Camera, ClusterRef, OcclusionHistory, OcclusionSplit, ResidentPage, SelectStats, Selection, StreamStats,
+    Streamer,
+};
+use tw_store::{PageCluster, Store};
+
+use super::{Pipe, Pipeline, PipelinedFrame, Submitted};
+use crate::occlude::{CullPlan, DepthFrame, OcclusionState, Tester, VisibleSet};
+use crate::{
+    lookup, page_bounds, select_and_stream, Culled, FrameError, FrameInfo, FrameSettings, FrameTimes,
+    Occlusion, ShadowInfo, Streamed, Walkthrough,
+};
+
+/// The frames' output: drawn frames, or the error of the stage that failed.
+type Output = Sender<Result<PipelinedFrame, FrameError>>;
+
+/// A frame's cut, as S hands it on: shared by the stages after it, holding its pages.
+struct Cut {
+    frame: u64,
+    camera: Camera,
+    submitted: Instant,
+    pages: Vec<(u32, Arc<ResidentPage>)>,
+    clusters: Vec<ClusterRef>,
+    select: SelectStats,
+    stream: StreamStats,
+    times: FrameTimes,
+}
+
+impl Cut {
+    fn decoded(&self) -> Vec<(ClusterRef, &PageCluster)> {
+        lookup(&self.pages, &self.clusters)
+    }
+
+    fn bounds(&self) -> impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync + '_ {
+        |c| page_bounds(&self.pages, c)
+    }
+}
+
+/// A frame whose occluders OR has drawn: the split it drew and the depth it read back
+/// (`None` without occlusion culling), and how long drawing and reading took.
+struct Occluded {
+    cut: Arc<Cut>,
+    split: OcclusionSplit,
+    depth: Option<DepthFrame>,
+}
+
+/// A culled frame, on its way to the render stage.
+struct Tested {
+    cut: Arc<Cut>,
+    set: VisibleSet,
+    culled: Culled,
+}
+
+/// Runs `kind` over `walk` (see [`Walkthrough::pipelined`]): the stages on scoped threads, the
+/// body on this one.
+pub(super) fn run<R>(
+    walk: &mut Walkthrough,
+    kind: Pipeline,
+    settings: &FrameSettings,
+    occluders: Vec<Renderer>,
+    body: impl FnOnce(&mut Pipe) -> R,
+) -> Result<R, FrameError> {
+    let store = walk.streamer.store().clone();
+    let settings = *settings;
+    let size = walk.renderer.size();
+    let (cameras_tx, cameras) = sync_channel::<Submitted>(0);
+    let (out, frames) = channel();
+    let mut pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind };
+    let Walkthrough { streamer, renderer, selection, .. } = walk;
+    std::thread::scope(|s| {
+        let store = &store;
+        let mut occluders = occluders.into_iter();
+        let mut next_device =
+            || occluders.next().ok_or_else(|| FrameError::Pipeline("an occlusion device is missing".into()));
+        match kind {
+            Pipeline::Serial => {
+                return Err(FrameError::Pipeline("serial frames are drawn by Walkthrough::frame".into()));
+            }
+            Pipeline::Gigawalk => {
+                let (cut_tx, cut_rx) = sync_channel(0);
+                let (occluded_tx, occluded_rx) = sync_channel(0);
+                let (tested_tx, tested_rx) = sync_channel(0);
+                let (history_tx, history_rx) = channel();
+                let mut device = next_device()?;
+                let o = out.clone();
+                spawn(s, "select", o.clone(), move || {
+                    select(streamer, selection, &settings, size, cameras, vec![cut_tx])
+                })?;
+                spawn(s, "occluders", o.clone(), move || {
+                    occluders_stage(&mut device, store, &settings, cut_rx, history_rx, occluded_tx)
+                })?;
+                spawn(s, "cull", o, move || cull(store, &settings, occluded_rx, history_tx, tested_tx))?;
+                let o = out.clone();
+                spawn(s, "render", out, move || render(renderer, store, vec![tested_rx], o))?;
+            }
+            Pipeline::Switch => {
+                let (mut cut_txs, mut tested_rxs) = (Vec::new(), Vec::new());
+                for name in ["context-a", "context-b"] {
+                    let (cut_tx, cut_rx) = sync_channel(0);
+                    let (tested_tx, tested_rx) = sync_channel(0);
+                    let mut device = next_device()?;
+                    spawn(s, name, out.clone(), move || {
+                        context(&mut device, store, &settings, cut_rx, tested_tx)
+                    })?;
+                    cut_txs.push(cut_tx);
+                    tested_rxs.push(tested_rx);
+                }
+                spawn(s, "select", out.clone(), move || {
+                    select(streamer, selection, &settings, size, cameras, cut_txs)
+                })?;
+                let o = out.clone();
+                spawn(s, "render", out, move || render(renderer, store, tested_rxs, o))?;
+            }
+        }
+        let result = body(&mut pipe);
+        // Closing the cameras' channel stops S, then every stage after it in turn.
+        drop(pipe);
+        Ok(result)
+    })
+}
+
+/// Starts stage `name` on a scoped thread: `work` runs until its input closes; an error it
+/// returns is sent to `out` before the stage's channels close, so the caller sees the error
+/// before the end of the output.
+fn spawn<'scope>(
+    s: &'scope Scope<'scope, '_>,
+    name: &str,
+    out: Output,
+    work: impl FnOnce() -> Result<(), FrameError> + Send + 'scope,
+) -> Result<(), FrameError> {
+    std::thread::Builder::new()
+        .name(format!("tw-{name}"))
+        .spawn_scoped(s, move || {
+            if let Err(e) = work() {
+                let _ = out.send(Err(e));
+            }
+        })
+        .map(|_| ())
+        .map_err(|e| FrameError::Pipeline(format!("could not start the {name} stage: {e}")))
+}
+
+/// S: the cut of each camera and its pages (streamed: the frame never waits for the disk, or
+/// with `wait_for_pages` loaded on the spot), handed to `next` in turn (frame i to
+/// `next[i % len]`).
+fn select(
+    streamer: &mut Streamer,
+    selection: &mut Selection,
+    settings: &FrameSettings,
+    viewport: (u32, u32),
+    cameras: Receiver<Submitted>,
+    next: Vec<SyncSender<Arc<Cut>>>,
+) -> Result<(), FrameError> {
+    for Submitted { frame, camera, at } in cameras {
+        let start = Instant::now();
+        let Streamed { pages, stats, times } =
+            select_and_stream(streamer, selection, &camera, settings, viewport);
+        let select = start.elapsed();
+        let cut = Cut {
+            frame,
+            camera,
+            submitted: at,
+            pages,
+            clusters: selection.clusters.clone(),
+            select: selection.stats,
+            stream: stats,
+            times: FrameTimes {
+                select,
+                select_cut: times.map_or(select, |t| t.cut),
+                select_prefetch: times.map_or(Duration::ZERO, |t| t.prefetch),
+                ..Default::default()
+            },
+        };
+        if next[(frame % next.len() as u64) as usize].send(Arc::new(cut)).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// OR: frame i's cut split by the visible set of frame i−2 (`histories` brings one a frame,
+/// from frame 0 on; frames 0 and 1 have none: no occluders, every cluster a candidate), the
+/// occluders drawn on `device` with frame i's camera and its depth read back for STC.
+fn occluders_stage(
+    device: &mut Renderer,
+    store: &Store,
+    settings: &FrameSettings,
+    cuts: Receiver<Arc<Cut>>,
+    histories: Receiver<OcclusionHistory>,
+    next: SyncSender<Occluded>,
+) -> Result<(), FrameError> {
+    let mut state = OcclusionState { triangle_culling: settings.triangle_culling, ..Default::default() };
+    let grid_step = store.header().grid_step;
+    for cut in cuts {
+        if cut.frame >= 2 {
+            match histories.recv() {
+                Ok(h) => state.history = h,
+                Err(_) => break,
+            }
+        }
+        let decoded = cut.decoded();
+        let plan = CullPlan::new(&state, &decoded);
+        let depth = if settings.occlusion == Occlusion::None {
+            None
+        } else {
+            device.begin_frame();
+            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step)?;
+            Some(DepthFrame::read(device)?)
+        };
+        let split = plan.into_split();
+        drop(decoded);
+        if next.send(Occluded { cut, split, depth }).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// STC: the HZB of OR's depth and the tests of the frame's candidates and occluders (on the
+/// rayon pool: every core left); the visible set goes to `next` and, as the history of a
+/// later frame's occluders, to `histories`.
+fn cull(
+    store: &Store,
+    settings: &FrameSettings,
+    occluded: Receiver<Occluded>,
+    histories: Sender<OcclusionHistory>,
+    next: SyncSender<Tested>,
+) -> Result<(), FrameError> {
+    let mut state = OcclusionState { triangle_culling: settings.triangle_culling, ..Default::default() };
+    for Occluded { cut, split, depth } in occluded {
+        let tested = {
+            let decoded = cut.decoded();
+            match depth {
+                None => Tested::whole(cut.clone()),
+                Some(depth) => {
+                    let plan = CullPlan::from_split(split, &decoded);
+                    let bounds = cut.bounds();
+                    let mut outcome = plan.test(
+                        settings.occlusion,
+                        &mut state,
+                        Tester::Depth(depth),
+                        store,
+                        &cut.camera,
+                        &bounds,
+                    )?;
+                    let t = Instant::now();
+                    state.finish(&mut outcome);
+                    outcome.culled.cull_time += t.elapsed();
+                    Tested { cut: cut.clone(), set: outcome.visible_set, culled: outcome.culled }
+                }
+            }
+        };
+        // OR waits for this history two frames on; a closed OR is seen at the next send.
+        let _ = histories.send(state.history.clone());
+        if next.send(tested).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// One occlusion context of the switch: it takes every other frame, splits the cut by the
+/// visible set it found for its previous frame (two frames before), draws the occluders on its
+/// own `device` and tests the candidates there (queries) or against its depth read back
+/// (`hzb`).
+fn context(
+    device: &mut Renderer,
+    store: &Store,
+    settings: &FrameSettings,
+    cuts: Receiver<Arc<Cut>>,
+    next: SyncSender<Tested>,
+) -> Result<(), FrameError> {
+    let mut state = OcclusionState {
+        triangle_culling: settings.triangle_culling,
+        visible_pixels: settings.visible_pixels,
+        ..Default::default()
+    };
+    let grid_step = store.header().grid_step;
+    for cut in cuts {
+        let tested = if settings.occlusion == Occlusion::None {
+            Tested::whole(cut)
+        } else {
+            let decoded = cut.decoded();
+            let plan = CullPlan::new(&state, &decoded);
+            device.begin_frame();
+            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step)?;
+            let tester = match settings.occlusion {
+                Occlusion::Hzb => Tester::Depth(DepthFrame::read(device)?),
+                _ => Tester::Queries(device),
+            };
+            let bounds = cut.bounds();
+            let mut outcome =
+                plan.test(settings.occlusion, &mut state, tester, store, &cut.camera, &bounds)?;
+            let t = Instant::now();
+            state.finish(&mut outcome);
+            outcome.culled.cull_time += t.elapsed();
+            drop(decoded);
+            Tested { cut: cut.clone(), set: outcome.visible_set, culled: outcome.culled }
+        };
+        if next.send(tested).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+impl Tested {
+    /// A frame drawn without occlusion culling: the whole cut in one pass.
+    fn whole(cut: Arc<Cut>) -> Tested {
+        let set = VisibleSet::whole(cut.clusters.clone());
+        let culled = Culled { drawn: cut.clusters.clone(), ..Default::default() };
+        Tested { cut, set, culled }
+    }
+}
+
+/// RVG: the frames' visible sets drawn on the walkthrough's `renderer` in submission order
+/// (frame i from `tested[i % len]`, its tag checked), each image read back and sent to `out`
+/// with the frame's figures.
+fn render(
+    renderer: &mut Renderer,
+    store: &Store,
+    tested: Vec<Receiver<Tested>>,
+    out: Output,
+) -> Result<(), FrameError> {
+    let grid_step = store.header().grid_step;
+    for expected in 0u64.. {
+        let Ok(Tested { cut, set, culled }) = tested[(expected % tested.len() as u64) as usize].recv() else {
+            break;
+        };
+        if cut.frame != expected {
+            return Err(FrameError::Pipeline(format!(
+                "frame {} reached the render stage where frame {expected} was due",
+                cut.frame
+            )));
+        }
+        let decoded = cut.decoded();
+        set.draw(renderer, &cut.camera, grid_step, &decoded)?;
+        let image = renderer.read_color()?;
+        let gpu = renderer.stats();
+        let cut_triangles = decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        drop(decoded);
+        let info = FrameInfo {
+            times: FrameTimes {
+                cull: culled.cull_time,
+                cull_box_tests: culled.box_test_time,
+                cull_triangle_tests: culled.triangle_test_time,
+                cull_readback: culled.readback_time,
+                upload: gpu.upload,
+                render: gpu.render,
+                total: cut.submitted.elapsed(),
+                ..cut.times
+            },
+            select: cut.select,
+            stream: cut.stream,
+            cut_triangles,
+            triangles: gpu.triangles,
+            masked_triangles: gpu.masked_triangles,
+            clusters: gpu.clusters,
+            draw_calls: gpu.draw_calls,
+            occlusion: culled.stats,
+            gpu: gpu.pool,
+            shadow: ShadowInfo::default(),
+        };
+        let frame = PipelinedFrame { frame: cut.frame, image, info, visible: set };
+        if out.send(Ok(frame)).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
