@@ -92,6 +92,7 @@ pub enum Command {
     #[command(after_help = "Examples:\n  terawalk bench plant.tw --path path.json --out report/\n  \
                             terawalk bench plant.tw --path walk.json --occlusion hzb --light sun   # shadows on vs off\n  \
                             terawalk bench plant.tw --path path.json --occlusion none,hzb --compare 10 --exact\n  \
+                            terawalk bench plant.tw --path walk.json --occlusion hzb --pipeline serial,gigawalk,switch   # parallel stages\n  \
                             terawalk bench plant.tw --path fly.json --compare 10 --samples 1 --reference-samples 16   # LOD vs brute force against a 16-sample truth\n  \
                             terawalk bench plant.tw --path path.json --reference --frames 20\n  \
                             terawalk bench plant.tw --memory 512M --size 1920x1080 --error 2")]
@@ -685,6 +686,13 @@ pub struct BenchArgs {
     /// fastest conservative one on this device); one run each, in this order.
     #[arg(long, value_delimiter = ',', default_value = "auto", value_parser = parse_occlusion)]
     pub occlusion: Vec<OcclusionChoice>,
+    /// How each strategy's frames run, comma-separated, one run each: serial (one stage after
+    /// the other), gigawalk (select, occluders on a second device, HZB culling and drawing as
+    /// concurrent stages, GigaWalk §5; none or hzb) or switch (two occlusion contexts taking
+    /// turns, the occlusion switch; none, hzb or queries). Frame times of the parallel ones are
+    /// their throughput; their latency is recorded beside.
+    #[arg(long, value_delimiter = ',', default_value = "serial", value_parser = parse_pipeline)]
+    pub pipeline: Vec<tw_frame::Pipeline>,
     /// Render at full detail without any culling (the reference) instead.
     #[arg(long, conflicts_with_all = ["compare", "exact"])]
     pub reference: bool,
@@ -778,6 +786,13 @@ impl OcclusionChoice {
             OcclusionChoice::Is(o) => o,
         }
     }
+}
+
+fn parse_pipeline(s: &str) -> Result<tw_frame::Pipeline, String> {
+    tw_frame::Pipeline::parse(s).ok_or_else(|| {
+        let names: Vec<&str> = tw_frame::Pipeline::ALL.iter().map(|p| p.name()).collect();
+        format!("unknown pipeline {s:?}; one of {}", names.join(", "))
+    })
 }
 
 fn parse_occlusion(s: &str) -> Result<OcclusionChoice, String> {

@@ -182,7 +182,7 @@ impl Bench {
     ) -> Result<Outcome> {
         let o = &self.options;
         let traced = runner.traced.is_some();
-        let plans = runs::plans(&strategies, runner.shadows.is_some(), traced);
+        let plans = runs::plans(&strategies, runner.shadows.is_some(), traced, &o.pipelines);
         let mut runs = Vec::new();
         for (index, &plan) in plans.iter().enumerate() {
             let name = runs::name(&plans, index, o.reference, traced);

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use anyhow::{bail, Result};
 use tw_core::color::ColorMode;
 use tw_frame::shadow::ShadowOptions;
-use tw_frame::{Occlusion, ShadowSettings};
+use tw_frame::{Occlusion, Pipeline, ShadowSettings};
 use tw_runtime::{Camera, InputLight};
 
 /// A benchmark's settings (`terawalk bench`'s flags, whose names its errors use).
@@ -31,6 +31,9 @@ pub struct BenchOptions {
     /// One run per strategy, in this order; `None`: the fastest conservative one on the device
     /// ([`Occlusion::fastest_for`]).
     pub occlusion: Vec<Option<Occlusion>>,
+    /// How each strategy's frames run (`--pipeline`): one run per strategy and pipeline, in
+    /// this order within each strategy.
+    pub pipelines: Vec<Pipeline>,
     /// The main run is the reference itself (full detail, no culling).
     pub reference: bool,
     /// The reference every K-th frame: PSNR, differing pixels, speed-up on the same frames.
@@ -128,10 +131,38 @@ impl BenchOptions {
         if self.shadows.is_some() && self.cull_server.is_some() {
             bail!("--light cannot be combined with --cull-server (the server culls the eye's view only)");
         }
+        self.validate_pipelines()?;
         let inputs: Vec<&std::path::Path> =
             [Some(self.store.as_path()), self.path.as_deref()].into_iter().flatten().collect();
         for file in tw_report::ReportFiles::in_folder(&self.out).all() {
             tw_core::output::check_output(&file, &inputs)?;
+        }
+        Ok(())
+    }
+
+    /// Refuses parallel pipelines where a run draws something else than culled frames of the
+    /// rasterizer, and strategies a pipeline cannot cull with.
+    fn validate_pipelines(&self) -> Result<()> {
+        if self.pipelines.is_empty() {
+            bail!("--pipeline needs at least one of serial, gigawalk, switch");
+        }
+        let Some(parallel) = self.pipelines.iter().find(|p| **p != Pipeline::Serial) else {
+            return Ok(());
+        };
+        let conflicts = [
+            (self.reference, "--reference"),
+            (self.ray_traced, "--renderer rt"),
+            (self.popping, "--popping"),
+            (self.shadows.is_some(), "--light"),
+            (self.cull_server.is_some(), "--cull-server"),
+        ];
+        if let Some((_, flag)) = conflicts.iter().find(|(on, _)| *on) {
+            bail!("--pipeline {} cannot be combined with {flag} (use --pipeline serial)", parallel.name());
+        }
+        for p in &self.pipelines {
+            for o in self.occlusion.iter().flatten() {
+                p.supports(*o).map_err(|e| anyhow::anyhow!(e))?;
+            }
         }
         Ok(())
     }

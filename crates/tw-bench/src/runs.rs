@@ -4,7 +4,7 @@
 
 use anyhow::Result;
 use tw_frame::traced::TracedWalkthrough;
-use tw_frame::{FrameInfo, FrameSettings, Occlusion, ShadowSettings, Walkthrough};
+use tw_frame::{FrameInfo, FrameSettings, Occlusion, Pipeline, ShadowSettings, Walkthrough};
 use tw_gpu::Image;
 use tw_report::{FrameRecord, ReportImage, Run};
 use tw_runtime::Camera;
@@ -15,17 +15,20 @@ use crate::references::References;
 use crate::traced::ColdStart;
 use crate::{BenchOptions, Observer, RemoteCulling};
 
-/// One run to measure: a strategy, with or without shadows.
+/// One run to measure: a strategy, with or without shadows, through a pipeline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Plan {
     pub occlusion: Occlusion,
     pub shadowed: bool,
+    pub pipeline: Pipeline,
 }
 
 /// The runs, in order: each strategy with shadows, then without, when there is a light (their
 /// ratio is the shadows' cost, measured in the same process on the same frames); the ray
 /// tracer's one run casts shadow rays when there is a light (it has no strategies to compare).
-pub fn plans(strategies: &[Occlusion], shadows: bool, traced: bool) -> Vec<Plan> {
+/// Each of those through every pipeline in turn (shadows and the ray tracer only serial:
+/// [`BenchOptions::validate`](crate::BenchOptions::validate) refuses the others).
+pub fn plans(strategies: &[Occlusion], shadows: bool, traced: bool, pipelines: &[Pipeline]) -> Vec<Plan> {
     let both: &[bool] = match (shadows, traced) {
         (true, false) => &[true, false],
         (true, true) => &[true],
@@ -33,7 +36,11 @@ pub fn plans(strategies: &[Occlusion], shadows: bool, traced: bool) -> Vec<Plan>
     };
     strategies
         .iter()
-        .flat_map(|&occlusion| both.iter().map(move |&shadowed| Plan { occlusion, shadowed }))
+        .flat_map(|&occlusion| {
+            both.iter().flat_map(move |&shadowed| {
+                pipelines.iter().map(move |&pipeline| Plan { occlusion, shadowed, pipeline })
+            })
+        })
         .collect()
 }
 
@@ -42,11 +49,14 @@ pub fn plans(strategies: &[Occlusion], shadows: bool, traced: bool) -> Vec<Plan>
 pub fn name(plans: &[Plan], index: usize, reference: bool, traced: bool) -> String {
     let plan = plans[index];
     let repeat = plans[..index].iter().filter(|&&p| p == plan).count();
-    let base = if plan.shadowed {
+    let mut base = if plan.shadowed {
         format!("{}+shadows", plan.occlusion.name())
     } else {
         plan.occlusion.name().to_string()
     };
+    if plan.pipeline != Pipeline::Serial {
+        base = format!("{base} {}", plan.pipeline.name());
+    }
     match (reference, repeat) {
         _ if traced => "rt".to_string(),
         (true, _) => "reference".to_string(),
@@ -82,14 +92,19 @@ impl Runner<'_> {
         observer: &mut dyn Observer,
     ) -> Result<Run> {
         let settings = self.settings(plan);
-        self.warm_up(&settings)?;
         let count = self.frames.cameras.len();
-        let mut records = Vec::with_capacity(count);
         observer.phase(&name, count as u64);
-        for i in 0..count {
-            records.push(self.measured_frame(index, &name, i, &settings, observer)?);
-            observer.frame_done(&name, i, true);
-        }
+        let records = if plan.pipeline == Pipeline::Serial {
+            self.warm_up(&settings)?;
+            let mut records = Vec::with_capacity(count);
+            for i in 0..count {
+                records.push(self.measured_frame(index, &name, i, &settings, observer)?);
+                observer.frame_done(&name, i, true);
+            }
+            records
+        } else {
+            self.measure_pipelined(index, plan.pipeline, &name, &settings, observer)?
+        };
         observer.end_phase();
         let run = Run::new(name, self.description(plan), records, tw_report::peak_rss_bytes());
         let network = self.remote.as_mut().map(|r| r.take_lines(&run.name)).unwrap_or_default();
@@ -110,6 +125,55 @@ impl Runner<'_> {
             triangle_culling: !o.whole_clusters,
             shadows: if plan.shadowed { self.shadows } else { None },
         }
+    }
+
+    /// A run through a parallel pipeline: `warmup` frames at the first camera, then the path,
+    /// keeping every stage busy ([`Pipeline::depth`] frames in flight). A frame's time is the
+    /// interval since the frame before came out (the pipeline's throughput); its latency, from
+    /// its camera going in to its image read back, is recorded beside it.
+    fn measure_pipelined(
+        &mut self,
+        index: usize,
+        pipeline: Pipeline,
+        name: &str,
+        settings: &FrameSettings,
+        observer: &mut dyn Observer,
+    ) -> Result<Vec<FrameRecord>> {
+        self.walk.reset();
+        let Runner { options, walk, frames, references, image_frames, images, .. } = self;
+        let frames: &Frames = frames;
+        let warmup = options.warmup;
+        let cameras: Vec<&Camera> =
+            std::iter::repeat_n(&frames.cameras[0], warmup).chain(&frames.cameras).collect();
+        walk.pipelined(pipeline, settings, |pipe| -> Result<Vec<FrameRecord>> {
+            let mut records = Vec::with_capacity(frames.cameras.len());
+            let (mut next, mut last) = (0, std::time::Instant::now());
+            for k in 0..cameras.len() {
+                while next < cameras.len() && pipe.in_flight() < pipeline.depth() as u64 {
+                    pipe.submit(cameras[next])?;
+                    next += 1;
+                }
+                let out = pipe.receive()?;
+                let interval = last.elapsed();
+                last = std::time::Instant::now();
+                let Some(i) = k.checked_sub(warmup) else { continue };
+                let (image, mut info) = (out.image, out.info);
+                let latency = info.times.total;
+                info.times.total = interval;
+                let segment = &frames.segments[i];
+                let mut rec = record(i, segment, &info);
+                rec.latency_ms = Some(latency.as_secs_f64() * 1e3);
+                rec.set_coverage(image.covered_pixels() as u64, options.error as f64);
+                if index == 0 && image_frames.contains(&i) {
+                    let caption = format!("{name}, frame {i} ({segment})");
+                    images.push(ReportImage { caption, png: image.png_bytes()? });
+                }
+                references.compare(&mut rec, i, &image, &info)?;
+                records.push(rec);
+                observer.frame_done(name, i, true);
+            }
+            Ok(records)
+        })?
     }
 
     /// A run's start: the caches emptied, then `warmup` frames at the first camera to fill
@@ -239,8 +303,12 @@ impl Runner<'_> {
             ),
             _ => String::new(),
         };
+        let pipeline = match plan.pipeline {
+            Pipeline::Serial => String::new(),
+            p => format!("; {} (frame time = throughput, latency recorded)", p.description()),
+        };
         format!(
-            "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}{shadows}",
+            "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}{shadows}{pipeline}",
             o.error,
             plan.occlusion.name()
         )

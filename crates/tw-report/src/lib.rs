@@ -84,8 +84,13 @@ pub struct FrameRecord {
     /// The camera path's segment ("walk", "fly", …).
     #[serde(default)]
     pub segment: String,
-    /// From camera update to image complete.
+    /// From camera update to image complete; through a parallel pipeline (`--pipeline`), the
+    /// interval since the frame before was complete (the pipeline's throughput).
     pub frame_ms: f64,
+    /// Through a parallel pipeline: from the camera going in to its image complete (the
+    /// end-to-end latency, which the pipeline's stages add up to).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency_ms: Option<f64>,
     pub select_ms: f64,
     /// Of `select_ms`: the frame's own cut, and the prefetch views' selections.
     #[serde(default)]

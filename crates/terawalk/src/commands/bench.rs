@@ -65,6 +65,7 @@ fn options(args: &BenchArgs) -> BenchOptions {
                 OcclusionChoice::Is(o) => Some(*o),
             })
             .collect(),
+        pipelines: args.pipeline.clone(),
         reference: args.reference,
         compare: args.compare,
         reference_samples: args.reference_samples,

@@ -143,6 +143,7 @@ fn bench_args(store: &Path, path_file: &Path, out: &Path) -> crate::cli::BenchAr
         error: 1.0,
         memory: 1 << 30,
         occlusion: tw_frame::Occlusion::ALL.iter().map(|&o| crate::cli::OcclusionChoice::Is(o)).collect(),
+        pipeline: vec![tw_frame::Pipeline::Serial],
         reference: false,
         compare: Some(30),
         reference_samples: 1,

@@ -122,8 +122,26 @@ pub fn print_run(run: &Run) {
             "nodes", run.name, node_tests, hidden
         );
     }
+    print_latency(run);
     print_shadows(run);
     print_popping(run);
+}
+
+/// A pipelined run's latency: from a camera going in to its image, median and p99 (its frame
+/// times above are the pipeline's throughput).
+fn print_latency(run: &Run) {
+    let latency: Vec<f64> = run.frames.iter().filter_map(|f| f.latency_ms).collect();
+    if latency.is_empty() {
+        return;
+    }
+    let median = tw_report::stats::median(&latency).unwrap_or(f64::NAN);
+    let p99 = tw_report::stats::percentile(&latency, 99.0).unwrap_or(f64::NAN);
+    outln!(
+        "{:>10}: {}: latency (camera in to image out) median {median:.1} ms, p99 {p99:.1} ms, {:.2} frames of its median frame time",
+        "latency",
+        run.name,
+        median / run.summary.median_ms
+    );
 }
 
 /// `--reference-samples`: a run's PSNR against the supersampled references, its brute-force
