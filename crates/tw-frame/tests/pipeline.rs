@@ -1,5 +1,6 @@
 //! The parallel pipelines (crates/tw-frame/src/pipeline) stay conservative: with the same LOD
-//! cut (pages loaded before drawing), every frame that comes out of `gigawalk` or `switch` is
+//! cut (pages loaded before drawing), every frame that comes out of `gigawalk`, `switch` or
+//! `alternate` is
 //! the image of `--occlusion none` for its camera, pixel for pixel, although its occluders are
 //! the visible set of two frames before, culled on another device. On a walk through the plant,
 //! on teleports (the history is then useless as occluders) and on the approach to an assembly;
@@ -75,6 +76,9 @@ fn compare(
         (Pipeline::Switch, Occlusion::Hzb),
         (Pipeline::Switch, Occlusion::Queries),
         (Pipeline::Gigawalk, Occlusion::None),
+        (Pipeline::Alternate, Occlusion::Hzb),
+        (Pipeline::Alternate, Occlusion::Queries),
+        (Pipeline::Alternate, Occlusion::GpuHzb),
     ];
     if gl && samples > 1 {
         runs.retain(|r| r.1 != Occlusion::Queries);
@@ -162,7 +166,7 @@ fn pipelines_stop_cleanly_with_frames_in_flight() {
     let store = plant();
     let cams = cameras(&store, PathPart::Walk, 12, 1);
     let Some(mut w) = common::walkthrough(store, wgpu::Backends::VULKAN, "stop", 256 << 20) else { return };
-    for kind in [Pipeline::Gigawalk, Pipeline::Switch] {
+    for kind in [Pipeline::Gigawalk, Pipeline::Switch, Pipeline::Alternate] {
         let got = w
             .pipelined(kind, &settings(Occlusion::Hzb), |pipe| {
                 assert!(pipe.receive().is_err(), "a frame came out before any was submitted");
@@ -183,6 +187,7 @@ fn pipelines_stop_cleanly_with_frames_in_flight() {
 fn unsupported_combinations_are_refused() {
     assert!(Pipeline::Gigawalk.supports(Occlusion::Queries).unwrap_err().contains("--pipeline switch"));
     assert!(Pipeline::Switch.supports(Occlusion::GpuHzb).unwrap_err().contains("--occlusion gpu-hzb"));
+    assert!(Pipeline::Alternate.supports(Occlusion::GpuHzb).is_ok());
     for p in Pipeline::ALL {
         assert!(p.supports(Occlusion::Hzb).is_ok() && p.supports(Occlusion::None).is_ok());
         assert_eq!(Pipeline::parse(p.name()), Some(p));

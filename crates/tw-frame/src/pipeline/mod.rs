@@ -16,6 +16,11 @@
 //!   HZB), the other renders frame i+1's occluders. Each context's occluders are the visible
 //!   set it found two frames before, which it keeps (a depth buffer never leaves its device
 //!   for `queries`). **S** and **RVG** are as above. Culls with `queries`, `hzb` or `none`.
+//! - [`Pipeline::Alternate`]: the switch without its render context, for machines where every
+//!   device shares the same cores (Mesa's CPU drivers): the two contexts each draw their frame
+//!   whole, the serial two-pass frame on their own device with their own history (the
+//!   walkthrough's renderer and one more), and the frames are put back in order. No geometry
+//!   is drawn twice; two frames are culled and rasterized at once. Culls with every strategy.
 //!
 //! Both stay conservative: every occluder is geometry of the frame's own cut drawn with the
 //! frame's camera, so frame i's image is that of `--occlusion none` (the tests in
@@ -35,9 +40,8 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 use tw_gpu::Image;
-use tw_runtime::Camera;
+use tw_runtime::{Camera, ClusterRef};
 
-use crate::occlude::VisibleSet;
 use crate::{FrameError, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 
 /// How a frame's stages run (`--pipeline`).
@@ -52,16 +56,20 @@ pub enum Pipeline {
     Gigawalk,
     /// Two occlusion contexts swapping roles every frame, plus the render context.
     Switch,
+    /// Two contexts taking turns, each drawing its frames whole.
+    Alternate,
 }
 
 impl Pipeline {
-    pub const ALL: [Pipeline; 3] = [Pipeline::Serial, Pipeline::Gigawalk, Pipeline::Switch];
+    pub const ALL: [Pipeline; 4] =
+        [Pipeline::Serial, Pipeline::Gigawalk, Pipeline::Switch, Pipeline::Alternate];
 
     pub fn name(self) -> &'static str {
         match self {
             Pipeline::Serial => "serial",
             Pipeline::Gigawalk => "gigawalk",
             Pipeline::Switch => "switch",
+            Pipeline::Alternate => "alternate",
         }
     }
 
@@ -75,6 +83,7 @@ impl Pipeline {
             Pipeline::Serial => "serial stages",
             Pipeline::Gigawalk => "GigaWalk pipeline: select, occluders, culling and drawing on four threads, two devices",
             Pipeline::Switch => "occlusion switch: two occlusion contexts taking turns, select and drawing on threads of their own",
+            Pipeline::Alternate => "alternate frames: two contexts on devices of their own each drawing every other frame whole, select on a thread of its own",
         }
     }
 
@@ -83,7 +92,7 @@ impl Pipeline {
     /// contexts; neither runs `gpu-hzb`, whose tests feed the same device's indirect draws.
     pub fn supports(self, occlusion: Occlusion) -> Result<(), String> {
         match (self, occlusion) {
-            (Pipeline::Serial, _) | (_, Occlusion::None | Occlusion::Hzb) => Ok(()),
+            (Pipeline::Serial | Pipeline::Alternate, _) | (_, Occlusion::None | Occlusion::Hzb) => Ok(()),
             (Pipeline::Switch, Occlusion::Queries) => Ok(()),
             (p, o) => Err(format!(
                 "--pipeline {} cannot cull with --occlusion {}: {}",
@@ -104,6 +113,7 @@ impl Pipeline {
             Pipeline::Serial => 1,
             Pipeline::Gigawalk => 4,
             Pipeline::Switch => 4,
+            Pipeline::Alternate => 3,
         }
     }
 }
@@ -118,8 +128,8 @@ pub struct PipelinedFrame {
     /// back); `times.select` is S's, `times.cull` the culling's (the depth read back included),
     /// `times.upload` and `times.render` the render stage's.
     pub info: FrameInfo,
-    /// What the render stage drew, pass by pass.
-    pub visible: VisibleSet,
+    /// The clusters drawn (both passes).
+    pub drawn: Vec<ClusterRef>,
 }
 
 /// A camera on its way in: its tag and when it was submitted.
@@ -214,12 +224,14 @@ impl Walkthrough {
         }
         let contexts = match kind {
             Pipeline::Serial => 0,
-            Pipeline::Gigawalk => 1,
+            Pipeline::Gigawalk | Pipeline::Alternate => 1,
             Pipeline::Switch => 2,
         };
         let mut occluders = Vec::with_capacity(contexts);
         for _ in 0..contexts {
-            occluders.push(self.renderer.sibling()?);
+            let mut device = self.renderer.sibling()?;
+            device.set_store_colors(self.streamer.store());
+            occluders.push(device);
         }
         self.occlusion.reset();
         let result = stages::run(self, kind, settings, occluders, body);

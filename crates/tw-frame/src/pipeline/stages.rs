@@ -9,6 +9,8 @@
 //! - [`context`] (one of the switch's two occlusion contexts): occluders, then the tests, on
 //!   one device that keeps its own history.
 //! - [`render`] (RVG): the visible set drawn on the walkthrough's renderer, the image read back.
+//! - [`whole`] (one of `alternate`'s two contexts): the serial frame's culling and drawing on
+//!   one device, the image read back; [`in_order`] puts the two contexts' frames back in order.
 
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
 use std::sync::Arc;
@@ -85,6 +87,7 @@ pub(super) fn run<R>(
     let (out, frames) = channel();
     let mut pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind };
     let Walkthrough { streamer, renderer, selection, .. } = walk;
+    let pacer = Pacer::new(2);
     std::thread::scope(|s| {
         let store = &store;
         let mut occluders = occluders.into_iter();
@@ -102,7 +105,7 @@ pub(super) fn run<R>(
                 let mut device = next_device()?;
                 let o = out.clone();
                 spawn(s, "select", o.clone(), move || {
-                    select(streamer, selection, &settings, size, cameras, vec![cut_tx])
+                    select(streamer, selection, &settings, size, cameras, vec![cut_tx], None)
                 })?;
                 spawn(s, "occluders", o.clone(), move || {
                     occluders_stage(&mut device, store, &settings, cut_rx, history_rx, occluded_tx)
@@ -124,10 +127,32 @@ pub(super) fn run<R>(
                     tested_rxs.push(tested_rx);
                 }
                 spawn(s, "select", out.clone(), move || {
-                    select(streamer, selection, &settings, size, cameras, cut_txs)
+                    select(streamer, selection, &settings, size, cameras, cut_txs, None)
                 })?;
                 let o = out.clone();
                 spawn(s, "render", out, move || render(renderer, store, tested_rxs, o))?;
+            }
+            Pipeline::Alternate => {
+                let (mut cut_txs, mut done_rxs) = (Vec::new(), Vec::new());
+                let second = next_device()?;
+                let devices: [(&str, Device<'_>); 2] =
+                    [("frames-a", Device::Borrowed(renderer)), ("frames-b", Device::Owned(second))];
+                let pacer = &pacer;
+                for (name, device) in devices {
+                    let (cut_tx, cut_rx) = sync_channel(0);
+                    // One finished frame may wait for its turn while the context goes on.
+                    let (done_tx, done_rx) = sync_channel(1);
+                    spawn(s, name, out.clone(), move || {
+                        whole(device, store, &settings, cut_rx, done_tx, pacer)
+                    })?;
+                    cut_txs.push(cut_tx);
+                    done_rxs.push(done_rx);
+                }
+                spawn(s, "select", out.clone(), move || {
+                    select(streamer, selection, &settings, size, cameras, cut_txs, Some(pacer))
+                })?;
+                let o = out.clone();
+                spawn(s, "in-order", out, move || in_order(done_rxs, o))?;
             }
         }
         let result = body(&mut pipe);
@@ -167,7 +192,9 @@ fn select(
     viewport: (u32, u32),
     cameras: Receiver<Submitted>,
     next: Vec<SyncSender<Arc<Cut>>>,
+    pacer: Option<&Pacer>,
 ) -> Result<(), FrameError> {
+    let mut last_dispatch: Option<Instant> = None;
     for Submitted { frame, camera, at } in cameras {
         let start = Instant::now();
         let Streamed { pages, stats, times } =
@@ -188,11 +215,55 @@ fn select(
                 ..Default::default()
             },
         };
+        if let Some(pacer) = pacer {
+            pacer.wait_after(last_dispatch);
+        }
         if next[(frame % next.len() as u64) as usize].send(Arc::new(cut)).is_err() {
             break;
         }
+        last_dispatch = Some(Instant::now());
     }
     Ok(())
+}
+
+/// Frame pacing for contexts that take turns (`alternate`; the micro-stutter of alternate-frame
+/// rendering): two contexts handed frames back to back finish them back to back, and the
+/// frames come out in pairs, 1 ms then 90 ms apart (measured on the 10^8 walk). S therefore
+/// hands a context its frame no sooner than a share of a context's frame time after the frame
+/// before: with two contexts, half of it, so their frames come out evenly spaced.
+pub(super) struct Pacer {
+    contexts: u32,
+    /// A context's time for one frame, cut in to image out, averaged (ns; 0: none yet).
+    frame_ns: std::sync::atomic::AtomicU64,
+}
+
+impl Pacer {
+    fn new(contexts: u32) -> Pacer {
+        Pacer { contexts, frame_ns: std::sync::atomic::AtomicU64::new(0) }
+    }
+
+    /// A context took `busy` for a frame: into the running average (an eighth of the new one).
+    fn record(&self, busy: Duration) {
+        use std::sync::atomic::Ordering::Relaxed;
+        let new = busy.as_nanos().min(u64::MAX as u128) as u64;
+        let old = self.frame_ns.load(Relaxed);
+        let avg = if old == 0 { new } else { old - old / 8 + new / 8 };
+        self.frame_ns.store(avg, Relaxed);
+    }
+
+    /// The interval between two frames handed out.
+    fn spacing(&self) -> Duration {
+        Duration::from_nanos(self.frame_ns.load(std::sync::atomic::Ordering::Relaxed) / self.contexts as u64)
+    }
+
+    /// Waits until the spacing has passed since `last` (the previous frame handed out).
+    fn wait_after(&self, last: Option<Instant>) {
+        if let Some(due) = last.map(|l| l + self.spacing()) {
+            if let Some(left) = due.checked_duration_since(Instant::now()) {
+                std::thread::sleep(left);
+            }
+        }
+    }
 }
 
 /// OR: frame i's cut split by the visible set of frame i−2 (`histories` brings one a frame,
@@ -353,35 +424,118 @@ fn render(
         let decoded = cut.decoded();
         set.draw(renderer, &cut.camera, grid_step, &decoded)?;
         let image = renderer.read_color()?;
-        let gpu = renderer.stats();
-        let cut_triangles = decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        let info = frame_info(&cut, &culled, renderer, &decoded);
         drop(decoded);
-        let info = FrameInfo {
-            times: FrameTimes {
-                cull: culled.cull_time,
-                cull_box_tests: culled.box_test_time,
-                cull_triangle_tests: culled.triangle_test_time,
-                cull_readback: culled.readback_time,
-                upload: gpu.upload,
-                render: gpu.render,
-                total: cut.submitted.elapsed(),
-                ..cut.times
-            },
-            select: cut.select,
-            stream: cut.stream,
-            cut_triangles,
-            triangles: gpu.triangles,
-            masked_triangles: gpu.masked_triangles,
-            clusters: gpu.clusters,
-            draw_calls: gpu.draw_calls,
-            occlusion: culled.stats,
-            gpu: gpu.pool,
-            shadow: ShadowInfo::default(),
-        };
-        let frame = PipelinedFrame { frame: cut.frame, image, info, visible: set };
+        let frame = PipelinedFrame { frame: cut.frame, image, info, drawn: culled.drawn };
         if out.send(Ok(frame)).is_err() {
             break;
         }
     }
     Ok(())
+}
+
+/// A renderer a stage draws with: the walkthrough's own, or one the pipeline opened.
+enum Device<'a> {
+    Borrowed(&'a mut Renderer),
+    Owned(Renderer),
+}
+
+impl Device<'_> {
+    fn get(&mut self) -> &mut Renderer {
+        match self {
+            Device::Borrowed(r) => r,
+            Device::Owned(r) => r,
+        }
+    }
+}
+
+/// One of `alternate`'s contexts: every other frame culled and drawn whole on its `device`
+/// ([`crate::occlude::draw_culled`], the serial frame's steps, with this context's own
+/// history), its image read back and handed to [`in_order`].
+fn whole(
+    mut device: Device<'_>,
+    store: &Store,
+    settings: &FrameSettings,
+    cuts: Receiver<Arc<Cut>>,
+    next: SyncSender<PipelinedFrame>,
+    pacer: &Pacer,
+) -> Result<(), FrameError> {
+    let renderer = device.get();
+    let mut state = OcclusionState {
+        triangle_culling: settings.triangle_culling,
+        visible_pixels: settings.visible_pixels,
+        ..Default::default()
+    };
+    for cut in cuts {
+        let start = Instant::now();
+        let decoded = cut.decoded();
+        let culled = crate::occlude::draw_culled(
+            settings.occlusion,
+            &mut state,
+            renderer,
+            store,
+            &cut.camera,
+            &decoded,
+            cut.bounds(),
+        )?;
+        let image = renderer.read_color()?;
+        pacer.record(start.elapsed());
+        let info = frame_info(&cut, &culled, renderer, &decoded);
+        drop(decoded);
+        if next.send(PipelinedFrame { frame: cut.frame, image, info, drawn: culled.drawn }).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// `alternate`'s frames back in submission order (frame i from `done[i % len]`, its tag
+/// checked), to the output.
+fn in_order(done: Vec<Receiver<PipelinedFrame>>, out: Output) -> Result<(), FrameError> {
+    for expected in 0u64.. {
+        let Ok(frame) = done[(expected % done.len() as u64) as usize].recv() else { break };
+        if frame.frame != expected {
+            return Err(FrameError::Pipeline(format!(
+                "frame {} came out where frame {expected} was due",
+                frame.frame
+            )));
+        }
+        if out.send(Ok(frame)).is_err() {
+            break;
+        }
+    }
+    Ok(())
+}
+
+/// A pipelined frame's figures: S's selection and streaming, the culling's, the drawing
+/// renderer's; `times.total` is the latency so far (submitted to now).
+fn frame_info(
+    cut: &Cut,
+    culled: &Culled,
+    renderer: &Renderer,
+    decoded: &[(ClusterRef, &PageCluster)],
+) -> FrameInfo {
+    let gpu = renderer.stats();
+    FrameInfo {
+        times: FrameTimes {
+            cull: culled.cull_time,
+            cull_box_tests: culled.box_test_time,
+            cull_triangle_tests: culled.triangle_test_time,
+            cull_readback: culled.readback_time,
+            upload: gpu.upload,
+            render: gpu.render,
+            total: cut.submitted.elapsed(),
+            ..cut.times
+        },
+        select: cut.select,
+        stream: cut.stream,
+        cut_triangles: decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum(),
+        triangles: gpu.triangles,
+        masked_triangles: gpu.masked_triangles,
+        clusters: gpu.clusters,
+        draw_calls: gpu.draw_calls,
+        occlusion: culled.stats,
+        gpu: gpu.pool,
+        shadow: ShadowInfo::default(),
+    }
 }

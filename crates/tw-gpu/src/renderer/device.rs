@@ -70,7 +70,8 @@ impl Renderer {
     }
 
     /// Another headless renderer like this one, on a device of its own: the same backend,
-    /// size, samples per pixel, GPU budget, draw mode and colours. The occlusion contexts of
+    /// size, samples per pixel, GPU budget, draw mode and colour mode (object colours are the
+    /// caller's: [`Renderer::set_store_colors`]). The occlusion contexts of
     /// the parallel frame pipelines (tw-frame's `pipeline`) draw on such devices; on Mesa's CPU
     /// drivers each device has its own rasterizer threads, so two of them draw at once. Fails
     /// when the backend's first adapter is not this renderer's (the occlusion tests must see

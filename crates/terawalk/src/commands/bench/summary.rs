@@ -136,11 +136,15 @@ fn print_latency(run: &Run) {
     }
     let median = tw_report::stats::median(&latency).unwrap_or(f64::NAN);
     let p99 = tw_report::stats::percentile(&latency, 99.0).unwrap_or(f64::NAN);
+    // Frames leave a pipeline unevenly when stages finish together; frames over the run's
+    // whole time is the throughput a median of intervals may hide.
+    let total_ms: f64 = run.frames.iter().map(|f| f.frame_ms).sum();
     outln!(
-        "{:>10}: {}: latency (camera in to image out) median {median:.1} ms, p99 {p99:.1} ms, {:.2} frames of its median frame time",
+        "{:>10}: {}: latency (camera in to image out) median {median:.1} ms, p99 {p99:.1} ms, {:.2} frames of its median frame time; throughput {:.1} fps (frames ÷ time)",
         "latency",
         run.name,
-        median / run.summary.median_ms
+        median / run.summary.median_ms,
+        run.frames.len() as f64 * 1e3 / total_ms
     );
 }
 
