@@ -146,12 +146,16 @@ pub struct Pipe {
     submitted: u64,
     received: u64,
     kind: Pipeline,
+    /// The error the pipeline stopped on, once it came out: later calls return it at once
+    /// rather than wait on stages that may wait for cameras.
+    failed: Option<String>,
 }
 
 impl Pipe {
     /// Hands the next camera to the pipeline; blocks while its first stage is busy. Returns the
     /// frame's tag. Fails when the pipeline has stopped on an error (that error).
     pub fn submit(&mut self, camera: &Camera) -> Result<u64, FrameError> {
+        self.check_failed()?;
         let frame = self.submitted;
         let sent = match &self.cameras {
             Some(tx) => tx.send(Submitted { frame, camera: *camera, at: Instant::now() }).is_ok(),
@@ -168,6 +172,7 @@ impl Pipe {
     /// The next frame, in submission order; blocks until it is drawn. Fails when a stage
     /// failed, or when no frame is in flight.
     pub fn receive(&mut self) -> Result<PipelinedFrame, FrameError> {
+        self.check_failed()?;
         if self.received == self.submitted {
             return Err(FrameError::Pipeline("no frame in flight: submit a camera first".into()));
         }
@@ -176,9 +181,24 @@ impl Pipe {
                 self.received += 1;
                 Ok(frame)
             }
-            Ok(Err(e)) => Err(e),
-            Err(_) => Err(FrameError::Pipeline("the pipeline stopped".into())),
+            Ok(Err(e)) => Err(self.fail(e)),
+            Err(_) => Err(self.fail(FrameError::Pipeline("the pipeline stopped".into()))),
         }
+    }
+
+    /// The error the pipeline stopped on, if it has.
+    fn check_failed(&self) -> Result<(), FrameError> {
+        match &self.failed {
+            Some(e) => Err(FrameError::Pipeline(format!("stopped earlier: {e}"))),
+            None => Ok(()),
+        }
+    }
+
+    /// Remembers that the pipeline stopped on `e`, and returns it.
+    fn fail(&mut self, e: FrameError) -> FrameError {
+        self.failed = Some(e.to_string());
+        self.cameras = None;
+        e
     }
 
     /// Frames submitted and not yet received.
@@ -195,10 +215,10 @@ impl Pipe {
     fn stopped_error(&mut self) -> FrameError {
         while let Ok(item) = self.frames.recv() {
             if let Err(e) = item {
-                return e;
+                return self.fail(e);
             }
         }
-        FrameError::Pipeline("the pipeline stopped".into())
+        self.fail(FrameError::Pipeline("the pipeline stopped".into()))
     }
 }
 

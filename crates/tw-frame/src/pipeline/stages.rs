@@ -85,7 +85,7 @@ pub(super) fn run<R>(
     let size = walk.renderer.size();
     let (cameras_tx, cameras) = sync_channel::<Submitted>(0);
     let (out, frames) = channel();
-    let mut pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind };
+    let mut pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind, failed: None };
     let Walkthrough { streamer, renderer, selection, .. } = walk;
     let pacer = Pacer::new(2);
     std::thread::scope(|s| {
@@ -136,7 +136,7 @@ pub(super) fn run<R>(
                 let (mut cut_txs, mut done_rxs) = (Vec::new(), Vec::new());
                 let second = next_device()?;
                 let devices: [(&str, Device<'_>); 2] =
-                    [("frames-a", Device::Borrowed(renderer)), ("frames-b", Device::Owned(second))];
+                    [("frames-a", Device::Borrowed(renderer)), ("frames-b", Device::Owned(Box::new(second)))];
                 let pacer = &pacer;
                 for (name, device) in devices {
                     let (cut_tx, cut_rx) = sync_channel(0);
@@ -163,18 +163,23 @@ pub(super) fn run<R>(
 }
 
 /// Starts stage `name` on a scoped thread: `work` runs until its input closes; an error it
-/// returns is sent to `out` before the stage's channels close, so the caller sees the error
-/// before the end of the output.
+/// returns, or a panic, is sent to `out` before the stage's channels close, so the caller sees
+/// it before the end of the output.
 fn spawn<'scope>(
     s: &'scope Scope<'scope, '_>,
     name: &str,
     out: Output,
     work: impl FnOnce() -> Result<(), FrameError> + Send + 'scope,
 ) -> Result<(), FrameError> {
+    let stage = name.to_string();
     std::thread::Builder::new()
         .name(format!("tw-{name}"))
         .spawn_scoped(s, move || {
-            if let Err(e) = work() {
+            // A panic is sent on as an error too: the stage before this one may be waiting for
+            // a camera and keep the output open, so the caller would otherwise wait forever.
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work))
+                .unwrap_or_else(|_| Err(FrameError::Pipeline(format!("the {stage} stage panicked"))));
+            if let Err(e) = result {
                 let _ = out.send(Err(e));
             }
         })
@@ -437,7 +442,7 @@ fn render(
 /// A renderer a stage draws with: the walkthrough's own, or one the pipeline opened.
 enum Device<'a> {
     Borrowed(&'a mut Renderer),
-    Owned(Renderer),
+    Owned(Box<Renderer>),
 }
 
 impl Device<'_> {
@@ -537,5 +542,109 @@ fn frame_info(
         occlusion: culled.stats,
         gpu: gpu.pool,
         shadow: ShadowInfo::default(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Three stages wired as the pipelines wire theirs (rendezvous channels, [`spawn`], one
+    /// output): the one at `failing` fails (or panics) at frame 3. The body gets frames 0–2, then that
+    /// stage's error, further submits fail with it too, and the scope ends: no stage waits
+    /// forever, whichever fails.
+    fn chain_with_failure(failing: usize) {
+        let (cameras_tx, cameras) = sync_channel::<Submitted>(0);
+        let (out, frames) = channel();
+        let mut pipe = Pipe {
+            cameras: Some(cameras_tx),
+            frames,
+            submitted: 0,
+            received: 0,
+            kind: Pipeline::Gigawalk,
+            failed: None,
+        };
+        let fail = |stage: usize, frame: u64| -> Result<(), FrameError> {
+            if stage == failing && frame == 3 {
+                return Err(FrameError::Pipeline(format!("stage {stage} failed at frame {frame}")));
+            }
+            if stage + 3 == failing && frame == 3 {
+                panic!("stage {stage} panicked at frame {frame}");
+            }
+            Ok(())
+        };
+        let expected = if failing < 3 {
+            format!("stage {failing} failed")
+        } else {
+            format!("the {} stage panicked", ["first", "second", "third"][failing - 3])
+        };
+        std::thread::scope(|s| {
+            let (a_tx, a_rx) = sync_channel::<u64>(0);
+            let (b_tx, b_rx) = sync_channel::<u64>(0);
+            spawn(s, "first", out.clone(), move || {
+                for c in cameras {
+                    fail(0, c.frame)?;
+                    if a_tx.send(c.frame).is_err() {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+            spawn(s, "second", out.clone(), move || {
+                for f in a_rx {
+                    fail(1, f)?;
+                    if b_tx.send(f).is_err() {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+            let o = out.clone();
+            spawn(s, "third", out, move || {
+                for frame in b_rx {
+                    fail(2, frame)?;
+                    let image = tw_gpu::Image { width: 1, height: 1, rgba: vec![0; 4] };
+                    let done = PipelinedFrame { frame, image, info: FrameInfo::default(), drawn: Vec::new() };
+                    if o.send(Ok(done)).is_err() {
+                        break;
+                    }
+                }
+                Ok(())
+            })
+            .unwrap();
+            let camera =
+                Camera::new(glam::Vec3::ZERO, glam::Vec3::X, glam::Vec3::Z, 1.0, 0.1, 100.0).unwrap();
+            for expected in 0..3u64 {
+                pipe.submit(&camera).unwrap();
+                assert_eq!(pipe.receive().unwrap().frame, expected);
+            }
+            // Frame 3 fails somewhere; the error comes out of receive, or of the submits
+            // that follow once the first stage has stopped.
+            let error = match pipe.submit(&camera) {
+                Err(e) => e,
+                Ok(_) => match pipe.receive() {
+                    Err(e) => e,
+                    Ok(f) => panic!("frame {} came out of a failed stage", f.frame),
+                },
+            };
+            assert!(error.to_string().contains(&expected), "{error}");
+            // Later calls fail at once, naming the error, and never wait.
+            for _ in 0..3 {
+                let again = pipe.submit(&camera).unwrap_err().to_string();
+                assert!(again.contains(&expected), "{again}");
+                assert!(pipe.receive().is_err());
+            }
+            drop(pipe);
+        });
+    }
+
+    #[test]
+    fn a_failing_stage_stops_every_stage_and_its_error_comes_out() {
+        // 0–2: stage k returns an error; 3–5: stage k − 3 panics.
+        for failing in 0..6 {
+            chain_with_failure(failing);
+        }
     }
 }
