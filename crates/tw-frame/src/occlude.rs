@@ -243,7 +243,7 @@ pub fn draw_culled(
         return crate::gpu_hzb::draw_gpu_hzb(state, renderer, grid_step, camera, clusters, bounds);
     }
     let cull = CullPlan::new(state, clusters);
-    cull.draw_first(strategy, state, renderer, camera, grid_step)?;
+    cull.draw_first(strategy, state, renderer, camera, grid_step, false)?;
     let tester = match strategy {
         Occlusion::Hzb => Tester::Depth(DepthFrame::read(renderer)?),
         _ => Tester::Queries(renderer),
@@ -395,7 +395,8 @@ impl<'a> CullPlan<'a> {
         strategy == Occlusion::Hzb && state.triangle_culling
     }
 
-    /// Draws the occluders into `renderer`'s own target, cleared first (colour and depth); the
+    /// Draws the occluders into `renderer`'s own target, cleared first (colour and depth, or
+    /// with `depth_only` the depth alone: an occlusion context whose colour nobody reads); the
     /// caller has begun the renderer's frame.
     pub(crate) fn draw_first(
         &self,
@@ -404,16 +405,15 @@ impl<'a> CullPlan<'a> {
         renderer: &mut Renderer,
         camera: &Camera,
         grid_step: f64,
+        depth_only: bool,
     ) -> Result<(), FrameError> {
         let masks = Self::partial_occluders(strategy, state).then_some(&self.split.occluder_masks[..]);
-        renderer.draw_masked(
-            Target::Own,
-            camera,
-            grid_step,
-            &self.by_key.decoded(&self.split.occluders),
-            masks,
-            true,
-        )?;
+        let occluders = self.by_key.decoded(&self.split.occluders);
+        if depth_only {
+            renderer.draw_depth_masked(camera, grid_step, &occluders, masks, true)?;
+        } else {
+            renderer.draw_masked(Target::Own, camera, grid_step, &occluders, masks, true)?;
+        }
         Ok(())
     }
 

@@ -75,6 +75,8 @@ pub(crate) struct Pipelines {
     shaded: Vec<(ShadedKey, wgpu::RenderPipeline)>,
     /// The shadow map's depth-only pipeline.
     shadow_depth: Option<wgpu::RenderPipeline>,
+    /// The eye's depth-only pipelines, by samples per pixel.
+    eye_depth: Vec<(u32, wgpu::RenderPipeline)>,
     item: Option<wgpu::RenderPipeline>,
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
     pub primitive_index: bool,
@@ -144,6 +146,7 @@ impl Pipelines {
             shade,
             shaded: Vec::new(),
             shadow_depth: None,
+            eye_depth: Vec::new(),
             item: None,
             primitive_index: device.features().contains(wgpu::Features::PRIMITIVE_INDEX),
         }
@@ -250,6 +253,48 @@ impl Pipelines {
             ));
         }
         self.item.as_ref().expect("just created")
+    }
+
+    /// The eye's depth-only pipeline at `samples` per pixel (shadow.wgsl `vs_depth` with the
+    /// camera's uniforms, no fragment stage), created on first use: reverse-Z (`Greater`),
+    /// both faces, no bias, as the shaded pipelines write depth. The occluder pass of the
+    /// parallel pipelines (GigaWalk's OR renders depth only) draws with it.
+    pub fn eye_depth(&mut self, device: &wgpu::Device, samples: u32) -> &wgpu::RenderPipeline {
+        if let Some(i) = self.eye_depth.iter().position(|(s, _)| *s == samples) {
+            return &self.eye_depth[i].1;
+        }
+        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("eye depth"),
+            layout: Some(&self.layout),
+            vertex: wgpu::VertexState {
+                module: &self.shade,
+                entry_point: Some("vs_depth"),
+                compilation_options: Default::default(),
+                buffers: &[Some(wgpu::VertexBufferLayout {
+                    array_stride: UNIT,
+                    step_mode: wgpu::VertexStepMode::Vertex,
+                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                })],
+            },
+            primitive: wgpu::PrimitiveState {
+                topology: wgpu::PrimitiveTopology::TriangleList,
+                cull_mode: None,
+                ..Default::default()
+            },
+            depth_stencil: Some(wgpu::DepthStencilState {
+                format: DEPTH_FORMAT,
+                depth_write_enabled: Some(true),
+                depth_compare: Some(wgpu::CompareFunction::Greater),
+                stencil: Default::default(),
+                bias: Default::default(),
+            }),
+            multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
+            fragment: None,
+            multiview_mask: None,
+            cache: None,
+        });
+        self.eye_depth.push((samples, pipeline));
+        &self.eye_depth.last().expect("just pushed").1
     }
 
     /// The shadow map's depth-only pipeline (shadow.wgsl `vs_depth`, no fragment stage),

@@ -297,7 +297,7 @@ fn occluders_stage(
             None
         } else {
             device.begin_frame();
-            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step)?;
+            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step, true)?;
             Some(DepthFrame::read(device)?)
         };
         let split = plan.into_split();
@@ -376,7 +376,7 @@ fn context(
             let decoded = cut.decoded();
             let plan = CullPlan::new(&state, &decoded);
             device.begin_frame();
-            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step)?;
+            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step, true)?;
             let tester = match settings.occlusion {
                 Occlusion::Hzb => Tester::Depth(DepthFrame::read(device)?),
                 _ => Tester::Queries(device),

@@ -74,6 +74,8 @@ pub(crate) enum Pass<'a> {
         own: bool,
     },
     Items,
+    /// A depth-only pass of the eye into the own depth target (its colour is left as it was).
+    EyeDepth,
     /// A depth-only pass into layer `layer` of the shadow map ([`crate::shadow`]).
     ShadowMap {
         layer: u32,

@@ -43,6 +43,8 @@ enum Kind {
         shadow_layers: Option<LookupLayers>,
     },
     Items,
+    /// Depth only, of the eye, into the own depth target (reverse-Z).
+    EyeDepth,
     /// Depth only, into a shadow-map layer (cleared to 1, standard depth).
     ShadowMap,
 }
@@ -136,6 +138,24 @@ impl Renderer {
                 )
             }
         }
+    }
+
+    /// [`draw_masked`](Self::draw_masked) into the own depth target only: no fragment shading,
+    /// the colour target left as it was. What [`read_depth`](Self::read_depth) and
+    /// [`query_boxes`](Self::query_boxes) then see is the depth a shaded pass of the same
+    /// clusters would have left: the occluder pass of GigaWalk's OR, which renders depth only.
+    pub fn draw_depth_masked(
+        &mut self,
+        camera: &Camera,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        self.last_own = true;
+        self.depth_stale = self.samples > 1;
+        let size = (self.width, self.height);
+        self.draw_pass(None, Pass::EyeDepth, size, Eye::Camera(camera), grid_step, clusters, masks, clear)
     }
 
     /// Hardware occlusion queries of `boxes` (scene-space min, max) against the own depth
@@ -395,6 +415,7 @@ impl Renderer {
         let kind = match pass {
             Pass::Shade { format, .. } => Kind::Shade { format, shadow_layers: self.shadow_layers()? },
             Pass::Items => Kind::Items,
+            Pass::EyeDepth => Kind::EyeDepth,
             Pass::ShadowMap { .. } => Kind::ShadowMap,
         };
         match eye {
@@ -606,6 +627,7 @@ impl Renderer {
                 (classified.clone(), Some(classified), Some(lookup))
             }
             Kind::Items => ((self.pipelines.item(&self.device).clone(), None), None, None),
+            Kind::EyeDepth => ((self.pipelines.eye_depth(&self.device, samples).clone(), None), None, None),
             Kind::ShadowMap => ((self.pipelines.shadow_depth(&self.device).clone(), None), None, None),
         })
     }

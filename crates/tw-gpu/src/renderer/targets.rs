@@ -144,6 +144,18 @@ impl Renderer {
                 depth: depth_view,
                 samples: 1,
             },
+            Pass::EyeDepth if self.samples == 1 => {
+                Attachments { color: None, resolve: None, depth: depth_view, samples: 1 }
+            }
+            Pass::EyeDepth => {
+                // The own multisampled depth, which read_depth resolves and queries test.
+                let (device, samples, size) = (&self.device, self.samples, (self.width, self.height));
+                if self.msaa_own.as_ref().is_none_or(|t| t.size != size || t.format != COLOR_FORMAT) {
+                    self.msaa_own = Some(msaa::MsaaTarget::new(device, size, COLOR_FORMAT, samples));
+                }
+                let t = self.msaa_own.as_ref().expect("made above");
+                Attachments { color: None, resolve: None, depth: t.depth.clone(), samples }
+            }
             Pass::Shade { view, .. } if self.samples == 1 => {
                 Attachments { color: Some(view.clone()), resolve: None, depth: depth_view, samples: 1 }
             }
