@@ -116,11 +116,15 @@ fn unpack_normal(p: u32) -> vec3<f32> {
     return vec3<f32>(q) / 511.0;
 }
 
-// The triangle's unit normal (`normal` packed as pool.rs writes it), turned towards the eye:
-// both sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
-// eye.
+// The triangle's unit normal (`normal` packed as pool.rs writes it), turned towards the viewer
+// (Camera::to_viewer: the eye in perspective, the headlight's direction in orthographic): both
+// sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
+// viewer.
 fn viewer_normal(normal: u32, position: vec3<f32>) -> vec3<f32> {
-    let to_eye = normalize(u.eye.xyz - position);
+    var to_eye = u.headlight.xyz;
+    if (u.eye.w != 0.0) {
+        to_eye = normalize(u.eye.xyz - position);
+    }
     var n = unpack_normal(normal);
     let len = length(n);
     if (len > 0.0) {
