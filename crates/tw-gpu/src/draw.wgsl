@@ -121,10 +121,11 @@ fn unpack_normal(p: u32) -> vec3<f32> {
 // sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
 // viewer.
 fn viewer_normal(normal: u32, position: vec3<f32>) -> vec3<f32> {
-    var to_eye = u.headlight.xyz;
-    if (u.eye.w != 0.0) {
-        to_eye = normalize(u.eye.xyz - position);
-    }
+    // Arithmetic, not an `if` on the uniform (docs/RUNTIME.md, "Memory": lavapipe compiles a
+    // shader anew per pass when a branch tests uniforms alone): w = 1 gives eye − position
+    // exactly, w = 0 the headlight.
+    let w = u.eye.w;
+    let to_eye = normalize((u.eye.xyz - position) * w + u.headlight.xyz * (1.0 - w));
     var n = unpack_normal(normal);
     let len = length(n);
     if (len > 0.0) {
