@@ -193,8 +193,9 @@ pub struct ExportArgs {
     /// Pixel error threshold τ of the LOD cut, as `render --error` (0 = full resolution).
     #[arg(long, default_value_t = 1.0, conflicts_with_all = ["region", "tiles"])]
     pub error: f32,
-    /// Camera "eye;target;up;fovy" in input coordinates, as `render --camera`, or just
-    /// "eye;target" (up: the store's axis; the default field of view). Default: `render`'s
+    /// Camera "eye;target;up;fovy" in input coordinates, as `render --camera` (also
+    /// "eye;target;up;ortho:HEIGHT"), or just "eye;target" (up: the store's axis; the default
+    /// field of view). Default: `render`'s
     /// overview of the whole scene.
     #[arg(long, allow_hyphen_values = true, conflicts_with_all = ["region", "tiles"])]
     pub camera: Option<String>,
@@ -312,7 +313,7 @@ pub struct PreviewArgs {
     /// Camera preset framing the model's bounds (ignored with --camera).
     #[arg(long, value_enum, default_value = "iso")]
     pub view: View,
-    /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees".
+    /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees" (perspective only).
     #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// How to colour objects.
@@ -422,8 +423,9 @@ pub struct RenderArgs {
     pub frames: Option<usize>,
     #[command(flatten)]
     pub frame: FrameArgs,
-    /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees". Default: the
-    /// whole scene from an oblique direction.
+    /// Camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees", or
+    /// "x,y,z;x,y,z;x,y,z;ortho:HEIGHT" for an orthographic view HEIGHT input units high.
+    /// Default: the whole scene from an oblique direction.
     #[arg(long, allow_hyphen_values = true, conflicts_with = "path")]
     pub camera: Option<String>,
     /// Pixel error threshold τ of the LOD cut (0 = full resolution).
@@ -562,8 +564,9 @@ pub struct ViewArgs {
     /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
     /// into the cache (see --cache-dir).
     pub store: PathBuf,
-    /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees".
-    /// Default: the first frame of --path, else the whole scene from an oblique direction.
+    /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees"
+    /// (or "…;ortho:HEIGHT": orthographic). Default: the first frame of --path, else the whole
+    /// scene from an oblique direction.
     #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// A camera path (JSON, as `terawalk path` writes and `bench` reads) to play back.

@@ -15,7 +15,7 @@ use tw_frame::FrameSettings;
 use tw_gpu::wgpu;
 use tw_rt::scene::{StoreTracer, TraceSettings};
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
-use tw_runtime::{Camera, SelectOptions, SelectionPages, StreamOptions};
+use tw_runtime::{Camera, Projection, SelectOptions, SelectionPages, StreamOptions};
 use tw_store::Store;
 
 mod common;
@@ -94,21 +94,14 @@ fn agreement(store: Arc<Store>, cameras: &[Camera], what: &str) -> Option<Agreem
                     continue;
                 }
                 a.same_triangle += 1;
-                let ray = tw_rt::Camera::look_at(
-                    camera.eye,
-                    camera.target,
-                    camera.up,
-                    camera.fovy,
-                    W as f32 / H as f32,
-                )
-                .pixel_ray(x, y, W, H);
+                let ray = tw_rt::Camera::for_view(camera, W as f32 / H as f32).pixel_ray(x, y, W, H);
                 let hit = ray.at(traced.distance[p]);
                 let clip = proj * view * hit.extend(1.0);
                 let rt_depth = clip.z / clip.w;
                 let raster_depth = depth.depth[p];
-                // Reverse-Z: depth ≈ near / view depth. Compare view depths, relatively: the
-                // rasterizer interpolates z/w in f32 across the triangle.
-                let to_view = |d: f32| camera.near / d.max(f32::MIN_POSITIVE);
+                // Compare view depths, relatively: the rasterizer interpolates z/w in f32 across
+                // the triangle.
+                let to_view = |d: f32| camera.view_depth_reverse_z(d);
                 let rel = (to_view(rt_depth) - to_view(raster_depth)).abs() / to_view(raster_depth);
                 if rel > 1e-3 {
                     a.depth_outliers += 1;
@@ -165,6 +158,24 @@ fn rays_see_what_the_item_buffer_sees_on_an_assembly_approach() {
     let cameras = path_cameras(&assembly(), PathPart::Approach, 16, 2);
     if let Some(a) = agreement(assembly(), &cameras, "assembly approach") {
         check(&a, "assembly approach");
+    }
+}
+
+/// The same comparison through orthographic cameras: each approach camera with a view as high as
+/// its perspective view is at the target, so the model keeps its size on screen.
+#[test]
+fn rays_see_what_the_item_buffer_sees_in_orthographic_views() {
+    let store = assembly();
+    let cameras: Vec<Camera> = path_cameras(&store, PathPart::Approach, 16, 4)
+        .into_iter()
+        .map(|c| {
+            let height = c.view_height_at((c.target - c.eye).length() as f64) as f32;
+            Camera::with_projection(c.eye, c.target, c.up, Projection::Orthographic { height }, c.near, c.far)
+                .unwrap()
+        })
+        .collect();
+    if let Some(a) = agreement(store, &cameras, "assembly orthographic") {
+        check(&a, "assembly orthographic");
     }
 }
 

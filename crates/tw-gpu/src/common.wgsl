@@ -5,7 +5,8 @@
 
 struct Uniforms {
     view_proj: mat4x4<f32>,
-    // xyz: eye in scene space.
+    // xyz: eye in scene space; w: 1 for a perspective camera, 0 for an orthographic one (whose
+    // viewer is along `headlight` from every point, Camera::to_viewer).
     eye: vec4<f32>,
     // xyz: unit direction towards the sun; w: unused (0).
     sun: vec4<f32>,

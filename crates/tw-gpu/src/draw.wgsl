@@ -116,11 +116,16 @@ fn unpack_normal(p: u32) -> vec3<f32> {
     return vec3<f32>(q) / 511.0;
 }
 
-// The triangle's unit normal (`normal` packed as pool.rs writes it), turned towards the eye:
-// both sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
-// eye.
+// The triangle's unit normal (`normal` packed as pool.rs writes it), turned towards the viewer
+// (Camera::to_viewer: the eye in perspective, the headlight's direction in orthographic): both
+// sides are drawn and lit (inputs are not consistently wound). A degenerate normal faces the
+// viewer.
 fn viewer_normal(normal: u32, position: vec3<f32>) -> vec3<f32> {
-    let to_eye = normalize(u.eye.xyz - position);
+    // Arithmetic, not an `if` on the uniform (docs/RUNTIME.md, "Memory": lavapipe compiles a
+    // shader anew per pass when a branch tests uniforms alone): w = 1 gives eye − position
+    // exactly, w = 0 the headlight.
+    let w = u.eye.w;
+    let to_eye = normalize((u.eye.xyz - position) * w + u.headlight.xyz * (1.0 - w));
     var n = unpack_normal(normal);
     let len = length(n);
     if (len > 0.0) {

@@ -1063,7 +1063,7 @@ mod tests {
             eye: Vec3::new(50.0, 50.0, 200.0),
             target: Vec3::new(50.0, 50.0, 0.0),
             up: Vec3::Y,
-            fovy: 40f32.to_radians(),
+            projection: tw_runtime::Projection::Perspective { fovy: 40f32.to_radians() },
             near: 1.0,
             far: 1000.0,
         };

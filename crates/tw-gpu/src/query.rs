@@ -10,7 +10,8 @@
 //! query per box, up to 4096 per query set (wgpu's limit), all resolved and read back at once.
 //! Results are what the backend counts: samples passed on Vulkan, 0 or 1 on GL (boolean
 //! queries, docs/DESIGN.md, D5). A box the eye is inside (or within the near distance of) is
-//! reported as [`EYE_INSIDE`] without a query: rasterization would clip it away.
+//! reported as [`EYE_INSIDE`] without a query: rasterization would clip it away. An orthographic
+//! camera's near plane is as wide as its view: there every box that reaches the near plane is.
 
 use bytemuck::{Pod, Zeroable};
 use glam::{Mat4, Vec3};
@@ -18,7 +19,8 @@ use glam::{Mat4, Vec3};
 use crate::error::GpuError;
 use crate::readback::Readback;
 
-/// The result for a box that contains the eye (always visible).
+/// The result for a box that contains the eye, or that an orthographic camera's near plane
+/// cuts (always visible).
 pub const EYE_INSIDE: u64 = u64::MAX;
 
 const MAX_QUERIES: usize = 4096;
@@ -144,8 +146,7 @@ impl BoxQueries {
         readback: &mut Readback,
         depth_view: &wgpu::TextureView,
         view_proj: Mat4,
-        eye: Vec3,
-        near: f32,
+        camera: &tw_runtime::Camera,
         boxes: &[(Vec3, Vec3)],
     ) -> Result<Vec<u64>, GpuError> {
         let mut results = vec![0u64; boxes.len()];
@@ -226,11 +227,25 @@ impl BoxQueries {
             }
         }
         for (r, &(lo, hi)) in results.iter_mut().zip(boxes) {
-            let m = Vec3::splat(near);
-            if eye.cmpge(lo - m).all() && eye.cmple(hi + m).all() {
+            if reaches_near_plane(camera, lo, hi) {
                 *r = EYE_INSIDE;
             }
         }
         Ok(results)
+    }
+}
+
+/// Whether rasterizing the box `lo..hi` could lose it to the near plane: in perspective when
+/// the eye is inside it or within the near distance of it; in orthographic when its nearest
+/// point is at most the near distance ahead (the near plane spans the whole view).
+fn reaches_near_plane(camera: &tw_runtime::Camera, lo: Vec3, hi: Vec3) -> bool {
+    let (eye, near) = (camera.eye, camera.near);
+    if camera.is_orthographic() {
+        let dir = camera.direction();
+        let nearest = ((lo + hi) * 0.5 - eye).dot(dir) - ((hi - lo) * 0.5).dot(dir.abs());
+        nearest <= near
+    } else {
+        let m = Vec3::splat(near);
+        eye.cmpge(lo - m).all() && eye.cmple(hi + m).all()
     }
 }

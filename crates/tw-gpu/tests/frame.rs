@@ -227,7 +227,7 @@ fn top_camera() -> Camera {
         eye: Vec3::new(50.0, 50.0, 200.0),
         target: Vec3::new(50.0, 50.0, 0.0),
         up: Vec3::Y,
-        fovy: 40f32.to_radians(),
+        projection: tw_runtime::Projection::Perspective { fovy: 40f32.to_radians() },
         near: 1.0,
         far: 1000.0,
     }
@@ -513,6 +513,56 @@ fn from_device_and_render_to_view_gl() {
 #[test]
 fn from_device_and_render_to_view_vulkan() {
     external(wgpu::Backends::VULKAN);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The orthographic projection.
+
+/// Orthographic: two equal 10 × 10 quads, one 190 and one 50 units below the eye, cover the
+/// same pixels (a view 100 units high on 200 pixels: 20 × 20 each), where perspective makes
+/// the near one about 14 times larger; the shading's viewer direction is the headlight, so both
+/// are shaded alike; a box the near plane cuts anywhere in the view is not queried.
+fn orthographic(backends: wgpu::Backends) {
+    let _g = gpu_lock();
+    let Some(mut r) = renderer(backends, W, H) else { return };
+    let far = quad(30, 45, 40, 55, 10, 3);
+    let near = quad(60, 45, 70, 55, 150, 4);
+    let list = [(key(1), &far), (key(2), &near)];
+    let ortho = Camera { projection: tw_runtime::Projection::Orthographic { height: 100.0 }, ..top_camera() };
+    let buf = r.item_buffer(&ortho, 1.0, &list).unwrap();
+    let v = buf.visible();
+    eprintln!("{backends:?}: orthographic pixels {:?}", v.objects);
+    let (a, b) = (v.objects[&3], v.objects[&4]);
+    assert_eq!(a, b, "equal quads at different distances");
+    assert!((380..=420).contains(&a), "20 x 20 pixels expected, got {a}");
+    let persp = r.item_buffer(&top_camera(), 1.0, &list).unwrap().visible();
+    assert!(persp.objects[&4] > 10 * persp.objects[&3], "{:?}", persp.objects);
+    let img = r.render_clusters(&ortho, 1.0, &list).unwrap();
+    let at = |x: u32, y: u32| img.rgba[((y * W + x) * 4) as usize..][..3].to_vec();
+    // Quad centres: x = 35 and 65 are 15 units left and right of the centre, 30 pixels.
+    assert_eq!(at(W / 2 - 30, H / 2), at(W / 2 + 30, H / 2), "the same shade at any distance");
+    r.begin_frame();
+    r.draw(Target::Own, &ortho, 1.0, &list, true).unwrap();
+    let boxes = [
+        (Vec3::new(0.0, 0.0, 199.5), Vec3::new(5.0, 5.0, 205.0)), // cut by the near plane, off-centre
+        (Vec3::new(32.0, 47.0, 0.0), Vec3::new(38.0, 53.0, 5.0)), // under the far quad: hidden
+        (Vec3::new(10.0, 40.0, 0.0), Vec3::new(20.0, 60.0, 5.0)), // beside it: visible
+    ];
+    let got = r.query_boxes(&ortho, &boxes).unwrap();
+    eprintln!("{backends:?}: orthographic query results {got:?}");
+    assert_eq!(got[0], tw_gpu::query::EYE_INSIDE);
+    assert_eq!(got[1], 0);
+    assert!(got[2] > 0);
+}
+
+#[test]
+fn orthographic_gl() {
+    orthographic(wgpu::Backends::GL);
+}
+
+#[test]
+fn orthographic_vulkan() {
+    orthographic(wgpu::Backends::VULKAN);
 }
 
 // ---------------------------------------------------------------------------------------------

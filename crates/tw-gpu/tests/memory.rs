@@ -37,7 +37,7 @@ fn camera(frame: usize) -> Camera {
         eye: Vec3::new(50.0 + a.cos(), 50.0 + a.sin(), 200.0),
         target: Vec3::new(50.0, 50.0, 0.0),
         up: Vec3::Y,
-        fovy: 40f32.to_radians(),
+        projection: tw_runtime::Projection::Perspective { fovy: 40f32.to_radians() },
         near: 1.0,
         far: 1000.0,
     }

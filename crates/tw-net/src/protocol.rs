@@ -112,7 +112,8 @@ pub struct CameraRequest {
     pub eye: [f32; 3],
     pub target: [f32; 3],
     pub up: [f32; 3],
-    /// Vertical field of view, radians.
+    /// Vertical field of view, radians; with the [`ORTHOGRAPHIC`](Self::ORTHOGRAPHIC) flag the
+    /// orthographic view's height in scene units instead.
     pub fovy: f32,
     pub near: f32,
     pub far: f32,
@@ -124,7 +125,7 @@ pub struct CameraRequest {
     /// gpu-hzb; the receiver checks it).
     pub occlusion: u8,
     /// Bit 0: frustum culling; bit 1: triangle culling (`hzb`); bit 2: load every page of the
-    /// cut before culling (the same cut whatever the timing).
+    /// cut before culling (the same cut whatever the timing); bit 3: an orthographic camera.
     pub flags: u8,
     /// `queries`' visible-pixel cut-off.
     pub visible_pixels: u32,
@@ -134,6 +135,8 @@ impl CameraRequest {
     pub const FRUSTUM_CULLING: u8 = 1;
     pub const TRIANGLE_CULLING: u8 = 2;
     pub const WAIT_FOR_PAGES: u8 = 4;
+    /// The camera is orthographic, [`fovy`](Self::fovy) its view height.
+    pub const ORTHOGRAPHIC: u8 = 8;
     /// [`occlusion`](Self::occlusion): the server's own choice.
     pub const SERVER_OCCLUSION: u8 = 255;
 }

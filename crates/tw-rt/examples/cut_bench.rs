@@ -51,17 +51,9 @@ fn run() -> Result<(), String> {
     let args = parse_args()?;
     let store = Arc::new(Store::open(&args.store).map_err(|e| format!("{}: {e}", args.store.display()))?);
     let input = InputCamera::parse(&args.camera).map_err(|e| e.to_string())?;
-    let camera =
-        Camera::from_input_coordinates(input.eye, input.target, input.up, input.fovy_deg, store.header())
-            .map_err(|e| e.to_string())?;
+    let camera = input.to_scene(store.header()).map_err(|e| e.to_string())?;
     let (scene, triangles) = cut_scene(&store, &camera, &args)?;
-    let rt_camera = tw_rt::Camera::look_at(
-        camera.eye,
-        camera.target,
-        camera.up,
-        camera.fovy,
-        args.width as f32 / args.height as f32,
-    );
+    let rt_camera = tw_rt::Camera::for_view(&camera, args.width as f32 / args.height as f32);
     let pool =
         rayon::ThreadPoolBuilder::new().num_threads(args.threads).build().map_err(|e| e.to_string())?;
     let trace = |mode| pool.install(|| trace_image_with(&scene, &rt_camera, args.width, args.height, mode));

@@ -315,8 +315,12 @@ fn dump(
     for v in [1, width, height] {
         out.write_all(&v.to_le_bytes())?;
     }
+    // The peer's format knows only the pinhole camera (this bench makes no other).
+    let tw_runtime::Projection::Perspective { fovy } = c.projection else {
+        return Err(std::io::Error::other("the dump format holds perspective cameras only"));
+    };
     let cam = [c.origin, c.right, c.up, c.forward].map(|v| v.to_array());
-    for f in cam.iter().flatten().chain(&[c.fov_y, c.aspect]) {
+    for f in cam.iter().flatten().chain(&[fovy, c.aspect]) {
         out.write_all(&f.to_le_bytes())?;
     }
     out.write_all(&(positions.len() as u32).to_le_bytes())?;

@@ -118,8 +118,7 @@ fn camera(store: &Store, view: &View) -> Result<Camera, String> {
     match view {
         View::Camera(s) => {
             let input = InputCamera::parse(s).map_err(|e| e.to_string())?;
-            Camera::from_input_coordinates(input.eye, input.target, input.up, input.fovy_deg, store.header())
-                .map_err(|e| e.to_string())
+            input.to_scene(store.header()).map_err(|e| e.to_string())
         }
         View::Path(part, frame) => {
             let options = PathOptions { frames: 600, part: *part, seed: 2, ..Default::default() };

@@ -118,7 +118,7 @@ fn crosses_box(p: Vec3, light: &Light, grow: f32) -> bool {
 /// of the shadow's edge are left out.
 fn floor_against_analytic(frame: &TracedFrame, light: &Light) -> (usize, usize, Vec<(u32, u32)>) {
     let c = camera();
-    let rays = tw_rt::Camera::look_at(c.eye, c.target, c.up, c.fovy, W as f32 / H as f32);
+    let rays = tw_rt::Camera::for_view(&c, W as f32 / H as f32);
     let (mut lit, mut blocked, mut wrong) = (0, 0, Vec::new());
     for y in 0..H {
         for x in 0..W {

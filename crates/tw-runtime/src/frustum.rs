@@ -203,7 +203,7 @@ mod tests {
     fn infinite_far_plane_is_always_inside() {
         let c = Camera::new(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y, 1.0, 0.5, 50.0).unwrap();
         // Reverse-Z with the far plane at infinity: depth = near / −z.
-        let h = 1.0 / (0.5 * c.fovy).tan();
+        let h = 2.0 / c.view_height_at(1.0) as f32;
         let proj = Mat4::from_cols(
             Vec4::new(h, 0.0, 0.0, 0.0),
             Vec4::new(0.0, h, 0.0, 0.0),
@@ -213,6 +213,37 @@ mod tests {
         let f = Frustum::from_view_projection(&(proj * c.view()));
         assert_eq!(f.test_sphere(Vec3::new(0.0, 0.0, -1e9), 1.0), Containment::Inside);
         assert_eq!(f.test_sphere(Vec3::new(0.0, 0.0, 1e9), 1.0), Containment::Outside);
+    }
+
+    /// Looking down −Z from the origin, a view 4 high and 8 wide, near 1, far 100: the frustum
+    /// is the box |x| ≤ 4, |y| ≤ 2, 1 ≤ −z ≤ 100, the same with reverse-Z.
+    #[test]
+    fn orthographic_frustum_is_a_box() {
+        let c = Camera::orthographic(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y, 4.0, 1.0, 100.0).unwrap();
+        for vp in [c.view_projection(2.0), c.projection_reverse_z(2.0) * c.view()] {
+            let f = Frustum::from_view_projection(&vp);
+            let want = [
+                Vec4::new(1.0, 0.0, 0.0, 4.0),
+                Vec4::new(-1.0, 0.0, 0.0, 4.0),
+                Vec4::new(0.0, 1.0, 0.0, 2.0),
+                Vec4::new(0.0, -1.0, 0.0, 2.0),
+            ];
+            for (p, w) in f.planes.iter().zip(want) {
+                assert!((*p - w).abs().max_element() < 1e-5, "{p:?} against {w:?}");
+            }
+            let b = |lo: [f32; 3], hi: [f32; 3]| f.test_aabb(Vec3::from_array(lo), Vec3::from_array(hi));
+            // Parallel sides: a box 3.5 off the axis is inside near and far alike.
+            assert_eq!(b([3.0, -1.0, -3.0], [3.5, 1.0, -2.0]), Containment::Inside);
+            assert_eq!(b([3.0, -1.0, -99.0], [3.5, 1.0, -98.0]), Containment::Inside);
+            assert_eq!(b([4.5, -1.0, -99.0], [5.0, 1.0, -98.0]), Containment::Outside);
+            assert_eq!(b([-1.0, 2.5, -50.0], [1.0, 3.0, -40.0]), Containment::Outside);
+            assert_eq!(b([-1.0, -1.0, -0.9], [1.0, 1.0, -0.5]), Containment::Outside, "before near");
+            assert_eq!(b([-1.0, -1.0, 0.5], [1.0, 1.0, 3.0]), Containment::Outside, "behind the eye");
+            assert_eq!(b([-1.0, -1.0, -101.0], [1.0, 1.0, -100.5]), Containment::Outside, "beyond far");
+            assert_eq!(b([3.0, 1.0, -5.0], [6.0, 3.0, -4.0]), Containment::Intersecting);
+            assert_eq!(f.test_sphere(Vec3::new(4.5, 0.0, -50.0), 0.6), Containment::Intersecting);
+            assert_eq!(f.test_sphere(Vec3::new(4.5, 0.0, -50.0), 0.4), Containment::Outside);
+        }
     }
 
     #[test]

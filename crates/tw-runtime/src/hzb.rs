@@ -431,6 +431,33 @@ mod tests {
         }
     }
 
+    /// Orthographic from the origin down +X, a view 4 high: a wall at 20 hides a box behind it
+    /// wherever it is in the view, a box in front of it or through a gap is visible, and one
+    /// the near plane cuts is visible without a test.
+    #[test]
+    fn orthographic_boxes_behind_a_wall_are_occluded() {
+        let c = Camera::orthographic(Vec3::ZERO, Vec3::X, Vec3::Z, 4.0, 0.1, 1000.0).unwrap();
+        let vp = view_proj(&c);
+        let hzb = Hzb::build(&wall(&vp, 20.0, 0..8), W, H).unwrap();
+        let shifted = |x: f32, dy: f32, dz: f32| {
+            let (lo, hi) = unit_box_at(x);
+            let d = Vec3::new(0.0, dy, dz);
+            (lo * Vec3::new(1.0, 0.3, 0.3) + d, hi * Vec3::new(1.0, 0.3, 0.3) + d)
+        };
+        for (dy, dz) in [(0.0, 0.0), (-1.5, 1.2), (1.0, -1.2)] {
+            let (lo, hi) = shifted(40.0, dy, dz);
+            assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Occluded, "behind, at {dy} {dz}");
+            assert_eq!(hzb.test_box_single_level(&vp, lo, hi), HzbResult::Occluded);
+            let (lo, hi) = shifted(10.0, dy, dz);
+            assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Visible, "in front, at {dy} {dz}");
+        }
+        // The gap: the 8 left pixel columns (+Y is left when looking down +X with Z up).
+        let (lo, hi) = shifted(40.0, 2.4, 0.0);
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Visible, "through the gap");
+        let (lo, hi) = (Vec3::new(0.05, -0.2, -0.2), Vec3::new(30.0, 0.2, 0.2));
+        assert_eq!(hzb.test_box(&vp, lo, hi), HzbResult::Visible, "cut by the near plane");
+    }
+
     #[test]
     fn bad_sizes_are_errors() {
         assert_eq!(Hzb::build(&[], 0, 4), Err(HzbError::Empty));

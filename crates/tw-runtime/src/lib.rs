@@ -1,7 +1,7 @@
 //! The CPU side of terawalk's per-frame runtime (docs/DESIGN.md "Data flow": camera → select → …):
 //!
-//! - [`camera`]: the scene-space camera, its matrices (right-handed, depth 0..1, optional
-//!   reverse-Z) and the command-line camera string in input coordinates;
+//! - [`camera`]: the scene-space camera, perspective or orthographic, its matrices
+//!   (right-handed, depth 0..1, optional reverse-Z) and the command-line camera string in input coordinates;
 //! - [`frustum`]: frustum planes and box/sphere tests;
 //! - [`fuzz`]: entry points of the fuzz targets that reach the runtime (path files, stores);
 //! - [`hzb`]: the hierarchical Z-buffer and its conservative box test (GigaWalk's occlusion test);
@@ -69,7 +69,7 @@ pub mod triangle_test;
 
 pub use availability::{Availability, Requests};
 pub use cache::{CacheStats, ClusterInfo, Eviction, Inserted, PageCache, PageState, ResidentPage};
-pub use camera::{Camera, InputCamera};
+pub use camera::{Camera, InputCamera, Projection};
 pub use error::RuntimeError;
 pub use frustum::{Containment, Frustum};
 pub use hzb::{Hzb, HzbResult};

@@ -6,11 +6,20 @@
 //! ```
 //!
 //! pixels, for a viewport `H` pixels high: `d` is the distance to the sphere's nearest point, so
-//! the estimate bounds the error anywhere in the sphere. Special cases:
+//! the estimate bounds the error anywhere in the sphere. An orthographic camera, whose view is
+//! `height` units high at every depth, projects the same error to the same pixels anywhere:
+//!
+//! ```text
+//! px = e · H / height
+//! ```
+//!
+//! (the camera's [`Camera::pixels`]; there is no eye to be inside of, and nothing gets finer
+//! nearby: LOD selection picks one level of detail for the whole view). Special cases:
 //! - `e = 0` (full-resolution clusters) projects to 0 everywhere, even with the eye inside;
-//! - the eye inside (or on) the sphere: `+∞` for any `e > 0` (must refine);
+//! - the eye inside (or on) the sphere: `+∞` for any `e > 0` (must refine; perspective only);
 //! - `e = +∞` (root groups, which nothing replaces) stays `+∞`;
-//! - `d` is clamped below by the near plane distance: geometry nearer than that is clipped.
+//! - `d` is clamped below by the near plane distance: geometry nearer than that is clipped
+//!   (perspective only).
 //!
 //! The result is monotone: a larger error, or a sphere that contains another, never projects
 //! to fewer pixels. That is what makes the per-cluster render rule of docs/FORMAT.md give a
@@ -28,8 +37,11 @@ use crate::camera::Camera;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LodMetric {
     eye: DVec3,
-    /// `H / (2 tan(fovy / 2))`.
+    /// [`Camera::pixel_scale`]: `H / (2 tan(fovy / 2))` in perspective, `H / height` in
+    /// orthographic.
     scale: f64,
+    /// An orthographic camera: the distance does not matter.
+    orthographic: bool,
     /// The smallest distance used (the near plane).
     min_distance: f64,
 }
@@ -40,6 +52,7 @@ impl LodMetric {
         LodMetric {
             eye: camera.eye.as_dvec3(),
             scale: camera.pixel_scale(viewport_height),
+            orthographic: camera.is_orthographic(),
             min_distance: (camera.near as f64).max(f64::MIN_POSITIVE),
         }
     }
@@ -51,10 +64,10 @@ impl LodMetric {
         if error <= 0.0 || error.is_nan() {
             return 0.0;
         }
-        if distance <= 0.0 {
+        if distance <= 0.0 && !self.orthographic {
             return f64::INFINITY;
         }
-        error as f64 * self.scale / distance.max(self.min_distance)
+        crate::camera::pixels_at(error as f64, self.scale, self.orthographic, distance.max(self.min_distance))
     }
 
     /// Pixel error of `error` at the sphere `[x, y, z, r]` (scene space).
@@ -132,6 +145,40 @@ mod tests {
         let m = metric();
         let px = m.sphere(f32::MIN_POSITIVE, [1e7, 0.0, 0.0, 1.0]);
         assert!(px > 0.0, "{px}");
+    }
+
+    /// Looking down −Z from the origin with a view 100 units high on a viewport 1000 pixels
+    /// high: 10 pixels per unit at any distance.
+    fn ortho_metric() -> LodMetric {
+        let c = Camera::orthographic(Vec3::ZERO, Vec3::NEG_Z, Vec3::Y, 100.0, 0.1, 1000.0).unwrap();
+        LodMetric::new(&c, 1000.0)
+    }
+
+    #[test]
+    fn orthographic_error_does_not_depend_on_distance() {
+        let m = ortho_metric();
+        for z in [-1.0, -12.0, -500.0] {
+            assert!(close(m.sphere(0.5, [3.0, -2.0, z, 0.5]), 5.0), "at {z}");
+            assert!(close(m.aabb(0.5, Vec3::new(1.0, 1.0, z - 1.0), Vec3::new(2.0, 2.0, z)), 5.0));
+        }
+        // No eye to be inside of: a sphere around the eye projects the same.
+        assert!(close(m.sphere(0.5, [0.0, 0.0, 0.0, 2.0]), 5.0));
+        assert!(close(m.aabb(0.5, Vec3::splat(-1.0), Vec3::splat(1.0)), 5.0));
+        assert_eq!(m.sphere(0.0, [0.0, 0.0, -5.0, 1.0]), 0.0);
+        assert_eq!(m.sphere(f32::INFINITY, [0.0, 0.0, -5.0, 1.0]), f64::INFINITY);
+        assert!(m.sphere(f32::MIN_POSITIVE, [1e7, 0.0, 0.0, 1.0]) > 0.0);
+    }
+
+    /// Two equal boxes, one 5 and one 500 units ahead: the same pixels in orthographic, a
+    /// hundred times fewer for the far one in perspective.
+    #[test]
+    fn equal_boxes_at_different_distances() {
+        let boxes = |z: f32| (Vec3::new(-1.0, -1.0, z - 2.0), Vec3::new(1.0, 1.0, z));
+        let ((a0, a1), (b0, b1)) = (boxes(-5.0), boxes(-500.0));
+        let o = ortho_metric();
+        assert_eq!(o.aabb(0.3, a0, a1), o.aabb(0.3, b0, b1));
+        let p = metric();
+        assert!(close(p.aabb(0.3, a0, a1), 100.0 * p.aabb(0.3, b0, b1)));
     }
 
     #[test]

@@ -15,7 +15,10 @@
 //! ```
 //!
 //! `eye`, `target` and `up` are in the units and axes of the input files (as `--camera`
-//! takes them), `fovy` is the vertical field of view in degrees (1..=179), `segment` names the
+//! takes them), `fovy` is the vertical field of view in degrees (1..=179), the optional
+//! `ortho_height` (> 0, input units) makes the frame orthographic with a view that high (its
+//! `fovy` is then the perspective the viewer's O key returns to; frames without it, as every file
+//! written before orthographic cameras, are perspective), `segment` names the
 //! part of the path a frame belongs to (`"walk"`, `"fly"`, `"recorded"`, …; free text, used to
 //! split reports). [`CameraPath::load`] checks every frame and names the file and frame of the
 //! first bad one; [`CameraPath::save`] writes atomically (a temporary file renamed into place).
@@ -44,6 +47,9 @@ pub struct PathFrame {
     pub up: [f64; 3],
     /// Vertical field of view, degrees.
     pub fovy: f64,
+    /// Orthographic view height (input units); absent: a perspective frame.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ortho_height: Option<f64>,
     /// Which part of the path this frame belongs to ("walk", "fly", "recorded", …).
     #[serde(default)]
     pub segment: String,
@@ -52,7 +58,13 @@ pub struct PathFrame {
 impl PathFrame {
     /// The frame as an [`InputCamera`] (not yet checked; see [`CameraPath::validate`]).
     pub fn input_camera(&self) -> InputCamera {
-        InputCamera { eye: self.eye, target: self.target, up: self.up, fovy_deg: self.fovy }
+        InputCamera {
+            eye: self.eye,
+            target: self.target,
+            up: self.up,
+            fovy_deg: self.fovy,
+            ortho_height: self.ortho_height,
+        }
     }
 
     /// The frame's scene-space camera for `header`'s store.
@@ -67,6 +79,7 @@ impl PathFrame {
             target: camera.target,
             up: camera.up,
             fovy: camera.fovy_deg,
+            ortho_height: camera.ortho_height,
             segment: segment.to_string(),
         }
     }
@@ -94,7 +107,8 @@ impl CameraPath {
     }
 
     /// Checks the header fields and every frame: finite values, eye ≠ target, up not zero and
-    /// not parallel to the view direction, 1 ≤ fovy ≤ 179. Errors name the frame.
+    /// not parallel to the view direction, 1 ≤ fovy ≤ 179, an orthographic height finite and
+    /// > 0. Errors name the frame.
     pub fn validate(&self) -> Result<(), String> {
         if self.format != PATH_FORMAT {
             return Err(format!("\"format\" is {:?}, expected {PATH_FORMAT:?}", self.format));
@@ -186,6 +200,11 @@ fn check_frame(f: &PathFrame) -> Result<(), String> {
     if !(1.0..=179.0).contains(&f.fovy) {
         return Err(format!("field of view must be 1..=179 degrees, got {}", f.fovy));
     }
+    if let Some(h) = f.ortho_height {
+        if !(h > 0.0 && h.is_finite()) {
+            return Err(format!("orthographic height must be finite and > 0, got {h}"));
+        }
+    }
     let d = [f.target[0] - f.eye[0], f.target[1] - f.eye[1], f.target[2] - f.eye[2]];
     let cross =
         [d[1] * f.up[2] - d[2] * f.up[1], d[2] * f.up[0] - d[0] * f.up[2], d[0] * f.up[1] - d[1] * f.up[0]];
@@ -212,6 +231,7 @@ mod tests {
             target: [x + 1.0, 0.0, 1.7],
             up: [0.0, 0.0, 1.0],
             fovy: 60.0,
+            ortho_height: None,
             segment: "walk".into(),
         }
     }
@@ -238,6 +258,7 @@ mod tests {
         .unwrap();
         let p = CameraPath::load(&file).unwrap();
         assert_eq!(p.frames[0].segment, "");
+        assert_eq!(p.frames[0].ortho_height, None, "files without the field are perspective");
         assert_eq!(p.fps, 24.0);
     }
 
@@ -288,5 +309,24 @@ mod tests {
         f.target = f.eye;
         assert!(CameraPath::new(30.0, vec![f]).save(&file).is_err());
         assert!(!file.exists());
+    }
+
+    #[test]
+    fn orthographic_frames_round_trip_and_perspective_ones_are_written_as_before() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("p.json");
+        let ortho = PathFrame { ortho_height: Some(12.5), ..frame(0.0) };
+        let p = CameraPath::new(30.0, vec![frame(0.0), ortho.clone()]);
+        p.save(&file).unwrap();
+        let text = std::fs::read_to_string(&file).unwrap();
+        assert_eq!(text.matches("ortho_height").count(), 1, "only the orthographic frame: {text}");
+        let back = CameraPath::load(&file).unwrap();
+        assert_eq!(back, p);
+        let h = tw_store::Header::empty([-10.0; 3], [10.0; 3], [0.0; 3], 0.01);
+        let c = back.frames[1].to_scene(&h).unwrap();
+        assert_eq!(c.projection, crate::camera::Projection::Orthographic { height: 12.5 });
+        assert!(!back.frames[0].to_scene(&h).unwrap().is_orthographic());
+        let bad = CameraPath::new(30.0, vec![PathFrame { ortho_height: Some(0.0), ..frame(0.0) }]);
+        assert!(bad.validate().unwrap_err().contains("orthographic"));
     }
 }

@@ -97,7 +97,7 @@ pub fn prefetch_views(
     if !prefetch.enabled {
         return Vec::new();
     }
-    let widen = |c: &Camera| Camera { fovy: (c.fovy * prefetch.fov_scale).min(179f32.to_radians()), ..*c };
+    let widen = |c: &Camera| Camera { projection: c.projection.widened(prefetch.fov_scale), ..*c };
     let mut out = Vec::new();
     let wide = widen(current);
     if wide.validate().is_ok() {
@@ -139,7 +139,8 @@ mod tests {
         let p = PrefetchOptions::default();
         let v = prefetch_views(&cam(0.0), &h, &o, &p);
         assert_eq!(v.len(), 1);
-        assert!((v[0].0.fovy - 1.2).abs() < 1e-6 && v[0].1.tau == 0.5);
+        assert_eq!(v[0].0.projection, crate::camera::Projection::Perspective { fovy: 1.2 });
+        assert_eq!(v[0].1.tau, 0.5);
         h.push(cam(0.0));
         assert_eq!(prefetch_views(&cam(1.0), &h, &o, &p).len(), 2);
         assert!(prefetch_views(&cam(1.0), &h, &o, &PrefetchOptions { enabled: false, ..p }).is_empty());

@@ -55,7 +55,7 @@ fn stream_frame(
     let (mut cut, mut view) = (Selection::default(), Selection::default());
     selector.select_available(store, cache, availability, &mut demand, camera, options, &mut cut);
     availability.set_peek_only(true);
-    let wide = Camera { fovy: camera.fovy * 1.2, ..*camera };
+    let wide = Camera { projection: camera.projection.widened(1.2), ..*camera };
     let half = SelectOptions { tau: options.tau * 0.5, ..*options };
     selector.select_available(store, cache, availability, &mut prefetch, &wide, &half, &mut view);
     availability.set_peek_only(false);

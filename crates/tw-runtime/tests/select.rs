@@ -22,6 +22,11 @@ fn camera(eye: [f32; 3], target: [f32; 3]) -> Camera {
         .unwrap()
 }
 
+/// An orthographic camera at `eye` looking at `target` with a view `height` high.
+fn ortho(eye: Vec3, target: Vec3, height: f32) -> Camera {
+    Camera::orthographic(eye, target, Vec3::Z, height, 0.01, 1e5).unwrap()
+}
+
 /// The store's centre and radius in scene space.
 fn scene_sphere(store: &Store) -> (Vec3, f32) {
     let h = store.header();
@@ -413,12 +418,50 @@ fn traversal_selects_what_the_per_cluster_rule_selects() {
         let mut cams = cameras(&store);
         let (c, r) = scene_sphere(&store);
         cams.push(camera((c + Vec3::new(-1.0, 0.1, 0.5) * (30.0 * r)).to_array(), c.to_array()));
+        // Orthographic views, from outside and from inside the model.
+        cams.push(ortho(c + Vec3::new(1.0, 0.3, 0.2) * (3.0 * r), c, r));
+        cams.push(ortho(c + Vec3::new(0.1, 0.05, 0.0) * r, c + Vec3::new(1.0, 0.5, 0.1) * r, 0.2 * r));
         for cam in cams {
             for tau in [0.0, 0.5, 1.0, 3.0, 10.0, 50.0, 1e6] {
                 let sel = select(&store, &cache, &cam, opts(tau, false));
                 assert_eq!(sorted(&sel), brute_force(&store, &cam, opts(tau, false)), "tau {tau} {cam:?}");
             }
         }
+    }
+}
+
+/// In orthographic the pixel error does not depend on distance: the same view height from
+/// near and from far selects the same cut (without frustum culling, which the near plane would
+/// change), a perspective camera does not; a larger view height selects a coarser cut.
+#[test]
+fn orthographic_selection_does_not_depend_on_distance_and_coarsens_with_the_height() {
+    for path in [plant_path(), spheres_path()] {
+        let store = open(path);
+        let cache = PageCache::new(&store, u64::MAX);
+        let (c, r) = scene_sphere(&store);
+        let dir = Vec3::new(1.0, 0.3, 0.2).normalize();
+        for tau in [0.5, 1.0, 4.0] {
+            let o = opts(tau, false);
+            let near = select(&store, &cache, &ortho(c + dir * (1.5 * r), c, r), o);
+            let far = select(&store, &cache, &ortho(c + dir * (40.0 * r), c, r), o);
+            let inside = select(&store, &cache, &ortho(c + dir * (0.3 * r), c, r), o);
+            assert_eq!(sorted(&near), sorted(&far), "tau {tau}: near and far cuts differ");
+            assert_eq!(sorted(&near), sorted(&inside), "tau {tau}: the eye inside the model changed the cut");
+            let coarser = select(&store, &cache, &ortho(c + dir * (1.5 * r), c, 8.0 * r), o);
+            assert!(coarser.triangles <= near.triangles, "tau {tau}");
+            let p_near = select(&store, &cache, &camera((c + dir * (1.5 * r)).to_array(), c.to_array()), o);
+            let p_far = select(&store, &cache, &camera((c + dir * (40.0 * r)).to_array(), c.to_array()), o);
+            assert_ne!(sorted(&p_near), sorted(&p_far), "tau {tau}: perspective should depend on distance");
+        }
+        let fine = select(&store, &cache, &ortho(c + dir * (2.0 * r), c, 0.5 * r), opts(1.0, false));
+        let coarse = select(&store, &cache, &ortho(c + dir * (2.0 * r), c, 16.0 * r), opts(1.0, false));
+        assert!(
+            coarse.triangles < fine.triangles,
+            "{}: a 32 times larger view should select fewer triangles ({} against {})",
+            path.display(),
+            coarse.triangles,
+            fine.triangles
+        );
     }
 }
 

@@ -11,9 +11,11 @@
 //! cursor ([`crate::pick::pick_triangle`]) and tints it, or, while measuring (M), adds a
 //! measurement point snapped to a vertex within [`SNAP_PX`] pixels; H / I / Shift+H hide,
 //! isolate, show all ([`crate::review::ObjectFilter`], which the scene honours when drawing and
-//! picking); 4…9, 0 are the preset views, O the orthographic view
-//! ([`Controller::dolly_zoom`]), F11 fullscreen, and named viewpoints are saved next to the
-//! store ([`crate::viewpoints`]).
+//! picking); 4…9, 0 are the preset views (orthographic while the view is), O switches between
+//! the perspective and a true orthographic camera (`tw_runtime::Projection`) that keeps what
+//! is ahead at its size ([`Controller::set_orthographic`]; zooming in orbit mode changes its
+//! view height), F11 fullscreen, and named viewpoints are saved next to the store
+//! ([`crate::viewpoints`]).
 //!
 //! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
 //! tracer's flashlight; while the camera stands still the ray-traced image gathers samples, and
@@ -61,9 +63,6 @@ pub const SNAP_PX: f32 = 8.0;
 
 /// A left button released this close to where it went down is a click (pick), not a drag.
 const CLICK_PX: f32 = 4.0;
-
-/// The orthographic view's field of view (see [`Controller::dolly_zoom`]): 1°.
-const ORTHO_FOVY: f32 = std::f32::consts::PI / 180.0;
 
 /// The colour of the measurement's line and points (RGBA).
 const MEASURE_COLOR: [u8; 4] = [255, 220, 40, 255];
@@ -125,8 +124,6 @@ pub(crate) struct App {
     press_at: Option<[f32; 2]>,
     /// The store's named viewpoints, read at first use.
     viewpoints: Option<Viewpoints>,
-    /// In the orthographic view (O): the perspective field of view to return to.
-    ortho: Option<f32>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -182,7 +179,6 @@ impl App {
             measuring: false,
             press_at: None,
             viewpoints: None,
-            ortho: None,
             error: None,
             report: Default::default(),
         };
@@ -308,7 +304,6 @@ impl App {
             Action::SetMode(m) => self.controller.set_mode(m, None),
             Action::ToggleDebugView => self.toggle_debug_view(),
             Action::ResetView => {
-                self.ortho = None;
                 self.frozen = None;
                 self.settings.debug_view = false;
                 self.controller = Controller::new(&self.start_camera, &self.scene.scene_frame());
@@ -326,7 +321,8 @@ impl App {
                 self.say(m.into());
             }
             Action::View(p) => {
-                let cam = p.camera(self.scene.bounds(), self.scene.up(), self.controller.fovy);
+                let ortho = self.controller.ortho_height.is_some();
+                let cam = p.camera(self.scene.bounds(), self.scene.up(), self.controller.fovy, ortho);
                 self.go_to(&cam);
                 self.say(format!("view {}", p.name()));
             }
@@ -473,7 +469,7 @@ impl App {
     /// O: the orthographic view and back, keeping what is ahead framed (the orbit pivot, else
     /// the surface under the centre of the view, else the model's centre).
     fn toggle_ortho(&mut self) {
-        if self.controller.mode == Mode::Walk && self.ortho.is_none() {
+        if self.controller.mode == Mode::Walk && self.controller.ortho_height.is_none() {
             self.say("orthographic view: not in walk mode (1 fly, 3 orbit)".into());
             return;
         }
@@ -486,16 +482,12 @@ impl App {
             let to_centre = ((lo + hi) * 0.5 - c.eye).dot(c.forward()).max(c.scene_size * 0.01);
             self.scene.pick(&ray, f32::MAX).unwrap_or(to_centre)
         };
-        match self.ortho.take() {
-            None => {
-                self.ortho = Some(self.controller.fovy);
-                self.controller.dolly_zoom(ORTHO_FOVY, focus);
-                self.say("orthographic view (O: perspective)".into());
-            }
-            Some(fovy) => {
-                self.controller.dolly_zoom(fovy, focus);
-                self.say("perspective view".into());
-            }
+        if self.controller.ortho_height.is_none() {
+            self.controller.set_orthographic(true, focus);
+            self.say("orthographic view (O: perspective)".into());
+        } else {
+            self.controller.set_orthographic(false, focus);
+            self.say("perspective view".into());
         }
     }
 
@@ -508,6 +500,10 @@ impl App {
         let mut k = Controller::new(cam, &self.scene.scene_frame());
         k.speed = old.speed;
         k.walk_speed = old.walk_speed;
+        if cam.is_orthographic() {
+            // The perspective to return to (O) stays the viewer's.
+            k.fovy = old.fovy;
+        }
         match old.mode {
             Mode::Orbit => k.set_mode(Mode::Orbit, Some(cam.target)),
             m => k.mode = m,
@@ -532,7 +528,7 @@ impl App {
         if c.mode == Mode::Orbit {
             cam.target = c.pivot;
         }
-        let v = Viewpoint::from_camera(name, &cam, self.scene.header().grid_origin);
+        let v = Viewpoint::from_camera(name, &cam, c.fovy, self.scene.header().grid_origin);
         let file = self.scene.views_file().to_path_buf();
         let result = self.viewpoints().and_then(|list| {
             list.set(v);
@@ -551,18 +547,18 @@ impl App {
         let origin = self.scene.header().grid_origin;
         let (bounds, up) = (self.scene.bounds(), self.scene.up());
         let cam = match self.viewpoints() {
-            Ok(list) => list.get(name).map(|v| v.camera(origin, bounds, up)),
+            Ok(list) => list.get(name).map(|v| (v.camera(origin, bounds, up), v.fovy_radians())),
             Err(e) => {
                 self.say(format!("viewpoint `{name}` not loaded: {e}"));
                 return;
             }
         };
         match cam {
-            Some(cam) => {
-                // A viewpoint saved in the orthographic view is one again (O returns to the
-                // starting field of view).
-                self.ortho = (cam.fovy <= ORTHO_FOVY * 1.01).then_some(self.start_camera.fovy);
+            Some((cam, fovy)) => {
+                // A viewpoint saved in the orthographic view is one again; O returns to its
+                // perspective.
                 self.go_to(&cam);
+                self.controller.fovy = fovy;
                 let now = self.controller.camera();
                 self.say(format!("viewpoint `{name}` restored: {}", camera_text(&now)));
             }
@@ -964,7 +960,6 @@ impl App {
         let draw = match self.play_path(dt) {
             Some(c) => {
                 // The controller takes over from the path's camera when the path ends or stops.
-                self.ortho = None;
                 self.controller = {
                     let mut k = Controller::new(&c, &self.scene.scene_frame());
                     k.mode = self.controller.mode;
@@ -1163,7 +1158,7 @@ impl App {
                 "{}{}{}{}{}",
                 self.controller.mode.name(),
                 if self.frozen.is_some() { ", debug view" } else { "" },
-                if self.ortho.is_some() { ", orthographic" } else { "" },
+                if self.controller.ortho_height.is_some() { ", orthographic" } else { "" },
                 if self.settings.lod_freeze { ", LOD frozen" } else { "" },
                 if self.controller.mode == Mode::Walk {
                     format!(", {}", self.walker.status())

@@ -19,9 +19,14 @@
 //!   walked 1700 units above its deck.
 //! - **Orbit**: around a pivot (a clicked point): mouse drag turns, scroll and W/S change the
 //!   distance (smoothed), A/D turn.
+//!
+//! Any mode may look through an orthographic camera ([`Controller::set_orthographic`]): the eye
+//! and its motion stay, the projection has a view height instead of the field of view. In orbit
+//! mode zooming scales the view height with the distance, so the zoom still shows.
 
 use glam::Vec3;
-use tw_runtime::Camera;
+use tw_runtime::camera::DEFAULT_FOVY_DEG;
+use tw_runtime::{Camera, Projection};
 use tw_store::units::{EYE_HEIGHT_M, GRAVITY_M_S2, WALK_SPEED_M_S};
 
 /// Camera mode.
@@ -108,7 +113,10 @@ pub struct Controller {
     pub up: Vec3,
     e1: Vec3,
     e2: Vec3,
+    /// The perspective field of view (radians); also the one an orthographic view returns to.
     pub fovy: f32,
+    /// `Some(height)`: the camera is orthographic, its view `height` scene units high.
+    pub ortho_height: Option<f32>,
     /// Fly speed, scene units per second (a fraction of the model's size).
     pub speed: f32,
     /// Walk speed, scene units per second (1.4 m/s in the store's units).
@@ -146,7 +154,14 @@ impl Controller {
             up,
             e1,
             e2,
-            fovy: camera.fovy,
+            fovy: match camera.projection {
+                Projection::Perspective { fovy } => fovy,
+                Projection::Orthographic { .. } => DEFAULT_FOVY_DEG.to_radians() as f32,
+            },
+            ortho_height: match camera.projection {
+                Projection::Perspective { .. } => None,
+                Projection::Orthographic { height } => Some(height),
+            },
             speed: scene_size * 0.05,
             walk_speed: (WALK_SPEED_M_S / unit as f64) as f32,
             scene_size,
@@ -259,7 +274,14 @@ impl Controller {
                     self.target_distance = (self.target_distance * 0.85f32.powf(steps))
                         .clamp(self.scene_size * 1e-4, self.scene_size * 10.0);
                 }
+                let before = self.distance;
                 self.distance += (self.target_distance - self.distance) * blend;
+                if let Some(h) = &mut self.ortho_height {
+                    // Zooming an orthographic view: its height follows the distance.
+                    if before > 0.0 && self.distance > 0.0 {
+                        *h *= self.distance / before;
+                    }
+                }
                 self.eye = self.pivot - self.forward() * self.distance;
             }
         }
@@ -303,23 +325,17 @@ impl Controller {
         }
     }
 
-    /// Changes the field of view to `fovy` and moves the eye along the view direction so that
-    /// what was `focus` units ahead keeps its size on screen (a "dolly zoom"). The viewer's
-    /// orthographic view is this with a very narrow field of view from far away: the renderer
-    /// and the LOD selection stay perspective (a projection of their own would touch both), and
-    /// at 1° the perspective of a model's depth is under 1 % of its size. In orbit mode the
-    /// pivot stays and the distance follows.
-    pub fn dolly_zoom(&mut self, fovy: f32, focus: f32) {
-        let fovy = fovy.clamp(0.001, 3.0);
-        let focus = if focus.is_finite() && focus > 0.0 { focus } else { self.scene_size * 0.5 };
-        let scale = (self.fovy * 0.5).tan() / (fovy * 0.5).tan();
-        let point = self.eye + self.forward() * focus;
-        self.eye = point - self.forward() * (focus * scale);
-        self.fovy = fovy;
-        if self.mode == Mode::Orbit {
-            self.distance = (self.pivot - self.eye).length();
-            self.target_distance = self.distance;
+    /// Switches to the orthographic camera (`on`) or back to perspective, keeping what is
+    /// `focus` units ahead at its size on screen: the orthographic view is as high as the
+    /// perspective one is at that depth ([`Camera::view_height_at`]). The eye does not move.
+    pub fn set_orthographic(&mut self, on: bool, focus: f32) {
+        if !on {
+            self.ortho_height = None;
+            return;
         }
+        let focus = if focus.is_finite() && focus > 0.0 { focus } else { self.scene_size * 0.5 };
+        let perspective = Camera { projection: Projection::Perspective { fovy: self.fovy }, ..self.camera() };
+        self.ortho_height = Some(perspective.view_height_at(focus as f64) as f32);
     }
 
     /// The speed of the current mode (walk or fly), scene units per second.
@@ -340,10 +356,15 @@ impl Controller {
     }
 
     /// The scene camera: clip planes from the eye's distance to the farthest bounds corner
-    /// (as [`Camera::from_input_coordinates`]).
+    /// (as [`Camera::from_input_coordinates`]); orthographic while
+    /// [`ortho_height`](Self::ortho_height) is set.
     pub fn camera(&self) -> Camera {
         let (near, far) = clip_planes(self.eye, self.bounds);
-        Camera { eye: self.eye, target: self.eye + self.forward(), up: self.up, fovy: self.fovy, near, far }
+        let projection = match self.ortho_height {
+            Some(height) => Projection::Orthographic { height },
+            None => Projection::Perspective { fovy: self.fovy },
+        };
+        Camera { eye: self.eye, target: self.eye + self.forward(), up: self.up, projection, near, far }
     }
 }
 
@@ -522,17 +543,25 @@ mod tests {
     }
 
     #[test]
-    fn a_dolly_zoom_keeps_the_focus_framed() {
+    fn the_orthographic_view_keeps_the_focus_framed_and_orbit_zoom_changes_its_height() {
         let mut c = ctl_in(1.0);
         let eye = c.eye;
-        let f = c.forward();
-        let width = |c: &Controller, d: f32| (c.fovy * 0.5).tan() * d;
-        let before = width(&c, 5.0);
-        c.dolly_zoom(0.02, 5.0);
-        let back = (eye + f * 5.0 - c.eye).length();
-        assert!((width(&c, back) - before).abs() < before * 1e-3, "the focus changed size");
-        assert!((c.forward() - f).length() < 1e-6 && back > 100.0);
-        c.dolly_zoom(1.0, back);
-        assert!((c.eye - eye).length() < 1e-2 && c.fovy == 1.0, "back where it was: {}", c.eye);
+        let before = c.camera().view_height_at(5.0);
+        c.set_orthographic(true, 5.0);
+        let cam = c.camera();
+        assert!(cam.is_orthographic() && c.eye == eye, "the eye stays");
+        assert!((cam.view_height_at(1e3) - before).abs() < before * 1e-5, "the focus changed size");
+        c.set_orthographic(false, 5.0);
+        assert_eq!(c.camera().projection, Projection::Perspective { fovy: 1.0 });
+        // Orbit: zooming in shrinks the view with the distance.
+        c.set_mode(Mode::Orbit, Some(eye + c.forward() * 5.0));
+        c.set_orthographic(true, c.distance);
+        let (h0, d0) = (c.ortho_height.unwrap(), c.distance);
+        for _ in 0..200 {
+            c.update(0.016, &Input { scroll: 1.0, ..Default::default() });
+        }
+        let (h1, d1) = (c.ortho_height.unwrap(), c.distance);
+        assert!(h1 < h0 * 0.5, "zoomed in: {h0} to {h1}");
+        assert!((h1 / d1 - h0 / d0).abs() < h0 / d0 * 1e-3, "the height follows the distance");
     }
 }

@@ -12,7 +12,10 @@
 //! - [`third_person`]: a starting point for the second camera, behind and above the frozen one.
 
 use glam::{Mat4, Vec3, Vec4};
-use tw_runtime::Camera;
+use tw_runtime::{Camera, Projection};
+
+/// The third-person camera's field of view behind an orthographic camera (60°).
+const THIRD_PERSON_FOVY: f32 = std::f32::consts::FRAC_PI_3;
 
 /// Colour of visible nodes' boxes (sRGB).
 pub const VISIBLE_COLOR: [u8; 4] = [255, 105, 180, 255];
@@ -106,7 +109,12 @@ pub fn third_person(frozen: &Camera, scene_size: f32) -> Camera {
     let look = frozen.eye + d * back;
     let eye = frozen.eye - d * back + up * back * 0.8;
     let far = frozen.far + back * 3.0;
-    Camera { eye, target: look, up, fovy: frozen.fovy, near: frozen.near, far }
+    // Perspective even behind an orthographic camera: the box of its view then shows as one.
+    let projection = match frozen.projection {
+        Projection::Perspective { .. } => frozen.projection,
+        Projection::Orthographic { .. } => Projection::Perspective { fovy: THIRD_PERSON_FOVY },
+    };
+    Camera { eye, target: look, up, projection, near: frozen.near, far }
 }
 
 #[cfg(test)]

@@ -21,17 +21,15 @@ impl Ray {
     }
 }
 
-/// The ray from `camera`'s eye through pixel (`x`, `y`) of a `w` × `h` viewport (y down).
+/// The ray of `camera` through the point (`x`, `y`) of a `w` × `h` viewport (pixels, y down):
+/// tw-rt's primary ray (`tw_rt::Camera::ndc_ray`), from the eye in perspective, from the near
+/// plane along the view direction in orthographic.
 pub fn camera_ray(camera: &Camera, x: f32, y: f32, w: f32, h: f32) -> Ray {
     let aspect = w / h.max(1.0);
     let ndc_x = (x / w.max(1.0)) * 2.0 - 1.0;
     let ndc_y = 1.0 - (y / h.max(1.0)) * 2.0;
-    let f = camera.direction();
-    let s = f.cross(camera.up).normalize_or_zero();
-    let u = s.cross(f);
-    let t = (camera.fovy * 0.5).tan();
-    let dir = (f + s * (ndc_x * t * aspect) + u * (ndc_y * t)).normalize();
-    Ray { origin: camera.eye, dir }
+    let r = tw_rt::Camera::for_view(camera, aspect).ndc_ray(ndc_x, ndc_y);
+    Ray { origin: r.origin, dir: r.dir }
 }
 
 /// Entry distance of `ray` into the box (0 if it starts inside), `None` when it misses.
@@ -234,5 +232,16 @@ mod tests {
         assert!(top.dir.z > 0.0);
         let left = camera_ray(&c, 0.0, 25.0, 100.0, 50.0);
         assert!(left.dir.x < 0.0);
+    }
+
+    /// Orthographic picking: parallel rays from the near plane, a view 4 high and 8 wide.
+    #[test]
+    fn orthographic_pixel_rays_are_parallel() {
+        let c = Camera::orthographic(Vec3::ZERO, Vec3::new(0.0, 3.0, 0.0), Vec3::Z, 4.0, 0.1, 10.0).unwrap();
+        let centre = camera_ray(&c, 50.0, 25.0, 100.0, 50.0);
+        let corner = camera_ray(&c, 100.0, 0.0, 100.0, 50.0);
+        assert_eq!((centre.dir, corner.dir), (Vec3::Y, Vec3::Y));
+        assert!((centre.origin - Vec3::new(0.0, 0.1, 0.0)).length() < 1e-6);
+        assert!((corner.origin - Vec3::new(4.0, 0.1, 2.0)).length() < 1e-5, "{:?}", corner.origin);
     }
 }

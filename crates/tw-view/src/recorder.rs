@@ -5,19 +5,26 @@
 //! deterministic) or by elapsed time at the path's fps (interactive playback).
 
 use glam::DVec3;
-use tw_runtime::{Camera, CameraPath, PathFrame, RuntimeError};
+use tw_runtime::camera::DEFAULT_FOVY_DEG;
+use tw_runtime::{Camera, CameraPath, PathFrame, Projection, RuntimeError};
 use tw_store::Header;
 
-/// The scene camera as a path frame in input coordinates.
+/// The scene camera as a path frame in input coordinates (an orthographic camera keeps
+/// [`DEFAULT_FOVY_DEG`] as its frame's field of view).
 pub fn to_frame(camera: &Camera, header: &Header, segment: &str) -> PathFrame {
     let origin = DVec3::from_array(header.grid_origin);
     let eye = camera.eye.as_dvec3() + origin;
     let target = camera.target.as_dvec3() + origin;
+    let (fovy, ortho_height) = match camera.projection {
+        Projection::Perspective { fovy } => ((fovy as f64).to_degrees().clamp(1.0, 179.0), None),
+        Projection::Orthographic { height } => (DEFAULT_FOVY_DEG, Some(height as f64)),
+    };
     PathFrame {
         eye: eye.to_array(),
         target: target.to_array(),
         up: camera.up.as_dvec3().to_array(),
-        fovy: (camera.fovy as f64).to_degrees().clamp(1.0, 179.0),
+        fovy,
+        ortho_height,
         segment: segment.to_string(),
     }
 }
@@ -131,13 +138,19 @@ mod tests {
     fn record_then_play_round_trips_through_a_file() {
         let h = header();
         let mut rec = Recorder::default();
+        // The last one orthographic.
         let cams: Vec<Camera> = (0..5)
             .map(|i| {
-                Camera::new(
+                let projection = if i == 4 {
+                    Projection::Orthographic { height: 7.5 }
+                } else {
+                    Projection::Perspective { fovy: 1.0 }
+                };
+                Camera::with_projection(
                     Vec3::new(i as f32, 1.0, 2.0),
                     Vec3::new(i as f32 + 1.0, 1.0, 2.0),
                     Vec3::Z,
-                    1.0,
+                    projection,
                     0.01,
                     50.0,
                 )
@@ -159,7 +172,12 @@ mod tests {
         for c in &cams {
             let got = p.step().unwrap();
             assert!((got.eye - c.eye).length() < 1e-4 && (got.target - c.target).length() < 1e-4);
-            assert!((got.fovy - c.fovy).abs() < 1e-5);
+            match (got.projection, c.projection) {
+                (Projection::Perspective { fovy: a }, Projection::Perspective { fovy: b }) => {
+                    assert!((a - b).abs() < 1e-5)
+                }
+                (a, b) => assert_eq!(a, b),
+            }
         }
         assert!(p.step().is_none());
         p.rewind();

@@ -12,7 +12,7 @@
 use glam::Vec3;
 use tw_frame::shadow::ShadowOptions;
 use tw_frame::ShadowSettings;
-use tw_runtime::{Camera, InputLight, Light};
+use tw_runtime::{Camera, InputLight, Light, Projection};
 use tw_store::Header;
 
 pub use tw_frame::Occlusion;
@@ -258,7 +258,14 @@ pub fn sun_angles(towards: Vec3, up_axis: u8) -> (f32, f32) {
 fn default_sun_direction(up_axis: u8) -> Vec3 {
     let axis = up_axis.min(2) as usize;
     let (up, ahead) = ([Vec3::X, Vec3::Y, Vec3::Z][axis], [Vec3::Y, Vec3::Z, Vec3::X][axis]);
-    let camera = Camera { eye: Vec3::ZERO, target: ahead, up, fovy: 1.0, near: 0.1, far: 1.0 };
+    let camera = Camera {
+        eye: Vec3::ZERO,
+        target: ahead,
+        up,
+        projection: Projection::Perspective { fovy: 1.0 },
+        near: 0.1,
+        far: 1.0,
+    };
     camera.sun_direction()
 }
 
@@ -384,7 +391,14 @@ mod tests {
     }
 
     fn camera(up: Vec3) -> Camera {
-        Camera { eye: Vec3::ZERO, target: Vec3::ONE, up, fovy: 1.0, near: 0.1, far: 100.0 }
+        Camera {
+            eye: Vec3::ZERO,
+            target: Vec3::ONE,
+            up,
+            projection: Projection::Perspective { fovy: 1.0 },
+            near: 0.1,
+            far: 100.0,
+        }
     }
 
     fn sun(light: Light) -> Vec3 {

@@ -7,13 +7,18 @@
 //!
 //! ```json
 //! {"format":"terawalk-views","version":1,
-//!  "views":[{"name":"entrance","eye":[1,2,3],"target":[1,3,3],"fovy":60}]}
+//!  "views":[{"name":"entrance","eye":[1,2,3],"target":[1,3,3],"fovy":60},
+//!           {"name":"plan","eye":[5,5,90],"target":[5,5,0],"fovy":60,"ortho_height":42}]}
 //! ```
+//!
+//! A view with `ortho_height` (input units, > 0) is orthographic with a view that high (its
+//! `fovy` is the perspective that O returns to); files without it, as every file written before
+//! the orthographic camera, hold perspective views.
 
 use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec3};
-use tw_runtime::Camera;
+use tw_runtime::{Camera, Projection};
 
 use crate::controller::clip_planes;
 
@@ -78,8 +83,10 @@ impl Preset {
         }
     }
 
-    /// The camera of this view of `bounds` (scene space) with vertical field of view `fovy`.
-    pub fn camera(self, bounds: (Vec3, Vec3), up: Vec3, fovy: f32) -> Camera {
+    /// The camera of this view of `bounds` (scene space) with vertical field of view `fovy`,
+    /// or, when `orthographic`, from the same eye with a view as high as the perspective one is
+    /// at the model's centre: the model keeps its apparent size.
+    pub fn camera(self, bounds: (Vec3, Vec3), up: Vec3, fovy: f32, orthographic: bool) -> Camera {
         let (lo, hi) = bounds;
         let centre = (lo + hi) * 0.5;
         let radius = ((hi - lo).length() * 0.5).max(1e-3);
@@ -89,7 +96,20 @@ impl Preset {
         // Along the up axis the camera's up is another axis (the controller keeps the scene's).
         let cam_up = if dir.dot(up).abs() > 0.99 { up.any_orthonormal_vector() } else { up };
         let (near, far) = clip_planes(eye, bounds);
-        Camera { eye, target: centre, up: cam_up, fovy, near, far }
+        let camera = Camera {
+            eye,
+            target: centre,
+            up: cam_up,
+            projection: Projection::Perspective { fovy },
+            near,
+            far,
+        };
+        if orthographic {
+            let height = camera.view_height_at((centre - eye).length() as f64) as f32;
+            Camera { projection: Projection::Orthographic { height }, ..camera }
+        } else {
+            camera
+        }
     }
 }
 
@@ -100,25 +120,39 @@ pub fn views_file(store: &Path) -> PathBuf {
     store.with_file_name(name)
 }
 
-/// A named camera in the store's input coordinates; `fovy` in degrees.
+/// A named camera in the store's input coordinates; `fovy` in degrees; `ortho_height` (input
+/// units) for an orthographic view.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Viewpoint {
     pub name: String,
     pub eye: [f64; 3],
     pub target: [f64; 3],
     pub fovy: f64,
+    pub ortho_height: Option<f64>,
 }
 
 impl Viewpoint {
-    /// `camera` (scene space) under `name`; `origin` is the store's grid origin.
-    pub fn from_camera(name: &str, camera: &Camera, origin: [f64; 3]) -> Viewpoint {
+    /// `camera` (scene space) under `name`; `origin` is the store's grid origin; `fovy`
+    /// (radians) the perspective an orthographic camera returns to.
+    pub fn from_camera(name: &str, camera: &Camera, fovy: f32, origin: [f64; 3]) -> Viewpoint {
         let o = DVec3::from_array(origin);
+        let (fovy, ortho_height) = match camera.projection {
+            Projection::Perspective { fovy } => (fovy, None),
+            Projection::Orthographic { height } => (fovy, Some(height as f64)),
+        };
         Viewpoint {
             name: name.to_string(),
             eye: (camera.eye.as_dvec3() + o).to_array(),
             target: (camera.target.as_dvec3() + o).to_array(),
-            fovy: (camera.fovy as f64).to_degrees(),
+            fovy: (fovy as f64).to_degrees(),
+            ortho_height,
         }
+    }
+
+    /// The perspective field of view (radians) of the view, or the one its orthographic view
+    /// returns to.
+    pub fn fovy_radians(&self) -> f32 {
+        (self.fovy.to_radians() as f32).clamp(0.01, 3.1)
     }
 
     /// The scene-space camera (clip planes seeing all of `bounds`, the scene's `up`).
@@ -127,7 +161,11 @@ impl Viewpoint {
         let eye = (DVec3::from_array(self.eye) - o).as_vec3();
         let target = (DVec3::from_array(self.target) - o).as_vec3();
         let (near, far) = clip_planes(eye, bounds);
-        Camera { eye, target, up, fovy: (self.fovy.to_radians() as f32).clamp(0.01, 3.1), near, far }
+        let projection = match self.ortho_height {
+            Some(h) => Projection::Orthographic { height: h as f32 },
+            None => Projection::Perspective { fovy: self.fovy_radians() },
+        };
+        Camera { eye, target, up, projection, near, far }
     }
 }
 
@@ -193,11 +231,19 @@ impl Viewpoints {
                 .and_then(|f| f.as_f64())
                 .filter(|f| *f > 0.0 && *f < 180.0)
                 .ok_or_else(|| err(format!("{} is not an angle in (0, 180) degrees", at("fovy"))))?;
+            let ortho_height = match item.get("ortho_height") {
+                None | Some(serde_json::Value::Null) => None,
+                Some(h) => Some(
+                    h.as_f64()
+                        .filter(|h| *h > 0.0 && h.is_finite())
+                        .ok_or_else(|| err(format!("{} is not a positive height", at("ortho_height"))))?,
+                ),
+            };
             let (eye, target) = (point("eye")?, point("target")?);
             if eye == target {
                 return Err(err(format!("{}: the eye is the target", at("name"))));
             }
-            views.push(Viewpoint { name: name.to_string(), eye, target, fovy });
+            views.push(Viewpoint { name: name.to_string(), eye, target, fovy, ortho_height });
         }
         Ok(Viewpoints { views })
     }
@@ -207,7 +253,14 @@ impl Viewpoints {
         let views: Vec<serde_json::Value> = self
             .views
             .iter()
-            .map(|v| serde_json::json!({"name": v.name, "eye": v.eye, "target": v.target, "fovy": v.fovy}))
+            .map(|v| {
+                let mut j =
+                    serde_json::json!({"name": v.name, "eye": v.eye, "target": v.target, "fovy": v.fovy});
+                if let Some(h) = v.ortho_height {
+                    j["ortho_height"] = serde_json::json!(h);
+                }
+                j
+            })
             .collect();
         let doc = serde_json::json!({"format": VIEWS_FORMAT, "version": VIEWS_VERSION, "views": views});
         let text = serde_json::to_string_pretty(&doc).unwrap_or_default();
@@ -239,7 +292,7 @@ mod tests {
         let bounds = (Vec3::ZERO, Vec3::new(4.0, 1.0, 1.0));
         let centre = Vec3::new(2.0, 0.5, 0.5);
         for p in Preset::ALL {
-            let c = p.camera(bounds, Vec3::Z, 1.0);
+            let c = p.camera(bounds, Vec3::Z, 1.0, false);
             assert_eq!(c.target, centre, "{}", p.name());
             assert!(c.validate().is_ok(), "{}", p.name());
             // Outside the bounding sphere, on the preset's side.
@@ -248,7 +301,7 @@ mod tests {
             assert!(d.normalize().dot(p.direction(Vec3::Z)) > 0.999, "{}", p.name());
             assert_eq!(Preset::parse(p.name()), Some(p));
         }
-        assert!(Preset::PosX.camera(bounds, Vec3::Z, 1.0).eye.x > 4.0);
+        assert!(Preset::PosX.camera(bounds, Vec3::Z, 1.0, false).eye.x > 4.0);
         assert_eq!(Preset::parse("X"), Some(Preset::PosX));
         assert_eq!(Preset::parse("front"), None);
         assert!(Preset::Iso.direction(Vec3::Z).z > 0.0 && Preset::Iso.direction(Vec3::Y).y > 0.0);
@@ -265,22 +318,51 @@ mod tests {
         let cam =
             Camera::new(Vec3::new(1.0, 2.0, 3.0), Vec3::new(1.0, 5.0, 3.0), Vec3::Z, 1.0, 0.1, 50.0).unwrap();
         let mut views = Viewpoints::default();
-        views.set(Viewpoint::from_camera("door", &cam, origin));
+        views.set(Viewpoint::from_camera("door", &cam, 1.0, origin));
         views.set(Viewpoint::from_camera(
             "top",
-            &Preset::PosZ.camera((Vec3::ZERO, Vec3::ONE), Vec3::Z, 1.0),
+            &Preset::PosZ.camera((Vec3::ZERO, Vec3::ONE), Vec3::Z, 1.0, false),
+            1.0,
             origin,
         ));
-        views.set(Viewpoint::from_camera("door", &cam, origin));
-        assert_eq!(views.views.len(), 2, "same name replaces");
+        let plan = Preset::PosZ.camera((Vec3::ZERO, Vec3::ONE), Vec3::Z, 1.0, true);
+        views.set(Viewpoint::from_camera("plan", &plan, 0.7, origin));
+        views.set(Viewpoint::from_camera("door", &cam, 1.0, origin));
+        assert_eq!(views.views.len(), 3, "same name replaces");
         views.save(&file).unwrap();
         let back = Viewpoints::load(&file).unwrap();
-        assert_eq!(back, views);
+        // serde_json reads floats to within an ulp (no `float_roundtrip`).
+        assert_eq!(back.views[..2], views.views[..2]);
+        let (a, b) = (back.views[2].ortho_height.unwrap(), views.views[2].ortho_height.unwrap());
+        assert!((a - b).abs() < 1e-12 && back.views[2].eye == views.views[2].eye);
         assert_eq!(back.get("door").unwrap().eye, [1001.0, -18.0, 6.5]);
         let bounds = (Vec3::ZERO, Vec3::splat(10.0));
         let again = back.get("door").unwrap().camera(origin, bounds, Vec3::Z);
         assert!((again.eye - cam.eye).length() < 1e-5 && (again.target - cam.target).length() < 1e-5);
-        assert!((again.fovy - cam.fovy).abs() < 1e-6);
+        assert_eq!(again.projection, cam.projection);
+        let plan = back.get("plan").unwrap();
+        assert!((plan.fovy_radians() - 0.7).abs() < 1e-6, "the perspective to return to");
+        let plan = plan.camera(origin, bounds, Vec3::Z);
+        let top = back.get("top").unwrap().camera(origin, bounds, Vec3::Z);
+        let Projection::Orthographic { height } = plan.projection else { panic!("{plan:?}") };
+        let d = (top.target - top.eye).length() as f64;
+        assert!((height as f64 - top.view_height_at(d)).abs() < 1e-5, "as high as the perspective view");
+    }
+
+    /// The preset views keep the model's apparent size in orthographic: the view's height at
+    /// the model's centre is the same in both projections.
+    #[test]
+    fn orthographic_presets_frame_the_model_as_the_perspective_ones() {
+        let bounds = (Vec3::new(-1.0, 0.0, 2.0), Vec3::new(3.0, 5.0, 4.0));
+        for p in Preset::ALL {
+            let persp = p.camera(bounds, Vec3::Z, 0.8, false);
+            let ortho = p.camera(bounds, Vec3::Z, 0.8, true);
+            assert_eq!((ortho.eye, ortho.target), (persp.eye, persp.target));
+            assert!(ortho.is_orthographic() && !persp.is_orthographic());
+            let d = (persp.target - persp.eye).length() as f64;
+            let (a, b) = (persp.view_height_at(d), ortho.view_height_at(d));
+            assert!((a - b).abs() < b * 1e-6, "{}: {a} against {b}", p.name());
+        }
     }
 
     #[test]
@@ -299,6 +381,11 @@ mod tests {
                 "{\"format\":\"terawalk-views\",\"version\":1,\"views\":[{\"name\":\"a\",\"eye\":[0,0,0],\
                  \"target\":[1,1,1],\"fovy\":0}]}",
                 "views[0].fovy",
+            ),
+            (
+                "{\"format\":\"terawalk-views\",\"version\":1,\"views\":[{\"name\":\"a\",\"eye\":[0,0,0],\
+                 \"target\":[1,1,1],\"fovy\":60,\"ortho_height\":-2}]}",
+                "views[0].ortho_height",
             ),
         ] {
             let e = Viewpoints::parse(text, p).unwrap_err().to_string();

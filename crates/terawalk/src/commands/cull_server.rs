@@ -16,7 +16,7 @@ use tw_gpu::{GpuError, Renderer};
 use tw_net::server::{serve, Culled, Culler, ServeSummary, ServerOptions};
 use tw_net::transport::Listener;
 use tw_net::{CameraRequest, StoreId};
-use tw_runtime::{Camera, StreamOptions};
+use tw_runtime::{Camera, Projection, StreamOptions};
 use tw_store::Store;
 
 use crate::cli::CullServerArgs;
@@ -135,7 +135,12 @@ impl WalkCuller {
 /// The camera and settings a request asks for, checked (a peer's numbers are not trusted).
 pub fn frame_of(r: &CameraRequest, server_occlusion: Occlusion) -> Result<(Camera, FrameSettings), String> {
     let v = |a: [f32; 3]| glam::Vec3::from_array(a);
-    let camera = Camera::new(v(r.eye), v(r.target), v(r.up), r.fovy, r.near, r.far)
+    let projection = if r.flags & CameraRequest::ORTHOGRAPHIC != 0 {
+        Projection::Orthographic { height: r.fovy }
+    } else {
+        Projection::Perspective { fovy: r.fovy }
+    };
+    let camera = Camera::with_projection(v(r.eye), v(r.target), v(r.up), projection, r.near, r.far)
         .map_err(|e| format!("frame {}: {e}", r.frame))?;
     let [w, h] = r.viewport;
     if !(1..=16384).contains(&w) || !(1..=16384).contains(&h) {
@@ -176,7 +181,10 @@ pub fn request_of(
         eye: camera.eye.to_array(),
         target: camera.target.to_array(),
         up: camera.up.to_array(),
-        fovy: camera.fovy,
+        fovy: match camera.projection {
+            Projection::Perspective { fovy } => fovy,
+            Projection::Orthographic { height } => height,
+        },
         near: camera.near,
         far: camera.far,
         viewport: [viewport.0, viewport.1],
@@ -187,7 +195,8 @@ pub fn request_of(
             .map_or(CameraRequest::SERVER_OCCLUSION, |i| i as u8),
         flags: flag(settings.frustum_culling, CameraRequest::FRUSTUM_CULLING)
             | flag(settings.triangle_culling, CameraRequest::TRIANGLE_CULLING)
-            | flag(settings.wait_for_pages, CameraRequest::WAIT_FOR_PAGES),
+            | flag(settings.wait_for_pages, CameraRequest::WAIT_FOR_PAGES)
+            | flag(camera.is_orthographic(), CameraRequest::ORTHOGRAPHIC),
         visible_pixels: settings.visible_pixels,
     }
 }
@@ -230,6 +239,11 @@ mod tests {
         for b in bad {
             assert!(frame_of(&b, Occlusion::None).unwrap_err().starts_with("frame 5:"));
         }
+        let ortho = Camera { projection: Projection::Orthographic { height: 7.0 }, ..camera };
+        let r_ortho = request_of(6, &ortho, &FrameSettings::default(), (640, 480));
+        assert_eq!(frame_of(&r_ortho, Occlusion::None).unwrap().0, ortho);
+        let flat = CameraRequest { fovy: 0.0, ..r_ortho };
+        assert!(frame_of(&flat, Occlusion::None).unwrap_err().contains("orthographic view height"));
         let server = CameraRequest { occlusion: CameraRequest::SERVER_OCCLUSION, ..r };
         assert_eq!(frame_of(&server, Occlusion::Hzb).unwrap().1.occlusion, Occlusion::Hzb);
     }

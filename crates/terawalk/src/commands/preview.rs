@@ -16,6 +16,8 @@ use crate::units::fmt_count;
 pub fn parse_camera(s: &str) -> Result<Camera> {
     // One parser of camera strings for every command (tw-runtime's), here into the preview's type.
     let c = tw_runtime::InputCamera::parse(s)?;
+    // The preview's software rasterizer projects in perspective only.
+    anyhow::ensure!(c.ortho_height.is_none(), "preview draws perspective views only (got {s:?})");
     Ok(Camera { eye: c.eye, target: c.target, up: c.up, fovy_deg: c.fovy_deg })
 }
 

@@ -179,16 +179,8 @@ impl Renderer {
         let q = self
             .box_queries
             .get_or_insert_with(|| query::BoxQueries::new(&self.device, &self.queue, DEPTH_FORMAT, samples));
-        let mut r = q.run(
-            &self.device,
-            &self.queue,
-            &mut self.readback,
-            &depth_view,
-            view_proj,
-            camera.eye,
-            camera.near,
-            boxes,
-        )?;
+        let mut r =
+            q.run(&self.device, &self.queue, &mut self.readback, &depth_view, view_proj, camera, boxes)?;
         if samples > 1 && self.queries_count_samples() {
             for c in r.iter_mut().filter(|c| **c != query::EYE_INSIDE) {
                 *c = c.div_ceil(samples as u64);
@@ -341,7 +333,9 @@ impl Renderer {
         let view_proj = camera.projection_reverse_z(aspect) * camera.view();
         let u = Uniforms {
             view_proj: view_proj.to_cols_array_2d(),
-            eye: camera.eye.extend(1.0).to_array(),
+            // w = 0: an orthographic camera, whose viewer direction is the headlight
+            // (Camera::to_viewer; draw.wgsl viewer_normal).
+            eye: camera.eye.extend(if camera.is_orthographic() { 0.0 } else { 1.0 }).to_array(),
             sun: camera.sun_direction().extend(0.0).to_array(),
             params: [
                 0,

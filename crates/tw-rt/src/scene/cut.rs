@@ -44,7 +44,8 @@ pub struct CutScene {
 }
 
 /// The rasterizer's near and far planes as limits on a ray's parameter: a point is drawn when
-/// its view depth (distance along `forward`) lies in `[near, far]`.
+/// its depth (distance along `forward` from the plane through the rays' origin) lies in
+/// `[near, far]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Clip {
     pub forward: Vec3,
@@ -53,6 +54,18 @@ pub struct Clip {
 }
 
 impl Clip {
+    /// The clip planes of `camera` for the rays of `crate::Camera::for_view`: the view depths
+    /// `[near, far]` from the eye in perspective; in orthographic, whose rays start on the near
+    /// plane, the depths `[0, far − near]` beyond it.
+    pub fn for_view(camera: &tw_runtime::Camera) -> Clip {
+        let forward = camera.direction();
+        if camera.is_orthographic() {
+            Clip { forward, near: 0.0, far: camera.far - camera.near }
+        } else {
+            Clip { forward, near: camera.near, far: camera.far }
+        }
+    }
+
     /// `ray` limited to the view depths between the planes; `None` for a ray that cannot reach
     /// them (pointing sideways or backwards).
     fn apply(&self, ray: &Ray) -> Option<Ray> {

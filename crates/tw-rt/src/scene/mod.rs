@@ -77,7 +77,8 @@ pub struct TracedFrame {
     pub clusters: Vec<u32>,
     /// The hit triangle per pixel: its index in the cluster, `u32::MAX` where nothing.
     pub triangles: Vec<u32>,
-    /// Distance from the eye per pixel, `f32::INFINITY` where nothing.
+    /// Distance along the pixel's primary ray per pixel, `f32::INFINITY` where nothing: from the
+    /// eye in perspective, from the near plane in orthographic (`crate::Camera::for_view`).
     pub distance: Vec<f32>,
     pub stats: TraceStats,
 }
@@ -160,7 +161,7 @@ impl StoreTracer {
         let start = Instant::now();
         let entries: Vec<(ClusterRef, &PageCluster)> = pages.clusters();
         let keys: Vec<ClusterRef> = entries.iter().map(|(k, _)| *k).collect();
-        let clip = Clip { forward: camera.direction(), near: camera.near, far: camera.far };
+        let clip = Clip::for_view(camera);
         let mut stats = TraceStats {
             clusters: entries.len(),
             triangles: entries.iter().map(|(_, c)| c.triangle_count() as u64).sum(),
@@ -180,13 +181,7 @@ impl StoreTracer {
         };
         stats.blas.bytes = self.blas.bytes();
 
-        let mut rt_camera = crate::Camera::look_at(
-            camera.eye,
-            camera.target,
-            camera.up,
-            camera.fovy,
-            width as f32 / height.max(1) as f32,
-        );
+        let mut rt_camera = crate::Camera::for_view(camera, width as f32 / height.max(1) as f32);
         rt_camera.subpixel = settings.subpixel;
         let t = Instant::now();
         let (prims, distance) = trace_image(&scene, &rt_camera, width, height);
@@ -198,6 +193,7 @@ impl StoreTracer {
             mode: settings.coloring,
             object_colors: &self.object_colors,
             eye: camera.eye,
+            orthographic: camera.is_orthographic(),
             headlight: camera.headlight(),
             sun: camera.sun_direction(),
         };

@@ -22,6 +22,9 @@ pub struct Shader<'a> {
     /// sRGB colour per object (the store's object table).
     pub object_colors: &'a [Option<[u8; 4]>],
     pub eye: Vec3,
+    /// An orthographic view: the viewer is towards `headlight` from every point
+    /// (`Camera::to_viewer`), not at `eye`.
+    pub orthographic: bool,
     /// Unit direction towards the eye (`Camera::headlight`).
     pub headlight: Vec3,
     /// Unit direction towards the sun (`Camera::sun_direction`).
@@ -29,11 +32,12 @@ pub struct Shader<'a> {
 }
 
 impl Shader<'_> {
-    /// The unit normal of the triangle with scene-space `corners`, turned towards the eye: both
-    /// sides are lit, as inputs are not consistently wound (a degenerate triangle faces the eye).
+    /// The unit normal of the triangle with scene-space `corners`, turned towards the viewer
+    /// (as `tw_runtime::Camera::to_viewer`): both sides are lit, as inputs are not consistently
+    /// wound (a degenerate triangle faces the viewer).
     pub fn normal(&self, corners: [Vec3; 3]) -> Vec3 {
         let [p0, p1, p2] = corners;
-        let to_eye = (self.eye - p0).normalize_or_zero();
+        let to_eye = if self.orthographic { self.headlight } else { (self.eye - p0).normalize_or_zero() };
         let n = (p1 - p0).cross(p2 - p0).normalize_or(to_eye);
         if n.dot(to_eye) < 0.0 {
             -n

@@ -94,6 +94,8 @@ pub(super) fn approach(store: &Store, count: usize, fovy: f64) -> Result<Approac
                 target,
                 up: upv,
                 fovy,
+                // Generated walkthroughs are perspective.
+                ortho_height: None,
                 segment: SEGMENT.to_string(),
             }
         })

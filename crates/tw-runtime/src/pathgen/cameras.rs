@@ -53,6 +53,8 @@ fn frame(
         target: [0, 1, 2].map(|a| eye[a] + origin[a] + d[a] / len * dist),
         up,
         fovy,
+        // Generated walkthroughs are perspective.
+        ortho_height: None,
         segment: segment.to_string(),
     }
 }

@@ -248,13 +248,13 @@ fn frustum_slice(eye: &Camera, aspect: f64, d0: f64, d1: f64) -> [DVec3; 8] {
     let dir = eye.direction().as_dvec3();
     let right = dir.cross(eye.up.as_dvec3()).normalize();
     let up = right.cross(dir);
-    let ty = (eye.fovy as f64 * 0.5).tan();
-    let tx = ty * aspect;
     std::array::from_fn(|i| {
         let d = if i & 4 == 0 { d0 } else { d1 };
         let sx = if i & 1 == 0 { -1.0 } else { 1.0 };
         let sy = if i & 2 == 0 { -1.0 } else { 1.0 };
-        eye.eye.as_dvec3() + dir * d + right * (sx * tx * d) + up * (sy * ty * d)
+        // Half the view's height at depth d (a box's in orthographic, a pyramid's in perspective).
+        let ty = eye.view_height_at(d) * 0.5;
+        eye.eye.as_dvec3() + dir * d + right * (sx * ty * aspect) + up * (sy * ty)
     })
 }
 
