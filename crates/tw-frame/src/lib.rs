@@ -145,6 +145,42 @@ pub struct FrameInfo {
     pub shadow: ShadowInfo,
 }
 
+impl FrameInfo {
+    /// A culled frame's figures: `times`' selection parts, the cut's selection and streaming
+    /// statistics and its triangles (`cut`), what occlusion culling did, what the renderer that
+    /// drew it counted (`gpu`), and the frame's `total` time. No shadows.
+    pub(crate) fn culled(
+        times: FrameTimes,
+        (select, stream, cut_triangles): (SelectStats, StreamStats, u64),
+        culled: &Culled,
+        gpu: &tw_gpu::FrameStats,
+        total: Duration,
+    ) -> FrameInfo {
+        FrameInfo {
+            times: FrameTimes {
+                cull: culled.cull_time,
+                cull_box_tests: culled.box_test_time,
+                cull_triangle_tests: culled.triangle_test_time,
+                cull_readback: culled.readback_time,
+                upload: gpu.upload,
+                render: gpu.render,
+                total,
+                ..times
+            },
+            select,
+            stream,
+            cut_triangles,
+            triangles: gpu.triangles,
+            masked_triangles: gpu.masked_triangles,
+            clusters: gpu.clusters,
+            draw_calls: gpu.draw_calls,
+            occlusion: culled.stats,
+            gpu: gpu.pool,
+            shadow: ShadowInfo::default(),
+        }
+    }
+}
+
 /// Errors of a frame.
 #[derive(Debug, thiserror::Error)]
 pub enum FrameError {
@@ -617,31 +653,20 @@ impl Walkthrough {
             &clusters,
             bounds,
         )?;
-        let gpu = self.renderer.stats();
-        let info = FrameInfo {
-            times: FrameTimes {
-                select,
-                select_cut: stream_times.map_or(select, |t| t.cut),
-                select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
-                cull: culled.cull_time,
-                cull_box_tests: culled.box_test_time,
-                cull_triangle_tests: culled.triangle_test_time,
-                cull_readback: culled.readback_time,
-                upload: gpu.upload,
-                render: gpu.render,
-                total: start.elapsed(),
-            },
-            select: self.selection.stats,
-            stream,
-            cut_triangles,
-            triangles: gpu.triangles,
-            masked_triangles: gpu.masked_triangles,
-            clusters: gpu.clusters,
-            draw_calls: gpu.draw_calls,
-            occlusion: culled.stats,
-            gpu: gpu.pool,
-            shadow,
+        let select_times = FrameTimes {
+            select,
+            select_cut: stream_times.map_or(select, |t| t.cut),
+            select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
+            ..Default::default()
         };
+        let mut info = FrameInfo::culled(
+            select_times,
+            (self.selection.stats, stream, cut_triangles),
+            &culled,
+            &self.renderer.stats(),
+            start.elapsed(),
+        );
+        info.shadow = shadow;
         Ok(DrawnFrame { info, drawn: culled.drawn, occluded: culled.occluded })
     }
 }

@@ -263,36 +263,8 @@ impl Pipelines {
         if let Some(i) = self.eye_depth.iter().position(|(s, _)| *s == samples) {
             return &self.eye_depth[i].1;
         }
-        let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("eye depth"),
-            layout: Some(&self.layout),
-            vertex: wgpu::VertexState {
-                module: &self.shade,
-                entry_point: Some("vs_depth"),
-                compilation_options: Default::default(),
-                buffers: &[Some(wgpu::VertexBufferLayout {
-                    array_stride: UNIT,
-                    step_mode: wgpu::VertexStepMode::Vertex,
-                    attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                })],
-            },
-            primitive: wgpu::PrimitiveState {
-                topology: wgpu::PrimitiveTopology::TriangleList,
-                cull_mode: None,
-                ..Default::default()
-            },
-            depth_stencil: Some(wgpu::DepthStencilState {
-                format: DEPTH_FORMAT,
-                depth_write_enabled: Some(true),
-                depth_compare: Some(wgpu::CompareFunction::Greater),
-                stencil: Default::default(),
-                bias: Default::default(),
-            }),
-            multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
-            fragment: None,
-            multiview_mask: None,
-            cache: None,
-        });
+        let depth = (wgpu::CompareFunction::Greater, Default::default());
+        let pipeline = depth_only(device, &self.layout, &self.shade, "eye depth", depth, samples);
         self.eye_depth.push((samples, pipeline));
         &self.eye_depth.last().expect("just pushed").1
     }
@@ -302,36 +274,8 @@ impl Pipelines {
     /// and [`SHADOW_DEPTH_BIAS`] so that a lit surface is not shadowed by itself.
     pub fn shadow_depth(&mut self, device: &wgpu::Device) -> &wgpu::RenderPipeline {
         if self.shadow_depth.is_none() {
-            self.shadow_depth = Some(device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("shadow map"),
-                layout: Some(&self.layout),
-                vertex: wgpu::VertexState {
-                    module: &self.shade,
-                    entry_point: Some("vs_depth"),
-                    compilation_options: Default::default(),
-                    buffers: &[Some(wgpu::VertexBufferLayout {
-                        array_stride: UNIT,
-                        step_mode: wgpu::VertexStepMode::Vertex,
-                        attributes: &wgpu::vertex_attr_array![0 => Float32x3],
-                    })],
-                },
-                primitive: wgpu::PrimitiveState {
-                    topology: wgpu::PrimitiveTopology::TriangleList,
-                    cull_mode: None,
-                    ..Default::default()
-                },
-                depth_stencil: Some(wgpu::DepthStencilState {
-                    format: DEPTH_FORMAT,
-                    depth_write_enabled: Some(true),
-                    depth_compare: Some(wgpu::CompareFunction::Less),
-                    stencil: Default::default(),
-                    bias: SHADOW_DEPTH_BIAS,
-                }),
-                multisample: Default::default(),
-                fragment: None,
-                multiview_mask: None,
-                cache: None,
-            }));
+            let depth = (wgpu::CompareFunction::Less, SHADOW_DEPTH_BIAS);
+            self.shadow_depth = Some(depth_only(device, &self.layout, &self.shade, "shadow map", depth, 1));
         }
         self.shadow_depth.as_ref().expect("just created")
     }
@@ -359,6 +303,48 @@ fn color_constants() -> String {
         + &c("SHADOW_BLOCKED", SHADOW_BLOCKED)
         + &c("SHADOW_AWAY", SHADOW_AWAY)
         + &c("HIGHLIGHT", HIGHLIGHT)
+}
+
+/// A depth-only pipeline: shadow.wgsl's `vs_depth` (positions only, through `u.view_proj`), no
+/// fragment stage, both faces, depth written with `compare` and `bias`, at `samples` per pixel.
+fn depth_only(
+    device: &wgpu::Device,
+    layout: &wgpu::PipelineLayout,
+    module: &wgpu::ShaderModule,
+    label: &str,
+    (compare, bias): (wgpu::CompareFunction, wgpu::DepthBiasState),
+    samples: u32,
+) -> wgpu::RenderPipeline {
+    device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+        label: Some(label),
+        layout: Some(layout),
+        vertex: wgpu::VertexState {
+            module,
+            entry_point: Some("vs_depth"),
+            compilation_options: Default::default(),
+            buffers: &[Some(wgpu::VertexBufferLayout {
+                array_stride: UNIT,
+                step_mode: wgpu::VertexStepMode::Vertex,
+                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+            })],
+        },
+        primitive: wgpu::PrimitiveState {
+            topology: wgpu::PrimitiveTopology::TriangleList,
+            cull_mode: None,
+            ..Default::default()
+        },
+        depth_stencil: Some(wgpu::DepthStencilState {
+            format: DEPTH_FORMAT,
+            depth_write_enabled: Some(true),
+            depth_compare: Some(compare),
+            stencil: Default::default(),
+            bias,
+        }),
+        multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
+        fragment: None,
+        multiview_mask: None,
+        cache: None,
+    })
 }
 
 fn pipeline(

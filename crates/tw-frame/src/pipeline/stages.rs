@@ -28,7 +28,7 @@ use super::{Pipe, Pipeline, PipelinedFrame, Submitted};
 use crate::occlude::{CullPlan, DepthFrame, OcclusionState, Tester, VisibleSet};
 use crate::{
     lookup, page_bounds, select_and_stream, Culled, FrameError, FrameInfo, FrameSettings, FrameTimes,
-    Occlusion, ShadowInfo, Streamed, Walkthrough,
+    Occlusion, Streamed, Walkthrough,
 };
 
 /// The frames' output: drawn frames, or the error of the stage that failed.
@@ -520,29 +520,9 @@ fn frame_info(
     renderer: &Renderer,
     decoded: &[(ClusterRef, &PageCluster)],
 ) -> FrameInfo {
-    let gpu = renderer.stats();
-    FrameInfo {
-        times: FrameTimes {
-            cull: culled.cull_time,
-            cull_box_tests: culled.box_test_time,
-            cull_triangle_tests: culled.triangle_test_time,
-            cull_readback: culled.readback_time,
-            upload: gpu.upload,
-            render: gpu.render,
-            total: cut.submitted.elapsed(),
-            ..cut.times
-        },
-        select: cut.select,
-        stream: cut.stream,
-        cut_triangles: decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum(),
-        triangles: gpu.triangles,
-        masked_triangles: gpu.masked_triangles,
-        clusters: gpu.clusters,
-        draw_calls: gpu.draw_calls,
-        occlusion: culled.stats,
-        gpu: gpu.pool,
-        shadow: ShadowInfo::default(),
-    }
+    let cut_triangles = decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+    let figures = (cut.select, cut.stream, cut_triangles);
+    FrameInfo::culled(cut.times, figures, culled, &renderer.stats(), cut.submitted.elapsed())
 }
 
 #[cfg(test)]
