@@ -566,6 +566,70 @@ pub struct DrawnFrame {
     pub occluded: Vec<ClusterRef>,
 }
 
+/// The culling side of a frame, for a cull server ([`remote`]; the occlusion switch's culling
+/// GPU): what a frame of `camera` would draw, without drawing it.
+impl Walkthrough {
+    /// The cut of `camera` (streamed, or loaded with `wait_for_pages`) and, for `hzb` and
+    /// `queries`, its occluders drawn **depth only** and the candidates tested: the clusters a
+    /// frame would draw (`drawn`) and those found hidden, as [`draw_frame`](Self::draw_frame)
+    /// returns them, without the second pass or any colour. `none` draws nothing at all;
+    /// `gpu-hzb`, whose tests feed its own draws, draws its frame as `draw_frame` does. The
+    /// occlusion history is kept as a frame keeps it. Shadows are not culled here.
+    pub fn cull_frame(
+        &mut self,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Result<DrawnFrame, FrameError> {
+        if settings.occlusion == Occlusion::GpuHzb {
+            return self.draw_frame(camera, &FrameSettings { shadows: None, ..*settings });
+        }
+        let start = Instant::now();
+        let store = self.streamer.store().clone();
+        let size = self.renderer.size();
+        let Streamed { pages, stats: stream, times: stream_times } =
+            select_and_stream(&mut self.streamer, &mut self.selection, camera, settings, size);
+        let select = start.elapsed();
+        let clusters = lookup(&pages, &self.selection.clusters);
+        let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        let culled = if settings.occlusion == Occlusion::None {
+            self.renderer.begin_frame();
+            Culled { drawn: clusters.iter().map(|c| c.0).collect(), ..Default::default() }
+        } else {
+            self.occlusion.visible_pixels = settings.visible_pixels;
+            self.occlusion.triangle_culling = settings.triangle_culling;
+            let grid_step = store.header().grid_step;
+            let plan = occlude::CullPlan::new(&self.occlusion, &clusters);
+            self.renderer.begin_frame();
+            plan.draw_first(
+                settings.occlusion,
+                &self.occlusion,
+                &mut self.renderer,
+                camera,
+                grid_step,
+                true,
+            )?;
+            let tester = match settings.occlusion {
+                Occlusion::Hzb => occlude::Tester::Depth(occlude::DepthFrame::read(&mut self.renderer)?),
+                _ => occlude::Tester::Queries(&mut self.renderer),
+            };
+            let bounds = |c: &ClusterRef| page_bounds(&pages, c);
+            let mut outcome =
+                plan.test(settings.occlusion, &mut self.occlusion, tester, &store, camera, &bounds)?;
+            self.occlusion.finish(&mut outcome);
+            outcome.culled
+        };
+        let select_times = FrameTimes {
+            select,
+            select_cut: stream_times.map_or(select, |t| t.cut),
+            select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
+            ..Default::default()
+        };
+        let figures = (self.selection.stats, stream, cut_triangles);
+        let info = FrameInfo::culled(select_times, figures, &culled, &self.renderer.stats(), start.elapsed());
+        Ok(DrawnFrame { info, drawn: culled.drawn, occluded: culled.occluded })
+    }
+}
+
 /// For interactive front ends (the viewer): frames without readback, a new streamer or
 /// renderer without a new walkthrough.
 impl Walkthrough {

@@ -83,3 +83,53 @@ fn drawing_a_frames_drawn_clusters_gives_its_image() {
         }
     }
 }
+
+/// A cull server's frame (`cull_frame`: occluders depth only, no second pass) finds the same
+/// clusters as a drawn frame, frame after frame (the history evolves the same way), with every
+/// strategy; and those clusters drawn give `none`'s image.
+#[test]
+fn culling_without_drawing_finds_what_a_frame_draws() {
+    let _gpu = gpu_lock();
+    let store = plant();
+    let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "cull_frame", 256 << 20)
+    else {
+        return;
+    };
+    let options = PathOptions { frames: 24, part: PathPart::Walk, seed: 2, ..Default::default() };
+    let path = generate_path(&store, &options, &mut |_, _, _| {}).unwrap().path;
+    let cameras: Vec<_> =
+        path.frames.iter().step_by(3).map(|f| f.to_scene(store.header()).unwrap()).collect();
+    let none = FrameSettings { occlusion: Occlusion::None, wait_for_pages: true, ..Default::default() };
+    let baseline: Vec<_> = cameras.iter().map(|c| walk.frame(c, &none).unwrap().0).collect();
+    for occlusion in [Occlusion::None, Occlusion::Hzb, Occlusion::Queries, Occlusion::GpuHzb] {
+        let settings = FrameSettings { occlusion, wait_for_pages: true, ..Default::default() };
+        walk.reset();
+        let drawn: Vec<Vec<ClusterRef>> =
+            cameras.iter().map(|c| walk.draw_frame(c, &settings).unwrap().drawn).collect();
+        walk.reset();
+        let mut culled_any = 0;
+        for (i, c) in cameras.iter().enumerate() {
+            let culled = walk.cull_frame(c, &settings).unwrap();
+            culled_any += culled.occluded.len();
+            let (mut a, mut b) = (culled.drawn.clone(), drawn[i].clone());
+            a.sort_by_key(|c| (c.page, c.index_in_page));
+            b.sort_by_key(|c| (c.page, c.index_in_page));
+            assert_eq!(
+                a,
+                b,
+                "{} frame {i}: cull_frame and draw_frame found other clusters",
+                occlusion.name()
+            );
+            let (image, _) = walk.frame_of_clusters(c, &culled.drawn).unwrap();
+            assert_eq!(
+                image.differing_pixels(&baseline[i]).unwrap(),
+                0,
+                "{} frame {i}: the culled set does not give none's image",
+                occlusion.name()
+            );
+        }
+        if matches!(occlusion, Occlusion::Hzb | Occlusion::Queries) {
+            assert!(culled_any > 0, "{}: nothing culled on the walk", occlusion.name());
+        }
+    }
+}

@@ -1,7 +1,8 @@
 //! `terawalk cull-server`: the occlusion switch's culling side over TCP (Govindaraju's thesis
 //! ch. 3; docs/DESIGN.md, D7). Each client (`bench --cull-server`) gets a thread and its own
 //! [`Walkthrough`] of the one store, whose frame pipeline culls the cameras the client sends
-//! (select, stream, occlude: [`Walkthrough::draw_frame`]); the drawn clusters go back as the
+//! (select, stream, occlude with the occluders drawn depth only and nothing else drawn:
+//! [`Walkthrough::cull_frame`]); the clusters a frame would draw go back as the
 //! delta of 4-byte ids against what that client was sent last (tw-net). By default the clients'
 //! renderers share one GPU device (`--own-devices`: one each).
 
@@ -107,7 +108,8 @@ impl Culler for WalkCuller {
     fn cull(&mut self, request: &CameraRequest) -> Result<Culled, String> {
         let (camera, settings) = frame_of(request, self.occlusion)?;
         let walk = self.walkthrough(request.viewport).map_err(|e| format!("{e:#}"))?;
-        let drawn = walk.draw_frame(&camera, &settings).map_err(|e| e.to_string())?;
+        // The visible set only: occluders depth only, no second pass, no colour.
+        let drawn = walk.cull_frame(&camera, &settings).map_err(|e| e.to_string())?;
         let ids = drawn.drawn.iter().filter_map(|c| self.ids.id(c)).collect();
         Ok(Culled { ids, triangles: drawn.info.triangles })
     }
