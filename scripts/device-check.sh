@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # terawalk on a machine with a real GPU (docs/benchmarks-log.md "On a real GPU"): adapters,
-# a 10^7 and a 10^8 plant built there, benches of every strategy. Prepare here, in the repo root:
+# a 10^7 and a 10^8 plant built there, benches of every strategy and of the parallel
+# pipelines (`--pipeline`). Prepare here, in the repo root:
 #   strip -o .dev/terawalk target/release/terawalk   (carry limit 64 MiB; .dev and .gl ignored)
 #   and the Vulkan/EGL loaders into .gl (their .deb packages, unpacked there), then run it there
 #   with carry [".dev", ".gl"] and timeout 560: `bash scripts/device-check.sh`. Results land in $OUT.
@@ -41,6 +42,9 @@ run timeout 60 $B info $W/p100m.tw --verify
 run $B -q path $W/p100m.tw -o $W/p100m.json --frames ${F:-300}
 WGPU_BACKEND=vulkan TAILN=40 run timeout 150 $B bench $W/p100m.tw --path $W/p100m.json --occlusion none,hzb,queries,gpu-hzb --memory 512M --out $W/r100-vk
 cp $W/r100-vk/report.json $OUT/r100-vk.json
+# the parallel pipelines against serial (issue: frame time no longer CPU-bound, >= 2x serial)
+WGPU_BACKEND=vulkan TAILN=40 run timeout 120 $B bench $W/p100m.tw --path $W/p100m.json --frames 150 --occlusion hzb --pipeline serial,gigawalk,switch,alternate,serial,gigawalk,switch,alternate --memory 512M --out $W/r100-pipe
+cp $W/r100-pipe/report.json $OUT/r100-pipe.json
 WGPU_BACKEND=vulkan TAILN=40 run timeout 150 $B bench $W/p100m.tw --path $W/p100m.json --occlusion auto --samples 4 --wait --compare 60 --memory 512M --out $W/r100-vk-s4
 cp $W/r100-vk-s4/report.json $OUT/r100-vk-s4.json
 cd $W && tar czf $OUT/frames.tgz img r100-vk/index.html r100-vk-s4/index.html r10-gl/index.html; ls -la $OUT | tee -a $L
