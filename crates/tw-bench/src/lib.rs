@@ -162,12 +162,21 @@ impl Bench {
     }
 
     /// The strategies to run: none for the reference and the ray tracer, else those asked for
-    /// (`None`: the fastest conservative one on this device).
+    /// (`None`: the fastest conservative one on this device that every `--pipeline` asked for
+    /// can cull with: `hzb` where that is `gpu-hzb` and a pipeline cannot run it).
     fn strategies(&self, walk: &Walkthrough, traced: bool) -> Vec<Occlusion> {
         if self.options.reference || traced {
             return vec![Occlusion::None];
         }
-        let fastest = || Occlusion::fastest_for(walk.renderer());
+        let fastest = || {
+            let device = Occlusion::fastest_for(walk.renderer());
+            let all_run = self.options.pipelines.iter().all(|p| p.supports(device).is_ok());
+            if all_run {
+                device
+            } else {
+                Occlusion::Hzb
+            }
+        };
         self.options.occlusion.iter().map(|o| o.unwrap_or_else(fastest)).collect()
     }
 
