@@ -72,6 +72,7 @@ fn compare(
         cameras.iter().map(|c| w.frame(c, &settings(Occlusion::None)).unwrap().0).collect();
     let gl = backends == wgpu::Backends::GL;
     let mut runs = vec![
+        (Pipeline::Serial, Occlusion::Hzb),
         (Pipeline::Gigawalk, Occlusion::Hzb),
         (Pipeline::Switch, Occlusion::Hzb),
         (Pipeline::Switch, Occlusion::Queries),
@@ -166,7 +167,7 @@ fn pipelines_stop_cleanly_with_frames_in_flight() {
     let store = plant();
     let cams = cameras(&store, PathPart::Walk, 12, 1);
     let Some(mut w) = common::walkthrough(store, wgpu::Backends::VULKAN, "stop", 256 << 20) else { return };
-    for kind in [Pipeline::Gigawalk, Pipeline::Switch, Pipeline::Alternate] {
+    for kind in Pipeline::ALL {
         let got = w
             .pipelined(kind, &settings(Occlusion::Hzb), |pipe| {
                 assert!(pipe.receive().is_err(), "a frame came out before any was submitted");

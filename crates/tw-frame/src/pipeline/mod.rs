@@ -44,7 +44,8 @@ use tw_runtime::{Camera, ClusterRef};
 
 use crate::{FrameError, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 
-/// How a frame's stages run (`--pipeline`).
+/// How a frame's stages run (`--pipeline`). Through [`Walkthrough::pipelined`], `Serial` is
+/// [`Walkthrough::draw_frame`] and the read-back on one thread behind the same [`Pipe`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Pipeline {

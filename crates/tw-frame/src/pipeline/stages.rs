@@ -2,7 +2,7 @@
 //! that takes a frame from the channel before it, does its step and hands the frame on.
 //!
 //! - [`select`] (S): the cut of each camera and the pages it holds.
-//! - [`occluders`] (GigaWalk's OR): the cut split by the visible set of two frames before, the
+//! - [`occluders_stage`] (GigaWalk's OR): the cut split by the visible set of two frames before, the
 //!   occluders drawn on the OR device, its depth read back.
 //! - [`cull`] (GigaWalk's STC): the HZB of that depth and the tests; the visible set goes to
 //!   RVG and, as the history, back to OR.
@@ -57,7 +57,7 @@ impl Cut {
 }
 
 /// A frame whose occluders OR has drawn: the split it drew and the depth it read back
-/// (`None` without occlusion culling), and how long drawing and reading took.
+/// (`None` without occlusion culling), with the time the read-back waited.
 struct Occluded {
     cut: Arc<Cut>,
     split: OcclusionSplit,
@@ -85,7 +85,14 @@ pub(super) fn run<R>(
     let size = walk.renderer.size();
     let (cameras_tx, cameras) = sync_channel::<Submitted>(0);
     let (out, frames) = channel();
-    let mut pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind, failed: None };
+    let pipe = Pipe { cameras: Some(cameras_tx), frames, submitted: 0, received: 0, kind, failed: None };
+    if kind == Pipeline::Serial {
+        // The serial frame behind the same pipe: one stage does everything.
+        return std::thread::scope(|s| {
+            spawn(s, "frames", out.clone(), move || serial(walk, &settings, cameras, out))?;
+            Ok(drive(pipe, body))
+        });
+    }
     let Walkthrough { streamer, renderer, selection, .. } = walk;
     let pacer = Pacer::new(2);
     std::thread::scope(|s| {
@@ -94,9 +101,7 @@ pub(super) fn run<R>(
         let mut next_device =
             || occluders.next().ok_or_else(|| FrameError::Pipeline("an occlusion device is missing".into()));
         match kind {
-            Pipeline::Serial => {
-                return Err(FrameError::Pipeline("serial frames are drawn by Walkthrough::frame".into()));
-            }
+            Pipeline::Serial => unreachable!("run_serial runs it"),
             Pipeline::Gigawalk => {
                 let (cut_tx, cut_rx) = sync_channel(0);
                 let (occluded_tx, occluded_rx) = sync_channel(0);
@@ -155,11 +160,16 @@ pub(super) fn run<R>(
                 spawn(s, "in-order", out, move || in_order(done_rxs, o))?;
             }
         }
-        let result = body(&mut pipe);
-        // Closing the cameras' channel stops S, then every stage after it in turn.
-        drop(pipe);
-        Ok(result)
+        Ok(drive(pipe, body))
     })
+}
+
+/// Runs the caller's `body` on the pipe, then closes it: closing the cameras' channel stops the
+/// first stage, then every stage after it in turn, and the scope joins them.
+fn drive<R>(mut pipe: Pipe, body: impl FnOnce(&mut Pipe) -> R) -> R {
+    let result = body(&mut pipe);
+    drop(pipe);
+    result
 }
 
 /// Starts stage `name` on a scoped thread: `work` runs until its input closes; an error it
@@ -185,6 +195,25 @@ fn spawn<'scope>(
         })
         .map(|_| ())
         .map_err(|e| FrameError::Pipeline(format!("could not start the {name} stage: {e}")))
+}
+
+/// The serial frame as a stage: each camera's frame drawn with [`Walkthrough::draw_frame`] and
+/// read back, on one thread.
+fn serial(
+    walk: &mut Walkthrough,
+    settings: &FrameSettings,
+    cameras: Receiver<Submitted>,
+    out: Output,
+) -> Result<(), FrameError> {
+    for Submitted { frame, camera, at } in cameras {
+        let mut drawn = walk.draw_frame(&camera, settings)?;
+        let image = walk.renderer_mut().read_color()?;
+        drawn.info.times.total = at.elapsed();
+        if out.send(Ok(PipelinedFrame { frame, image, info: drawn.info, drawn: drawn.drawn })).is_err() {
+            break;
+        }
+    }
+    Ok(())
 }
 
 /// S: the cut of each camera and its pages (streamed: the frame never waits for the disk, or
