@@ -4,7 +4,8 @@
 //!
 //! - [`Pipeline::Serial`]: [`Walkthrough::frame`], one stage after the other on one thread.
 //! - [`Pipeline::Gigawalk`] (GigaWalk §5): **S** selects and streams the cut of each camera;
-//!   **OR** renders the frame's occluders on a device of its own and reads its depth back;
+//!   **OR** renders the frame's occluders, depth only, on a device of its own and reads its
+//!   depth back;
 //!   **STC** builds the HZB from it and tests the cut's candidates (on every core left);
 //!   **RVG** draws the visible set on the walkthrough's renderer and reads the image. The
 //!   occluders of frame i are the visible set of frame i−2 at frame i's LOD (the paper's
@@ -22,16 +23,16 @@
 //!   walkthrough's renderer and one more), and the frames are put back in order. No geometry
 //!   is drawn twice; two frames are culled and rasterized at once. Culls with every strategy.
 //!
-//! Both stay conservative: every occluder is geometry of the frame's own cut drawn with the
+//! All stay conservative: every occluder is geometry of the frame's own cut drawn with the
 //! frame's camera, so frame i's image is that of `--occlusion none` (the tests in
 //! crates/tw-frame/tests/pipeline.rs compare them pixel for pixel on Vulkan and GL).
 //!
 //! The stages hand whole frames on over rendezvous channels (a frame's message is its
-//! end-of-frame marker; its tag is checked in order at the render stage), so at most one frame
-//! is in each stage: the frames in flight, and the decoded pages they hold beyond the page
-//! cache's budget, are bounded by the number of stages. A stage that fails sends its error
-//! to the output and stops; the others then find their channels closed and stop too, so no
-//! stage waits forever ([`Pipe::receive`] returns the error).
+//! end-of-frame marker; its tag is checked in order where the frames meet again), so at most
+//! one frame is in each stage: the frames in flight, and the decoded pages they hold beyond the
+//! page cache's budget, are bounded by the number of stages. A stage that fails or panics sends
+//! its error to the output and stops; the others then find their channels closed and stop too,
+//! so no stage waits forever ([`Pipe::receive`] returns the error, and every later call too).
 
 mod stages;
 
@@ -49,7 +50,7 @@ use crate::{FrameError, FrameInfo, FrameSettings, Occlusion, Walkthrough};
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Pipeline {
-    /// One stage after the other, on the calling thread.
+    /// One stage after the other, on one thread.
     #[default]
     Serial,
     /// GigaWalk's occluder rendering, culling and rendering of the visible set as concurrent
