@@ -692,9 +692,10 @@ pub struct BenchArgs {
     /// How each strategy's frames run, comma-separated, one run each: serial (one stage after
     /// the other), gigawalk (select, occluders on a second device, HZB culling and drawing as
     /// concurrent stages, GigaWalk §5; none or hzb) or switch (two occlusion contexts taking
-    /// turns, the occlusion switch; none, hzb or queries) or alternate (two devices each
-    /// drawing every other frame whole; any strategy). Frame times of the parallel ones are
-    /// their throughput; their latency is recorded beside.
+    /// turns, the occlusion switch; none, hzb or queries), select-ahead (the next frame's
+    /// selection on a thread of its own while this one is culled and drawn; any strategy) or
+    /// alternate (two devices each drawing every other frame whole; any strategy). Frame times
+    /// of the parallel ones are their throughput; their latency is recorded beside.
     #[arg(long, value_delimiter = ',', default_value = "serial", value_parser = parse_pipeline)]
     pub pipeline: Vec<tw_frame::Pipeline>,
     /// Render at full detail without any culling (the reference) instead.

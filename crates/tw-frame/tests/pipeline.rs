@@ -73,6 +73,8 @@ fn compare(
     let gl = backends == wgpu::Backends::GL;
     let mut runs = vec![
         (Pipeline::Serial, Occlusion::Hzb),
+        (Pipeline::SelectAhead, Occlusion::Hzb),
+        (Pipeline::SelectAhead, Occlusion::GpuHzb),
         (Pipeline::Gigawalk, Occlusion::Hzb),
         (Pipeline::Switch, Occlusion::Hzb),
         (Pipeline::Switch, Occlusion::Queries),
@@ -189,6 +191,7 @@ fn unsupported_combinations_are_refused() {
     assert!(Pipeline::Gigawalk.supports(Occlusion::Queries).unwrap_err().contains("--pipeline switch"));
     assert!(Pipeline::Switch.supports(Occlusion::GpuHzb).unwrap_err().contains("--occlusion gpu-hzb"));
     assert!(Pipeline::Alternate.supports(Occlusion::GpuHzb).is_ok());
+    assert!(Pipeline::SelectAhead.supports(Occlusion::Queries).is_ok());
     for p in Pipeline::ALL {
         assert!(p.supports(Occlusion::Hzb).is_ok() && p.supports(Occlusion::None).is_ok());
         assert_eq!(Pipeline::parse(p.name()), Some(p));

@@ -17,6 +17,10 @@
 //!   HZB), the other renders frame i+1's occluders. Each context's occluders are the visible
 //!   set it found two frames before, which it keeps (a depth buffer never leaves its device
 //!   for `queries`). **S** and **RVG** are as above. Culls with `queries`, `hzb` or `none`.
+//! - [`Pipeline::SelectAhead`]: **S** selects and streams frame i+1 while one context culls and
+//!   draws frame i whole (the serial frame's steps) on the walkthrough's renderer: nothing is
+//!   drawn twice, and the selection's single-threaded traversal overlaps the rasterization.
+//!   Culls with every strategy.
 //! - [`Pipeline::Alternate`]: the switch without its render context, for machines where every
 //!   device shares the same cores (Mesa's CPU drivers): the two contexts each draw their frame
 //!   whole, the serial two-pass frame on their own device with their own history (the
@@ -60,6 +64,8 @@ pub enum Pipeline {
     Switch,
     /// Two contexts taking turns, each drawing its frames whole.
     Alternate,
+    /// Selection on a thread of its own, one frame ahead of culling and drawing.
+    SelectAhead,
 }
 
 impl Pipeline {
@@ -72,6 +78,7 @@ impl Pipeline {
             Pipeline::Gigawalk => "gigawalk",
             Pipeline::Switch => "switch",
             Pipeline::Alternate => "alternate",
+            Pipeline::SelectAhead => "select-ahead",
         }
     }
 
@@ -86,6 +93,7 @@ impl Pipeline {
             Pipeline::Gigawalk => "GigaWalk pipeline: select, occluders, culling and drawing on four threads, two devices",
             Pipeline::Switch => "occlusion switch: two occlusion contexts taking turns, select and drawing on threads of their own",
             Pipeline::Alternate => "alternate frames: two contexts on devices of their own each drawing every other frame whole, select on a thread of its own",
+            Pipeline::SelectAhead => "select ahead: the next frame's selection and streaming on a thread of its own while this one is culled and drawn",
         }
     }
 
@@ -94,7 +102,8 @@ impl Pipeline {
     /// contexts; neither runs `gpu-hzb`, whose tests feed the same device's indirect draws.
     pub fn supports(self, occlusion: Occlusion) -> Result<(), String> {
         match (self, occlusion) {
-            (Pipeline::Serial | Pipeline::Alternate, _) | (_, Occlusion::None | Occlusion::Hzb) => Ok(()),
+            (Pipeline::Serial | Pipeline::SelectAhead | Pipeline::Alternate, _)
+            | (_, Occlusion::None | Occlusion::Hzb) => Ok(()),
             (Pipeline::Switch, Occlusion::Queries) => Ok(()),
             (p, o) => Err(format!(
                 "--pipeline {} cannot cull with --occlusion {}: {}",
@@ -116,6 +125,7 @@ impl Pipeline {
             Pipeline::Gigawalk => 4,
             Pipeline::Switch => 4,
             Pipeline::Alternate => 3,
+            Pipeline::SelectAhead => 2,
         }
     }
 }
@@ -245,7 +255,7 @@ impl Walkthrough {
             )));
         }
         let contexts = match kind {
-            Pipeline::Serial => 0,
+            Pipeline::Serial | Pipeline::SelectAhead => 0,
             Pipeline::Gigawalk | Pipeline::Alternate => 1,
             Pipeline::Switch => 2,
         };

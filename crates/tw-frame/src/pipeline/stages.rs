@@ -9,8 +9,9 @@
 //! - [`context`] (one of the switch's two occlusion contexts): occluders, then the tests, on
 //!   one device that keeps its own history.
 //! - [`render`] (RVG): the visible set drawn on the walkthrough's renderer, the image read back.
-//! - [`whole`] (one of `alternate`'s two contexts): the serial frame's culling and drawing on
-//!   one device, the image read back; [`in_order`] puts the two contexts' frames back in order.
+//! - [`whole`] (`select-ahead`'s one context, or one of `alternate`'s two): the serial frame's
+//!   culling and drawing on one device, the image read back; [`in_order`] puts the contexts'
+//!   frames back in order.
 
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender, SyncSender};
 use std::sync::Arc;
@@ -137,12 +138,14 @@ pub(super) fn run<R>(
                 let o = out.clone();
                 spawn(s, "render", out, move || render(renderer, store, tested_rxs, o))?;
             }
-            Pipeline::Alternate => {
+            Pipeline::SelectAhead | Pipeline::Alternate => {
                 let (mut cut_txs, mut done_rxs) = (Vec::new(), Vec::new());
-                let second = next_device()?;
-                let devices: [(&str, Device<'_>); 2] =
-                    [("frames-a", Device::Borrowed(renderer)), ("frames-b", Device::Owned(Box::new(second)))];
-                let pacer = &pacer;
+                let mut devices = vec![("frames-a", Device::Borrowed(renderer))];
+                if kind == Pipeline::Alternate {
+                    devices.push(("frames-b", Device::Owned(Box::new(next_device()?))));
+                }
+                // Only contexts that take turns need their hand-outs spaced.
+                let pacer = (devices.len() > 1).then_some(&pacer);
                 for (name, device) in devices {
                     let (cut_tx, cut_rx) = sync_channel(0);
                     // One finished frame may wait for its turn while the context goes on.
@@ -154,7 +157,7 @@ pub(super) fn run<R>(
                     done_rxs.push(done_rx);
                 }
                 spawn(s, "select", out.clone(), move || {
-                    select(streamer, selection, &settings, size, cameras, cut_txs, Some(pacer))
+                    select(streamer, selection, &settings, size, cameras, cut_txs, pacer)
                 })?;
                 let o = out.clone();
                 spawn(s, "in-order", out, move || in_order(done_rxs, o))?;
@@ -483,7 +486,8 @@ impl Device<'_> {
     }
 }
 
-/// One of `alternate`'s contexts: every other frame culled and drawn whole on its `device`
+/// A context of `select-ahead` (every frame) or `alternate` (every other frame): frames culled
+/// and drawn whole on its `device`
 /// ([`crate::occlude::draw_culled`], the serial frame's steps, with this context's own
 /// history), its image read back and handed to [`in_order`].
 fn whole(
@@ -492,7 +496,7 @@ fn whole(
     settings: &FrameSettings,
     cuts: Receiver<Arc<Cut>>,
     next: SyncSender<PipelinedFrame>,
-    pacer: &Pacer,
+    pacer: Option<&Pacer>,
 ) -> Result<(), FrameError> {
     let renderer = device.get();
     let mut state = OcclusionState {
@@ -513,7 +517,9 @@ fn whole(
             cut.bounds(),
         )?;
         let image = renderer.read_color()?;
-        pacer.record(start.elapsed());
+        if let Some(pacer) = pacer {
+            pacer.record(start.elapsed());
+        }
         let info = frame_info(&cut, &culled, renderer, &decoded);
         drop(decoded);
         if next.send(PipelinedFrame { frame: cut.frame, image, info, drawn: culled.drawn }).is_err() {
@@ -523,7 +529,7 @@ fn whole(
     Ok(())
 }
 
-/// `alternate`'s frames back in submission order (frame i from `done[i % len]`, its tag
+/// `select-ahead`'s or `alternate`'s frames back in submission order (frame i from `done[i % len]`, its tag
 /// checked), to the output.
 fn in_order(done: Vec<Receiver<PipelinedFrame>>, out: Output) -> Result<(), FrameError> {
     for expected in 0u64.. {
