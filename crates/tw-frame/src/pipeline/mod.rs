@@ -69,8 +69,8 @@ pub enum Pipeline {
 }
 
 impl Pipeline {
-    pub const ALL: [Pipeline; 4] =
-        [Pipeline::Serial, Pipeline::Gigawalk, Pipeline::Switch, Pipeline::Alternate];
+    pub const ALL: [Pipeline; 5] =
+        [Pipeline::Serial, Pipeline::SelectAhead, Pipeline::Gigawalk, Pipeline::Switch, Pipeline::Alternate];
 
     pub fn name(self) -> &'static str {
         match self {
