@@ -160,15 +160,11 @@ impl Runner<'_> {
                 let (image, mut info) = (out.image, out.info);
                 let latency = info.times.total;
                 info.times.total = interval;
-                let segment = &frames.segments[i];
-                let mut rec = record(i, segment, &info);
+                let mut pictures = Pictures { index, name, frames: image_frames, images };
+                let tau = settings.tau as f64;
+                let mut rec =
+                    framed_record(options, frames, references, &mut pictures, i, &image, &info, tau)?;
                 rec.latency_ms = Some(latency.as_secs_f64() * 1e3);
-                rec.set_coverage(image.covered_pixels() as u64, options.error as f64);
-                if index == 0 && image_frames.contains(&i) {
-                    let caption = format!("{name}, frame {i} ({segment})");
-                    images.push(ReportImage { caption, png: image.png_bytes()? });
-                }
-                references.compare(&mut rec, i, &image, &info)?;
                 records.push(rec);
                 observer.frame_done(name, i, true);
             }
@@ -213,20 +209,10 @@ impl Runner<'_> {
                 observer.line(&line);
             }
         }
-        let segment = &frames.segments[i];
-        let mut rec = record(i, segment, &info);
         // The reference draws full detail (τ = 0): no model of what it needs.
         let tau = if o.reference { 0.0 } else { settings.tau as f64 };
-        rec.set_coverage(image.covered_pixels() as u64, tau);
-        if index == 0 && self.image_frames.contains(&i) {
-            self.images.push(ReportImage {
-                caption: format!("{name}, frame {i} ({segment})"),
-                png: image.png_bytes()?,
-            });
-        }
-        if !o.reference {
-            self.references.compare(&mut rec, i, &image, &info)?;
-        }
+        let mut pictures = Pictures { index, name, frames: &self.image_frames, images: &mut self.images };
+        let mut rec = framed_record(o, frames, self.references, &mut pictures, i, &image, &info, tau)?;
         if o.popping {
             self.popping(&mut rec, camera, previous)?;
         }
@@ -313,4 +299,39 @@ impl Runner<'_> {
             plan.occlusion.name()
         )
     }
+}
+
+/// Where a run's frames become the report's pictures: run `index` (only the first run's
+/// frames are kept), named `name`, at the frames `frames`.
+struct Pictures<'a> {
+    index: usize,
+    name: &'a str,
+    frames: &'a [usize],
+    images: &'a mut Vec<ReportImage>,
+}
+
+/// Frame `i`'s record from its image and figures: coverage at pixel error `tau`, the picture
+/// when it is one, and (except for the reference run) the comparison with its reference.
+#[allow(clippy::too_many_arguments)]
+fn framed_record(
+    options: &BenchOptions,
+    frames: &Frames,
+    references: &References,
+    pictures: &mut Pictures<'_>,
+    i: usize,
+    image: &Image,
+    info: &FrameInfo,
+    tau: f64,
+) -> Result<FrameRecord> {
+    let segment = &frames.segments[i];
+    let mut rec = record(i, segment, info);
+    rec.set_coverage(image.covered_pixels() as u64, tau);
+    if pictures.index == 0 && pictures.frames.contains(&i) {
+        let caption = format!("{}, frame {i} ({segment})", pictures.name);
+        pictures.images.push(ReportImage { caption, png: image.png_bytes()? });
+    }
+    if !options.reference {
+        references.compare(&mut rec, i, image, info)?;
+    }
+    Ok(rec)
 }

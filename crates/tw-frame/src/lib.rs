@@ -45,7 +45,7 @@ use tw_runtime::{
 };
 use tw_store::{PageCluster, Store};
 
-pub use occlude::{Occlusion, OcclusionStats, VisibleSet};
+pub use occlude::{Occlusion, OcclusionStats};
 pub use pipeline::{Pipe, Pipeline, PipelinedFrame};
 pub use shadow::{ShadowInfo, ShadowSettings};
 
@@ -553,6 +553,22 @@ fn lookup<'a>(
         .collect()
 }
 
+/// Triangles of decoded clusters.
+pub(crate) fn triangles(clusters: &[(ClusterRef, &PageCluster)]) -> u64 {
+    clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum()
+}
+
+/// A frame's selection times: `select` in all, of which the cut and the prefetch views as the
+/// streamer measured them (`None`, a blocking frame: all of it the cut).
+pub(crate) fn selection_times(select: Duration, stream: Option<tw_runtime::StreamTimes>) -> FrameTimes {
+    FrameTimes {
+        select,
+        select_cut: stream.map_or(select, |t| t.cut),
+        select_prefetch: stream.map_or(Duration::ZERO, |t| t.prefetch),
+        ..Default::default()
+    }
+}
+
 pub use occlude::Culled;
 
 /// One frame drawn by [`Walkthrough::draw_frame`]: its statistics and which clusters were
@@ -590,40 +606,29 @@ impl Walkthrough {
             select_and_stream(&mut self.streamer, &mut self.selection, camera, settings, size);
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
-        let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        let cut_triangles = triangles(&clusters);
         let culled = if settings.occlusion == Occlusion::None {
             self.renderer.begin_frame();
             Culled { drawn: clusters.iter().map(|c| c.0).collect(), ..Default::default() }
         } else {
             self.occlusion.visible_pixels = settings.visible_pixels;
             self.occlusion.triangle_culling = settings.triangle_culling;
-            let grid_step = store.header().grid_step;
-            let plan = occlude::CullPlan::new(&self.occlusion, &clusters);
             self.renderer.begin_frame();
-            plan.draw_first(
+            let bounds = |c: &ClusterRef| page_bounds(&pages, c);
+            let (_, mut outcome) = occlude::cull_on(
                 settings.occlusion,
-                &self.occlusion,
+                &mut self.occlusion,
                 &mut self.renderer,
+                &store,
                 camera,
-                grid_step,
+                &clusters,
+                &bounds,
                 true,
             )?;
-            let tester = match settings.occlusion {
-                Occlusion::Hzb => occlude::Tester::Depth(occlude::DepthFrame::read(&mut self.renderer)?),
-                _ => occlude::Tester::Queries(&mut self.renderer),
-            };
-            let bounds = |c: &ClusterRef| page_bounds(&pages, c);
-            let mut outcome =
-                plan.test(settings.occlusion, &mut self.occlusion, tester, &store, camera, &bounds)?;
             self.occlusion.finish(&mut outcome);
             outcome.culled
         };
-        let select_times = FrameTimes {
-            select,
-            select_cut: stream_times.map_or(select, |t| t.cut),
-            select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
-            ..Default::default()
-        };
+        let select_times = selection_times(select, stream_times);
         let figures = (self.selection.stats, stream, cut_triangles);
         let info = FrameInfo::culled(select_times, figures, &culled, &self.renderer.stats(), start.elapsed());
         Ok(DrawnFrame { info, drawn: culled.drawn, occluded: culled.occluded })
@@ -674,7 +679,7 @@ impl Walkthrough {
         );
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
-        let cut_triangles = clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        let cut_triangles = triangles(&clusters);
         let bounds = |c: &ClusterRef| page_bounds(&pages, c);
         let shadow = match &settings.shadows {
             Some(shadows) => {
@@ -717,12 +722,7 @@ impl Walkthrough {
             &clusters,
             bounds,
         )?;
-        let select_times = FrameTimes {
-            select,
-            select_cut: stream_times.map_or(select, |t| t.cut),
-            select_prefetch: stream_times.map_or(Duration::ZERO, |t| t.prefetch),
-            ..Default::default()
-        };
+        let select_times = selection_times(select, stream_times);
         let mut info = FrameInfo::culled(
             select_times,
             (self.selection.stats, stream, cut_triangles),

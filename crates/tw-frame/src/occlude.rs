@@ -242,18 +242,38 @@ pub fn draw_culled(
     if strategy == Occlusion::GpuHzb {
         return crate::gpu_hzb::draw_gpu_hzb(state, renderer, grid_step, camera, clusters, bounds);
     }
-    let cull = CullPlan::new(state, clusters);
-    cull.draw_first(strategy, state, renderer, camera, grid_step, false)?;
+    let (cull, mut tested) = cull_on(strategy, state, renderer, store, camera, clusters, &bounds, false)?;
+    cull.draw_second(renderer, camera, grid_step, &tested.visible_set)?;
+    state.finish(&mut tested);
+    Ok(tested.culled)
+}
+
+/// The steps of `hzb` and `queries` up to the second pass, all on `renderer` (whose frame the
+/// caller has begun): the cut split by `state`'s history, the occluders drawn (with
+/// `depth_only`, the depth alone), the candidates tested against them. The history is not
+/// updated yet ([`OcclusionState::finish`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn cull_on<'a, B>(
+    strategy: Occlusion,
+    state: &mut OcclusionState,
+    renderer: &mut Renderer,
+    store: &Store,
+    camera: &Camera,
+    clusters: &[(ClusterRef, &'a PageCluster)],
+    bounds: &B,
+    depth_only: bool,
+) -> Result<(CullPlan<'a>, CullOutcome), FrameError>
+where
+    B: Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])> + Sync,
+{
+    let plan = CullPlan::new(state, clusters);
+    plan.draw_first(strategy, state, renderer, camera, store.header().grid_step, depth_only)?;
     let tester = match strategy {
         Occlusion::Hzb => Tester::Depth(DepthFrame::read(renderer)?),
         _ => Tester::Queries(renderer),
     };
-    let mut tested = cull.test(strategy, state, tester, store, camera, &bounds)?;
-    cull.draw_second(renderer, camera, grid_step, &tested.visible_set)?;
-    let t = Instant::now();
-    state.finish(&mut tested);
-    tested.culled.cull_time += t.elapsed();
-    Ok(tested.culled)
+    let outcome = plan.test(strategy, state, tester, store, camera, bounds)?;
+    Ok((plan, outcome))
 }
 
 /// What a frame draws after occlusion culling, pass by pass: the first pass (the occluders,
@@ -262,29 +282,23 @@ pub fn draw_culled(
 /// their first pass left out). Drawn in this order on any renderer, it gives the frame's image
 /// ([`crate::pipeline`]'s render stage draws a set culled on another renderer).
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct VisibleSet {
-    pub first: Vec<ClusterRef>,
+pub(crate) struct VisibleSet {
+    first: Vec<ClusterRef>,
     /// Per cluster of `first`, the triangles drawn; `None`: all of them.
-    pub first_masks: Option<Vec<TriangleMask>>,
-    pub second: Vec<ClusterRef>,
-    pub second_masks: Vec<TriangleMask>,
+    first_masks: Option<Vec<TriangleMask>>,
+    second: Vec<ClusterRef>,
+    second_masks: Vec<TriangleMask>,
 }
 
 impl VisibleSet {
     /// The whole cut in one pass (no occlusion culling).
-    pub fn whole(clusters: Vec<ClusterRef>) -> VisibleSet {
+    pub(crate) fn whole(clusters: Vec<ClusterRef>) -> VisibleSet {
         VisibleSet { first: clusters, ..Default::default() }
-    }
-
-    /// Clusters drawn in either pass (an occluder whose hidden triangles the second pass
-    /// draws counts once).
-    pub fn clusters(&self) -> usize {
-        self.first.len() + self.second.len()
     }
 
     /// Draws both passes of the set with `camera` into `renderer`'s own target (cleared first);
     /// `clusters` are the frame's decoded clusters, in which every cluster of the set is.
-    pub fn draw(
+    pub(crate) fn draw(
         &self,
         renderer: &mut Renderer,
         camera: &Camera,
@@ -503,10 +517,12 @@ impl<'a> CullPlan<'a> {
 
 impl OcclusionState {
     /// Takes a tested frame's visible set as the history that chooses the next frame's
-    /// occluders.
+    /// occluders (its time counts as culling).
     pub(crate) fn finish(&mut self, outcome: &mut CullOutcome) {
+        let start = Instant::now();
         self.history.update_masked(std::mem::take(&mut outcome.history));
         self.frames = self.frames.wrapping_add(1);
+        outcome.culled.cull_time += start.elapsed();
     }
 }
 

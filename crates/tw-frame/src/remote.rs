@@ -89,7 +89,7 @@ impl Walkthrough {
         self.renderer.begin_frame();
         self.renderer.draw(Target::Own, camera, grid_step, &decoded, true)?;
         let gpu = self.renderer.stats();
-        let triangles = decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+        let triangles = crate::triangles(&decoded);
         Ok(FrameInfo {
             times: FrameTimes {
                 select,

@@ -50,7 +50,7 @@ use tw_runtime::shadow::{
 use tw_runtime::{Camera, ClusterRef, Light, ResidentPage, SelectOptions, ShadowClass, Shadows, Streamer};
 use tw_store::PageCluster;
 
-use crate::{lookup, page_bounds, resident_pages, FrameError};
+use crate::{lookup, page_bounds, resident_pages, triangles, FrameError};
 pub use tw_runtime::shadow::ShadowOptions;
 
 /// Shadows of a frame (`--light`, `--shadows`).
@@ -652,10 +652,6 @@ fn scene_box(header: &tw_store::Header) -> (Vec3, Vec3) {
     let lo = (glam::DVec3::from_array(header.bounds_min) - o).as_vec3();
     let hi = (glam::DVec3::from_array(header.bounds_max) - o).as_vec3();
     (lo, hi)
-}
-
-fn triangles(clusters: &[(ClusterRef, &PageCluster)]) -> u64 {
-    clusters.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum()
 }
 
 #[cfg(test)]

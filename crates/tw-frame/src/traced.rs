@@ -103,13 +103,10 @@ impl TracedWalkthrough {
         let t: TraceStats = traced.stats;
         let info = FrameInfo {
             times: FrameTimes {
-                select,
-                select_cut: stream_times.map_or(select, |s| s.cut),
-                select_prefetch: stream_times.map_or(Default::default(), |s| s.prefetch),
                 upload: t.blas.build_time + t.tlas_time,
                 render: t.trace_time + t.shade_time,
                 total: start.elapsed(),
-                ..Default::default()
+                ..crate::selection_times(select, stream_times)
             },
             select: self.selection.stats,
             stream,

@@ -26,10 +26,10 @@ use tw_runtime::{
 use tw_store::{PageCluster, Store};
 
 use super::{Pipe, Pipeline, PipelinedFrame, Submitted};
-use crate::occlude::{CullPlan, DepthFrame, OcclusionState, Tester, VisibleSet};
+use crate::occlude::{cull_on, CullPlan, DepthFrame, OcclusionState, Tester, VisibleSet};
 use crate::{
-    lookup, page_bounds, select_and_stream, Culled, FrameError, FrameInfo, FrameSettings, FrameTimes,
-    Occlusion, Streamed, Walkthrough,
+    lookup, page_bounds, select_and_stream, selection_times, triangles, Culled, FrameError, FrameInfo,
+    FrameSettings, FrameTimes, Occlusion, Streamed, Walkthrough,
 };
 
 /// The frames' output: drawn frames, or the error of the stage that failed.
@@ -245,12 +245,7 @@ fn select(
             clusters: selection.clusters.clone(),
             select: selection.stats,
             stream: stats,
-            times: FrameTimes {
-                select,
-                select_cut: times.map_or(select, |t| t.cut),
-                select_prefetch: times.map_or(Duration::ZERO, |t| t.prefetch),
-                ..Default::default()
-            },
+            times: selection_times(select, times),
         };
         if let Some(pacer) = pacer {
             pacer.wait_after(last_dispatch);
@@ -368,9 +363,7 @@ fn cull(
                         &cut.camera,
                         &bounds,
                     )?;
-                    let t = Instant::now();
                     state.finish(&mut outcome);
-                    outcome.culled.cull_time += t.elapsed();
                     Tested { cut: cut.clone(), set: outcome.visible_set, culled: outcome.culled }
                 }
             }
@@ -400,25 +393,16 @@ fn context(
         visible_pixels: settings.visible_pixels,
         ..Default::default()
     };
-    let grid_step = store.header().grid_step;
     for cut in cuts {
         let tested = if settings.occlusion == Occlusion::None {
             Tested::whole(cut)
         } else {
             let decoded = cut.decoded();
-            let plan = CullPlan::new(&state, &decoded);
             device.begin_frame();
-            plan.draw_first(settings.occlusion, &state, device, &cut.camera, grid_step, true)?;
-            let tester = match settings.occlusion {
-                Occlusion::Hzb => Tester::Depth(DepthFrame::read(device)?),
-                _ => Tester::Queries(device),
-            };
             let bounds = cut.bounds();
-            let mut outcome =
-                plan.test(settings.occlusion, &mut state, tester, store, &cut.camera, &bounds)?;
-            let t = Instant::now();
+            let (_, mut outcome) =
+                cull_on(settings.occlusion, &mut state, device, store, &cut.camera, &decoded, &bounds, true)?;
             state.finish(&mut outcome);
-            outcome.culled.cull_time += t.elapsed();
             drop(decoded);
             Tested { cut: cut.clone(), set: outcome.visible_set, culled: outcome.culled }
         };
@@ -555,7 +539,7 @@ fn frame_info(
     renderer: &Renderer,
     decoded: &[(ClusterRef, &PageCluster)],
 ) -> FrameInfo {
-    let cut_triangles = decoded.iter().map(|(_, c)| (c.indices.len() / 3) as u64).sum();
+    let cut_triangles = triangles(decoded);
     let figures = (cut.select, cut.stream, cut_triangles);
     FrameInfo::culled(cut.times, figures, culled, &renderer.stats(), cut.submitted.elapsed())
 }

@@ -125,6 +125,17 @@ impl Renderer {
         Ok(d)
     }
 
+    /// The multisampled target of `size` and `format`: the own one (`own`) or the one for
+    /// callers' views, made again when its size or format differs.
+    fn msaa_target(&mut self, own: bool, size: (u32, u32), format: wgpu::TextureFormat) -> &msaa::MsaaTarget {
+        let (device, samples) = (&self.device, self.samples);
+        let slot = if own { &mut self.msaa_own } else { &mut self.msaa_view };
+        if slot.as_ref().is_none_or(|t| t.size != size || t.format != format) {
+            *slot = Some(msaa::MsaaTarget::new(device, size, format, samples));
+        }
+        slot.as_ref().expect("made above")
+    }
+
     /// The attachments of `pass` into a target of `size` whose single-sample depth is
     /// `depth_view`: with multisampling, a shaded pass draws into the multisampled targets of
     /// that size and format (made on first use) and resolves into the pass's view.
@@ -149,12 +160,9 @@ impl Renderer {
             }
             Pass::EyeDepth => {
                 // The own multisampled depth, which read_depth resolves and queries test.
-                let (device, samples, size) = (&self.device, self.samples, (self.width, self.height));
-                if self.msaa_own.as_ref().is_none_or(|t| t.size != size || t.format != COLOR_FORMAT) {
-                    self.msaa_own = Some(msaa::MsaaTarget::new(device, size, COLOR_FORMAT, samples));
-                }
-                let t = self.msaa_own.as_ref().expect("made above");
-                Attachments { color: None, resolve: None, depth: t.depth.clone(), samples }
+                let own = (self.width, self.height);
+                let t = self.msaa_target(true, own, COLOR_FORMAT);
+                Attachments { color: None, resolve: None, depth: t.depth.clone(), samples: self.samples }
             }
             Pass::Shade { view, .. } if self.samples == 1 => {
                 Attachments { color: Some(view.clone()), resolve: None, depth: depth_view, samples: 1 }
@@ -165,17 +173,13 @@ impl Renderer {
                     // The caller's view reuses the own multisampled target: keep its frame.
                     self.resolve_color();
                 }
-                let (device, samples) = (&self.device, self.samples);
-                let slot = if own_size { &mut self.msaa_own } else { &mut self.msaa_view };
-                if slot.as_ref().is_none_or(|t| t.size != size || t.format != format) {
-                    *slot = Some(msaa::MsaaTarget::new(device, size, format, samples));
-                }
-                let t = slot.as_ref().expect("made above");
+                let t = self.msaa_target(own_size, size, format);
+                let (color, depth) = (t.color.clone(), t.depth.clone());
                 let att = Attachments {
-                    color: Some(t.color.clone()),
+                    color: Some(color),
                     resolve: (!own).then(|| view.clone()),
-                    depth: t.depth.clone(),
-                    samples,
+                    depth,
+                    samples: self.samples,
                 };
                 self.color_stale |= own;
                 att
