@@ -5,6 +5,12 @@
 //! packagers building from a source tarball who know the commit), `git rev-parse --short HEAD`
 //! in a git checkout, else "unknown". No dependency, and no failure: a tarball without `.git`, a
 //! machine without `git` or a repository git refuses to read all build, with "unknown".
+//!
+//! A checkout whose tracked sources differ from HEAD (`crates/`, `Cargo.toml`, `Cargo.lock`)
+//! is stamped `HASH-dirty`: a binary built from an uncommitted experiment must not pass for the
+//! commit (a stale release binary carrying a dropped experiment once produced "committed"
+//! figures; docs/benchmarks-log.md, session 36). The sources are watched, so an edit reruns
+//! this script and the stamp follows the tree the binary is built from.
 
 use std::path::Path;
 use std::process::Command;
@@ -24,6 +30,22 @@ fn git_commit() -> Option<String> {
     // the commit counts only if this crate is tracked in it.
     git(&["ls-files", "--full-name", "--error-unmatch", "Cargo.toml"])?;
     let commit = git(&["rev-parse", "--short", "HEAD"])?;
+    let top = git(&["rev-parse", "--show-toplevel"])?;
+    let sources = ["crates", "Cargo.toml", "Cargo.lock"];
+    for source in sources {
+        let path = Path::new(&top).join(source);
+        if path.exists() {
+            // A directory is watched with everything in it (cargo compares every file's mtime).
+            println!("cargo:rerun-if-changed={}", path.display());
+        }
+    }
+    let mut status = vec!["-C", &top, "status", "--porcelain", "--untracked-files=no", "--"];
+    status.extend(sources);
+    let changed = Command::new("git").args(&status).output().ok().filter(|o| o.status.success());
+    let commit = match changed {
+        Some(out) if !out.stdout.is_empty() => format!("{commit}-dirty"),
+        _ => commit,
+    };
     let mut watched =
         vec![git(&["rev-parse", "--git-path", "HEAD"]), git(&["rev-parse", "--git-path", "packed-refs"])];
     // On a branch, a commit moves the branch's ref, not HEAD.

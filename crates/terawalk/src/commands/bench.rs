@@ -86,7 +86,8 @@ fn options(args: &BenchArgs) -> BenchOptions {
         program: Program {
             command_line: std::env::args().collect::<Vec<_>>().join(" "),
             version: env!("CARGO_PKG_VERSION").into(),
-            // Set by build.rs: the short hash of the commit built, or "unknown".
+            // Set by build.rs: the short hash of the commit built (with "-dirty" when the
+            // tracked sources differed from it), or "unknown".
             commit: env!("TERAWALK_COMMIT").into(),
         },
     }
