@@ -149,6 +149,7 @@ pub enum Command {
                             terawalk collide bunnies --method cullide --resolution 128,512,1400\n  \
                             terawalk collide cloth --steps 5 --scale 0.1 --method far,reference\n  \
                             terawalk collide tori --method far --groups 256,16\n  \
+                            terawalk collide breaking --method cullide --queries batched,occlusion\n  \
                             terawalk collide cylinders --within 0.05 --method far,reference")]
     Collide(crate::commands::collide::CollideArgs),
 }

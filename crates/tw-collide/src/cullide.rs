@@ -73,11 +73,21 @@ pub struct Options {
     /// Report the pairs within this distance instead of the overlapping ones (FAR's
     /// within-distance variant: everything fattened by a further D/2; `Far` and `Reference`).
     pub within: f32,
+    /// Run a pass's queries in batches of a few draws where the device allows it
+    /// (`tw_gpu::visibility`; the same answers), instead of one occlusion query a draw.
+    pub batched: bool,
 }
 
 impl Default for Options {
     fn default() -> Options {
-        Options { method: Method::Far, resolution: 512, groups: vec![32, 1], iterations: 2, within: 0.0 }
+        Options {
+            method: Method::Far,
+            resolution: 512,
+            groups: vec![32, 1],
+            iterations: 2,
+            within: 0.0,
+            batched: true,
+        }
     }
 }
 
@@ -157,7 +167,11 @@ impl Collider {
         }
         let vis = match options.method {
             Method::Reference => None,
-            _ => Some(Visibility::new_headless(options.resolution)?),
+            _ => {
+                let mut vis = Visibility::new_headless(options.resolution)?;
+                vis.set_batched(options.batched);
+                Some(vis)
+            }
         };
         Ok(Collider { options, vis })
     }
@@ -169,6 +183,12 @@ impl Collider {
     /// The GPU adapter's name, when one is used.
     pub fn adapter(&self) -> Option<String> {
         self.vis.as_ref().map(|v| format!("{} ({:?})", v.adapter().name, v.adapter().backend))
+    }
+
+    /// Whether the queries run in batches (`Some(false)`: one occlusion query a draw; `None`:
+    /// no GPU).
+    pub fn batched(&self) -> Option<bool> {
+        self.vis.as_ref().map(Visibility::batched)
     }
 
     /// The colliding pairs of `objects` in this step. Objects with a vertex index out of range

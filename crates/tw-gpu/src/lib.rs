@@ -69,6 +69,7 @@ mod readback;
 mod renderer;
 pub mod shadow;
 pub mod visibility;
+mod visibility_batch;
 
 pub use wgpu;
 

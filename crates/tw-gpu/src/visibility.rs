@@ -18,8 +18,13 @@
 //! (clear 1, nearer is smaller), in a `Depth32Float` target of `resolution`² pixels, one sample
 //! a pixel, no colour attachment.
 //!
-//! Queries are batched (one query set of up to 4096 a render pass, wgpu's limit, passes chained
-//! with the depth loaded), resolved into one buffer and read back once per [`Visibility::run`].
+//! Where the device has storage buffers in the vertex and fragment stages (Vulkan, Metal, DX12; not GL),
+//! a run is drawn in batches of consecutive queries and draws, one draw call each, the queries'
+//! test done in the fragment stage (`crate::visibility_batch`): the same counts for a few draws
+//! a run instead of one a query. Otherwise (GL), and with [`Visibility::set_batched`]`(false)`,
+//! each query is an occlusion query: one query set of up to 4096 a render pass (wgpu's limit),
+//! passes chained with the depth loaded, resolved into one buffer and read back once per
+//! [`Visibility::run`].
 
 use std::ops::Range;
 
@@ -29,6 +34,7 @@ use glam::Mat4;
 use crate::error::GpuError;
 use crate::query::QueryShader;
 use crate::readback::Readback;
+use crate::visibility_batch::{self, Batched};
 
 const MAX_QUERIES: u32 = 4096;
 const DEPTH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Depth32Float;
@@ -83,6 +89,9 @@ pub struct Visibility {
     vertices: Option<wgpu::Buffer>,
     vertex_count: u32,
     readback: Readback,
+    /// The batched path, where the device has it ([`Visibility::set_batched`]).
+    batched: Option<Batched>,
+    use_batched: bool,
 }
 
 impl Visibility {
@@ -95,6 +104,8 @@ impl Visibility {
         let have = adapter.limits();
         let limits = wgpu::Limits {
             max_buffer_size: have.max_buffer_size,
+            // The batched path reads the uploaded vertices as one storage buffer.
+            max_storage_buffer_binding_size: have.max_storage_buffer_binding_size,
             ..wgpu::Limits::downlevel_defaults().using_resolution(have)
         };
         if resolution == 0 || resolution > limits.max_texture_dimension_2d {
@@ -111,16 +122,18 @@ impl Visibility {
             ..Default::default()
         }))
         .map_err(|source| GpuError::Device { adapter: info.name.clone(), source })?;
-        Ok(Visibility::from_device(device, queue, info, resolution))
+        Ok(Visibility::from_device(device, queue, &adapter, resolution))
     }
 
-    /// Visibility queries on a device the caller has.
+    /// Visibility queries on a device the caller has, opened on `adapter`.
     pub fn from_device(
         device: wgpu::Device,
         queue: wgpu::Queue,
-        adapter: wgpu::AdapterInfo,
+        adapter: &wgpu::Adapter,
         resolution: u32,
     ) -> Visibility {
+        let batched = visibility_batch::supported(adapter).then(|| Batched::new(&device));
+        let adapter = adapter.get_info();
         // The box-query shader is the same transform of a position by one matrix.
         let QueryShader { layout, pipeline_layout: pl, module } = QueryShader::new(&device, "visibility");
         let pipeline = |compare: wgpu::CompareFunction, write: bool, cull: Option<wgpu::Face>| {
@@ -192,7 +205,21 @@ impl Visibility {
             vertices: None,
             vertex_count: 0,
             readback: Readback::default(),
+            use_batched: batched.is_some(),
+            batched,
         }
+    }
+
+    /// Runs later queries in batches (`true`, the default where the device allows it) or as one
+    /// occlusion query each; returns whether batches are in use.
+    pub fn set_batched(&mut self, batched: bool) -> bool {
+        self.use_batched = batched && self.batched.is_some();
+        self.use_batched
+    }
+
+    /// Whether queries run in batches (see [`Visibility::set_batched`]).
+    pub fn batched(&self) -> bool {
+        self.use_batched
     }
 
     /// The side of the depth target in pixels.
@@ -222,7 +249,13 @@ impl Visibility {
             self.vertices = Some(self.device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some("visibility vertices"),
                 size: bytes.max(12).next_power_of_two(),
-                usage: wgpu::BufferUsages::VERTEX | wgpu::BufferUsages::COPY_DST,
+                usage: wgpu::BufferUsages::VERTEX
+                    | wgpu::BufferUsages::COPY_DST
+                    | if self.batched.is_some() {
+                        wgpu::BufferUsages::STORAGE
+                    } else {
+                        wgpu::BufferUsages::empty()
+                    },
                 mapped_at_creation: false,
             }));
         }
@@ -253,6 +286,17 @@ impl Visibility {
             return Ok(Vec::new());
         }
         let vertices = self.vertices.as_ref().ok_or_else(|| GpuError::Gpu("no vertices uploaded".into()))?;
+        if let (Some(batched), true) = (&self.batched, self.use_batched) {
+            let gpu = (&self.device, &self.queue, &mut self.readback);
+            let split = self.faces == Faces::Split;
+            let used = std::num::NonZeroU64::new(self.vertex_count as u64 * 12);
+            let vertices = wgpu::BindingResource::Buffer(wgpu::BufferBinding {
+                buffer: vertices,
+                offset: 0,
+                size: used,
+            });
+            return batched.run(gpu, &self.depth_view, vertices, view_proj, ops, test, split);
+        }
         self.queue.write_buffer(&self.uniform, 0, bytemuck::cast_slice(&view_proj.to_cols_array()));
         let [inclusive, strict, draw_pipeline] = &self.pipelines[(self.faces == Faces::Split) as usize];
         let query_pipeline = match test {
@@ -347,7 +391,8 @@ fn depth_target(device: &wgpu::Device, resolution: u32) -> wgpu::TextureView {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: DEPTH_FORMAT,
-            usage: wgpu::TextureUsages::RENDER_ATTACHMENT,
+            // Sampled by the batched path's queries (while attached read-only).
+            usage: wgpu::TextureUsages::RENDER_ATTACHMENT | wgpu::TextureUsages::TEXTURE_BINDING,
             view_formats: &[],
         })
         .create_view(&Default::default())

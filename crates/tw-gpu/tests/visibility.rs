@@ -2,7 +2,7 @@
 //! adapter a test is skipped with a note, unless `TERAWALK_REQUIRE_GPU=1`, where it fails.
 
 use glam::Mat4;
-use tw_gpu::visibility::{DepthTest, VisOp, Visibility};
+use tw_gpu::visibility::{DepthTest, Faces, VisOp, Visibility};
 use tw_gpu::GpuError;
 
 fn open(resolution: u32) -> Option<Visibility> {
@@ -99,7 +99,7 @@ fn split_faces_query_the_far_side_and_draw_the_near_side() {
     verts.extend(facing(0.5));
     v.upload(&verts);
     let (cube, quad_in_front, quad_inside) = (0..36, 36..42, 42..48);
-    v.set_faces(tw_gpu::visibility::Faces::Split);
+    v.set_faces(Faces::Split);
     // The drawn box keeps its near face (0.4): a quad at 0.45 is behind it.
     let r = v
         .run(Mat4::IDENTITY, &[VisOp::Draw(cube.clone()), VisOp::Query(quad_in_front)], DepthTest::Inclusive)
@@ -109,4 +109,79 @@ fn split_faces_query_the_far_side_and_draw_the_near_side() {
     let r =
         v.run(Mat4::IDENTITY, &[VisOp::Draw(quad_inside), VisOp::Query(cube)], DepthTest::Inclusive).unwrap();
     assert!(r[0] > 0);
+}
+
+/// A small deterministic generator (xorshift), so that the comparison below needs no crate.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        self.0
+    }
+
+    fn unit(&mut self) -> f32 {
+        (self.next() >> 40) as f32 / (1u64 << 24) as f32
+    }
+}
+
+#[test]
+fn batches_count_what_one_query_a_draw_counts() {
+    let Some(mut v) = open(64) else { return };
+    if !v.batched() {
+        // GL has no storage buffers in the vertex stage here: the per-query path is all it runs
+        // (and what the other tests check).
+        eprintln!("no batched path on {}: nothing to compare", v.adapter().name);
+        return;
+    }
+    // Random triangles in clip space (some crossing the near and far planes, some coplanar
+    // copies, some degenerate), and random runs over them: queries and draws of one to five
+    // triangles, in long and short stretches.
+    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut verts: Vec<[f32; 3]> = Vec::new();
+    for t in 0..600 {
+        if t % 10 == 9 {
+            let copy = verts[verts.len() - 3..].to_vec();
+            verts.extend(copy);
+            continue;
+        }
+        let centre = [rng.unit() * 2.0 - 1.0, rng.unit() * 2.0 - 1.0, rng.unit() * 1.2 - 0.1];
+        let size = 0.02 + rng.unit() * 0.6;
+        for _ in 0..3 {
+            verts.push([
+                centre[0] + (rng.unit() - 0.5) * size,
+                centre[1] + (rng.unit() - 0.5) * size,
+                centre[2] + (rng.unit() - 0.5) * 0.3,
+            ]);
+        }
+    }
+    v.upload(&verts);
+    let triangles = verts.len() as u32 / 3;
+    for round in 0..6 {
+        let mut ops = Vec::new();
+        let mut query = true;
+        while ops.len() < 400 {
+            let stretch = if round % 2 == 0 { 3 } else { 20 };
+            if rng.next().is_multiple_of(stretch) {
+                query = !query;
+            }
+            let first = (rng.next() % triangles as u64) as u32;
+            let n = 1 + (rng.next() % 5) as u32;
+            let range = first * 3..(first + n).min(triangles) * 3;
+            ops.push(if query { VisOp::Query(range) } else { VisOp::Draw(range) });
+        }
+        ops.push(VisOp::Query(0..0));
+        let faces = if round % 3 == 2 { Faces::Split } else { Faces::Both };
+        v.set_faces(faces);
+        for test in [DepthTest::Inclusive, DepthTest::Strict] {
+            assert!(v.set_batched(true));
+            let batched = v.run(Mat4::IDENTITY, &ops, test).unwrap();
+            v.set_batched(false);
+            let queried = v.run(Mat4::IDENTITY, &ops, test).unwrap();
+            assert_eq!(batched, queried, "round {round}, {test:?}, {faces:?}");
+            assert!(queried.iter().any(|&n| n > 0) && queried.iter().filter(|&&n| n == 0).count() > 10);
+        }
+    }
 }

@@ -41,6 +41,11 @@ pub struct CollideArgs {
     /// ones (FAR's within-distance variant; far and reference only).
     #[arg(long, default_value_t = 0.0)]
     pub within: f32,
+    /// How the GPU methods query, comma-separated for a row each: batched (a pass's queries in
+    /// a few draws, the test in the fragment stage; where the device cannot, GL, it falls back)
+    /// or occlusion (one occlusion query a draw, as the thesis). The answers are the same.
+    #[arg(long, value_delimiter = ',', default_value = "batched")]
+    pub queries: Vec<String>,
     /// Where the models are (dragon_vrip.ply.gz, bunny.obj; scripts/fetch-data.sh).
     #[arg(long, default_value = "data")]
     pub data: PathBuf,
@@ -50,6 +55,8 @@ pub struct CollideArgs {
 struct Row {
     method: Method,
     resolution: Option<u32>,
+    /// How its queries ran (`Collider::batched`).
+    batched: Option<bool>,
     times: Vec<f64>,
     gpu: Vec<f64>,
     cpu: Vec<f64>,
@@ -61,9 +68,9 @@ struct Row {
 }
 
 pub fn run(a: CollideArgs) -> anyhow::Result<()> {
-    let (kind, methods) = check_args(&a)?;
+    let (kind, methods, queries) = check_args(&a)?;
     let scene = Scene::new(kind, &SceneOptions { scale: a.scale, data_dir: a.data.clone() })?;
-    let mut rows = colliders(&a, &methods)?;
+    let mut rows = colliders(&a, &methods, &queries)?;
     if let Some(adapter) = rows.iter().find_map(|(_, c)| c.adapter()) {
         println!("GPU: {adapter}");
     }
@@ -102,8 +109,9 @@ pub fn run(a: CollideArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The scene and methods named by the arguments, once the other arguments are checked.
-fn check_args(a: &CollideArgs) -> anyhow::Result<(SceneKind, Vec<Method>)> {
+/// The scene, the methods and the query modes (batched or not) named by the arguments, once
+/// the other arguments are checked.
+fn check_args(a: &CollideArgs) -> anyhow::Result<(SceneKind, Vec<Method>, Vec<bool>)> {
     let kind = SceneKind::from_name(&a.scene).with_context(|| {
         let names: Vec<&str> = SceneKind::ALL.iter().map(|k| k.name()).collect();
         format!("unknown scene {:?}: one of {}", a.scene, names.join(", "))
@@ -127,29 +135,41 @@ fn check_args(a: &CollideArgs) -> anyhow::Result<(SceneKind, Vec<Method>)> {
             other => bail!("unknown method {other:?}: cullide, far or reference"),
         })
         .collect::<anyhow::Result<Vec<Method>>>()?;
-    Ok((kind, methods))
+    let queries = a
+        .queries
+        .iter()
+        .map(|q| match q.trim() {
+            "batched" => Ok(true),
+            "occlusion" => Ok(false),
+            other => bail!("unknown --queries {other:?}: batched or occlusion"),
+        })
+        .collect::<anyhow::Result<Vec<bool>>>()?;
+    Ok((kind, methods, queries))
 }
 
-/// A collider and an empty row per method and resolution (the reference has no resolution).
-fn colliders(a: &CollideArgs, methods: &[Method]) -> anyhow::Result<Vec<(Row, Collider)>> {
+/// A collider and an empty row per method, resolution and query mode (the reference has
+/// neither resolution nor queries).
+fn colliders(a: &CollideArgs, methods: &[Method], queries: &[bool]) -> anyhow::Result<Vec<(Row, Collider)>> {
     let mut rows: Vec<(Row, Collider)> = Vec::new();
     for &method in methods {
-        let resolutions: Vec<Option<u32>> = match method {
-            Method::Reference => vec![None],
-            _ => a.resolution.iter().map(|&r| Some(r)).collect(),
+        let settings: Vec<(Option<u32>, bool)> = match method {
+            Method::Reference => vec![(None, true)],
+            _ => a.resolution.iter().flat_map(|&r| queries.iter().map(move |&q| (Some(r), q))).collect(),
         };
-        for resolution in resolutions {
+        for (resolution, batched) in settings {
             let options = Options {
                 method,
                 resolution: resolution.unwrap_or(512),
                 groups: a.groups.clone(),
                 within: a.within,
+                batched,
                 ..Default::default()
             };
             let collider = Collider::new(options)?;
             let row = Row {
                 method,
                 resolution,
+                batched: collider.batched(),
                 times: Vec::new(),
                 gpu: Vec::new(),
                 cpu: Vec::new(),
@@ -170,9 +190,10 @@ fn colliders(a: &CollideArgs, methods: &[Method]) -> anyhow::Result<Vec<(Row, Co
 fn print_table(rows: &[(Row, Collider)], steps: usize) {
     println!();
     println!(
-        "{:<10} {:>10} {:>10} {:>9} {:>9} {:>11} {:>8} {:>11} {:>13}",
+        "{:<10} {:>10} {:>9} {:>10} {:>9} {:>9} {:>11} {:>8} {:>11} {:>13}",
         "method",
         "resolution",
+        "queries",
         "median ms",
         "gpu ms",
         "cpu ms",
@@ -185,9 +206,14 @@ fn print_table(rows: &[(Row, Collider)], steps: usize) {
         let per = |v: usize| v as f64 / steps as f64;
         let gpu = r.method != Method::Reference;
         println!(
-            "{:<10} {:>10} {:>10.1} {:>9} {:>9} {:>11.1} {:>8} {:>11} {:>13}",
+            "{:<10} {:>10} {:>9} {:>10.1} {:>9} {:>9} {:>11.1} {:>8} {:>11} {:>13}",
             r.method.name(),
             r.resolution.map_or("-".to_string(), |x| x.to_string()),
+            match r.batched {
+                Some(true) => "batched",
+                Some(false) => "occlusion",
+                None => "-",
+            },
             median(&r.times),
             if gpu { format!("{:.1}", median(&r.gpu)) } else { "-".into() },
             if gpu { format!("{:.1}", median(&r.cpu)) } else { "-".into() },
