@@ -561,6 +561,21 @@ fn preset_views_viewpoints_and_ortho_under_xvfb() {
     assert!(share("perspective.png", "back.png") < 0.005, "O twice did not return");
 }
 
+/// F11 under Xvfb, where no window manager answers the fullscreen request: the viewer covers
+/// the 1024×768 screen with its window itself, and F11 again restores the window's size.
+#[test]
+fn f11_fills_the_screen_without_a_window_manager_and_returns() {
+    let script = "wait 4\nscreenshot windowed.png\npress F11\nwait 10\nscreenshot full.png\n\
+                  press F11\nwait 10\nscreenshot back.png\n";
+    let Some((dir, err)) = review_session(store(), script) else { return };
+    let size = |n: &str| png_size(&dir.path().join(n));
+    assert_eq!(size("windowed.png"), (480, 320), "{err}");
+    assert_eq!(size("full.png"), (1024, 768), "F11 did not fill the screen: {err}");
+    assert_eq!(size("back.png"), (480, 320), "F11 again did not restore the window: {err}");
+    assert!(err.contains("no window manager answered"), "{err}");
+    assert!(err.contains("fullscreen off"), "{err}");
+}
+
 #[test]
 fn flashlight_needs_the_ray_tracer() {
     let dir = tempfile::tempdir().unwrap();
