@@ -94,7 +94,7 @@ pub(super) fn approach(store: &Store, count: usize, fovy: f64) -> Result<Approac
                 target,
                 up: upv,
                 fovy,
-                // Generated walkthroughs are perspective.
+                // Perspective; `--ortho` makes it orthographic afterwards (`orthographic_frames`).
                 ortho_height: None,
                 segment: SEGMENT.to_string(),
             }
