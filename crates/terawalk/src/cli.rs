@@ -56,7 +56,8 @@ pub enum Command {
     /// Render a quick preview image of model files on the CPU (streaming; any size).
     #[command(after_help = "Examples:\n  terawalk preview plant.ply -o plant.png\n  \
                             terawalk preview dragon.ply.gz -o dragon.png --view front --size 800x800\n  \
-                            terawalk preview plant.ply -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"")]
+                            terawalk preview plant.ply -o in.png --camera \"10,5,1.7;40,5,1.7;0,0,1;70\"\n  \
+                            terawalk preview plant.ply -o top.png --camera \"50,50,400;50,50,0;0,1,0;ortho:120\"")]
     Preview(PreviewArgs),
     /// Preprocess inputs into a store file for walkthroughs (out of core, bounded memory).
     #[command(after_help = "Examples:\n  terawalk build plant.ply              # writes plant.tw\n  \
@@ -127,6 +128,8 @@ pub enum Command {
                             terawalk path plant.tw -o tour.json --walk-share 0.8 --speed 2\n  \
                             terawalk path dragon.tw -o orbit.json   # no floors: a fly-around\n  \
                             terawalk path engine.tw -o approach.json --part approach   # overview to close view\n  \
+                            terawalk path engine.tw -o zoom.json --part approach --ortho auto   # orthographic, zooming in\n  \
+                            terawalk path plant.tw -o plan.json --part fly --ortho 120   # orthographic, 120 units high\n  \
                             terawalk path ship_mm.tw -o p.json --eye-height 1700")]
     Path(PathArgs),
     /// Write a store's scene back out: the LOD cut `render` draws (or the full-detail triangles
@@ -314,7 +317,8 @@ pub struct PreviewArgs {
     /// Camera preset framing the model's bounds (ignored with --camera).
     #[arg(long, value_enum, default_value = "iso")]
     pub view: View,
-    /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees" (perspective only).
+    /// Explicit camera "eye;target;up;fovy": "x,y,z;x,y,z;x,y,z;degrees", or
+    /// "x,y,z;x,y,z;x,y,z;ortho:HEIGHT" for an orthographic view HEIGHT input units high.
     #[arg(long, allow_hyphen_values = true)]
     pub camera: Option<String>,
     /// How to colour objects.
@@ -550,6 +554,16 @@ impl ShadowArgs {
 
 fn parse_light(s: &str) -> Result<tw_runtime::InputLight, String> {
     tw_runtime::InputLight::parse(s).map_err(|e| e.to_string())
+}
+
+fn parse_ortho_height(s: &str) -> Result<tw_runtime::OrthoHeight, String> {
+    if s.eq_ignore_ascii_case("auto") {
+        return Ok(tw_runtime::OrthoHeight::Framed);
+    }
+    match s.trim().parse::<f64>() {
+        Ok(h) if h.is_finite() && h > 0.0 => Ok(tw_runtime::OrthoHeight::Fixed(h)),
+        _ => Err(format!("expected a view height > 0 (store units) or \"auto\", got {s:?}")),
+    }
 }
 
 fn parse_on_off(s: &str) -> Result<bool, String> {
@@ -1111,6 +1125,13 @@ pub struct PathArgs {
     /// the camera `render` uses without --camera).
     #[arg(long, default_value_t = 60.0)]
     pub fovy: f64,
+    /// Orthographic frames (the same eyes and view directions; the viewer, render and bench show
+    /// them orthographic): HEIGHT makes every frame HEIGHT store units high; "auto" makes each
+    /// as high as the --fovy perspective view at the distance to what it shows — the approach's
+    /// target (so the approach still zooms in to an eighth), the model's centre on the walk and
+    /// the fly-over (changing smoothly along the path).
+    #[arg(long, value_name = "HEIGHT|auto", value_parser = parse_ortho_height)]
+    pub ortho: Option<tw_runtime::OrthoHeight>,
     /// Random seed: the same seed gives the same path.
     #[arg(short, long, default_value_t = 1)]
     pub seed: u64,

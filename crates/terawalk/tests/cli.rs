@@ -73,6 +73,24 @@ fn generate_then_stats_then_preview_round_trip() {
     assert!(o.status.success(), "{}", stderr(&o));
     let png = std::fs::read(dir.path().join("p.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG"));
+    // An orthographic camera (a plan view from far above; the eye's height does not matter).
+    for (name, eye_z) in [("plan.png", "1e4"), ("plan2.png", "1e5")] {
+        let camera = format!("40,40,{eye_z};40,40,0;0,1,0;ortho:100");
+        let o =
+            terawalk(&["preview", "p.ply", "-o", name, "--size", "160x90", "--camera", &camera], dir.path());
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let decode = |name: &str| {
+        let file = std::fs::File::open(dir.path().join(name)).unwrap();
+        let mut reader = png::Decoder::new(std::io::BufReader::new(file)).read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut buf).unwrap();
+        buf
+    };
+    let plan = decode("plan.png");
+    assert!(plan == decode("plan2.png"), "an orthographic image depends on the eye's distance");
+    let sky = &plan[..4];
+    assert!(plan.chunks_exact(4).filter(|p| p != &sky).count() > 160 * 90 / 20, "the plant shows");
 }
 
 #[test]
@@ -206,6 +224,41 @@ fn approach_path_starts_at_the_render_overview_and_benches() {
     // --help shows how.
     let o = terawalk(&["path", "--help"], dir.path());
     assert!(stdout(&o).contains("--part approach"), "{}", stdout(&o));
+    assert!(stdout(&o).contains("--ortho auto") && stdout(&o).contains("--ortho 120"), "{}", stdout(&o));
+
+    // Orthographic: the same cameras, each as high as the perspective view at its target.
+    let ortho = [
+        "path", "p.tw", "-o", "o.json", "--part", "approach", "--frames", "48", "--fovy", "40", "--ortho",
+        "auto",
+    ];
+    let o = terawalk(&ortho, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("orthographic: views"), "{}", stdout(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("o.json")).unwrap()).unwrap();
+    let oframes = json["frames"].as_array().unwrap();
+    assert_eq!(v3(&oframes[0], "eye"), eye0);
+    let h0 = oframes[0]["ortho_height"].as_f64().unwrap();
+    assert!((h0 - 2.0 * d0 * 20f64.to_radians().tan()).abs() < 1e-9 * h0, "{h0}");
+    let h1 = oframes[47]["ortho_height"].as_f64().unwrap();
+    assert!((h1 / h0 - 0.125).abs() < 1e-9, "{h1} / {h0}");
+    let o = terawalk(
+        &["path", "p.tw", "-o", "f.json", "--part", "fly", "--frames", "8", "--ortho", "30"],
+        dir.path(),
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("orthographic: views 30"), "{}", stdout(&o));
+    let fixed: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("f.json")).unwrap()).unwrap();
+    let fixed = fixed["frames"].as_array().unwrap();
+    assert!(fixed.len() == 8 && fixed.iter().all(|f| f["ortho_height"].as_f64() == Some(30.0)), "{fixed:?}");
+    let o = terawalk(&["path", "p.tw", "-o", "x.json", "--ortho", "0"], dir.path());
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("auto"), "{}", stderr(&o));
+    // The orthographic approach plays in bench.
+    let bench = ["bench", "p.tw", "--path", "o.json", "--frames", "4", "--size", "320x180", "--out", "orep"];
+    let o = terawalk(&bench, dir.path());
+    assert!(o.status.success(), "{}", stderr(&o));
 }
 
 #[test]

@@ -561,6 +561,38 @@ fn preset_views_viewpoints_and_ortho_under_xvfb() {
     assert!(share("perspective.png", "back.png") < 0.005, "O twice did not return");
 }
 
+/// The wheel in an orthographic view (fly mode) zooms: three steps in make the cubes cover
+/// more of the image, three out bring the picture back; the fly speed stays.
+#[test]
+fn the_wheel_zooms_an_orthographic_view_under_xvfb() {
+    let script = "view -y\nwait 6\npress O\nwait 6\nscreenshot ortho.png\nscroll 3\nwait 6\n\
+                  screenshot zoomed.png\nscroll -3\nwait 6\nscreenshot back.png\n";
+    let Some((dir, err)) = review_session(cubes_store(), script) else { return };
+    let covered = |n: &str| coverage(&dir.path().join(n)).0;
+    let (ortho, zoomed) = (covered("ortho.png"), covered("zoomed.png"));
+    assert!(zoomed > ortho * 1.5, "the wheel did not zoom in: {ortho} to {zoomed}: {err}");
+    let img = |n: &str| tw_gpu::Image::from_png_bytes(&std::fs::read(dir.path().join(n)).unwrap()).unwrap();
+    assert!(
+        img("ortho.png").differing_share(&img("back.png")).unwrap() < 0.005,
+        "zooming out did not return"
+    );
+}
+
+/// F11 under Xvfb, where no window manager answers the fullscreen request: the viewer covers
+/// the 1024×768 screen with its window itself, and F11 again restores the window's size.
+#[test]
+fn f11_fills_the_screen_without_a_window_manager_and_returns() {
+    let script = "wait 4\nscreenshot windowed.png\npress F11\nwait 10\nscreenshot full.png\n\
+                  press F11\nwait 10\nscreenshot back.png\n";
+    let Some((dir, err)) = review_session(store(), script) else { return };
+    let size = |n: &str| png_size(&dir.path().join(n));
+    assert_eq!(size("windowed.png"), (480, 320), "{err}");
+    assert_eq!(size("full.png"), (1024, 768), "F11 did not fill the screen: {err}");
+    assert_eq!(size("back.png"), (480, 320), "F11 again did not restore the window: {err}");
+    assert!(err.contains("no window manager answered"), "{err}");
+    assert!(err.contains("fullscreen off"), "{err}");
+}
+
 #[test]
 fn flashlight_needs_the_ray_tracer() {
     let dir = tempfile::tempdir().unwrap();

@@ -1,6 +1,7 @@
 //! End-to-end tests of the GPU renderer on a built 50k-triangle plant: the full-resolution cut
 //! (τ = 0) rendered from an oblique camera must show geometry in several colours and cover the
-//! same pixels as tw-preview's CPU rasterizer drawing the input triangles from the same camera.
+//! same pixels as tw-preview's CPU rasterizer drawing the input triangles from the same camera,
+//! perspective or orthographic.
 //!
 //! One test per backend (default from `WGPU_BACKEND`, GL, Vulkan). Without an adapter a test
 //! is skipped with a note, unless `TERAWALK_REQUIRE_GPU=1` (CI), where it fails. On machines
@@ -64,8 +65,26 @@ fn renderer(backends: wgpu::Backends, what: &str) -> Option<Renderer> {
     }
 }
 
+/// [`cameras`] made orthographic, as high as the perspective view is at the target.
+fn orthographic_cameras(store: &Store) -> (tw_preview::Camera, Camera) {
+    let (pc, rc) = cameras(store);
+    let height = rc.view_height_at((rc.target - rc.eye).length() as f64);
+    let pc = tw_preview::Camera { ortho_height: Some(height), ..pc };
+    let projection = tw_runtime::Projection::Orthographic { height: height as f32 };
+    (pc, Camera::with_projection(rc.eye, rc.target, rc.up, projection, rc.near, rc.far).unwrap())
+}
+
 /// Renders the plant at τ = 0 and checks it against the CPU preview.
 fn check_backend(backends: wgpu::Backends, what: &str) {
+    check_backend_with(backends, what, cameras);
+}
+
+/// [`check_backend`] through the cameras `cameras` gives (tw-preview's and the renderer's).
+fn check_backend_with(
+    backends: wgpu::Backends,
+    what: &str,
+    cameras: fn(&Store) -> (tw_preview::Camera, Camera),
+) {
     let _guard = gpu_lock();
     let Some(mut renderer) = renderer(backends, what) else { return };
     let store = Store::open(plant_path()).unwrap();
@@ -140,6 +159,12 @@ fn plant_gl_matches_cpu_preview() {
 #[test]
 fn plant_vulkan_matches_cpu_preview() {
     check_backend(wgpu::Backends::VULKAN, "vulkan");
+}
+
+/// tw-preview's orthographic projection against the renderer's (the same pixels covered).
+#[test]
+fn plant_orthographic_matches_cpu_preview() {
+    check_backend_with(wgpu::Backends::all().with_env(), "orthographic", orthographic_cameras);
 }
 
 #[test]

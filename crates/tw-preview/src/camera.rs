@@ -1,10 +1,12 @@
-//! A pinhole camera: where it is, what it looks at, and how to frame a bounding box.
+//! A pinhole (or orthographic) camera: where it is, what it looks at, and how to frame a
+//! bounding box.
 
 use glam::DVec3;
 use tw_core::Aabb;
 
-/// A perspective camera in the scene's own coordinates (f64, so that georeferenced scenes with
-/// large coordinates keep their precision: everything is made relative to `eye` first).
+/// A perspective or orthographic camera in the scene's own coordinates (f64, so that
+/// georeferenced scenes with large coordinates keep their precision: everything is made relative
+/// to `eye` first).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     /// Position of the eye.
@@ -13,14 +15,25 @@ pub struct Camera {
     pub target: [f64; 3],
     /// The scene's up direction; need not be perpendicular to the view, nor unit length.
     pub up: [f64; 3],
-    /// Vertical field of view in degrees (clamped to 1..=170 when used).
+    /// Vertical field of view in degrees (clamped to 1..=170 when used); unused while
+    /// `ortho_height` is set.
     pub fovy_deg: f64,
+    /// `Some(height)`: an orthographic camera whose view is `height` scene units high (> 0; the
+    /// width follows the image's aspect), looking along eye → target; geometry behind the near
+    /// plane (in front of the eye, as in perspective) is cut away. `None`: perspective.
+    pub ortho_height: Option<f64>,
 }
 
 impl Default for Camera {
     /// At (0, 0, 1) looking at the origin, Y up, 45°.
     fn default() -> Self {
-        Camera { eye: [0.0, 0.0, 1.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], fovy_deg: 45.0 }
+        Camera {
+            eye: [0.0, 0.0, 1.0],
+            target: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            fovy_deg: 45.0,
+            ortho_height: None,
+        }
     }
 }
 
@@ -66,6 +79,7 @@ impl Camera {
             target: center,
             up: up.to_array(),
             fovy_deg: FRAMING_FOVY_DEG,
+            ortho_height: None,
         }
     }
 
@@ -119,6 +133,12 @@ impl Camera {
         d.to_radians()
     }
 
+    /// The orthographic view height, when the camera is orthographic with a usable one (finite,
+    /// > 0); `None` for perspective.
+    pub fn orthographic_height(&self) -> Option<f64> {
+        self.ortho_height.filter(|h| h.is_finite() && *h > 0.0)
+    }
+
     /// Distance from eye to target (0 if they coincide or are not finite).
     pub fn target_distance(&self) -> f64 {
         let l = (DVec3::from(self.target) - DVec3::from(self.eye)).length();
@@ -169,7 +189,13 @@ mod tests {
 
     #[test]
     fn basis_is_orthonormal_and_right_handed() {
-        let c = Camera { eye: [0.0, 0.0, 5.0], target: [0.0; 3], up: [0.0, 1.0, 0.0], fovy_deg: 60.0 };
+        let c = Camera {
+            eye: [0.0, 0.0, 5.0],
+            target: [0.0; 3],
+            up: [0.0, 1.0, 0.0],
+            fovy_deg: 60.0,
+            ortho_height: None,
+        };
         let b = c.basis();
         assert!(close(b.forward, DVec3::NEG_Z));
         assert!(close(b.up, DVec3::Y));
@@ -178,13 +204,19 @@ mod tests {
 
     #[test]
     fn degenerate_cameras_get_a_usable_basis() {
-        let same = Camera { eye: [1.0; 3], target: [1.0; 3], up: [0.0; 3], fovy_deg: f64::NAN };
+        let same =
+            Camera { eye: [1.0; 3], target: [1.0; 3], up: [0.0; 3], fovy_deg: f64::NAN, ortho_height: None };
         let b = same.basis();
         assert!(close(b.forward, DVec3::NEG_Z));
         assert!((b.up.length_squared() - 1.0).abs() < 1e-12 && b.up.dot(b.forward).abs() < 1e-12);
         assert_eq!(same.fovy(), 45f64.to_radians());
-        let parallel =
-            Camera { eye: [0.0; 3], target: [0.0, 0.0, -3.0], up: [0.0, 0.0, 2.0], fovy_deg: 400.0 };
+        let parallel = Camera {
+            eye: [0.0; 3],
+            target: [0.0, 0.0, -3.0],
+            up: [0.0, 0.0, 2.0],
+            fovy_deg: 400.0,
+            ortho_height: None,
+        };
         let b = parallel.basis();
         assert!(b.up.dot(b.forward).abs() < 1e-12 && (b.right.length_squared() - 1.0).abs() < 1e-12);
         assert_eq!(parallel.fovy(), 170f64.to_radians());

@@ -10,7 +10,8 @@
 //! Per triangle (the stages are listed in `src/raster.rs`): transform to camera space in f64, reject it if
 //! it lies outside the view frustum, clip it against the near plane when it crosses it, project,
 //! and scan-convert with edge functions and the top-left fill rule; depth is 1/z, interpolated
-//! perspective-correctly. Both sides are drawn (models are not consistently wound) and flat
+//! perspective-correctly. Orthographic cameras ([`Camera::ortho_height`]) project in parallel
+//! along the view, with a box for a frustum. Both sides are drawn (models are not consistently wound) and flat
 //! shaded by a headlight plus a fixed sun from above; colours come from the object (or per-vertex
 //! colours), or from a hash of the object id with [`ColorMode::HashObject`]. Pixels no triangle
 //! covers show a sky gradient by the elevation of their view ray.
@@ -130,7 +131,10 @@ impl Preview {
         let basis = camera.basis();
         let d = camera.target_distance();
         let near = if d > 0.0 { d * 1e-4 } else { 1e-4 };
-        let proj = Projector::new(width, height, camera.fovy(), near);
+        let proj = match camera.orthographic_height() {
+            Some(view_height) => Projector::orthographic(width, height, view_height, near),
+            None => Projector::new(width, height, camera.fovy(), near),
+        };
         // The sun: from above (the camera's up, which is the scene's up), tilted towards a
         // horizontal direction fixed in the scene.
         let world_up = DVec3::from(camera.up).try_normalize().unwrap_or(basis.up);
@@ -242,9 +246,11 @@ impl Preview {
         const GROUND_NEAR: [f64; 3] = [0.78, 0.81, 0.86];
         const NADIR: [f64; 3] = [0.42, 0.46, 0.54];
         for j in 0..h {
-            let y = -((j as f64 + 0.5) - 0.5 * h as f64) / self.proj.focal;
+            // Orthographic: every view ray is parallel to the view axis (one sky colour).
+            let ortho = if self.proj.orthographic { 0.0 } else { 1.0 };
+            let y = -((j as f64 + 0.5) - 0.5 * h as f64) / self.proj.focal * ortho;
             for i in 0..w {
-                let x = ((i as f64 + 0.5) - 0.5 * w as f64) / self.proj.focal;
+                let x = ((i as f64 + 0.5) - 0.5 * w as f64) / self.proj.focal * ortho;
                 let len = (x * x + y * y + 1.0).sqrt();
                 let e = (x * up.x + y * up.y + up.z) / len;
                 let c = if e >= 0.0 {
@@ -303,7 +309,7 @@ impl Preview {
         }
         let base = self.base_color(t);
         let sun = self.sun;
-        let (w, h) = (self.proj.width, self.proj.height);
+        let (w, h, ortho) = (self.proj.width, self.proj.height, self.proj.orthographic);
         let depth = &mut self.depth;
         let image = &mut self.color;
         let (mut pixels, mut fragments) = (0u64, 0u64);
@@ -313,12 +319,12 @@ impl Preview {
             fragments += 1;
             if z > depth[i] {
                 depth[i] = z;
-                image[i] = *color.get_or_insert_with(|| shade(&c, base, sun));
+                image[i] = *color.get_or_insert_with(|| shade(&c, base, sun, ortho));
                 pixels += 1;
             }
         };
         if let Some(s) = projected {
-            raster::rasterize(s, w, h, &mut plot);
+            raster::rasterize(s, w, h, ortho, &mut plot);
         } else {
             self.stats.clipped += 1;
             let poly = raster::clip(&self.proj, &c);
@@ -326,7 +332,7 @@ impl Preview {
                 let s0 = self.proj.project(poly.v[0]);
                 for k in 1..poly.len - 1 {
                     let tri = [s0, self.proj.project(poly.v[k]), self.proj.project(poly.v[k + 1])];
-                    raster::rasterize(tri, w, h, &mut plot);
+                    raster::rasterize(tri, w, h, ortho, &mut plot);
                 }
             }
         }
@@ -359,14 +365,15 @@ fn memo_key(c: &[[f64; 3]; 3]) -> [u64; 9] {
 
 /// Flat shading of a camera-space triangle: ambient + headlight + sun (`sun`: unit, camera
 /// space), both sides lit alike.
-fn shade(c: &[[f64; 3]; 3], base: [f64; 3], sun: DVec3) -> [u8; 4] {
+fn shade(c: &[[f64; 3]; 3], base: [f64; 3], sun: DVec3, orthographic: bool) -> [u8; 4] {
     let c = c.map(DVec3::from);
     let n = (c[1] - c[0]).cross(c[2] - c[0]);
-    let centroid = (c[0] + c[1] + c[2]) / 3.0;
+    // The view ray to the triangle: from the eye, or along the view axis in orthographic.
+    let ray = if orthographic { DVec3::Z } else { (c[0] + c[1] + c[2]) / 3.0 };
     let light = match n.try_normalize() {
         Some(mut n) => {
             // Face the eye: the side we see is the side we light.
-            if n.dot(centroid) > 0.0 {
+            if n.dot(ray) > 0.0 {
                 n = -n;
             }
             // The headlight shines along the view axis (not towards each triangle), so that

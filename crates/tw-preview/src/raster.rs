@@ -2,7 +2,8 @@
 //!
 //! 1. [`Projector::classify`]: outcodes of the three camera-space vertices against the view
 //!    frustum (reject when all lie outside one plane) and against the near plane and a guard
-//!    band 4× the image (clip when any vertex lies outside).
+//!    band 4× the image (clip when any vertex lies outside). An orthographic projector's view
+//!    volume is a box: its side planes do not widen with depth.
 //! 2. [`clip`]: Sutherland–Hodgman clipping of the triangle against those planes in camera space
 //!    (Sutherland & Hodgman, "Reentrant polygon clipping", CACM 1974), giving a convex polygon
 //!    of up to 8 vertices, drawn as a fan. Clipping in camera space before the divide is what
@@ -11,7 +12,9 @@
 //!    rasterization", SIGGRAPH 1988) over the triangle's bounding box, in exact 64-bit integer
 //!    arithmetic on vertices snapped to 1/256 pixel, with the top-left fill rule of Direct3D and
 //!    OpenGL: a pixel centre on a shared edge belongs to exactly one of the triangles. Depth is
-//!    1/z, which is affine in screen space, so interpolating it linearly is perspective-correct.
+//!    1/z, which is affine in screen space, so interpolating it linearly is perspective-correct;
+//!    in an orthographic projection z itself is affine in screen space, so z is interpolated and
+//!    inverted per pixel (the depth buffer holds 1/z either way).
 
 /// Sub-pixel precision: vertices snap to 1/256 pixel.
 const SUB_BITS: u32 = 8;
@@ -21,7 +24,8 @@ const HALF: i64 = SUB / 2;
 /// directly; beyond it, triangles are clipped so that fixed-point coordinates stay small.
 const GUARD: f64 = 4.0;
 
-/// A projected vertex: pixel coordinates (x right, y down, pixel centres at +0.5) and 1/z.
+/// A projected vertex: pixel coordinates (x right, y down, pixel centres at +0.5) and the depth
+/// that is affine in screen space: 1/z in perspective, z in orthographic ([`rasterize`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub(crate) struct ScreenVertex {
     pub x: f64,
@@ -45,10 +49,13 @@ pub(crate) enum Class {
 pub(crate) struct Projector {
     pub width: u32,
     pub height: u32,
-    /// Pixels per unit of x/z (and y/z).
+    /// Pixels per unit of x/z (and y/z); orthographic: pixels per scene unit of x (and y).
     pub focal: f64,
     pub near: f64,
-    /// Half-extents of the view frustum as slopes: |x| ≤ fx·z, |y| ≤ fy·z.
+    /// Parallel projection along z (the view volume is a box).
+    pub orthographic: bool,
+    /// Half-extents of the view frustum as slopes: |x| ≤ fx·z, |y| ≤ fy·z; orthographic: as
+    /// lengths, |x| ≤ fx, |y| ≤ fy.
     fx: f64,
     fy: f64,
 }
@@ -61,21 +68,41 @@ const TOP: u8 = 16;
 
 impl Projector {
     pub fn new(width: u32, height: u32, fovy: f64, near: f64) -> Projector {
-        let focal = 0.5 * height as f64 / (0.5 * fovy).tan();
+        Projector::with_focal(width, height, 0.5 * height as f64 / (0.5 * fovy).tan(), near, false)
+    }
+
+    /// An orthographic projector whose view is `view_height` scene units high.
+    pub fn orthographic(width: u32, height: u32, view_height: f64, near: f64) -> Projector {
+        Projector::with_focal(width, height, height as f64 / view_height, near, true)
+    }
+
+    fn with_focal(width: u32, height: u32, focal: f64, near: f64, orthographic: bool) -> Projector {
         Projector {
             width,
             height,
             focal,
             near,
+            orthographic,
             fx: 0.5 * width as f64 / focal,
             fy: 0.5 * height as f64 / focal,
+        }
+    }
+
+    /// What the side planes scale with at `z`: the depth in perspective, 1 in orthographic.
+    #[inline]
+    fn spread(&self, z: f64) -> f64 {
+        if self.orthographic {
+            1.0
+        } else {
+            z
         }
     }
 
     /// Outcodes of a camera-space point against the frustum scaled by `g` (1 = the image).
     #[inline]
     fn code(&self, p: [f64; 3], g: f64) -> u8 {
-        let (sx, sy) = (self.fx * g * p[2], self.fy * g * p[2]);
+        let z = self.spread(p[2]);
+        let (sx, sy) = (self.fx * g * z, self.fy * g * z);
         ((p[2] < self.near) as u8 * NEAR)
             | ((p[0] < -sx) as u8 * LEFT)
             | ((p[0] > sx) as u8 * RIGHT)
@@ -100,23 +127,25 @@ impl Projector {
     /// Projects a camera-space point with z ≥ near.
     #[inline]
     pub fn project(&self, p: [f64; 3]) -> ScreenVertex {
-        let inv_z = 1.0 / p[2];
+        let (scale, depth) = if self.orthographic { (1.0, p[2]) } else { (1.0 / p[2], 1.0 / p[2]) };
         ScreenVertex {
-            x: 0.5 * self.width as f64 + p[0] * inv_z * self.focal,
-            y: 0.5 * self.height as f64 - p[1] * inv_z * self.focal,
-            inv_z,
+            x: 0.5 * self.width as f64 + p[0] * scale * self.focal,
+            y: 0.5 * self.height as f64 - p[1] * scale * self.focal,
+            inv_z: depth,
         }
     }
 
-    /// The planes a clipped polygon must be inside of, as (a, b, c): a·x + b·y + c·z + d ≥ 0.
+    /// The planes a clipped polygon must be inside of, as (a, b, c, d): a·x + b·y + c·z + d ≥ 0.
     fn clip_planes(&self) -> [[f64; 4]; 5] {
         let (gx, gy) = (self.fx * GUARD, self.fy * GUARD);
+        // The side planes: |x| ≤ gx·z in perspective, |x| ≤ gx in orthographic.
+        let (pz, pd) = if self.orthographic { (0.0, 1.0) } else { (1.0, 0.0) };
         [
             [0.0, 0.0, 1.0, -self.near],
-            [1.0, 0.0, gx, 0.0],
-            [-1.0, 0.0, gx, 0.0],
-            [0.0, 1.0, gy, 0.0],
-            [0.0, -1.0, gy, 0.0],
+            [1.0, 0.0, gx * pz, gx * pd],
+            [-1.0, 0.0, gx * pz, gx * pd],
+            [0.0, 1.0, gy * pz, gy * pd],
+            [0.0, -1.0, gy * pz, gy * pd],
         ]
     }
 }
@@ -177,8 +206,16 @@ fn ceil_div(a: i64, b: i64) -> i64 {
 /// Scan-converts a triangle into a `width` × `height` image, calling `plot(pixel index, 1/z)`
 /// for every pixel whose centre it covers (top-left rule on edges). Either winding is drawn.
 /// Vertices must lie within the guard band (coordinates of at most a few million pixels).
+/// `orthographic`: the vertices carry z, not 1/z ([`Projector::project`]); it is interpolated
+/// and inverted per pixel.
 #[inline]
-pub(crate) fn rasterize(v: [ScreenVertex; 3], width: u32, height: u32, mut plot: impl FnMut(usize, f32)) {
+pub(crate) fn rasterize(
+    v: [ScreenVertex; 3],
+    width: u32,
+    height: u32,
+    orthographic: bool,
+    mut plot: impl FnMut(usize, f32),
+) {
     let snap =
         |s: &ScreenVertex| ((s.x * SUB as f64).round() as i64, (s.y * SUB as f64).round() as i64, s.inv_z);
     let (p0, mut p1, mut p2) = (snap(&v[0]), snap(&v[1]), snap(&v[2]));
@@ -221,7 +258,7 @@ pub(crate) fn rasterize(v: [ScreenVertex; 3], width: u32, height: u32, mut plot:
         for i in i0..=i1 {
             if (e0 | e1 | e2) >= 0 {
                 let z = z0 + e1 as f64 * k1 + e2 as f64 * k2;
-                plot(row + i as usize, z as f32);
+                plot(row + i as usize, if orthographic { 1.0 / z } else { z } as f32);
             }
             e0 += sx0;
             e1 += sx1;
@@ -245,7 +282,7 @@ mod tests {
     fn coverage(tris: &[[ScreenVertex; 3]], w: u32, h: u32) -> Vec<u32> {
         let mut c = vec![0u32; (w * h) as usize];
         for t in tris {
-            rasterize(*t, w, h, |i, _| c[i] += 1);
+            rasterize(*t, w, h, false, |i, _| c[i] += 1);
         }
         c
     }
@@ -329,7 +366,7 @@ mod tests {
             ScreenVertex { x: 0.0, y: 100.0, inv_z: 1.0 },
         ];
         let mut z = vec![0f32; 100 * 100];
-        rasterize(t, 100, 100, |i, d| z[i] = d);
+        rasterize(t, 100, 100, false, |i, d| z[i] = d);
         // At x = 50.5 on any covered row, 1/z = 1 − 0.5·0.505.
         assert!((z[10 * 100 + 50] - (1.0 - 0.5 * 0.505)).abs() < 1e-6, "{}", z[10 * 100 + 50]);
     }

@@ -14,6 +14,7 @@ fn front_camera(offset: [f64; 3]) -> Camera {
         target: offset,
         up: [0.0, 1.0, 0.0],
         fovy_deg: 90.0,
+        ortho_height: None,
     }
 }
 
@@ -59,7 +60,13 @@ fn single_triangle_covers_expected_pixels() {
 #[test]
 fn near_plane_crossing_triangle_draws() {
     // Eye at the origin looking down −z; a floor triangle at y = −1 that reaches behind the eye.
-    let cam = Camera { eye: [0.0; 3], target: [0.0, 0.0, -1.0], up: [0.0, 1.0, 0.0], fovy_deg: 90.0 };
+    let cam = Camera {
+        eye: [0.0; 3],
+        target: [0.0, 0.0, -1.0],
+        up: [0.0, 1.0, 0.0],
+        fovy_deg: 90.0,
+        ortho_height: None,
+    };
     let mut p = Preview::new(64, 64, cam).unwrap();
     p.object(0, &ObjectInfo::default()).unwrap();
     p.triangle(&tri([[-10.0, -1.0, -10.0], [10.0, -1.0, -10.0], [0.0, -1.0, 5.0]], 0)).unwrap();
@@ -367,4 +374,82 @@ fn exact_repeats_of_large_triangles_are_not_drawn_again() {
     assert_eq!(b.fragments, a.fragments + 2000 * big_fragments + 20 * small);
     assert!(big_fragments > 400_000, "{a:?}");
     assert!(took.as_secs_f64() < 5.0, "2,000 repeats took {took:?}");
+}
+
+/// [`front_camera`] made orthographic, `height` units high, its eye `back` units from z = 0.
+fn ortho_camera(height: f64, back: f64) -> Camera {
+    Camera { eye: [0.0, 0.0, back], ortho_height: Some(height), ..front_camera([0.0; 3]) }
+}
+
+#[test]
+fn orthographic_views_project_in_parallel() {
+    // A square |x|, |y| ≤ 10 fills a 20-unit-high orthographic view exactly, however far back
+    // the eye is; 1/z is still the depth, and the shading does not change with the distance.
+    let square = |z: f64, object: u32| {
+        [
+            tri([[-10.0, -10.0, z], [10.0, -10.0, z], [10.0, 10.0, z]], object),
+            tri([[-10.0, -10.0, z], [10.0, 10.0, z], [-10.0, 10.0, z]], object),
+        ]
+    };
+    let mut images = Vec::new();
+    for back in [10.0, 1000.0] {
+        let mut p = Preview::new(100, 100, ortho_camera(20.0, back)).unwrap();
+        p.object(0, &ObjectInfo { name: String::new(), color: Some(RED) }).unwrap();
+        for t in square(0.0, 0) {
+            p.triangle(&t).unwrap();
+        }
+        assert_eq!(covered(&p), 100 * 100, "eye {back} back");
+        assert!(p.depth().iter().all(|&d| (d as f64 - 1.0 / back).abs() < 1e-6 / back), "eye {back} back");
+        assert_eq!(p.project([10.0, 10.0, 0.0]), Some([100.0, 0.0]));
+        assert_eq!(p.project([-5.0, 0.0, -123.0]), Some([25.0, 50.0]), "depth does not move a point");
+        images.push(p.image().to_vec());
+    }
+    assert!(images[0] == images[1], "the image changed with the eye's distance");
+
+    // Equal squares at different depths cover the same pixels (in perspective the far one
+    // would cover a quarter of the near one's); the nearer hides the farther in either order.
+    for order in [[0usize, 1], [1, 0]] {
+        let mut p = Preview::new(100, 100, ortho_camera(40.0, 100.0)).unwrap();
+        p.object(1, &ObjectInfo { name: "near".into(), color: Some(BLUE) }).unwrap();
+        p.object(2, &ObjectInfo { name: "far".into(), color: Some(RED) }).unwrap();
+        let quads = [square(50.0, 1), square(-50.0, 2)];
+        for k in order {
+            for t in &quads[k] {
+                p.triangle(t).unwrap();
+            }
+        }
+        assert_eq!(covered(&p), 50 * 50);
+        let c = pixel(&p, 50, 50);
+        assert!(c[2] > 100 && c[0] == 0, "the near blue square shows: {c:?}");
+        assert!((p.depth()[50 * 100 + 50] - 1.0 / 50.0).abs() < 1e-7);
+        assert_eq!(pixel(&p, 24, 50), pixel(&p, 0, 0), "sky outside the squares");
+    }
+}
+
+#[test]
+fn orthographic_views_clip_at_the_near_plane_and_the_box_sides() {
+    // A floor from behind the eye to far ahead, much wider than the view: clipped by the near
+    // plane and the guard band, it covers the whole image (no gaps along the clipped edges).
+    let cam = Camera {
+        eye: [0.0; 3],
+        target: [0.0, 0.0, -1.0],
+        up: [0.0, 1.0, 0.0],
+        fovy_deg: 60.0,
+        ortho_height: Some(2.0),
+    };
+    let mut p = Preview::new(80, 60, cam).unwrap();
+    p.object(0, &ObjectInfo::default()).unwrap();
+    let (a, b) = (1e4, 1e4);
+    // A plane tilted so that it is seen (x, y) over the whole view, crossing the eye plane.
+    let z = |y: f64| -y * 0.5;
+    p.triangle(&tri([[-a, -b, z(-b)], [a, -b, z(-b)], [a, b, z(b)]], 0)).unwrap();
+    p.triangle(&tri([[-a, -b, z(-b)], [a, b, z(b)], [-a, b, z(b)]], 0)).unwrap();
+    // In front of the eye: y > 0 (z < 0); the rows of y ≤ 0 are behind the near plane.
+    let rows_drawn = (0..60).filter(|&j| p.depth()[j * 80 + 40] > 0.0).count();
+    assert_eq!(rows_drawn, 30, "the upper half (in front of the eye) only");
+    assert_eq!(covered(&p), 80 * 30);
+    assert_eq!(p.stats().clipped, 2);
+    // Outside the view box entirely: culled.
+    p.triangle(&tri([[5.0, 5.0, -1.0], [6.0, 5.0, -1.0], [5.0, 6.0, -1.0]], 0)).unwrap();
+    assert_eq!(p.stats().culled, 1);
 }

@@ -211,3 +211,67 @@ fn a_light_that_blocks_nothing_leaves_the_image_unchanged() {
         assert_eq!(plain.stats.rays, u64::from(W * H), "no shadow rays without a light");
     }
 }
+
+/// An orthographic view of the box and floor from the side, its eye `back` units from the
+/// target.
+fn ortho_camera(back: f32) -> Camera {
+    let target = Vec3::new(10.0, 10.0, 1.5);
+    let eye = target + Vec3::new(-14.0, -12.0, 7.5).normalize() * back;
+    Camera::orthographic(eye, target, Vec3::Z, 22.0, 0.05, back + 40.0).unwrap()
+}
+
+/// Through an orthographic camera the flashlight is a parallel light from the eye's side: the
+/// image does not change as the eye moves back along the view (a point light by the eye would
+/// light and shadow differently from each distance), and the box's shadow on the floor is where
+/// that light's parallel rays cross the box. In perspective it stays a point light by the eye.
+#[test]
+fn the_flashlight_of_an_orthographic_view_is_parallel_and_does_not_depend_on_the_eye() {
+    let dir = tempfile::tempdir().unwrap();
+    let (store, pages) = store(&dir);
+    let settings = TraceSettings { flashlight: true, ..Default::default() };
+    let mut tracer = StoreTracer::new(&store, 64 << 20);
+    let near = tracer.trace(&pages, &ortho_camera(25.0), (W, H), &settings);
+    let far = tracer.trace(&pages, &ortho_camera(400.0), (W, H), &settings);
+    assert_eq!(near.objects, far.objects, "the same view");
+    assert!(near.rgba == far.rgba, "the flashlight changed with the eye's distance");
+
+    let ortho = ortho_camera(25.0);
+    let rays = tw_rt::Camera::for_view(&ortho, W as f32 / H as f32);
+    let light = tw_rt::scene::flashlight(&ortho, &rays);
+    let Light::Sun { towards } = light else { panic!("a point light in orthographic: {light:?}") };
+    assert!(towards.dot(ortho.headlight()) > 0.99, "from the eye's side: {towards}");
+    // The floor (flat, lit by a parallel light) has one colour where the light reaches it and
+    // a darker one where the box blocks it, as the light's rays say (5 cm from the edge left out).
+    let (mut lit, mut blocked) = (Vec::new(), Vec::new());
+    for y in 0..H {
+        for x in 0..W {
+            let i = (y * W + x) as usize;
+            if near.objects[i] != 0 {
+                continue;
+            }
+            let p = rays.pixel_ray(x, y, W, H).at(near.distance[i]);
+            let pixel: [u8; 4] = near.rgba[i * 4..i * 4 + 4].try_into().unwrap();
+            if !crosses_box(p, &light, 0.05) {
+                lit.push(pixel);
+            } else if crosses_box(p, &light, -0.05) {
+                blocked.push(pixel);
+            }
+        }
+    }
+    assert!(lit.len() > 1000 && blocked.len() > 100, "{} lit, {} blocked", lit.len(), blocked.len());
+    assert!(lit.iter().all(|p| *p == lit[0]), "the lit floor is one colour");
+    assert!(blocked.iter().all(|p| *p == blocked[0]), "the shadow is one colour");
+    assert!(blocked[0][0] < lit[0][0], "the shadow is darker: {:?} against {:?}", blocked[0], lit[0]);
+
+    // Perspective: the point light above and beside the eye.
+    let perspective = camera();
+    let rays = tw_rt::Camera::for_view(&perspective, W as f32 / H as f32);
+    match tw_rt::scene::flashlight(&perspective, &rays) {
+        Light::Point { position } => {
+            assert!(
+                (position - perspective.eye).length() < 0.1 * (perspective.target - perspective.eye).length()
+            )
+        }
+        sun => panic!("a parallel flashlight in perspective: {sun:?}"),
+    }
+}

@@ -79,8 +79,8 @@ pub use node_test::{test_hierarchy, NodeTestOptions, NodeTestResult, NodeTestSwi
 pub use occlusion::{OcclusionHistory, OcclusionSplit, OcclusionTest};
 pub use path::{CameraPath, PathFrame};
 pub use pathgen::{
-    generate_path, GeneratedPath, PathGenError, PathOptions, PathPart, PathReport, RegionKind, WalkGrid,
-    WalkParams,
+    generate_path, GeneratedPath, OrthoHeight, PathGenError, PathOptions, PathPart, PathReport, RegionKind,
+    WalkGrid, WalkParams,
 };
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use resolve::SelectionPages;

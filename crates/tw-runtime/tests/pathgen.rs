@@ -1,12 +1,14 @@
 //! End-to-end tests of automatic paths (`tw_runtime::pathgen`) on stores built with tw-build: the
 //! walk through a generated plant stays at eye height in free space above a floor and moves
 //! smoothly; paths are deterministic for a seed; a model with nothing to walk on gets a
-//! fly-around; bad options are clear errors.
+//! fly-around; bad options are clear errors; orthographic paths keep the cameras.
 
 use std::path::{Path, PathBuf};
 
 use tw_io::{ImportError, ObjectInfo, SourceSummary, Triangle, TriangleSink, TriangleSource};
-use tw_runtime::pathgen::{generate_path, PathOptions, PathPart, RegionKind, WalkGrid, WalkParams};
+use tw_runtime::pathgen::{
+    generate_path, OrthoHeight, PathOptions, PathPart, RegionKind, WalkGrid, WalkParams,
+};
 use tw_store::Store;
 
 /// How every store of these tests is built.
@@ -167,8 +169,45 @@ fn bad_options_are_clear_errors() {
         (PathOptions { speed: Some(f64::NAN), ..d.clone() }, "speed"),
         (PathOptions { voxel_size: Some(5.0), ..d.clone() }, "voxel size"),
         (PathOptions { fovy_deg: 0.0, ..d.clone() }, "field of view"),
+        (PathOptions { ortho: Some(OrthoHeight::Fixed(0.0)), ..d.clone() }, "orthographic view height"),
     ] {
         let e = generate_path(&store, &o, &mut |_, _, _| {}).unwrap_err().to_string();
         assert!(e.contains(what), "{what}: {e}");
     }
+}
+
+/// `ortho`: the same path (eyes, targets), orthographic; `Framed` as high as the perspective view
+/// at the distance to the model's centre on the walk and the fly-over, changing smoothly from
+/// the walk through the rise into the orbit; `Fixed` the given height on every frame.
+#[test]
+fn orthographic_walks_and_fly_overs_keep_the_path() {
+    let store = Store::open(plant_path()).unwrap();
+    let perspective = generate_path(&store, &options(120, 5), &mut |_, _, _| {}).unwrap();
+    let with = |ortho| PathOptions { ortho: Some(ortho), ..options(120, 5) };
+    let framed = generate_path(&store, &with(OrthoHeight::Framed), &mut |_, _, _| {}).unwrap();
+    framed.path.validate().unwrap();
+    assert!(perspective.report.walk_frames > 0 && perspective.report.fly_frames > 0);
+    let h = store.header();
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (h.bounds_min[a] + h.bounds_max[a]));
+    let tan = (30f64).to_radians().tan();
+    let mut heights = Vec::new();
+    let mut eyes = Vec::new();
+    for (p, o) in perspective.path.frames.iter().zip(&framed.path.frames) {
+        assert_eq!((p.eye, p.target, &p.segment), (o.eye, o.target, &o.segment));
+        assert_eq!(p.ortho_height, None);
+        let want = 2.0 * tan * dist(o.eye, centre);
+        let got = o.ortho_height.unwrap();
+        assert!((got - want).abs() < 1e-9 * want, "{o:?}");
+        heights.push(got);
+        eyes.push(o.eye);
+    }
+    // No jump where the walk ends or the orbit starts: the height changes no faster than the
+    // eye moves (2 tan(fovy / 2) per unit).
+    for i in 1..heights.len() {
+        let step = 2.0 * tan * dist(eyes[i - 1], eyes[i]);
+        assert!((heights[i] - heights[i - 1]).abs() <= step * (1.0 + 1e-9) + 1e-9, "frame {i}: {heights:?}");
+    }
+    let fixed = generate_path(&store, &with(OrthoHeight::Fixed(25.0)), &mut |_, _, _| {}).unwrap();
+    assert!(fixed.path.frames.iter().all(|f| f.ortho_height == Some(25.0)));
+    assert!(fixed.path.frames[3].to_scene(h).unwrap().is_orthographic());
 }

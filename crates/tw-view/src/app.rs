@@ -13,8 +13,9 @@
 //! isolate, show all ([`crate::review::ObjectFilter`], which the scene honours when drawing and
 //! picking); 4…9, 0 are the preset views (orthographic while the view is), O switches between
 //! the perspective and a true orthographic camera (`tw_runtime::Projection`) that keeps what
-//! is ahead at its size ([`Controller::set_orthographic`]; zooming in orbit mode changes its
-//! view height), F11 fullscreen, and named viewpoints are saved next to the store
+//! is ahead at its size ([`Controller::set_orthographic`]; the wheel, in orbit mode the zoom,
+//! changes its view height), F11 fullscreen (the window covers the monitor itself where no
+//! window manager answers, [`crate::fullscreen`]), and named viewpoints are saved next to the store
 //! ([`crate::viewpoints`]).
 //!
 //! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
@@ -43,6 +44,7 @@ use crate::collision::WalkCollision;
 use crate::controller::{Controller, Input, Mode};
 use crate::debug_view;
 use crate::error::ViewError;
+use crate::fullscreen::Fullscreen;
 use crate::gfx::Gfx;
 use crate::hud::{FrameTimes, HudFrame, Throughput};
 use crate::pick::{camera_ray, snap_to_vertex, Ray};
@@ -124,6 +126,8 @@ pub(crate) struct App {
     press_at: Option<[f32; 2]>,
     /// The store's named viewpoints, read at first use.
     viewpoints: Option<Viewpoints>,
+    /// F11's fullscreen while on.
+    fullscreen: Option<Fullscreen>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -179,6 +183,7 @@ impl App {
             measuring: false,
             press_at: None,
             viewpoints: None,
+            fullscreen: None,
             error: None,
             report: Default::default(),
         };
@@ -244,6 +249,7 @@ impl App {
     fn animating(&self) -> bool {
         self.options.exit_after.is_some()
             || self.script.is_some()
+            || self.fullscreen.as_ref().is_some_and(Fullscreen::pending)
             || self.playing
             || self.recorder.is_some()
             || self.dragging
@@ -337,12 +343,36 @@ impl App {
                 self.settings.shadows.point = self.controller.eye;
                 self.say(format!("shadows: {}", self.light_text()));
             }
-            Action::ToggleFullscreen => {
-                if let Some(w) = &self.win {
-                    let full = w.window.fullscreen().is_some();
-                    w.window.set_fullscreen((!full).then_some(winit::window::Fullscreen::Borderless(None)));
-                }
+            Action::ToggleFullscreen => self.toggle_fullscreen(),
+        }
+    }
+
+    /// F11: borderless fullscreen on the window's monitor, or back; without a window manager
+    /// to answer, the window covers the monitor itself ([`crate::fullscreen`]).
+    fn toggle_fullscreen(&mut self) {
+        let Some(window) = self.win.as_ref().map(|w| w.window.clone()) else { return };
+        match self.fullscreen.take() {
+            Some(f) => {
+                f.leave(&window);
+                self.say("fullscreen off".into());
             }
+            None => {
+                self.fullscreen = Fullscreen::enter(&window, self.frames);
+                let what =
+                    if self.fullscreen.is_some() { "fullscreen" } else { "fullscreen: no monitor to fill" };
+                self.say(what.into());
+                window.request_redraw();
+            }
+        }
+    }
+
+    /// Once a frame while fullscreen was asked for: the fallback when no window manager
+    /// answered.
+    fn check_fullscreen(&mut self) {
+        let scripted = self.options.exit_after.is_some() || self.script.is_some();
+        let (Some(f), Some(w)) = (self.fullscreen.as_mut(), self.win.as_ref()) else { return };
+        if f.check(&w.window, self.frames, scripted) {
+            self.say("fullscreen: no window manager answered; the window covers the monitor".into());
         }
     }
 
@@ -891,6 +921,7 @@ impl App {
         let dt = self.frame_time();
         // The script's steps first: a resize it asks for may apply at once.
         let last_step = self.script_steps(event_loop);
+        self.check_fullscreen();
         let Some(size) = self.win.as_ref().map(|w| w.window.inner_size()) else { return Ok(()) };
         if self.minimized || size.width == 0 || size.height == 0 {
             self.skip_frame(event_loop, last_step);

@@ -3,7 +3,8 @@
 //! involved, so the motion is unit-tested.
 //!
 //! - **Fly**: WASD (and Q/E down/up) along the view, mouse look (yaw about the scene's up axis,
-//!   pitch clamped short of the poles), speed scaled by the scroll wheel, starting at a fraction
+//!   pitch clamped short of the poles), speed scaled by the scroll wheel (through an
+//!   orthographic camera the wheel zooms instead), starting at a fraction
 //!   of the model's size; velocity is smoothed (exponential approach), so motion starts and stops
 //!   softly.
 //! - **Walk**: as fly but horizontal, at walking speed, falling under gravity along the up axis.
@@ -22,7 +23,9 @@
 //!
 //! Any mode may look through an orthographic camera ([`Controller::set_orthographic`]): the eye
 //! and its motion stay, the projection has a view height instead of the field of view. In orbit
-//! mode zooming scales the view height with the distance, so the zoom still shows.
+//! mode zooming scales the view height with the distance, so the zoom still shows; in fly and
+//! walk mode the wheel scales the view height (moving along the view changes nothing on screen
+//! there) and leaves the speed alone.
 
 use glam::Vec3;
 use tw_runtime::camera::DEFAULT_FOVY_DEG;
@@ -88,6 +91,8 @@ pub const LOOK_SENSITIVITY: f32 = 0.004;
 pub const MAX_PITCH: f32 = 1.54;
 /// Velocity smoothing rate (1/s): higher is snappier.
 pub const SMOOTHING: f32 = 10.0;
+/// One wheel step of zoom: orbit distance or orthographic view height × this (in: up/away).
+pub const ZOOM_STEP: f32 = 0.85;
 
 /// What a controller needs of the scene: its bounds and up axis (scene space) and the size of
 /// its unit.
@@ -242,7 +247,11 @@ impl Controller {
             Mode::Fly | Mode::Walk => {
                 let (lo, hi) = (self.scene_size * 1e-5, self.scene_size * 10.0);
                 let speed = if self.mode == Mode::Walk { &mut self.walk_speed } else { &mut self.speed };
-                if input.scroll != 0.0 {
+                if let (Some(h), true) = (&mut self.ortho_height, input.scroll != 0.0) {
+                    // Orthographic: the wheel zooms (the view height, by orbit zoom's step), as
+                    // moving closer does not; the speed stays.
+                    *h = (*h * ZOOM_STEP.powf(input.scroll)).clamp(lo.min(*h), hi.max(*h));
+                } else if input.scroll != 0.0 {
                     // Within a range scaled to the model; a walking speed already outside it (a
                     // model far smaller or larger than a person) may only move back towards it.
                     *speed = (*speed * 1.2f32.powf(input.scroll)).clamp(lo.min(*speed), hi.max(*speed));
@@ -271,7 +280,7 @@ impl Controller {
                 self.yaw -= input.right * 1.5 * dt;
                 if input.scroll != 0.0 || input.forward != 0.0 {
                     let steps = input.scroll + input.forward * dt * 4.0 * boost;
-                    self.target_distance = (self.target_distance * 0.85f32.powf(steps))
+                    self.target_distance = (self.target_distance * ZOOM_STEP.powf(steps))
                         .clamp(self.scene_size * 1e-4, self.scene_size * 10.0);
                 }
                 let before = self.distance;
@@ -563,5 +572,29 @@ mod tests {
         let (h1, d1) = (c.ortho_height.unwrap(), c.distance);
         assert!(h1 < h0 * 0.5, "zoomed in: {h0} to {h1}");
         assert!((h1 / d1 - h0 / d0).abs() < h0 / d0 * 1e-3, "the height follows the distance");
+    }
+
+    #[test]
+    fn the_wheel_zooms_an_orthographic_view_in_fly_and_walk_mode_and_keeps_the_speed() {
+        for mode in [Mode::Fly, Mode::Walk] {
+            let mut c = ctl_in(1.0);
+            c.set_mode(mode, None);
+            c.set_orthographic(true, 5.0);
+            let (h0, speed, walk, eye) = (c.ortho_height.unwrap(), c.speed, c.walk_speed, c.eye);
+            c.update(0.016, &Input { scroll: 2.0, ..Default::default() });
+            let h1 = c.ortho_height.unwrap();
+            assert!((h1 / h0 - ZOOM_STEP * ZOOM_STEP).abs() < 1e-5, "{mode:?}: zoomed in {h0} to {h1}");
+            assert_eq!((c.speed, c.walk_speed), (speed, walk), "{mode:?}: the speed stays");
+            c.update(0.016, &Input { scroll: -2.0, ..Default::default() });
+            assert!((c.ortho_height.unwrap() / h0 - 1.0).abs() < 1e-5, "{mode:?}: and back out");
+            if mode == Mode::Fly {
+                assert_eq!(c.eye, eye, "{mode:?}: zooming does not move the eye");
+            }
+            // Perspective again: the wheel is the speed once more.
+            c.set_orthographic(false, 5.0);
+            c.update(0.016, &Input { scroll: 1.0, ..Default::default() });
+            let s = if mode == Mode::Walk { (c.walk_speed, walk) } else { (c.speed, speed) };
+            assert!((s.0 / s.1 - 1.2).abs() < 1e-5, "{mode:?}: {s:?}");
+        }
     }
 }

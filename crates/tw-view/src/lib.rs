@@ -36,6 +36,7 @@ pub mod collision;
 pub mod controller;
 pub mod debug_view;
 pub mod error;
+pub mod fullscreen;
 pub mod gfx;
 pub mod hud;
 pub mod pick;

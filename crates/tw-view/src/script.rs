@@ -12,7 +12,7 @@
 //! press Shift+H        # … with Shift held (show all objects)
 //! press ]              # the sun keys: ] [ turn it, Shift+] Shift+[ raise and lower it
 //! look 120 -40         # move the mouse-look by (dx, dy) pixels
-//! scroll 3             # the wheel: +3 lines (speed)
+//! scroll 3             # the wheel: +3 lines (speed; zoom in orbit and orthographic views)
 //! click 240 160        # left click at window pixel (x, y): pick (or measure, after `press M`)
 //! view +x              # a preset view: +x -x +y -y +z -z iso (as keys 4…9, 0)
 //! save-view door       # save the camera as viewpoint `door` (STORE.views.json)

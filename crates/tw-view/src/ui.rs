@@ -92,7 +92,7 @@ pub const HELP: &[(&str, &str)] = &[
     ("0", "isometric view"),
     ("O", "orthographic / perspective view (orbit zoom: view height)"),
     ("F11", "fullscreen"),
-    ("scroll wheel", "speed (fly, walk); distance and orthographic view height (orbit)"),
+    ("scroll wheel", "speed (fly, walk); distance (orbit); zoom in orthographic views"),
     ("1 / 2 / 3", "fly / walk / orbit"),
     ("N", "walk: fly through walls / collide with them (the HUD shows the collision's time)"),
     ("F", "debug view: freeze the culling camera, move a second one out"),

@@ -13,14 +13,22 @@
 //!
 //! A view with `ortho_height` (input units, > 0) is orthographic with a view that high (its
 //! `fovy` is the perspective that O returns to); files without it, as every file written before
-//! the orthographic camera, hold perspective views.
+//! the orthographic camera, hold perspective views — except the views the viewer's former O
+//! saved: a 1° perspective from far away, stored as `fovy` 1 and read back as the orthographic
+//! view they stood for ([`OLD_ORTHO_FOVY_DEG`], [`Viewpoint::camera`]).
 
 use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec3};
+use tw_runtime::camera::DEFAULT_FOVY_DEG;
 use tw_runtime::{Camera, Projection};
 
 use crate::controller::clip_planes;
+
+/// The former orthographic view (before the true projection: a 1° perspective from 66 times
+/// further away, `fovy` saved as 1): a view without `ortho_height` whose `fovy` is at most this
+/// (the former viewer's own test, 1° + 1 %) is read as orthographic.
+pub const OLD_ORTHO_FOVY_DEG: f64 = 1.01;
 
 /// The `format` field of a viewpoints file.
 pub const VIEWS_FORMAT: &str = "terawalk-views";
@@ -150,21 +158,45 @@ impl Viewpoint {
     }
 
     /// The perspective field of view (radians) of the view, or the one its orthographic view
-    /// returns to.
+    /// returns to (for a former orthographic view, [`DEFAULT_FOVY_DEG`]).
     pub fn fovy_radians(&self) -> f32 {
-        (self.fovy.to_radians() as f32).clamp(0.01, 3.1)
+        let degrees = if self.is_old_orthographic() { DEFAULT_FOVY_DEG } else { self.fovy };
+        (degrees.to_radians() as f32).clamp(0.01, 3.1)
+    }
+
+    /// Whether this is a view the former O saved ([`OLD_ORTHO_FOVY_DEG`]).
+    pub fn is_old_orthographic(&self) -> bool {
+        self.ortho_height.is_none() && self.fovy <= OLD_ORTHO_FOVY_DEG
     }
 
     /// The scene-space camera (clip planes seeing all of `bounds`, the scene's `up`).
+    ///
+    /// A former orthographic view ([`is_old_orthographic`](Self::is_old_orthographic)) becomes
+    /// the orthographic camera that view stood for: as high as its narrow view was at the depth
+    /// of the bounds' centre, the eye brought forward along the view to where the former O had
+    /// moved it back from (a [`DEFAULT_FOVY_DEG`] view showing that depth at the same size, as
+    /// O in the viewer now leaves the eye); a view looking away from the centre stays as saved.
     pub fn camera(&self, origin: [f64; 3], bounds: (Vec3, Vec3), up: Vec3) -> Camera {
         let o = DVec3::from_array(origin);
-        let eye = (DVec3::from_array(self.eye) - o).as_vec3();
-        let target = (DVec3::from_array(self.target) - o).as_vec3();
-        let (near, far) = clip_planes(eye, bounds);
-        let projection = match self.ortho_height {
+        let mut eye = (DVec3::from_array(self.eye) - o).as_vec3();
+        let mut target = (DVec3::from_array(self.target) - o).as_vec3();
+        let mut projection = match self.ortho_height {
             Some(h) => Projection::Orthographic { height: h as f32 },
-            None => Projection::Perspective { fovy: self.fovy_radians() },
+            None => Projection::Perspective { fovy: (self.fovy.to_radians() as f32).clamp(0.01, 3.1) },
         };
+        if self.is_old_orthographic() {
+            let forward = (target - eye).normalize_or_zero();
+            let depth = ((bounds.0 + bounds.1) * 0.5 - eye).dot(forward) as f64;
+            if depth > 0.0 {
+                let narrow = (self.fovy.to_radians() * 0.5).tan();
+                let back = depth * narrow / (DEFAULT_FOVY_DEG.to_radians() * 0.5).tan();
+                let reach = (target - eye).length();
+                eye += forward * (depth - back) as f32;
+                target = eye + forward * reach;
+                projection = Projection::Orthographic { height: (2.0 * depth * narrow) as f32 };
+            }
+        }
+        let (near, far) = clip_planes(eye, bounds);
         Camera { eye, target, up, projection, near, far }
     }
 }
@@ -347,6 +379,50 @@ mod tests {
         let Projection::Orthographic { height } = plan.projection else { panic!("{plan:?}") };
         let d = (top.target - top.eye).length() as f64;
         assert!((height as f64 - top.view_height_at(d)).abs() < 1e-5, "as high as the perspective view");
+    }
+
+    /// A view the former O saved (a 1° perspective 66 times further back, `fovy` 1, no
+    /// `ortho_height`) is read as orthographic: the model's centre as large as the narrow view
+    /// showed it, the eye where O had taken it from, O returning to a 60° perspective that
+    /// frames it alike. A 2° view is an ordinary telephoto view.
+    #[test]
+    fn former_orthographic_viewpoints_load_as_orthographic() {
+        let bounds = (Vec3::splat(-5.0), Vec3::splat(5.0));
+        let origin = [100.0, 200.0, 0.0];
+        // The former O from 20 units in front of the centre, looking along +y: 66x further.
+        let scale = (30f64.to_radians().tan() / 0.5f64.to_radians().tan()) as f32;
+        let eye = Vec3::new(0.0, -20.0 * scale, 0.0);
+        let old = |fovy: f64| Viewpoint {
+            name: "old".into(),
+            eye: [eye.x as f64 + 100.0, eye.y as f64 + 200.0, 0.0],
+            target: [100.0, eye.y as f64 + 201.0, 0.0],
+            fovy,
+            ortho_height: None,
+        };
+        let v = old(1.0);
+        assert!(v.is_old_orthographic());
+        let cam = v.camera(origin, bounds, Vec3::Z);
+        let Projection::Orthographic { height } = cam.projection else { panic!("{cam:?}") };
+        let narrow_height = 2.0 * (-eye.y) * 0.5f32.to_radians().tan();
+        assert!((height - narrow_height).abs() < 1e-3 * height, "{height} against {narrow_height}");
+        assert!((cam.eye - Vec3::new(0.0, -20.0, 0.0)).length() < 1e-2, "the eye back in front: {}", cam.eye);
+        assert!((cam.direction() - Vec3::Y).length() < 1e-6);
+        assert!((v.fovy_radians() - 60f32.to_radians()).abs() < 1e-6);
+        let back = Camera { projection: Projection::Perspective { fovy: v.fovy_radians() }, ..cam };
+        assert!(
+            (back.view_height_at(20.0) - height as f64).abs() < 1e-3 * height as f64,
+            "O frames it alike"
+        );
+        // Saved again, it is an orthographic view of today's kind.
+        let again = Viewpoint::from_camera("old", &cam, v.fovy_radians(), origin);
+        assert!(!again.is_old_orthographic() && again.ortho_height.is_some());
+        // A narrow view of another kind stays perspective.
+        let tele = old(2.0);
+        assert!(!tele.is_old_orthographic());
+        assert_eq!(
+            tele.camera(origin, bounds, Vec3::Z).projection,
+            Projection::Perspective { fovy: 2f32.to_radians() }
+        );
     }
 
     /// The preset views keep the model's apparent size in orthographic: the view's height at

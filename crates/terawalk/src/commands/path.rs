@@ -52,6 +52,13 @@ pub fn run(args: PathArgs, quiet: bool) -> Result<()> {
     if r.approach_frames > 0 {
         print_approach(r, &unit_name);
     }
+    let heights = path.frames.iter().filter_map(|f| f.ortho_height);
+    if let Some((lo, hi)) = heights
+        .fold(None, |m: Option<(f64, f64)>, h| Some(m.map_or((h, h), |(lo, hi)| (lo.min(h), hi.max(h)))))
+    {
+        let range = if lo == hi { len(lo) } else { format!("{} to {}", len(lo), len(hi)) };
+        outln!("orthographic: views {range} {unit_name} high");
+    }
     let parts = if r.approach_frames > 0 {
         format!("approach {}", r.approach_frames)
     } else {
@@ -84,6 +91,7 @@ fn path_options(args: &PathArgs) -> PathOptions {
         eye_height: args.eye_height,
         speed: args.speed,
         fovy_deg: args.fovy,
+        ortho: args.ortho,
         seed: args.seed,
         voxel_size: args.voxel,
         max_voxels: args.max_voxels,

@@ -12,13 +12,12 @@ use crate::cli::{Coloring, PreviewArgs, View};
 use crate::progress;
 use crate::units::fmt_count;
 
-/// Parses "x,y,z;x,y,z;x,y,z;fovy" (eye; target; up; vertical field of view in degrees).
+/// Parses "x,y,z;x,y,z;x,y,z;fovy" (eye; target; up; vertical field of view in degrees), or an
+/// orthographic camera ("…;ortho:HEIGHT").
 pub fn parse_camera(s: &str) -> Result<Camera> {
     // One parser of camera strings for every command (tw-runtime's), here into the preview's type.
     let c = tw_runtime::InputCamera::parse(s)?;
-    // The preview's software rasterizer projects in perspective only.
-    anyhow::ensure!(c.ortho_height.is_none(), "preview draws perspective views only (got {s:?})");
-    Ok(Camera { eye: c.eye, target: c.target, up: c.up, fovy_deg: c.fovy_deg })
+    Ok(Camera { eye: c.eye, target: c.target, up: c.up, fovy_deg: c.fovy_deg, ortho_height: c.ortho_height })
 }
 
 /// The view direction (from the model towards the eye) of a preset, for a model with `up` axis.
@@ -117,6 +116,10 @@ mod tests {
         assert!(parse_camera("1,2,3;4,5,6;0,0,1;0").is_err());
         assert!(parse_camera("1,2,3;1,2,3;0,0,1;60").is_err());
         assert!(parse_camera("nan,2,3;4,5,6;0,0,1;60").is_err());
+        let ortho = parse_camera("1,2,3;4,5,6;0,0,1;ortho:12.5").unwrap();
+        assert_eq!((ortho.ortho_height, ortho.eye), (Some(12.5), [1.0, 2.0, 3.0]));
+        assert_eq!(parse_camera("1,2,3;4,5,6;0,0,1;60").unwrap().ortho_height, None);
+        assert!(parse_camera("1,2,3;4,5,6;0,0,1;ortho:0").is_err());
     }
 
     /// The presets frame a glTF input y-up and a PLY input z-up, as `build` records them.

@@ -41,7 +41,8 @@ use crate::trace_image;
 pub struct TraceSettings {
     pub coloring: ColorMode,
     /// A point light near the eye (Wald 2004's "flashlight") instead of the headlight
-    /// direction, with hard shadows by shadow rays.
+    /// direction, with hard shadows by shadow rays; through an orthographic camera a parallel
+    /// light from the eye's side ([`flashlight`]).
     pub flashlight: bool,
     /// Where in each pixel the primary ray passes (`crate::Camera::subpixel`): the centre by
     /// default; successive positions are the samples of progressive supersampling.
@@ -198,9 +199,7 @@ impl StoreTracer {
             sun: camera.sun_direction(),
         };
         let lights = Lights {
-            flashlight: settings
-                .flashlight
-                .then(|| Light::Point { position: flashlight_position(camera, &rt_camera) }),
+            flashlight: settings.flashlight.then(|| flashlight(camera, &rt_camera)),
             light: settings.light,
         };
         let (frame, shadow_rays) = shade_pixels(
@@ -222,10 +221,26 @@ impl StoreTracer {
     }
 }
 
-/// The flashlight's position for `camera` (see [`FLASHLIGHT_UP`]).
-fn flashlight_position(camera: &Camera, rays: &crate::Camera) -> Vec3 {
+/// The flashlight of `camera` (whose rays are `rays`, [`crate::Camera::for_view`]).
+///
+/// Perspective: a point light above and to the right of the eye (by 8 % and 5 % of the
+/// distance from the eye to the target, so that shadows show at any scale). An
+/// orthographic camera has no centre of projection — its eye may sit anywhere back along the
+/// view, and its rays are parallel — so a point light by the eye would light and shadow the
+/// scene differently as the eye moves back without the image changing otherwise. There the
+/// flashlight is a parallel light from the same side: from the target, the direction in which
+/// the perspective flashlight would be seen (back along the view, tilted up and right by the
+/// same fractions), so that shadows still show beside what casts them and do not depend on
+/// where the eye is.
+pub fn flashlight(camera: &Camera, rays: &crate::Camera) -> Light {
+    if camera.is_orthographic() {
+        let towards = -rays.forward + rays.up * FLASHLIGHT_UP + rays.right * FLASHLIGHT_RIGHT;
+        return Light::Sun { towards: towards.normalize_or(camera.headlight()) };
+    }
     let d = (camera.target - camera.eye).length();
-    camera.eye + rays.up * (FLASHLIGHT_UP * d) + rays.right * (FLASHLIGHT_RIGHT * d)
+    Light::Point {
+        position: camera.eye + rays.up * (FLASHLIGHT_UP * d) + rays.right * (FLASHLIGHT_RIGHT * d),
+    }
 }
 
 /// The lights whose shadows a frame traces.

@@ -94,7 +94,7 @@ pub(super) fn approach(store: &Store, count: usize, fovy: f64) -> Result<Approac
                 target,
                 up: upv,
                 fovy,
-                // Generated walkthroughs are perspective.
+                // Perspective; `--ortho` makes it orthographic afterwards (`orthographic_frames`).
                 ortho_height: None,
                 segment: SEGMENT.to_string(),
             }
@@ -287,6 +287,41 @@ mod tests {
             assert!(steps.windows(2).all(|w| (w[1] - w[0]).abs() < 0.1 * max), "{steps:?}");
             assert!((g.report.approach_length - steps.iter().sum::<f64>()).abs() < 1e-9 * d[0]);
         }
+    }
+
+    /// `--ortho auto` on the approach: the same eyes and targets, each frame as high as the
+    /// perspective view at its target (so the view shrinks to an eighth); `--ortho 40`: 40 high.
+    #[test]
+    fn orthographic_approaches_keep_the_cameras_and_frame_the_target() {
+        use crate::pathgen::OrthoHeight;
+        let (_dir, store) = plant_store(2);
+        let perspective = approach_of(&store, 60, 1);
+        assert!(perspective.path.frames.iter().all(|f| f.ortho_height.is_none()));
+        let ortho = |ortho| {
+            let options = PathOptions {
+                frames: 60,
+                seed: 1,
+                part: PathPart::Approach,
+                ortho: Some(ortho),
+                ..Default::default()
+            };
+            generate_path(&store, &options, &mut |_, _, _| {}).unwrap()
+        };
+        let framed = ortho(OrthoHeight::Framed);
+        framed.path.validate().unwrap();
+        let tan = (30f64).to_radians().tan();
+        for (p, o) in perspective.path.frames.iter().zip(&framed.path.frames) {
+            assert_eq!((p.eye, p.target, p.up, p.fovy), (o.eye, o.target, o.up, o.fovy));
+            let want = 2.0 * tan * dist3(p.eye, p.target);
+            assert!((o.ortho_height.unwrap() - want).abs() < 1e-9 * want, "{o:?}");
+        }
+        let h: Vec<f64> = framed.path.frames.iter().map(|f| f.ortho_height.unwrap()).collect();
+        assert!((h[59] / h[0] - ZOOM).abs() < 1e-9, "{} / {}", h[59], h[0]);
+        // The camera the viewer, render and bench get from the file is orthographic.
+        let cam = framed.path.frames[0].to_scene(store.header()).unwrap();
+        assert_eq!(cam.projection, crate::Projection::Orthographic { height: h[0] as f32 });
+        let fixed = ortho(OrthoHeight::Fixed(40.0));
+        assert!(fixed.path.frames.iter().all(|f| f.ortho_height == Some(40.0)));
     }
 
     #[test]

@@ -53,7 +53,7 @@ fn frame(
         target: [0, 1, 2].map(|a| eye[a] + origin[a] + d[a] / len * dist),
         up,
         fovy,
-        // Generated walkthroughs are perspective.
+        // Perspective; `--ortho` makes it orthographic afterwards (`orthographic_frames`).
         ortho_height: None,
         segment: segment.to_string(),
     }

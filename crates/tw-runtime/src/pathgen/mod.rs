@@ -52,6 +52,10 @@
 //! model to a close oblique view of its top, the distance shrinking geometrically to an eighth;
 //! it needs no walkable space, so nothing is voxelized (see `approach`).
 //!
+//! Frames are perspective unless [`PathOptions::ortho`] asks for orthographic ones: a fixed
+//! view height, or [`OrthoHeight::Framed`], which keeps the sizes the perspective path shows
+//! (`orthographic_frames`).
+//!
 //! Files: `voxels` (steps 1–4: [`WalkGrid`]), `route` (steps 5–7: the region, the route and its
 //! smoothing), `cameras` (the look direction, the fly-over, the rise between them and the
 //! frames) and `approach`; this file has the options, the report and [`generate_path`], which
@@ -81,6 +85,19 @@ pub enum PathPart {
     Approach,
 }
 
+/// The view height of orthographic path frames ([`PathOptions::ortho`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum OrthoHeight {
+    /// Every frame this many input units high.
+    Fixed(f64),
+    /// Each frame as high as the perspective view of [`PathOptions::fovy_deg`] is at the
+    /// distance from its eye to what it shows: the approach's target (so the approach still
+    /// closes in, its view shrinking to an eighth), the model's centre for the walk and the
+    /// fly-over (the orbit looks at it; along a walk the height changes smoothly, the model
+    /// shown at the size the fly-over shows it, and the rise joins the two without a jump).
+    Framed,
+}
+
 /// What to generate. Lengths are in scene (input) units; `None` picks a default from the
 /// store's units (metres when it has none).
 #[derive(Clone, Debug, PartialEq)]
@@ -98,6 +115,9 @@ pub struct PathOptions {
     pub speed: Option<f64>,
     /// Vertical field of view, degrees (1..=179).
     pub fovy_deg: f64,
+    /// `Some`: orthographic frames of this view height (the eyes and view directions are the
+    /// same as without it); `None`: perspective.
+    pub ortho: Option<OrthoHeight>,
     pub seed: u64,
     /// Voxel edge; default eye height / 8.
     pub voxel_size: Option<f64>,
@@ -115,6 +135,7 @@ impl Default for PathOptions {
             eye_height: None,
             speed: None,
             fovy_deg: 60.0,
+            ortho: None,
             seed: 1,
             voxel_size: None,
             max_voxels: 1 << 28,
@@ -237,6 +258,7 @@ pub fn generate_path(
         };
     report.walk_frames = walk.len();
     walk.extend(fly);
+    orthographic_frames(store, options, &mut walk);
     Ok(GeneratedPath { path: CameraPath::new(options.fps, walk), report })
 }
 
@@ -246,15 +268,35 @@ fn approach_part(
     options: &PathOptions,
     mut report: PathReport,
 ) -> Result<GeneratedPath, PathGenError> {
-    let a = approach::approach(store, options.frames, options.fovy_deg)?;
+    let mut a = approach::approach(store, options.frames, options.fovy_deg)?;
+    orthographic_frames(store, options, &mut a.frames);
     report.approach_frames = a.frames.len();
     report.approach_length = a.frames.windows(2).map(|w| route::dist3(w[0].eye, w[1].eye)).sum();
     report.approach_distances = (a.start_distance, a.end_distance);
     Ok(GeneratedPath { path: CameraPath::new(options.fps, a.frames), report })
 }
 
-/// Refuses options that cannot make a path: the frame count, frame rate, walk share and field
-/// of view.
+/// Makes `frames` orthographic as [`PathOptions::ortho`] says (nothing for `None`): the view
+/// height of [`OrthoHeight`] on every frame, its eye, target and field of view kept.
+fn orthographic_frames(store: &Store, options: &PathOptions, frames: &mut [PathFrame]) {
+    let Some(ortho) = options.ortho else { return };
+    let h = store.header();
+    let centre: [f64; 3] = std::array::from_fn(|a| 0.5 * (h.bounds_min[a] + h.bounds_max[a]));
+    let tan = (options.fovy_deg.to_radians() * 0.5).tan();
+    for f in frames {
+        f.ortho_height = Some(match ortho {
+            OrthoHeight::Fixed(height) => height,
+            OrthoHeight::Framed => {
+                let looked_at = if f.segment == approach::SEGMENT { f.target } else { centre };
+                // At least a grid step, however close the eye (a view of no height is refused).
+                (2.0 * tan * route::dist3(f.eye, looked_at)).max(h.grid_step)
+            }
+        });
+    }
+}
+
+/// Refuses options that cannot make a path: the frame count, frame rate, walk share, field of
+/// view and orthographic height.
 fn check_options(options: &PathOptions) -> Result<(), PathGenError> {
     let bad = |m: String| Err(PathGenError::Options(m));
     if options.frames < 2 || options.frames > crate::path::MAX_FRAMES {
@@ -271,6 +313,11 @@ fn check_options(options: &PathOptions) -> Result<(), PathGenError> {
     }
     if !(1.0..=179.0).contains(&options.fovy_deg) {
         return bad(format!("field of view must be 1..=179 degrees, got {}", options.fovy_deg));
+    }
+    if let Some(OrthoHeight::Fixed(height)) = options.ortho {
+        if !(height.is_finite() && height > 0.0) {
+            return bad(format!("the orthographic view height must be a positive number, got {height}"));
+        }
     }
     Ok(())
 }
