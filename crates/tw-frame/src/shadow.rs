@@ -44,7 +44,7 @@ use serde::{Deserialize, Serialize};
 use tw_gpu::Renderer;
 use tw_runtime::frustum::{grid_box, Containment, Frustum};
 use tw_runtime::shadow::{
-    casters, classify_receivers, classify_subobjects, fit_layers, light_visible, lod_within_bias,
+    casters, classify_receivers, classify_subobjects_cut, fit_layers, light_visible, lod_within_bias,
     refit_layers, LightDepth, ShadowSetStats, TriangleClasses,
 };
 use tw_runtime::{Camera, ClusterRef, Light, ResidentPage, SelectOptions, ShadowClass, Shadows, Streamer};
@@ -235,9 +235,10 @@ pub(crate) fn prepare(
     Ok((info, shadows))
 }
 
-/// The receivers' boxes cut to the eye's view `view_proj`, for cross-culling: each box replaced
-/// by the bounding box of its part inside the view frustum (its planes widened by a hair
-/// against rounding; [`tw_runtime::shadow::clip`]), a box with no part inside kept whole. The
+/// The receivers' boxes (or their subobjects') cut to the eye's view `view_proj`, for
+/// cross-culling: each box replaced by the bounding box of its part inside the view frustum (its
+/// planes widened by a hair against rounding; [`tw_runtime::shadow::clip`]), a box with no part
+/// inside kept whole. The
 /// eye's pass shades a receiver only inside the frustum, so a class found for the cut box is the
 /// class of every fragment drawn: the image is the same. What a box loses is what it held out of
 /// view — on a walk, the floor cluster under the eye reaches behind it, a wall cluster beyond
@@ -253,24 +254,29 @@ fn in_view(view_proj: &glam::Mat4, boxes: Vec<(Vec3, Vec3)>) -> Vec<(Vec3, Vec3)
     if !planes.iter().all(|p| p.is_finite()) {
         return boxes;
     }
-    boxes
-        .into_par_iter()
-        .map_init(Vec::new, |points, (lo, hi)| {
-            tw_runtime::shadow::clip::clip_box(lo, hi, &planes, points);
-            if points.is_empty() {
-                return (lo, hi);
-            }
-            let (a, b) =
-                points.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), &p| (a.min(p), b.max(p)));
-            // Never outside the box itself (the points of a cut lie on its faces, up to rounding).
-            let (a, b) = (a.max(lo), b.min(hi));
-            if a.cmple(b).all() {
-                (a, b)
-            } else {
-                (lo, hi)
-            }
-        })
-        .collect()
+    let cut = |points: &mut Vec<Vec3>, (lo, hi): (Vec3, Vec3)| {
+        tw_runtime::shadow::clip::clip_box(lo, hi, &planes, points);
+        if points.is_empty() {
+            return (lo, hi);
+        }
+        let (a, b) =
+            points.iter().fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(a, b), &p| (a.min(p), b.max(p)));
+        // Never outside the box itself (the points of a cut lie on its faces, up to rounding).
+        let (a, b) = (a.max(lo), b.min(hi));
+        if a.cmple(b).all() {
+            (a, b)
+        } else {
+            (lo, hi)
+        }
+    };
+    // A box in view costs a fraction of a microsecond: a walk's few hundred are cut on this
+    // thread (handing them to the pool costs more), a fly-over's thousands on all.
+    if boxes.len() < 4096 {
+        let mut points = Vec::new();
+        boxes.into_iter().map(|b| cut(&mut points, b)).collect()
+    } else {
+        boxes.into_par_iter().map_init(Vec::new, cut).collect()
+    }
 }
 
 /// What every layer of a frame's shadow stage is selected and checked with.
@@ -538,7 +544,8 @@ fn refine_partial(
     candidates.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
     candidates.truncate(REFINE_MAX_RECEIVERS);
     let clusters: Vec<&PageCluster> = candidates.iter().map(|&(_, i)| receivers[i].1).collect();
-    let refined = classify_subobjects(shadows, depths, camera, &clusters, view.grid_step);
+    let cut = |boxes| in_view(&view.view_proj, boxes);
+    let refined = classify_subobjects_cut(shadows, depths, camera, &clusters, view.grid_step, cut);
     let mut out = Vec::with_capacity(refined.len());
     for (&(_, i), triangles) in candidates.iter().zip(refined) {
         if triangles.refines() {
