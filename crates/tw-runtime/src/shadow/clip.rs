@@ -35,13 +35,23 @@ pub fn corners(lo: Vec3, hi: Vec3) -> [Vec3; 8] {
 pub fn clip_box(lo: Vec3, hi: Vec3, planes: &[Plane], out: &mut Vec<Vec3>) {
     out.clear();
     let c = corners(lo, hi);
-    if planes.iter().all(|&p| c.iter().all(|&q| side(p, q) >= 0.0)) {
+    let holds = |p: Plane| c.iter().all(|&q| side(p, q) >= 0.0);
+    if planes.iter().all(|&p| holds(p)) {
         out.extend_from_slice(&c); // nothing cut (the common case)
+        return;
+    }
+    // A plane with every corner outside leaves nothing (a receiver in another layer's slab: the
+    // other common case), and one with every corner inside cuts nothing off: the box's points
+    // are convex combinations of its corners. Neither is worth a pass over the faces.
+    if planes.iter().any(|&p| c.iter().all(|&q| side(p, q) < 0.0)) {
         return;
     }
     let mut faces: Vec<Vec<Vec3>> = FACES.iter().map(|f| f.iter().map(|&i| c[i]).collect()).collect();
     let mut cap: Vec<Vec3> = Vec::new();
     for &plane in planes {
+        if holds(plane) {
+            continue;
+        }
         cap.clear();
         let mut clipped = Vec::with_capacity(faces.len() + 1);
         for face in &faces {
@@ -185,5 +195,21 @@ mod tests {
         assert!(out.is_empty());
         // Open ends give no planes.
         assert!(depth_slab(Vec3::ZERO, dir, -f32::MAX, f32::MAX, 0.0).is_empty());
+    }
+
+    #[test]
+    fn planes_that_cut_nothing_off_or_leave_nothing_need_no_pass() {
+        let dir = Vec3::ONE.normalize();
+        let cut = depth_slab(Vec3::ZERO, dir, 0.5, 1.0, 0.0);
+        let (mut alone, mut with) = (Vec::new(), Vec::new());
+        clip_box(Vec3::ZERO, Vec3::ONE, &cut, &mut alone);
+        // A plane every corner is inside of, before and after the cutting ones: the same points.
+        let wide = Vec4::new(1.0, 0.0, 0.0, 5.0);
+        clip_box(Vec3::ZERO, Vec3::ONE, &[wide, cut[0], cut[1], wide], &mut with);
+        assert_eq!(alone, with);
+        // A plane every corner is outside of, after a cutting one: nothing.
+        let away = Vec4::new(1.0, 0.0, 0.0, -5.0);
+        clip_box(Vec3::ZERO, Vec3::ONE, &[cut[0], away], &mut with);
+        assert!(with.is_empty());
     }
 }

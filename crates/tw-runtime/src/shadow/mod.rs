@@ -40,7 +40,7 @@ pub use classify::{casters, classify_receivers, light_visible, ShadowSetStats};
 pub use depth::LightDepth;
 pub use fit::{fit_layers, refit_layers, texel_size, ShadowOptions};
 pub use reuse::lod_within_bias;
-pub use subobjects::{classify_subobjects, TriangleClasses, SUBOBJECT_TRIANGLES};
+pub use subobjects::{classify_subobjects, classify_subobjects_cut, TriangleClasses, SUBOBJECT_TRIANGLES};
 
 /// What cross-culling decided about a receiver (a cluster of the eye's cut).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]

@@ -87,9 +87,25 @@ pub fn classify_subobjects(
     clusters: &[&PageCluster],
     grid_step: f64,
 ) -> Vec<TriangleClasses> {
+    classify_subobjects_cut(shadows, depths, eye, clusters, grid_step, |boxes| boxes)
+}
+
+/// [`classify_subobjects`] with each subobject's box replaced by `cut` (all of them at once, in
+/// order) before it is classified: a caller that knows where the subobjects can be drawn (the
+/// eye's view) passes the boxes of their parts there. `cut` must return, for each box, one that
+/// holds every point of the subobject that can be drawn.
+pub fn classify_subobjects_cut(
+    shadows: &Shadows,
+    depths: &[LightDepth],
+    eye: &Camera,
+    clusters: &[&PageCluster],
+    grid_step: f64,
+    cut: impl FnOnce(Vec<(Vec3, Vec3)>) -> Vec<(Vec3, Vec3)>,
+) -> Vec<TriangleClasses> {
     let per_cluster: Vec<Vec<(Vec3, Vec3)>> =
         clusters.iter().map(|c| subobject_boxes(c, grid_step)).collect();
-    let boxes: Vec<(Vec3, Vec3)> = per_cluster.iter().flatten().copied().collect();
+    let boxes = cut(per_cluster.iter().flatten().copied().collect());
+    assert_eq!(boxes.len(), per_cluster.iter().map(Vec::len).sum::<usize>(), "one box per subobject");
     let classes = classify_receivers(shadows, depths, eye, &boxes);
     let mut next = classes.iter();
     clusters
