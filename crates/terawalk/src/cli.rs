@@ -1017,6 +1017,10 @@ pub struct BuildArgs {
     /// session 33) but make more, smaller reads and a larger page table.
     #[arg(long, default_value_t = 2048, value_parser = clap::value_parser!(u32).range(256..=65_536))]
     pub page_triangles: u32,
+    /// Store each cluster's ray-tracing BVH (its shape: ~1.2 bytes a stored triangle), so that
+    /// `--renderer rt` refits it as pages load instead of building it (docs/DESIGN.md D8).
+    #[arg(long)]
+    pub rt_bvh: bool,
     #[command(flatten)]
     pub import: ImportArgs,
     #[command(flatten)]

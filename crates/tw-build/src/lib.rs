@@ -53,7 +53,7 @@ pub use cut::{
 pub use error::BuildError;
 pub use hlod::HlodParams;
 pub use lod::LodParams;
-pub use pages::PageParams;
+pub use pages::{PageParams, RtTreeFn};
 pub use pipeline::{
     build, max_worker_threads, work_root, BuildOptions, BuildProgress, BuildReport, HlodDepthStats,
     NoProgress, WorkDir,

@@ -8,13 +8,23 @@
 //! each group's first cluster are reported back so that the group table can point at them.
 //! Clusters arrive encoded (`tw_store::EncodedCluster`, a cell's on the pool that built its
 //! DAG): a page is the concatenation of its clusters' encodings.
+//!
+//! With [`PageParams::rt_bvh`] (`terawalk build --rt-bvh`) each cluster is followed by the shape
+//! of its ray-tracing BVH (docs/FORMAT.md, "Ray-tracing trees"), made when its page is written,
+//! on the rayon pool, from the cluster as a reader decodes it.
 
-use tw_store::{ClusterParts, EncodedCluster, StoreWriter};
+use rayon::prelude::*;
+use tw_store::{ClusterParts, EncodedCluster, PageCluster, RtTree, StoreWriter};
 
 use crate::error::BuildError;
 use crate::types::{LodCluster, LodDag};
 
-/// Page sizing.
+/// Makes the ray-tracing tree of a decoded cluster at a grid step (`tw_rt::scene::stored::
+/// cluster_tree`; passed in because the ray tracer's crate depends on the runtime's, not on the
+/// builder's).
+pub type RtTreeFn = fn(&PageCluster, f64) -> Result<RtTree, String>;
+
+/// Page sizing, and the optional ray-tracing trees.
 #[derive(Clone, Copy, Debug)]
 pub struct PageParams {
     /// A page is written once it holds this many triangles (a group is never split; a single
@@ -24,11 +34,14 @@ pub struct PageParams {
     /// walk at τ = 1 fits `--memory 1G` with 2048 and needed ~3G with 8192, at the same build
     /// time and frame times at 10^8 (docs/benchmarks-log.md, session 33).
     pub page_triangles: usize,
+    /// Store each cluster's ray-tracing tree, made by this function (None: no trees, the
+    /// default; the ray tracer then builds the BVHs as pages load).
+    pub rt_bvh: Option<RtTreeFn>,
 }
 
 impl Default for PageParams {
     fn default() -> Self {
-        PageParams { page_triangles: 2048 }
+        PageParams { page_triangles: 2048, rt_bvh: None }
     }
 }
 
@@ -50,6 +63,8 @@ struct OpenPage {
 /// Packs groups into pages and streams the pages to the store writer.
 pub struct PagePacker {
     params: PageParams,
+    /// The store's grid step (scene space of the ray-tracing trees).
+    grid_step: f64,
     /// Open pages by (root, level).
     open: Vec<Option<OpenPage>>,
     placements: Vec<GroupPlacement>,
@@ -58,8 +73,15 @@ pub struct PagePacker {
 }
 
 impl PagePacker {
-    pub fn new(params: PageParams) -> PagePacker {
-        PagePacker { params, open: Vec::new(), placements: Vec::new(), pages_written: 0, root_pages: 0 }
+    pub fn new(params: PageParams, grid_step: f64) -> PagePacker {
+        PagePacker {
+            params,
+            grid_step,
+            open: Vec::new(),
+            placements: Vec::new(),
+            pages_written: 0,
+            root_pages: 0,
+        }
     }
 
     /// Adds one group (all its clusters, encoded with the scene-wide group id).
@@ -93,7 +115,14 @@ impl PagePacker {
     }
 
     fn flush(&mut self, writer: &mut StoreWriter, slot: usize) -> Result<(), BuildError> {
-        let Some(page) = self.open[slot].take() else { return Ok(()) };
+        let Some(mut page) = self.open[slot].take() else { return Ok(()) };
+        if let Some(rt) = self.params.rt_bvh {
+            let step = self.grid_step;
+            page.clusters
+                .par_iter_mut()
+                .try_for_each(|c| append_rt_tree(c, rt, step))
+                .map_err(BuildError::Internal)?;
+        }
         let root = slot % 2 == 1;
         let index = writer.add_encoded_page(&page.clusters, root).map_err(BuildError::store)?;
         self.pages_written += 1;
@@ -111,6 +140,14 @@ impl PagePacker {
         }
         Ok((self.placements, self.pages_written, self.root_pages))
     }
+}
+
+/// Appends the ray-tracing tree of `c` to its bytes: the tree of the cluster as a reader decodes
+/// it (canonical form), at the store's grid step.
+fn append_rt_tree(c: &mut EncodedCluster, rt: RtTreeFn, grid_step: f64) -> Result<(), String> {
+    let decoded = tw_store::codec::decode_page(&c.bytes, 1).map_err(|e| format!("ray-tracing tree: {e}"))?;
+    let tree = rt(&decoded[0], grid_step)?;
+    tree.encode(c.triangles, &mut c.bytes)
 }
 
 /// Every cluster of `dag`, encoded for a page (group id 0 until the pipeline sets it).

@@ -95,7 +95,7 @@ impl BuildOptions {
     pub fn describe(&self) -> String {
         format!(
             "memory={}\nup={}\nt1={}\nk={}\nmax_cell_triangles={}\ncluster_triangles={}\n\
-             hlod_ratio={}\nhlod_max_node_triangles={}\npage_triangles={}\nroot_depth={}\n",
+             hlod_ratio={}\nhlod_max_node_triangles={}\npage_triangles={}\nroot_depth={}\n{}",
             self.memory,
             self.up,
             self.redefine.t1,
@@ -105,7 +105,9 @@ impl BuildOptions {
             self.hlod.ratio,
             self.hlod.max_node_triangles,
             self.pages.page_triangles,
-            self.root_depth
+            self.root_depth,
+            // Only when set, so that a default build's header is what it was before the option.
+            if self.pages.rt_bvh.is_some() { "rt_bvh=1\n" } else { "" },
         )
     }
 }
@@ -378,6 +380,7 @@ pub(crate) fn finish<'h>(
     pool: &rayon::ThreadPool,
     t: &mut Timer,
 ) -> Result<(), BuildError> {
+    writer.set_rt_trees(options.pages.rt_bvh.is_some());
     let (state, duplicates) = lod_phase(prepared, source, options, &mut writer, progress, pool)?;
     t.lap("lod+hlod+pages");
     log_lod_figures(&state);
@@ -510,7 +513,7 @@ fn lod_phase<'h>(
     let cells = &prepared.cells;
     let jobs = HlodJobs::new(&prepared.facts.grid, &options.hlod);
     let mut consumer = CellConsumer {
-        state: LodState::new(&prepared.hierarchy, options, source.records()),
+        state: LodState::new(&prepared.hierarchy, options, source.records(), prepared.facts.grid.step),
         writer,
         progress: &mut *progress,
         jobs: &jobs,
@@ -736,6 +739,7 @@ impl<'h> LodState<'h> {
         hierarchy: &'h Hierarchy,
         options: &BuildOptions,
         prebuilt: Option<&'h CellRecords>,
+        grid_step: f64,
     ) -> LodState<'h> {
         let n = hierarchy.nodes.len();
         let index = TreeIndex::new(hierarchy);
@@ -747,7 +751,7 @@ impl<'h> LodState<'h> {
             groups: Vec::new(),
             sources: Vec::new(),
             node_groups: vec![(0, 0); n],
-            packer: PagePacker::new(options.pages),
+            packer: PagePacker::new(options.pages, grid_step),
             root_depth: options.root_depth,
             clusters: 0,
             stored_triangles: 0,

@@ -848,6 +848,58 @@ fn one_two_and_five_threads_give_identical_files() {
     }
 }
 
+/// A stand-in for the ray tracer's SAH (`tw_rt::scene::stored::cluster_tree`, which this crate
+/// does not depend on): a tree that depends on the decoded cluster and the grid step.
+fn test_tree(c: &tw_store::PageCluster, step: f64) -> Result<tw_store::RtTree, String> {
+    let mut tree = tw_store::RtTree::halving(c.triangle_count());
+    let shift = (c.positions[0][0] as usize + step.to_bits() as usize) % c.triangle_count();
+    tree.order.rotate_left(shift);
+    Ok(tree)
+}
+
+/// `PageParams::rt_bvh` (`terawalk build --rt-bvh`): every cluster gets its tree, the same one
+/// for 1 and 5 threads (byte-identical files); the clusters, the tables and the page table but
+/// the page lengths and checksums are those of the build without trees.
+#[test]
+fn stored_rt_trees_are_deterministic_and_leave_the_rest_alone() {
+    let dir = tempfile::tempdir().unwrap();
+    let build = |threads: usize, rt: bool| {
+        let out = dir.path().join(format!("t{threads}-{rt}.tw"));
+        let mut opts = BuildOptions { threads: Some(threads), ..options(small_cells(4096)) };
+        opts.pages.rt_bvh = rt.then_some(test_tree as tw_build::RtTreeFn);
+        run_build(plant(40_000, 7), &out, &opts);
+        out
+    };
+    let (plain, one, five) = (build(2, false), build(1, true), build(5, true));
+    assert!(std::fs::read(&one).unwrap() == std::fs::read(&five).unwrap(), "1 and 5 threads differ");
+    let (plain, trees) = (Store::open(&plain).unwrap(), Store::open(&one).unwrap());
+    assert!(trees.has_rt_trees() && !plain.has_rt_trees());
+    trees.verify(|_, _| {}).unwrap();
+    assert!(trees.build_options().contains("rt_bvh=1") && !plain.build_options().contains("rt_bvh"));
+    assert_eq!(plain.pages().len(), trees.pages().len());
+    assert_eq!(plain.groups(), trees.groups());
+    let grid = trees.header().grid_step;
+    let (mut bytes, mut triangles) = (0u64, 0u64);
+    for i in 0..plain.pages().len() as u32 {
+        let (a, b) = (&plain.pages()[i as usize], &trees.pages()[i as usize]);
+        assert_eq!(
+            (a.cluster_count, a.triangle_count, a.uncompressed_len),
+            (b.cluster_count, b.triangle_count, b.uncompressed_len)
+        );
+        let (clusters, rt) = trees.page_with_trees(i).unwrap();
+        assert_eq!(plain.page(i).unwrap(), clusters);
+        assert_eq!(plain.page_with_trees(i).unwrap().1.len(), 0);
+        assert_eq!(rt.len(), clusters.len());
+        for (c, t) in clusters.iter().zip(&rt) {
+            assert_eq!(*t, test_tree(c, grid).unwrap());
+        }
+        bytes += (b.compressed_len - a.compressed_len) as u64;
+        triangles += a.triangle_count as u64;
+    }
+    let per = bytes as f64 / triangles as f64;
+    assert!((1.0..1.5).contains(&per), "{per} bytes a stored triangle");
+}
+
 /// Two inputs: a good OBJ, then a PLY cut off in the middle of its faces.
 fn good_and_truncated(dir: &Path) -> Vec<PathBuf> {
     let good = dir.join("good.obj");
@@ -908,8 +960,10 @@ fn small_store(dir: &Path) -> PathBuf {
     let obj = dir.join("sphere.obj");
     write_file(&obj, &[icosphere("ball", [0.0; 3], 1.0, 4)]);
     let out = dir.join("scene.tw");
-    let opts =
-        BuildOptions { pages: tw_build::PageParams { page_triangles: 1024 }, ..options(small_cells(2048)) };
+    let opts = BuildOptions {
+        pages: tw_build::PageParams { page_triangles: 1024, ..Default::default() },
+        ..options(small_cells(2048))
+    };
     run_build(open_scene(&[obj]), &out, &opts);
     out
 }
@@ -958,7 +1012,10 @@ fn wrong_version_does_not_open() {
     let dir = tempfile::tempdir().unwrap();
     let out = small_store(dir.path());
     let mut bytes = std::fs::read(&out).unwrap();
-    for (version, says) in [(tw_store::FORMAT_VERSION + 1, "newer terawalk"), (1, "older terawalk")] {
+    let older = tw_store::FORMAT_VERSION - 1;
+    for (version, says) in
+        [(tw_store::FORMAT_VERSION + 1, "newer terawalk"), (1, "older terawalk"), (older, "older terawalk")]
+    {
         bytes[8..12].copy_from_slice(&version.to_le_bytes());
         std::fs::write(&out, &bytes).unwrap();
         let err = Store::open(&out).expect_err("wrong version");

@@ -58,6 +58,12 @@ impl TracedWalkthrough {
         &self.tracer
     }
 
+    /// The tracer, e.g. to make it build the cluster BVHs of a store that stores them
+    /// ([`StoreTracer::use_stored_bvhs`]).
+    pub fn tracer_mut(&mut self) -> &mut StoreTracer {
+        &mut self.tracer
+    }
+
     /// The last frame's LOD cut (what it traced, with a light the casters outside the view
     /// too; the viewer picks among these clusters: `TracedFrame::clusters` indexes it).
     pub fn selection(&self) -> &tw_runtime::Selection {

@@ -229,3 +229,47 @@ fn traced_frames_stream_within_the_budget() {
     }
     assert!(dropped > 0, "a walk under a tight budget dropped no cluster BVH");
 }
+
+/// `terawalk build --rt-bvh` (docs/DESIGN.md D8): the same plant built with the cluster BVHs'
+/// shapes stored. Traced with the stored shapes (no SAH at run time), with the BVHs built as
+/// pages load on the same store, and on the store built without them, every frame of a walk
+/// gives the same pixels: colours, objects, clusters, triangles and distances, bit for bit.
+#[test]
+fn stored_cluster_bvhs_trace_the_same_frames() {
+    let with_trees = {
+        let mut o = tw_build::BuildOptions { memory: 256 << 20, ..Default::default() };
+        o.pages.rt_bvh = Some(tw_rt::scene::stored::cluster_tree);
+        tw_testkit::plant(200_000, 3, o).store()
+    };
+    let without = plant();
+    assert!(with_trees.has_rt_trees() && !without.has_rt_trees());
+    let cameras = path_cameras(&without, PathPart::Walk, 24, 3);
+    let settings = FrameSettings { tau: 1.0, wait_for_pages: true, ..Default::default() };
+    let walk = |store: &Arc<Store>, stored: bool| {
+        let mut w =
+            TracedWalkthrough::new(store.clone(), (W, H), StreamOptions::default(), TraceSettings::default())
+                .unwrap();
+        w.tracer_mut().use_stored_bvhs(stored);
+        w
+    };
+    let mut walks = [walk(&with_trees, true), walk(&with_trees, false), walk(&without, true)];
+    let (mut stored, mut built) = (0, 0);
+    for (i, camera) in cameras.iter().enumerate() {
+        let frames: Vec<_> = walks.iter_mut().map(|w| w.frame(camera, &settings).unwrap().2).collect();
+        stored += frames[0].stats.blas.stored;
+        built += frames[1].stats.blas.built + frames[2].stats.blas.built;
+        assert_eq!(frames[0].stats.blas.stored, frames[0].stats.blas.built, "frame {i}: a BVH was built");
+        assert_eq!(frames[1].stats.blas.stored + frames[2].stats.blas.stored, 0);
+        for (k, f) in frames[1..].iter().enumerate() {
+            let what = ["built on the same store", "the store without trees"][k];
+            assert_eq!(f.stats.clusters, frames[0].stats.clusters, "frame {i}, {what}: another cut");
+            assert!(f.rgba == frames[0].rgba, "frame {i}, {what}: other colours");
+            assert!(f.objects == frames[0].objects, "frame {i}, {what}: other objects");
+            assert!(f.clusters == frames[0].clusters, "frame {i}, {what}: other clusters");
+            assert!(f.triangles == frames[0].triangles, "frame {i}, {what}: other triangles");
+            let bits = |d: &[f32]| d.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert!(bits(&f.distance) == bits(&frames[0].distance), "frame {i}, {what}: other distances");
+        }
+    }
+    assert!(stored > 0 && built == 2 * stored, "{stored} stored, {built} built");
+}

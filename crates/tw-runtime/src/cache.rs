@@ -28,7 +28,7 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-use tw_store::{PageCluster, Store, StoreError};
+use tw_store::{PageCluster, RtTree, Store, StoreError};
 
 use crate::error::RuntimeError;
 
@@ -47,6 +47,8 @@ pub struct ResidentPage {
     /// The page's distinct `(self_error, self_sphere)` pairs (bit for bit), in order of first
     /// appearance: clusters made by the same simplification step share one.
     steps: Vec<(f32, [f32; 4])>,
+    /// The clusters' stored ray-tracing trees (same order), or none.
+    trees: Vec<RtTree>,
     bytes: usize,
 }
 
@@ -64,6 +66,12 @@ pub struct ClusterInfo {
 impl ResidentPage {
     /// Wraps decoded clusters and computes their bounds.
     pub fn new(clusters: Vec<PageCluster>) -> ResidentPage {
+        ResidentPage::with_trees(clusters, Vec::new())
+    }
+
+    /// [`ResidentPage::new`] with the clusters' ray-tracing trees (`Store::page_with_trees`;
+    /// empty for a store without them).
+    pub fn with_trees(clusters: Vec<PageCluster>, trees: Vec<RtTree>) -> ResidentPage {
         let bounds = clusters
             .iter()
             .map(|c| {
@@ -104,8 +112,17 @@ impl ResidentPage {
             + clusters
                 .iter()
                 .map(|c| c.positions.capacity() * 12 + c.indices.capacity() + c.objects.capacity() * 4)
+                .sum::<usize>()
+            + trees
+                .iter()
+                .map(|t| std::mem::size_of::<RtTree>() + t.order.capacity() + t.nodes.capacity())
                 .sum::<usize>();
-        ResidentPage { clusters, bounds, info, steps, bytes }
+        ResidentPage { clusters, bounds, info, steps, trees, bytes }
+    }
+
+    /// The stored ray-tracing tree of cluster `index`, if the store has them.
+    pub fn rt_tree(&self, index: u32) -> Option<&RtTree> {
+        self.trees.get(index as usize)
     }
 
     /// Per cluster: its group, step and triangle count (same order as `clusters`).
@@ -300,7 +317,7 @@ impl PageCache {
             });
         }
         // Decode without holding the lock, so that other threads keep using the cache.
-        let loaded = store.page(page).map(|c| Arc::new(ResidentPage::new(c)));
+        let loaded = store.page_with_trees(page).map(|(c, t)| Arc::new(ResidentPage::with_trees(c, t)));
         match self.insert(page, loaded, Eviction::Lru) {
             Inserted::Resident(p) | Inserted::AlreadyResident(p) => Ok(p),
             Inserted::Failed(e) => Err(e.into()),

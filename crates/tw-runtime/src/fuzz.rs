@@ -65,8 +65,8 @@ pub fn store_bytes(data: &[u8]) {
 /// selected for a few cameras derived from the header (page loads through a [`PageCache`]).
 pub fn store_in_runtime(store: &Store) {
     for i in 0..store.pages().len() as u32 {
-        if let Ok(clusters) = store.page(i) {
-            let page = ResidentPage::new(clusters);
+        if let Ok((clusters, trees)) = store.page_with_trees(i) {
+            let page = ResidentPage::with_trees(clusters, trees);
             let _ = (page.info().len(), page.steps().len(), page.bytes());
         }
     }
@@ -156,11 +156,13 @@ impl Bytes<'_> {
 struct Geometry {
     info: StoreInfo,
     pages: Vec<(Vec<PageCluster>, [f32; 4])>,
+    /// Write a ray-tracing tree after every cluster (`RtTree::halving`).
+    rt_trees: bool,
 }
 
 impl Geometry {
     /// Layout: grid step (f64), grid origin, bounds min, bounds max (3 × f64 each), the page
-    /// count − 1 (u8, mod 4); per page the group sphere (4 × f32), the cluster count − 1 (u8,
+    /// count − 1 (u8, mod 4; bit 7: ray-tracing trees); per page the group sphere (4 × f32), the cluster count − 1 (u8,
     /// mod 4); per cluster the triangle count − 1 (u8, mod 128), vertex count − 1 (u8), level
     /// (u8), self error and self sphere (5 × f32), the positions (3 × u32 each), three indices
     /// per triangle (u8, reduced modulo the vertex count) and an object id per triangle (u8,
@@ -177,7 +179,8 @@ impl Geometry {
             build_options: String::new(),
             input_triangles: 0,
         };
-        let page_count = r.u8().unwrap_or(0) % 4 + 1;
+        let count_byte = r.u8().unwrap_or(0);
+        let (page_count, rt_trees) = (count_byte % 4 + 1, count_byte & 0x80 != 0);
         let mut pages = Vec::new();
         for _ in 0..page_count {
             let sphere = [r.f32(), r.f32(), r.f32(), r.f32()];
@@ -185,7 +188,7 @@ impl Geometry {
             let clusters = (0..cluster_count).map(|_| Self::cluster(r, pages.len() as u32)).collect();
             pages.push((clusters, sphere));
         }
-        let mut g = Geometry { info, pages };
+        let mut g = Geometry { info, pages, rt_trees };
         g.info.input_triangles = g.pages.iter().flat_map(|p| &p.0).map(|c| c.triangle_count() as u64).sum();
         g
     }
@@ -215,7 +218,20 @@ impl Geometry {
                     max[a] = max[a].max(p[a]);
                 }
             }
-            let page = w.add_page(clusters, true)?;
+            let page = if self.rt_trees {
+                let mut encoded = Vec::new();
+                for c in clusters {
+                    let mut e = tw_store::EncodedCluster::new(c).map_err(tw_store::StoreError::Invalid)?;
+                    tw_store::RtTree::halving(c.triangle_count())
+                        .encode(c.triangle_count(), &mut e.bytes)
+                        .map_err(tw_store::StoreError::Invalid)?;
+                    encoded.push(e);
+                }
+                w.set_rt_trees(true);
+                w.add_encoded_page(&encoded, true)?
+            } else {
+                w.add_page(clusters, true)?
+            };
             groups.push(Group {
                 sphere: *sphere,
                 error: f32::INFINITY,
@@ -273,7 +289,7 @@ mod tests {
         let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../fuzz/corpus");
         let path = std::fs::read(dir.join("path/walk.json")).unwrap();
         assert_eq!(super::camera_path(&path), Ok(3));
-        for name in ["quad.bin", "extreme.bin"] {
+        for name in ["quad.bin", "extreme.bin", "quad-rt.bin"] {
             let data = std::fs::read(dir.join("store_geometry").join(name)).unwrap();
             let geometry = super::Geometry::read(&mut super::Bytes(&data));
             let tmp = tempfile::tempdir().unwrap();
@@ -281,6 +297,7 @@ mod tests {
             geometry.write(&file).unwrap_or_else(|e| panic!("{name}: {e}"));
             let store = tw_store::Store::open(&file).unwrap();
             store.verify(|_, _| {}).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_eq!(store.has_rt_trees(), name == "quad-rt.bin", "{name}");
         }
     }
 }

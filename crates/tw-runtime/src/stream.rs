@@ -224,7 +224,7 @@ fn take(q: &mut Queue, store: &Store, cache: &PageCache) -> Option<Job> {
 
 /// Reads, decodes and hands in one page (no lock held while decoding).
 fn load(store: &Store, cache: &PageCache, shared: &Shared, job: Job) {
-    let loaded = store.page(job.page).map(|c| Arc::new(ResidentPage::new(c)));
+    let loaded = store.page_with_trees(job.page).map(|(c, t)| Arc::new(ResidentPage::with_trees(c, t)));
     let eviction = if job.prefetch { Eviction::SparingThisFrame } else { Eviction::Lru };
     let outcome = cache.insert(job.page, loaded, eviction);
     if let Inserted::Failed(e) = &outcome {

@@ -17,6 +17,7 @@
 //! offset within the page.
 
 use crate::error::CodecError;
+use crate::rt::RtTree;
 
 /// Most triangles in one cluster.
 pub const MAX_TRIANGLES: usize = 128;
@@ -553,6 +554,17 @@ fn put_objects(objects: &[u32], distinct: &[u32], multi: bool, out: &mut Vec<u8>
 }
 /// Decodes a page of `cluster_count` clusters. `bytes` must be exactly the page's bytes.
 pub fn decode_page(bytes: &[u8], cluster_count: usize) -> Result<Vec<PageCluster>, CodecError> {
+    decode_page_with_trees(bytes, cluster_count, false).map(|(clusters, _)| clusters)
+}
+
+/// [`decode_page`] of a page whose clusters are each followed by a ray-tracing tree when
+/// `trees` (a store with [`crate::format::HEADER_RT_TREES`]); returns the trees too, one per
+/// cluster (none when not `trees`).
+pub fn decode_page_with_trees(
+    bytes: &[u8],
+    cluster_count: usize,
+    trees: bool,
+) -> Result<(Vec<PageCluster>, Vec<RtTree>), CodecError> {
     // Each cluster takes at least MIN_CLUSTER_BYTES: this bounds the allocation.
     if cluster_count.saturating_mul(MIN_CLUSTER_BYTES) > bytes.len() {
         return Err(CodecError::new(
@@ -561,17 +573,23 @@ pub fn decode_page(bytes: &[u8], cluster_count: usize) -> Result<Vec<PageCluster
         ));
     }
     let mut clusters = Vec::with_capacity(cluster_count);
+    let mut rt = Vec::with_capacity(if trees { cluster_count } else { 0 });
     let mut pos = 0usize;
     for k in 0..cluster_count {
-        let (c, next) = decode_cluster(bytes, pos)
-            .map_err(|e| CodecError { msg: format!("cluster {k}: {}", e.msg), ..e })?;
-        clusters.push(c);
+        let in_cluster = |e: CodecError| CodecError { msg: format!("cluster {k}: {}", e.msg), ..e };
+        let (c, next) = decode_cluster(bytes, pos).map_err(in_cluster)?;
         pos = next;
+        if trees {
+            let (tree, next) = crate::rt::decode(bytes, pos, c.triangle_count()).map_err(in_cluster)?;
+            rt.push(tree);
+            pos = next;
+        }
+        clusters.push(c);
     }
     if pos != bytes.len() {
         return Err(CodecError::new(pos, format!("{} bytes after the last cluster", bytes.len() - pos)));
     }
-    Ok(clusters)
+    Ok((clusters, rt))
 }
 
 struct Cursor<'a> {

@@ -12,7 +12,7 @@ pub use tables::{validate_tables, GroupLinks, Tables};
 /// The first 8 bytes of every store.
 pub const MAGIC: [u8; 8] = *b"TERAWALK";
 /// The format version this crate reads and writes.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// Size of the header in bytes.
 pub const HEADER_LEN: usize = 344;
 /// Byte offset of the header checksum (CRC-32C of bytes `0..HEADER_CRC_AT`).
@@ -47,6 +47,11 @@ pub const MIN_GRID_STEP: f64 = f32::MIN_POSITIVE as f64;
 
 /// Page flag: the page holds the coarsest levels and should stay resident.
 pub const PAGE_ROOT: u8 = 1;
+/// Header flag: every cluster of every page is followed by its ray-tracing tree
+/// (`terawalk build --rt-bvh`; docs/FORMAT.md, "Ray-tracing trees").
+pub const HEADER_RT_TREES: u32 = 1;
+/// The header flags this version defines.
+pub const HEADER_FLAGS: u32 = HEADER_RT_TREES;
 /// Object flag: the object has a colour.
 pub const OBJECT_HAS_COLOR: u32 = 1;
 
@@ -121,7 +126,7 @@ pub struct StrRef {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Header {
     pub version: u32,
-    /// Feature flags; none are defined in version 2 (must be 0).
+    /// Feature flags: [`HEADER_RT_TREES`] or 0.
     pub flags: u32,
     /// Up axis of the input: 0 x, 1 y, 2 z.
     pub up_axis: u8,
@@ -292,10 +297,11 @@ fn check_header_checksum(bytes: &[u8]) -> Result<(), (u64, String)> {
     Ok(())
 }
 
-/// The feature flags (none defined: 0) and the up axis (0, 1 or 2) with its 3 reserved bytes.
+/// The feature flags (only [`HEADER_FLAGS`]) and the up axis (0, 1 or 2) with its 3 reserved
+/// bytes.
 fn read_flags_and_up_axis(r: &mut Reader) -> Result<(u32, u8), (u64, String)> {
     let flags = r.u32()?;
-    if flags != 0 {
+    if flags & !HEADER_FLAGS != 0 {
         return Err((16, format!("unknown header flags {flags:#x}")));
     }
     let up_axis = r.u8()?;
@@ -715,7 +721,7 @@ mod tests {
         let h = header();
         let b = h.to_bytes();
         assert_eq!(&b[..8], b"TERAWALK");
-        assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 2);
+        assert_eq!(u32::from_le_bytes(b[8..12].try_into().unwrap()), 3);
         assert_eq!(u32::from_le_bytes(b[12..16].try_into().unwrap()), HEADER_LEN as u32);
         assert_eq!(b[20], 2);
         assert_eq!(f64::from_le_bytes(b[96..104].try_into().unwrap()), h.grid_step);
@@ -739,6 +745,8 @@ mod tests {
         let mut b = header().to_bytes();
         b[16] = 4;
         assert!(Header::parse(&b, false).unwrap_err().1.contains("flags"));
+        let h = Header { flags: HEADER_RT_TREES, ..header() };
+        assert_eq!(Header::parse(&h.to_bytes(), true).unwrap().flags, HEADER_RT_TREES);
     }
 
     #[test]

@@ -72,6 +72,7 @@ pub mod codec;
 pub mod error;
 pub mod format;
 mod read;
+pub mod rt;
 pub mod units;
 mod write;
 
@@ -79,6 +80,7 @@ pub use codec::{ClusterParts, EncodedCluster, PageCluster, MAX_TRIANGLES, MAX_VE
 pub use error::{CodecError, StoreError};
 pub use format::{Group, GroupLinks, Header, Node, PageEntry, FORMAT_VERSION};
 pub use read::{Store, VerifyReport};
+pub use rt::RtTree;
 pub use write::{temporary_prefix, Object, StoreInfo, StoreWriter, WriteSummary};
 
 /// Fuzzing entry point: opens `data` as a store and, when it opens, verifies it and decodes

@@ -21,9 +21,10 @@ use crate::codec::{self, PageCluster};
 use crate::error::StoreError;
 use crate::format::{
     checksum, str_at, validate_tables, Group, GroupLinks, Header, Node, ObjectEntry, PageEntry, Reader,
-    SectionKind, Tables, FORMAT_VERSION, GROUP_LEN, HEADER_LEN, MAGIC, NODE_LEN, OBJECT_LEN, PAGE_ENTRY_LEN,
-    SECTIONS_AT, SECTION_ALIGN, SECTION_ENTRY_LEN, SOURCE_LEN,
+    SectionKind, Tables, FORMAT_VERSION, GROUP_LEN, HEADER_LEN, HEADER_RT_TREES, MAGIC, NODE_LEN, OBJECT_LEN,
+    PAGE_ENTRY_LEN, SECTIONS_AT, SECTION_ALIGN, SECTION_ENTRY_LEN, SOURCE_LEN,
 };
+use crate::rt::RtTree;
 use crate::write::{Object, TABLE_ORDER};
 
 /// Checksums are skipped only when fuzzing, so that the fuzzer reaches the parsers behind them.
@@ -289,12 +290,25 @@ impl Store {
     /// Decodes page `index` (checksum, then every cluster; see [`codec::decode_page`]) and
     /// checks it against its page table entry.
     pub fn page(&self, index: u32) -> Result<Vec<PageCluster>, StoreError> {
+        self.page_with_trees(index).map(|(clusters, _)| clusters)
+    }
+
+    /// True when every cluster carries its ray-tracing tree ([`HEADER_RT_TREES`]; `terawalk
+    /// build --rt-bvh`).
+    pub fn has_rt_trees(&self) -> bool {
+        self.header().flags & HEADER_RT_TREES != 0
+    }
+
+    /// [`Store::page`] with the clusters' ray-tracing trees, one per cluster, validated
+    /// ([`RtTree::validate`]); none when the store has no trees ([`Store::has_rt_trees`]).
+    pub fn page_with_trees(&self, index: u32) -> Result<(Vec<PageCluster>, Vec<RtTree>), StoreError> {
         let bytes = self.page_bytes(index)?;
         let p = self.page_entry(index)?;
         let err =
             |offset: u64, msg: String| StoreError::Page { path: self.path.clone(), page: index, offset, msg };
-        let clusters = codec::decode_page(&bytes, p.cluster_count as usize)
-            .map_err(|e| err(p.offset + e.offset as u64, e.msg))?;
+        let (clusters, trees) =
+            codec::decode_page_with_trees(&bytes, p.cluster_count as usize, self.has_rt_trees())
+                .map_err(|e| err(p.offset + e.offset as u64, e.msg))?;
         drop(bytes);
         let triangles: usize = clusters.iter().map(|c| c.triangle_count()).sum();
         let decoded: usize =
@@ -314,7 +328,7 @@ impl Store {
                 ),
             ));
         }
-        Ok(clusters)
+        Ok((clusters, trees))
     }
 
     /// Checks every page (checksum, decoding) and the invariants that need the clusters: each

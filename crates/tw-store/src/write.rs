@@ -17,7 +17,7 @@ use crate::codec::{self, EncodedCluster, PageCluster};
 use crate::error::StoreError;
 use crate::format::{
     checksum, validate_tables, Group, Header, Node, ObjectEntry, PageEntry, Section, SectionKind, StrRef,
-    Tables, FORMAT_VERSION, HEADER_LEN, PAGE_ROOT, SECTION_ALIGN, SECTION_COUNT,
+    Tables, FORMAT_VERSION, HEADER_LEN, HEADER_RT_TREES, PAGE_ROOT, SECTION_ALIGN, SECTION_COUNT,
 };
 
 /// Scene-wide facts for the header.
@@ -69,6 +69,8 @@ pub struct StoreWriter {
     pos: u64,
     pages: Vec<PageEntry>,
     scratch: Vec<u8>,
+    /// Header flags ([`StoreWriter::set_rt_trees`]).
+    flags: u32,
     /// Removes the temporary file if the process is interrupted ([`crate::cleanup`]).
     _cleanup: crate::cleanup::TempGuard,
 }
@@ -114,6 +116,7 @@ impl StoreWriter {
             pos: HEADER_LEN as u64,
             pages: Vec::new(),
             scratch: Vec::new(),
+            flags: 0,
             _cleanup: cleanup,
         })
     }
@@ -163,6 +166,13 @@ impl StoreWriter {
         self.pos += s.encoded_len as u64;
         self.pages.push(entry);
         Ok(index)
+    }
+
+    /// Declares that every cluster of every page is followed by its ray-tracing tree
+    /// ([`crate::RtTree::encode`], appended to the cluster's [`EncodedCluster::bytes`] by the
+    /// caller): sets [`crate::format::HEADER_RT_TREES`]. Call it before [`StoreWriter::finish`].
+    pub fn set_rt_trees(&mut self, on: bool) {
+        self.flags = if on { HEADER_RT_TREES } else { 0 };
     }
 
     /// Pages added so far.
@@ -250,7 +260,7 @@ impl StoreWriter {
         );
         Ok(Header {
             version: FORMAT_VERSION,
-            flags: 0,
+            flags: self.flags,
             up_axis: info.up_axis,
             bounds_min: info.bounds_min,
             bounds_max: info.bounds_max,

@@ -65,6 +65,9 @@ pub fn options(args: &BuildArgs) -> BuildOptions {
     o.lod.max_triangles = cluster;
     o.hlod.max_triangles = cluster;
     o.pages.page_triangles = args.page_triangles as usize;
+    if args.rt_bvh {
+        o.pages.rt_bvh = Some(tw_rt::scene::stored::cluster_tree);
+    }
     o
 }
 

@@ -303,6 +303,9 @@ pub fn command_of(args: &BuildArgs, output: &Path) -> Result<Vec<String>> {
     if let Some(g) = &args.generate {
         flag("generate", g.to_string());
     }
+    if args.rt_bvh {
+        c.push("--rt-bvh".to_string());
+    }
     Ok(c)
 }
 

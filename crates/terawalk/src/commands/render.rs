@@ -318,11 +318,13 @@ fn print_raster_stats(renderer: &Renderer) {
 fn print_trace_stats(t: &TraceStats, bytes: usize) {
     let ms = |d: Duration| d.as_secs_f64() * 1e3;
     outln!(
-        "ray tracing: {} clusters, {} triangles; {} cluster BVHs built in {:.1} ms, top level {:.1} ms; \
+        "ray tracing: {} clusters, {} triangles; {} cluster BVHs made ({} from stored shapes) in {:.1} ms, \
+         top level {:.1} ms; \
          {} rays in {:.1} ms ({:.1} M rays/s), shading {:.1} ms; BVHs hold {}",
         fmt_count(t.clusters as u64),
         fmt_count(t.triangles),
         fmt_count(t.blas.built as u64),
+        fmt_count(t.blas.stored as u64),
         ms(t.blas.build_time),
         ms(t.tlas_time),
         fmt_count(t.rays),

@@ -8,6 +8,10 @@
 //! BVHs have a budget of their own ([`BlasCache::new`]): over it, the clusters unused for the
 //! longest are dropped (least recently used; never those of the frame being traced, so a cut
 //! larger than the budget is still traced whole).
+//!
+//! A store built with `--rt-bvh` carries each cluster's BVH shape ([`super::stored`]): the
+//! cache then makes the BVH from it (a refit, no SAH) instead of building it, the same BVH bit
+//! for bit.
 
 use std::collections::HashMap;
 use std::sync::{Arc, Weak};
@@ -16,7 +20,7 @@ use std::time::{Duration, Instant};
 use glam::Vec3;
 use rayon::prelude::*;
 use tw_runtime::{ResidentPage, SelectionPages};
-use tw_store::PageCluster;
+use tw_store::{PageCluster, RtTree};
 
 use crate::{Aabb, TriangleBvh};
 
@@ -46,6 +50,25 @@ impl ClusterBlas {
         ClusterBlas { bvh, bounds }
     }
 
+    /// The BVH of `cluster` from its stored shape ([`super::stored::bvh_from_tree`]): the same
+    /// as [`ClusterBlas::build`] when `tree` is the shape the builder stored; built instead
+    /// (with an error logged) when the tree does not fit the cluster.
+    pub fn from_tree(cluster: &PageCluster, grid_step: f64, tree: &RtTree) -> ClusterBlas {
+        match super::stored::bvh_from_tree(cluster, grid_step, tree) {
+            Ok(bvh) => {
+                let bounds = cluster
+                    .positions
+                    .iter()
+                    .fold(Aabb::EMPTY, |b, &g| b.grown(Vec3::from(scene_position(g, grid_step))));
+                ClusterBlas { bvh, bounds }
+            }
+            Err(e) => {
+                tracing::error!("stored cluster BVH unusable, built instead: {e}");
+                ClusterBlas::build(cluster, grid_step)
+            }
+        }
+    }
+
     /// Bytes held (the BVH and its triangles).
     pub fn bytes(&self) -> usize {
         std::mem::size_of::<Self>() + self.bvh.memory_bytes()
@@ -67,8 +90,10 @@ struct PageEntry {
 /// What [`BlasCache::prepare`] did in one frame.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BlasStats {
-    /// Cluster BVHs built for this frame.
+    /// Cluster BVHs built (or made from stored shapes) for this frame.
     pub built: usize,
+    /// Of which made from the store's shapes (`terawalk build --rt-bvh`) rather than built.
+    pub stored: usize,
     /// Wall time of those builds (on the rayon pool).
     pub build_time: Duration,
     /// Bytes of all cached cluster BVHs after the frame.
@@ -87,13 +112,21 @@ pub struct BlasCache {
     bytes: usize,
     budget: usize,
     frame: u64,
+    /// Use the pages' stored shapes when they have them.
+    use_stored: bool,
 }
 
 impl BlasCache {
     /// An empty cache whose BVHs may hold `budget` bytes beyond the clusters of the frame
     /// being traced.
     pub fn new(budget: usize) -> BlasCache {
-        BlasCache { pages: HashMap::new(), bytes: 0, budget, frame: 0 }
+        BlasCache { pages: HashMap::new(), bytes: 0, budget, frame: 0, use_stored: true }
+    }
+
+    /// Whether the pages' stored BVH shapes are used (the default) or every BVH is built (to
+    /// compare both; the BVHs are the same).
+    pub fn use_stored(&mut self, on: bool) {
+        self.use_stored = on;
     }
 
     /// The BVH of every cluster of `pages`, in its order, building the missing ones in
@@ -107,10 +140,21 @@ impl BlasCache {
             .collect();
         if !missing.is_empty() {
             let start = Instant::now();
-            let built: Vec<Arc<ClusterBlas>> =
-                missing.par_iter().map(|&i| Arc::new(ClusterBlas::build(entries[i].2, grid_step))).collect();
+            let use_stored = self.use_stored;
+            let built: Vec<(Arc<ClusterBlas>, bool)> = missing
+                .par_iter()
+                .map(|&i| {
+                    let (r, page, cluster) = entries[i];
+                    match page.rt_tree(r.index_in_page).filter(|_| use_stored) {
+                        Some(tree) => (Arc::new(ClusterBlas::from_tree(cluster, grid_step, tree)), true),
+                        None => (Arc::new(ClusterBlas::build(cluster, grid_step)), false),
+                    }
+                })
+                .collect();
             stats.build_time = start.elapsed();
             stats.built = built.len();
+            stats.stored = built.iter().filter(|b| b.1).count();
+            let built = built.into_iter().map(|b| b.0);
             for (&i, blas) in missing.iter().zip(built) {
                 let (r, page, _) = entries[i];
                 self.insert(r.page, page, r.index_in_page, blas);

@@ -21,6 +21,7 @@ pub mod casters;
 pub mod cut;
 pub mod shade;
 pub mod shadow;
+pub mod stored;
 
 use std::time::{Duration, Instant};
 
@@ -142,6 +143,12 @@ impl StoreTracer {
     /// Bytes held by the cluster BVHs and the last top-level BVH.
     pub fn bytes(&self) -> usize {
         self.blas.bytes() + self.last.as_ref().map_or(0, |(keys, s)| s.tlas_bytes() + keys.len() * 12)
+    }
+
+    /// Whether cluster BVHs come from the store's shapes when it has them (the default; see
+    /// [`blas::BlasCache::use_stored`]) or are all built.
+    pub fn use_stored_bvhs(&mut self, on: bool) {
+        self.blas.use_stored(on);
     }
 
     /// Forgets every cached BVH.
