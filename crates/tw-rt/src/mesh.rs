@@ -77,6 +77,13 @@ impl TriangleBvh {
             Some(splits) => Bvh::build_spatial(&corners, &boxes, &options, &splits),
             None => Bvh::build_with(&boxes, &options),
         };
+        Ok(TriangleBvh::with_leaves(bvh, &corners))
+    }
+
+    /// `bvh` over the triangles `corners` (its leaves index them), with each leaf's triangles
+    /// copied into its SIMD group: the last step of a build, and of a stored shape's refit
+    /// (`scene::stored`).
+    pub(crate) fn with_leaves(bvh: Bvh, corners: &[[Vec3; 3]]) -> TriangleBvh {
         let groups = bvh
             .leaves
             .iter()
@@ -86,7 +93,7 @@ impl TriangleBvh {
                 TriGroup::new(&tris)
             })
             .collect();
-        Ok(TriangleBvh { bvh, groups })
+        TriangleBvh { bvh, groups }
     }
 
     /// The underlying box BVH (its leaves index `prim_indices`, i.e. triangle indices).

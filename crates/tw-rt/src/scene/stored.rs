@@ -17,8 +17,8 @@ use tw_store::{PageCluster, RtTree};
 use crate::build::{build_binary, BuildNode, BuildOptions, MAX_DEPTH};
 use crate::bvh::Bvh;
 use crate::scene::blas::scene_position;
-use crate::triangle::{TriGroup, GROUP};
-use crate::wide::{collapse, Leaf};
+use crate::triangle::GROUP;
+use crate::wide::collapse;
 use crate::{Aabb, TriangleBvh};
 
 // A stored tree's depth bound must fit the traversal stacks.
@@ -82,16 +82,7 @@ pub fn bvh_from_tree(cluster: &PageCluster, grid_step: f64, tree: &RtTree) -> Re
     let prim_indices: Vec<u32> = tree.order.iter().map(|&i| i as u32).collect();
     let (nodes, leaves) = collapse(&root);
     let bvh = Bvh { nodes, leaves, prim_indices, bounds: root.bounds() };
-    let groups = bvh
-        .leaves
-        .iter()
-        .map(|&Leaf { first, count }| {
-            let prims = &bvh.prim_indices[first as usize..(first + count) as usize];
-            let tris: Vec<_> = prims.iter().map(|&p| (corners[p as usize], p)).collect();
-            TriGroup::new(&tris)
-        })
-        .collect();
-    Ok(TriangleBvh { bvh, groups })
+    Ok(TriangleBvh::with_leaves(bvh, &corners))
 }
 
 /// The subtree of `tree` that starts at node `next.0` (its leaves from `order[next.1..]`), with
