@@ -40,7 +40,7 @@ impl ClusterBlas {
             cluster.positions.iter().map(|&g| scene_position(g, grid_step)).collect();
         let triangles: Vec<[u32; 3]> =
             cluster.indices.chunks_exact(3).map(|t| [t[0] as u32, t[1] as u32, t[2] as u32]).collect();
-        let bounds = positions.iter().fold(Aabb::EMPTY, |b, &p| b.grown(Vec3::from(p)));
+        let bounds = bounds_of(positions.iter().copied());
         let bvh = TriangleBvh::build(&positions, &triangles).unwrap_or_else(|e| {
             // A decoded page's indices were checked by the decoder: this is not reachable from
             // a store that opened, but a ray tracer must not take the process down for it.
@@ -55,13 +55,10 @@ impl ClusterBlas {
     /// (with an error logged) when the tree does not fit the cluster.
     pub fn from_tree(cluster: &PageCluster, grid_step: f64, tree: &RtTree) -> ClusterBlas {
         match super::stored::bvh_from_tree(cluster, grid_step, tree) {
-            Ok(bvh) => {
-                let bounds = cluster
-                    .positions
-                    .iter()
-                    .fold(Aabb::EMPTY, |b, &g| b.grown(Vec3::from(scene_position(g, grid_step))));
-                ClusterBlas { bvh, bounds }
-            }
+            Ok(bvh) => ClusterBlas {
+                bvh,
+                bounds: bounds_of(cluster.positions.iter().map(|&g| scene_position(g, grid_step))),
+            },
             Err(e) => {
                 tracing::error!("stored cluster BVH unusable, built instead: {e}");
                 ClusterBlas::build(cluster, grid_step)
@@ -73,6 +70,11 @@ impl ClusterBlas {
     pub fn bytes(&self) -> usize {
         std::mem::size_of::<Self>() + self.bvh.memory_bytes()
     }
+}
+
+/// The box of a cluster's scene-space positions.
+fn bounds_of(positions: impl Iterator<Item = [f32; 3]>) -> Aabb {
+    positions.fold(Aabb::EMPTY, |b, p| b.grown(Vec3::from(p)))
 }
 
 /// A scene-space position of a grid point.
