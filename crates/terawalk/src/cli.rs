@@ -509,6 +509,12 @@ pub struct ShadowArgs {
     /// same either way; off for comparing).
     #[arg(long, default_value = "on", value_parser = parse_on_off, value_name = "on|off", requires = "light", action = clap::ArgAction::Set)]
     pub cross_culling: bool,
+    /// Level of detail of the eye's and the light's views: eye (the eye's everywhere: fewest
+    /// triangles) or finer (the finer of the eye's pixels and the light's texels: sharper
+    /// shadows of far objects near the light, more triangles). Govindaraju's thesis §4.2.1. The
+    /// rasterizer's policy; the ray tracer's shadow rays meet the eye's cut.
+    #[arg(long, default_value = "eye", value_parser = parse_shadow_lod, value_name = "eye|finer", requires = "light")]
+    pub shadow_lod: tw_frame::ShadowLod,
 }
 
 impl Default for ShadowArgs {
@@ -521,6 +527,7 @@ impl Default for ShadowArgs {
             cascades: o.cascades,
             shadow_bias: o.bias_texels,
             cross_culling: true,
+            shadow_lod: tw_frame::ShadowLod::Eye,
         }
     }
 }
@@ -537,6 +544,7 @@ impl ShadowArgs {
                 bias_texels: self.shadow_bias,
             },
             cross_culling: self.cross_culling,
+            lod: self.shadow_lod,
         })
     }
 
@@ -550,6 +558,10 @@ impl ShadowArgs {
     ) -> anyhow::Result<Option<tw_frame::ShadowSettings>> {
         self.request().map(|r| r.settings(header, up_axis, camera)).transpose()
     }
+}
+
+fn parse_shadow_lod(s: &str) -> Result<tw_frame::ShadowLod, String> {
+    tw_frame::ShadowLod::parse(s).ok_or_else(|| format!("expected eye or finer, got {s:?}"))
 }
 
 fn parse_light(s: &str) -> Result<tw_runtime::InputLight, String> {

@@ -48,6 +48,8 @@ fn bad_lights_are_refused(d: &Path) {
         (vec!["--light", "sun", "--shadow-map", "10"], "shadow map size"),
         (vec!["--light", "sun", "--cascades", "9"], "cascades"),
         (vec!["--shadow-map", "512"], "--light"),
+        (vec!["--light", "sun", "--shadow-lod", "coarse"], "eye or finer"),
+        (vec!["--shadow-lod", "finer"], "--light"),
     ] {
         let mut args = vec!["render", "p.tw", "-o", "x.png", "--size", "64x64"];
         args.extend(bad.iter().copied());
@@ -87,7 +89,29 @@ fn raster_shadows_agree_with_the_ray_tracer(d: &Path) -> bool {
     );
     let agreement = tw_frame::mask::compare_shadow_images(&rt, &raster, 2).unwrap();
     assert!(agreement.ratio() >= 0.99, "{agreement:?}");
+    // The finer of both LODs: at least the eye's triangles, and shadows the ray tracer confirms
+    // (at full detail: the finer cut is not the ray tracer's own eye-LOD cut).
+    let o = run_ok(&[&["render", "p.tw", "-o", "finer.png", "--shadow-lod", "finer"][..], &mask].concat(), d);
+    run_ok(
+        &[&["render", "p.tw", "-o", "rt0.png", "--renderer", "rt", "--error", "0"][..], &mask].concat(),
+        d,
+    );
+    let (finer, rt0) = (image(d, "finer.png"), image(d, "rt0.png"));
+    let eye_full = tw_frame::mask::compare_shadow_images(&rt0, &raster, 2).unwrap();
+    let finer_full = tw_frame::mask::compare_shadow_images(&rt0, &finer, 2).unwrap();
+    assert!(finer_full.ratio() >= 0.99, "finer LOD: {finer_full:?}");
+    assert!(finer_full.agree >= eye_full.agree, "finer {finer_full:?}\neye {eye_full:?}");
+    assert!(triangles_drawn(&stdout(&o)) >= triangles_drawn(&out), "{}\n{out}", stdout(&o));
     true
+}
+
+/// The cut's triangles `render` reports ("… N triangles …" on its first line that has them).
+fn triangles_drawn(out: &str) -> u64 {
+    let line =
+        out.lines().find(|l| l.contains("triangles")).unwrap_or_else(|| panic!("no triangles in {out}"));
+    let words: Vec<&str> = line.split_whitespace().collect();
+    let i = words.iter().position(|w| w.starts_with("triangles")).expect("a count before 'triangles'");
+    words[..i].last().and_then(|w| w.replace([',', '\u{202f}'], "").parse().ok()).unwrap_or(0)
 }
 
 /// The PNG `name` in `d`.

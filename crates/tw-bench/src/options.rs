@@ -91,6 +91,8 @@ pub struct ShadowRequest {
     pub light: InputLight,
     pub options: ShadowOptions,
     pub cross_culling: bool,
+    /// `--shadow-lod`.
+    pub lod: tw_frame::ShadowLod,
 }
 
 impl ShadowRequest {
@@ -108,6 +110,7 @@ impl ShadowRequest {
             light: self.light.to_scene(header, up_axis, camera),
             options: self.options,
             cross_culling: self.cross_culling,
+            lod: self.lod,
         })
     }
 }

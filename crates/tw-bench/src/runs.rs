@@ -282,10 +282,11 @@ impl Runner<'_> {
         };
         let shadows = match (plan.shadowed, &self.shadows) {
             (true, Some(s)) => format!(
-                ", shadows: {} ({} texels, cross-culling {})",
+                ", shadows: {} ({} texels, cross-culling {}, {} LOD)",
                 light_name(&s.light),
                 s.options.size,
-                if s.cross_culling { "on" } else { "off" }
+                if s.cross_culling { "on" } else { "off" },
+                s.lod.name()
             ),
             _ => String::new(),
         };

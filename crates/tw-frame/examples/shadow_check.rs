@@ -5,15 +5,19 @@
 //! frame, so both draw the complete cut. Every frame of the path is drawn in order (the layers
 //! are reused from frame to frame as in a walkthrough); every EVERY-th is compared.
 //!
-//! `cargo run --release -p tw-frame --example shadow_check -- STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES]`
-//! (defaults: every 10th frame, `sun`, 640x360, the default layers of `ShadowOptions`).
+//! `cargo run --release -p tw-frame --example shadow_check -- STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES] [LOD] [REF_TAU]`
+//! (defaults: every 10th frame, `sun`, 640x360, the default layers of `ShadowOptions`, the
+//! eye's LOD, the reference traced at the same τ = 1). `LOD` `finer` draws the rasterized
+//! frames under the policy "the finer of both" (`ShadowLod::Finer`); `REF_TAU` 0 traces the
+//! reference at full detail, so that both policies are compared with the same ground truth
+//! (the ray tracer selects its own cut at the eye's LOD and that τ).
 
 use std::sync::Arc;
 
 use tw_frame::mask::compare_shadow_images;
 use tw_frame::shadow::ShadowOptions;
 use tw_frame::traced::TracedWalkthrough;
-use tw_frame::{FrameSettings, Occlusion, ShadowSettings, Walkthrough};
+use tw_frame::{FrameSettings, Occlusion, ShadowLod, ShadowSettings, Walkthrough};
 use tw_gpu::{ColorMode, Renderer};
 use tw_rt::scene::TraceSettings;
 use tw_runtime::{CameraPath, InputLight, StreamOptions};
@@ -25,7 +29,9 @@ const EDGE_PX: u32 = 2;
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.len() < 3 {
-        eprintln!("usage: shadow_check STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES]");
+        eprintln!(
+            "usage: shadow_check STORE PATH.json [EVERY] [LIGHT] [WxH] [MAP] [CASCADES] [LOD] [REF_TAU]"
+        );
         std::process::exit(2);
     }
     let store = Arc::new(Store::open(&args[1])?);
@@ -39,10 +45,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let defaults = ShadowOptions::default();
     let size: u32 = args.get(6).map(|s| s.parse()).transpose()?.unwrap_or(defaults.size);
     let cascades: u32 = args.get(7).map(|s| s.parse()).transpose()?.unwrap_or(defaults.cascades);
+    let lod = match args.get(8) {
+        Some(s) => ShadowLod::parse(s).ok_or_else(|| format!("LOD must be eye or finer, got {s:?}"))?,
+        None => ShadowLod::Eye,
+    };
+    let reference_tau: f32 = args.get(9).map(|s| s.parse()).transpose()?.unwrap_or(1.0);
     let stream = StreamOptions { budget_bytes: 1 << 30, ..Default::default() };
     let mut renderer = Renderer::new_headless(w, h)?;
     renderer.set_color_mode(ColorMode::Shadow);
-    println!("{} at {w}x{h}, {size}-texel layers, every {every}th frame", renderer.adapter_summary());
+    println!(
+        "{} at {w}x{h}, {size}-texel layers, every {every}th frame, {} LOD, reference at τ = {reference_tau}",
+        renderer.adapter_summary(),
+        lod.name()
+    );
     let mut walk = Walkthrough::new(store.clone(), renderer, stream)?;
     let trace = TraceSettings { coloring: ColorMode::Shadow, ..Default::default() };
     let mut traced = TracedWalkthrough::new(store.clone(), (w, h), stream, trace)?;
@@ -57,20 +72,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let settings = FrameSettings {
             occlusion: Occlusion::Hzb,
             wait_for_pages: true,
-            shadows: Some(ShadowSettings { light, options, cross_culling: true }),
+            shadows: Some(ShadowSettings { light, options, cross_culling: true, lod }),
             ..Default::default()
         };
         let (raster, info) = walk.frame(&camera, &settings)?;
         if i % every != 0 {
             continue;
         }
-        let (reference, ..) = traced.frame(&camera, &settings)?;
+        let (reference, ..) = traced.frame(&camera, &FrameSettings { tau: reference_tau, ..settings })?;
         let a = compare_shadow_images(&reference, &raster, EDGE_PX)?;
         compared += a.compared;
         agree += a.agree;
         worst = worst.min(a.ratio());
         println!(
-            "frame {i:4} ({}): {:.3} % of {} pixels agree (lit as blocked {}, blocked as lit {}; {} edge pixels left out); {} layers, {} reused",
+            "frame {i:4} ({}): {:.3} % of {} pixels agree (lit as blocked {}, blocked as lit {}; {} edge pixels left out); {} layers, {} reused; cut {} triangles, light sets {}",
             f.segment,
             100.0 * a.ratio(),
             a.compared,
@@ -78,7 +93,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             a.blocked_as_lit,
             a.excluded_edge,
             info.shadow.layers,
-            info.shadow.layers_reused
+            info.shadow.layers_reused,
+            info.cut_triangles,
+            info.shadow.light_triangles
         );
     }
     println!(

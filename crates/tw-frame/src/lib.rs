@@ -47,7 +47,7 @@ use tw_store::{PageCluster, Store};
 
 pub use occlude::{Occlusion, OcclusionStats};
 pub use pipeline::{Pipe, Pipeline, PipelinedFrame};
-pub use shadow::{ShadowInfo, ShadowSettings};
+pub use shadow::{ShadowInfo, ShadowLod, ShadowSettings};
 
 /// What a frame draws, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -281,6 +281,30 @@ impl Walkthrough {
         &self.selection
     }
 
+    /// The light's LOD of a frame under the policy "the finer of both" ([`ShadowLod::Finer`]):
+    /// measured in the layers of the frame before (they change little from frame to frame, and
+    /// the metric only chooses levels, never what is shadowed); the first frame fits layers to
+    /// its eye-LOD cut first. `None` under the eye's LOD or without shadows.
+    fn light_lod(
+        &mut self,
+        camera: &Camera,
+        settings: &FrameSettings,
+    ) -> Option<tw_runtime::shadow::LightLod> {
+        let shadows = settings.shadows.as_ref().filter(|s| s.lod == ShadowLod::Finer)?;
+        if self.shadows.is_none() {
+            let size = self.renderer.size();
+            let Streamed { pages, .. } =
+                select_and_stream(&mut self.streamer, &mut self.selection, camera, settings, size);
+            let clusters = lookup(&pages, &self.selection.clusters);
+            let store = self.streamer.store().clone();
+            let bounds = |c: &ClusterRef| page_bounds(&pages, c);
+            let viewport = [size.0, size.1];
+            self.shadows =
+                Some(shadow::fit_to_cut(shadows, store.header(), camera, viewport, &clusters, bounds));
+        }
+        tw_runtime::shadow::LightLod::new(self.shadows.as_ref()?, camera)
+    }
+
     /// Forgets frame-to-frame state (occlusion history, camera history for prefetching): after
     /// a teleport or a change of settings.
     pub fn reset(&mut self) {
@@ -370,7 +394,7 @@ impl Walkthrough {
         tau: f32,
     ) -> Result<ExactVisibility, FrameError> {
         let (w, h) = self.renderer.size();
-        let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true };
+        let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true, ..Default::default() };
         let selection = self.streamer.select_blocking(camera, &options);
         self.visible_in(camera, &selection)
     }
@@ -407,7 +431,8 @@ impl Walkthrough {
     /// from nothing.
     fn full_detail(&mut self, camera: &Camera) -> Selection {
         let (w, h) = self.renderer.size();
-        let options = SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false };
+        let options =
+            SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false, ..Default::default() };
         self.streamer.select_blocking(camera, &options)
     }
 
@@ -481,8 +506,20 @@ fn select_and_stream(
     settings: &FrameSettings,
     (w, h): (u32, u32),
 ) -> Streamed {
-    let options =
-        SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
+    select_and_stream_lod(streamer, selection, camera, settings, (w, h), None)
+}
+
+/// [`select_and_stream`] with a light's LOD as well ([`SelectOptions::light_lod`]: the shadow
+/// policy "the finer of both").
+fn select_and_stream_lod(
+    streamer: &mut Streamer,
+    selection: &mut Selection,
+    camera: &Camera,
+    settings: &FrameSettings,
+    (w, h): (u32, u32),
+    light_lod: Option<tw_runtime::shadow::LightLod>,
+) -> Streamed {
+    let options = select_options(settings, [w, h], light_lod);
     if settings.wait_for_pages {
         let stats;
         (*selection, stats) = streamer.frame_blocking(camera, &options);
@@ -492,6 +529,15 @@ fn select_and_stream(
         *selection = frame.selection;
         Streamed { pages: frame.pages, stats: frame.stats, times: Some(frame.times) }
     }
+}
+
+/// The selection options of a frame: its τ, viewport and frustum culling, and a light's LOD.
+fn select_options(
+    settings: &FrameSettings,
+    viewport: [u32; 2],
+    light_lod: Option<tw_runtime::shadow::LightLod>,
+) -> SelectOptions {
+    SelectOptions { tau: settings.tau, viewport, frustum_culling: settings.frustum_culling, light_lod }
 }
 
 /// Loads the pages of `clusters[from..]` into `cache` in parallel, up to `pages` distinct ones
@@ -670,12 +716,14 @@ impl Walkthrough {
     ) -> Result<DrawnFrame, FrameError> {
         let start = Instant::now();
         let store = self.streamer.store().clone();
-        let Streamed { pages, stats: stream, times: stream_times } = select_and_stream(
+        let light_lod = self.light_lod(camera, settings);
+        let Streamed { pages, stats: stream, times: stream_times } = select_and_stream_lod(
             &mut self.streamer,
             &mut self.selection,
             camera,
             settings,
             self.renderer.size(),
+            light_lod,
         );
         let select = start.elapsed();
         let clusters = lookup(&pages, &self.selection.clusters);
@@ -684,11 +732,7 @@ impl Walkthrough {
         let shadow = match &settings.shadows {
             Some(shadows) => {
                 let (w, h) = self.renderer.size();
-                let options = SelectOptions {
-                    tau: settings.tau,
-                    viewport: [w, h],
-                    frustum_culling: settings.frustum_culling,
-                };
+                let options = select_options(settings, [w, h], light_lod);
                 let receivers = shadow::receivers(settings.occlusion, &self.occlusion, &clusters);
                 let (info, layers) = shadow::prepare(
                     shadows,

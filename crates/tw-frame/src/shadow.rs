@@ -5,7 +5,8 @@
 //!    ([`tw_runtime::shadow::fit_layers`]);
 //! 2. **light-view sets**: per layer, the clusters that can cast into it — the eye's LOD cut
 //!    (the thesis' LOD consistency: the eye's level for every cluster, so that a surface is never
-//!    shadowed by a coarser copy of itself) culled by the layer's frustum instead of the eye's,
+//!    shadowed by a coarser copy of itself; or, with [`ShadowLod::Finer`], the finer of the eye's
+//!    and the light's level, in both views alike) culled by the layer's frustum instead of the eye's,
 //!    streamed under the same memory budget ([`tw_runtime::Streamer::select_light`]);
 //! 3. **shadow map**: each layer's set drawn depth-only into its layer, occlusion culled from the
 //!    light two-pass (what the light saw last frame first, the rest tested against it);
@@ -63,6 +64,43 @@ pub struct ShadowSettings {
     /// Classify receivers against the map (fully lit and fully shadowed ones drawn without
     /// lookups); off: every receiver looks the map up. The image is the same either way.
     pub cross_culling: bool,
+    /// The level of detail of both views (`--shadow-lod`): the eye's (the default) or the finer
+    /// of the eye's and the light's.
+    pub lod: ShadowLod,
+}
+
+/// The LOD policy of a shadowed frame (Govindaraju's thesis §4.2.1): both keep each cluster at
+/// one level in the eye's and the light's views, so a surface is never shadowed by a coarser
+/// copy of itself.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ShadowLod {
+    /// The eye's LOD everywhere (method 2): the fewest triangles, and shadows that change only
+    /// when the eye's cut does; a coarse object near the light casts a coarse shadow.
+    #[default]
+    Eye,
+    /// The finer of the eye's and the light's LOD (method 1, after Lloyd): a cluster is fine
+    /// enough when its error is at most τ pixels from the eye and τ texels in the shadow map
+    /// (src/shadow/light_lod.rs in tw-runtime), in both views; more triangles, and levels that
+    /// change when the light moves.
+    Finer,
+}
+
+impl ShadowLod {
+    /// `eye` or `finer` (the `--shadow-lod` values).
+    pub fn parse(s: &str) -> Option<ShadowLod> {
+        match s.to_ascii_lowercase().as_str() {
+            "eye" => Some(ShadowLod::Eye),
+            "finer" => Some(ShadowLod::Finer),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            ShadowLod::Eye => "eye",
+            ShadowLod::Finer => "finer",
+        }
+    }
 }
 
 /// What the shadow stage of one frame did: set sizes (thesis ch. 4's figures) and stage times.
@@ -172,10 +210,7 @@ pub(crate) fn prepare(
     let header = streamer.store().header().clone();
     let step = header.grid_step;
     let aspect = aspect(options.viewport);
-    let boxes: Vec<(Vec3, Vec3)> = receivers
-        .iter()
-        .map(|(k, _)| bounds(k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step)))
-        .collect();
+    let boxes = receiver_boxes(receivers, &bounds, step);
     let map = (settings.options.size.max(1), map_layers(&settings.light, &settings.options));
     if cache.map != Some(map) {
         *cache = ShadowCache { map: Some(map), ..Default::default() };
@@ -682,6 +717,32 @@ pub(crate) fn receivers<'a>(
     } else {
         visible
     }
+}
+
+/// The scene-space boxes of `receivers` (from their grid boxes, `bounds`).
+fn receiver_boxes(
+    receivers: &[(ClusterRef, &PageCluster)],
+    bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])>,
+    step: f64,
+) -> Vec<(Vec3, Vec3)> {
+    receivers
+        .iter()
+        .map(|(k, _)| bounds(k).map_or((Vec3::ZERO, Vec3::ZERO), |(lo, hi)| grid_box(lo, hi, step)))
+        .collect()
+}
+
+/// Layers fitted to the whole cut `cut` of `camera` (a frame's first, before any was drawn):
+/// what [`ShadowLod::Finer`] measures the light's texels in until a frame has drawn its own.
+pub(crate) fn fit_to_cut(
+    settings: &ShadowSettings,
+    header: &tw_store::Header,
+    camera: &Camera,
+    viewport: [u32; 2],
+    cut: &[(ClusterRef, &PageCluster)],
+    bounds: impl Fn(&ClusterRef) -> Option<([u32; 3], [u32; 3])>,
+) -> Shadows {
+    let boxes = receiver_boxes(cut, &bounds, header.grid_step);
+    fit_layers(&settings.light, camera, aspect(viewport), &boxes, scene_box(header), &settings.options)
 }
 
 /// Unshadowed shading for the next frames.

@@ -12,9 +12,10 @@ use std::collections::HashSet;
 use std::sync::Arc;
 
 use tw_frame::shadow::ShadowOptions;
-use tw_frame::{FrameSettings, Occlusion, ShadowSettings};
+use tw_frame::{FrameSettings, Occlusion, ShadowLod, ShadowSettings};
 use tw_gpu::{wgpu, ColorMode};
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
+use tw_runtime::shadow::LightLod;
 use tw_runtime::{Camera, Light, SelectOptions};
 use tw_store::Store;
 
@@ -42,7 +43,7 @@ fn settings(light: Light, cross_culling: bool, occlusion: Occlusion) -> FrameSet
     FrameSettings {
         occlusion,
         wait_for_pages: true,
-        shadows: Some(ShadowSettings { light, options, cross_culling }),
+        shadows: Some(ShadowSettings { light, options, cross_culling, lod: Default::default() }),
         ..Default::default()
     }
 }
@@ -106,7 +107,8 @@ fn shadow_maps_are_drawn_at_the_eyes_lod() {
     };
     for camera in cameras(&store, PathPart::Walk, 30, 15) {
         let light = Light::default_sun(&camera);
-        let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false };
+        let options =
+            SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false, ..Default::default() };
         // The eye's cut without its frustum: every cluster the eye's LOD would draw anywhere.
         let eye: HashSet<_> =
             walk.streamer().select_blocking(&camera, &options).clusters.into_iter().collect();
@@ -128,6 +130,59 @@ fn shadow_maps_are_drawn_at_the_eyes_lod() {
             );
         }
     }
+}
+
+/// The policy "the finer of both" (Govindaraju's thesis §4.2.1, method 1): a light far from the
+/// eye but near the geometry it lights refines that geometry beyond the eye's LOD, in both views
+/// alike. With the light's metric of the frame's layers, every cluster a layer draws is in the
+/// eye's cut of the same metric (frustum aside), and that cut has at least the eye-LOD cut's
+/// triangles; the frames drawn under it select more triangles than under the eye's LOD.
+#[test]
+fn the_finer_of_both_lods_refines_for_the_light_in_both_views() {
+    let store = plant();
+    let _lock = gpu_lock();
+    let Some(mut walk) = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, "finer lod", 256 << 20)
+    else {
+        return;
+    };
+    let views = cameras(&store, PathPart::Walk, 30, 10);
+    // The lamp above the walk's last eye; the eye at its first views, far from it.
+    let light = lamp(views.last().expect("a walk"));
+    let (mut eye_triangles, mut finer_triangles) = (0u64, 0u64);
+    for camera in &views[..2] {
+        let mut eye_lod = settings(light, true, Occlusion::None);
+        walk.reset();
+        let (_, eye_info) = walk.frame(camera, &eye_lod).unwrap();
+        if let Some(s) = eye_lod.shadows.as_mut() {
+            s.lod = ShadowLod::Finer;
+        }
+        let (_, finer_info) = walk.frame(camera, &eye_lod).unwrap();
+        eye_triangles += eye_info.cut_triangles;
+        finer_triangles += finer_info.cut_triangles;
+        let shadows = walk.last_shadows().expect("the frame drew shadows").clone();
+        let lod = LightLod::new(&shadows, camera).expect("layers");
+        let options =
+            SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false, light_lod: Some(lod) };
+        let eye_only = SelectOptions { light_lod: None, ..options };
+        let finer = walk.streamer().select_blocking(camera, &options);
+        let coarser = walk.streamer().select_blocking(camera, &eye_only);
+        assert!(finer.triangles >= coarser.triangles, "{} < {}", finer.triangles, coarser.triangles);
+        let cut: HashSet<_> = finer.clusters.into_iter().collect();
+        for layer in &shadows.layers {
+            let set = walk.streamer().select_light_blocking(
+                camera,
+                &layer.view_proj,
+                &SelectOptions { frustum_culling: true, ..options },
+            );
+            let foreign = set.clusters.iter().filter(|c| !cut.contains(c)).count();
+            assert_eq!(foreign, 0, "clusters of a shadow layer not in the eye's cut of the same metric");
+        }
+    }
+    eprintln!("cut triangles: eye LOD {eye_triangles}, finer of both {finer_triangles}");
+    assert!(
+        finer_triangles > eye_triangles,
+        "the light near far geometry refines nothing: {finer_triangles} against {eye_triangles}"
+    );
 }
 
 /// Reusing layers (docs/RUNTIME.md "Shadows", "Reusing layers"): along a walk of small steps most

@@ -28,10 +28,16 @@
 //! (`f32::MIN_POSITIVE`) never round to 0 pixels, which keeps τ = 0 meaning full resolution.
 //! Every evaluation of the same (error, sphere) pair gives the same bits, so the decisions
 //! "this group is replaced" and "its replacement is drawn" agree exactly.
+//!
+//! **The finer of both** ([`LodMetric::with_light`]): with a light's metric attached (shadow-map
+//! texels, src/shadow/light_lod.rs), an error projects to the larger of its pixels and its
+//! texels, so a cut is fine enough for both views. The larger of two monotone measures is
+//! monotone, so the cut stays complete and crack-free.
 
 use glam::{DVec3, Vec3};
 
 use crate::camera::Camera;
+use crate::shadow::LightLod;
 
 /// Projects object-space errors to pixels for one camera and viewport.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,6 +50,8 @@ pub struct LodMetric {
     orthographic: bool,
     /// The smallest distance used (the near plane).
     min_distance: f64,
+    /// A light's texels, counted as well (the finer of both LODs); `None`: the eye's alone.
+    light: Option<LightLod>,
 }
 
 impl LodMetric {
@@ -54,7 +62,14 @@ impl LodMetric {
             scale: camera.pixel_scale(viewport_height),
             orthographic: camera.is_orthographic(),
             min_distance: (camera.near as f64).max(f64::MIN_POSITIVE),
+            light: None,
         }
+    }
+
+    /// This metric taking the larger of its pixels and `light`'s texels (module documentation,
+    /// "The finer of both"); `None` keeps the eye's alone.
+    pub fn with_light(self, light: Option<LightLod>) -> LodMetric {
+        LodMetric { light, ..self }
     }
 
     /// Pixels of `error` at `distance` (> 0 means outside; ≤ 0 means the eye is inside).
@@ -74,7 +89,11 @@ impl LodMetric {
     #[inline]
     pub fn sphere(&self, error: f32, sphere: [f32; 4]) -> f64 {
         let c = DVec3::new(sphere[0] as f64, sphere[1] as f64, sphere[2] as f64);
-        self.at_distance(error, c.distance(self.eye) - sphere[3] as f64)
+        let eye = self.at_distance(error, c.distance(self.eye) - sphere[3] as f64);
+        match &self.light {
+            Some(light) => eye.max(light.sphere(error, sphere)),
+            None => eye,
+        }
     }
 
     /// Pixel error of `error` at the nearest point of the box `min..=max` (scene space); `+∞`
@@ -83,7 +102,11 @@ impl LodMetric {
     #[inline]
     pub fn aabb(&self, error: f32, min: Vec3, max: Vec3) -> f64 {
         let d = (min.as_dvec3() - self.eye).max(self.eye - max.as_dvec3()).max(DVec3::ZERO);
-        self.at_distance(error, d.length())
+        let eye = self.at_distance(error, d.length());
+        match &self.light {
+            Some(light) => eye.max(light.aabb(error, min, max)),
+            None => eye,
+        }
     }
 }
 

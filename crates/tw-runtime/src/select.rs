@@ -67,7 +67,9 @@
 //! the LOD metric is the eye camera's pixel error and only the culling frustum changes, so a
 //! cluster drawn in both views is drawn at the same level (no false self-shadowing), and its
 //! shadow changes only when the eye's cut does. A traversal takes both as a `View`; the eye's
-//! own selection is the view whose frustum is the eye's.
+//! own selection is the view whose frustum is the eye's. The thesis' other policy, "the finer
+//! of both" ([`SelectOptions::light_lod`]), changes the metric of every view alike (the larger
+//! of the eye's pixels and the light's texels), so the two views still agree on each level.
 //!
 //! **Two residency modes.** [`Selector::select`] waits: pages are loaded through
 //! [`PageCache::get`] on a miss, and the cut is exactly the render rule's. [`Selector::select_available`]
@@ -90,6 +92,7 @@ use crate::cache::{ClusterInfo, PageCache, ResidentPage};
 use crate::camera::Camera;
 use crate::frustum::{grid_box, Frustum};
 use crate::lod_error::LodMetric;
+use crate::shadow::LightLod;
 
 mod traversal;
 use traversal::{Scratch, Traversal};
@@ -104,11 +107,16 @@ pub struct SelectOptions {
     pub viewport: [u32; 2],
     /// Cull against the view frustum (`--frustum off` turns it off).
     pub frustum_culling: bool,
+    /// The LOD policy "the finer of both" (Govindaraju's thesis §4.2.1, method 1): a shadow
+    /// light's metric, so that every view of the frame (the eye's and the light's) selects the
+    /// cut fine enough in both the eye's pixels and the light's texels
+    /// ([`LodMetric::with_light`]). `None`, the default: the eye's LOD alone (method 2).
+    pub light_lod: Option<LightLod>,
 }
 
 impl Default for SelectOptions {
     fn default() -> Self {
-        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true }
+        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true, light_lod: None }
     }
 }
 
@@ -182,7 +190,7 @@ impl View {
     fn culled_by(eye: &Camera, view_proj: &Mat4, options: &SelectOptions) -> View {
         let h = options.viewport[1].max(1) as f32;
         View {
-            metric: LodMetric::new(eye, h),
+            metric: LodMetric::new(eye, h).with_light(options.light_lod),
             frustum: Frustum::from_view_projection(view_proj),
             cull: options.frustum_culling,
             tau: options.tau as f64,

@@ -49,7 +49,7 @@ fn cameras(store: &Store) -> Vec<Camera> {
 }
 
 fn opts(tau: f32, frustum: bool) -> SelectOptions {
-    SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum }
+    SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum, ..Default::default() }
 }
 
 fn select(store: &Store, cache: &PageCache, cam: &Camera, o: SelectOptions) -> Selection {

@@ -11,7 +11,7 @@
 
 use glam::Vec3;
 use tw_frame::shadow::ShadowOptions;
-use tw_frame::ShadowSettings;
+use tw_frame::{ShadowLod, ShadowSettings};
 use tw_runtime::{Camera, InputLight, Light, Projection};
 use tw_store::Header;
 
@@ -130,6 +130,8 @@ pub struct ShadowControls {
     /// Classify receivers against the light's depth so that only partly shadowed ones look the
     /// map up (the image is the same either way).
     pub cross_culling: bool,
+    /// The level of detail of both views: the eye's, or the finer of the eye's and the light's.
+    pub lod: ShadowLod,
     /// Shadow-map layer size in texels per side, sun cascades, depth bias in texels.
     pub map_size: u32,
     pub cascades: u32,
@@ -158,6 +160,7 @@ impl ShadowControls {
             elevation_deg,
             point: Vec3::ZERO,
             cross_culling: true,
+            lod: ShadowLod::Eye,
             map_size: o.size,
             cascades: o.cascades,
             bias_texels: o.bias_texels,
@@ -177,6 +180,7 @@ impl ShadowControls {
             }
         }
         c.cross_culling = s.cross_culling;
+        c.lod = s.lod;
         c.map_size = s.options.size;
         c.cascades = s.options.cascades;
         c.bias_texels = s.options.bias_texels;
@@ -235,6 +239,7 @@ impl ShadowControls {
             light: self.light(header, up_axis, camera),
             options: self.options(),
             cross_culling: self.cross_culling,
+            lod: self.lod,
         })
     }
 }
@@ -501,14 +506,19 @@ mod tests {
         let options = ShadowOptions { size: 1024, cascades: 2, bias_texels: 3.0 };
         for (axis, up) in [(0u8, Vec3::X), (1, Vec3::Y), (2, Vec3::Z)] {
             let towards = (up * 2.0 + Vec3::ONE).normalize();
-            let given = ShadowSettings { light: Light::Sun { towards }, options, cross_culling: false };
+            let given = ShadowSettings {
+                light: Light::Sun { towards },
+                options,
+                cross_culling: false,
+                lod: ShadowLod::Finer,
+            };
             let c = ShadowControls::from_settings(&given, true, axis);
             let back = c.frame_settings(&header(), axis, &camera(up)).expect("enabled");
             assert!(close(sun(back.light), towards), "axis {axis}: {:?}", back.light);
-            assert_eq!((back.options, back.cross_culling), (options, false));
+            assert_eq!((back.options, back.cross_culling, back.lod), (options, false, ShadowLod::Finer));
         }
         let point = Light::Point { position: Vec3::new(-4.0, 5.0, 6.0) };
-        let given = ShadowSettings { light: point, options, cross_culling: true };
+        let given = ShadowSettings { light: point, options, cross_culling: true, lod: ShadowLod::Eye };
         let c = ShadowControls::from_settings(&given, false, 2);
         assert!(!c.enabled && c.kind == LightKind::Point);
         assert_eq!(c.light(&header(), 2, &camera(Vec3::Z)), point);

@@ -334,6 +334,10 @@ fn shadows(
         ui.label("ray traced: shadow rays (the map options apply to the rasterizer)");
     }
     ui.checkbox(&mut s.cross_culling, "cross-culling (lit / shadowed receivers skip the map)");
+    let mut finer = s.lod == tw_frame::ShadowLod::Finer;
+    if ui.checkbox(&mut finer, "finer of eye and light LOD (else the eye's)").changed() {
+        s.lod = if finer { tw_frame::ShadowLod::Finer } else { tw_frame::ShadowLod::Eye };
+    }
     ui.horizontal(|ui| {
         egui::ComboBox::from_label("map texels").selected_text(s.map_size.to_string()).show_ui(ui, |ui| {
             for n in MAP_SIZES {

@@ -171,6 +171,7 @@ impl<'s> FrameRenderer<'s> {
             tau: args.error,
             viewport: [args.frame.size.0, args.frame.size.1],
             frustum_culling: true,
+            ..Default::default()
         };
         Ok(FrameRenderer { store, backend, size: args.frame.size, cache, selector, options, up: args.up })
     }

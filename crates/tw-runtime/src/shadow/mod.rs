@@ -20,7 +20,8 @@
 //! keeps last frame's layers where they still serve, [`clip`] cuts a box to what a layer can
 //! hold, [`depth`] keeps a read-back layer as min/max pyramids, [`classify`] cross-culls
 //! receivers and casters against them, [`subobjects`] refines partly shadowed receivers to
-//! runs of a few triangles. The light's view of a layer (the
+//! runs of a few triangles, [`light_lod`] measures errors in the light's texels (the LOD policy
+//! "the finer of both"). The light's view of a layer (the
 //! eye's LOD cut culled by the layer's frustum) is [`crate::Selector::select_light`] and
 //! [`crate::Streamer::select_light`].
 
@@ -33,12 +34,14 @@ pub mod classify;
 pub mod clip;
 pub mod depth;
 pub mod fit;
+pub mod light_lod;
 pub mod reuse;
 pub mod subobjects;
 
 pub use classify::{casters, classify_receivers, light_visible, ShadowSetStats};
 pub use depth::LightDepth;
 pub use fit::{fit_layers, refit_layers, texel_size, ShadowOptions};
+pub use light_lod::LightLod;
 pub use reuse::lod_within_bias;
 pub use subobjects::{classify_subobjects, classify_subobjects_cut, TriangleClasses, SUBOBJECT_TRIANGLES};
 
