@@ -302,7 +302,8 @@ impl Walkthrough {
             self.shadows =
                 Some(shadow::fit_to_cut(shadows, store.header(), camera, viewport, &clusters, bounds));
         }
-        tw_runtime::shadow::LightLod::new(self.shadows.as_ref()?, camera)
+        let scene = shadow::scene_box(self.streamer.store().header());
+        tw_runtime::shadow::LightLod::new(self.shadows.as_ref()?, camera, scene)
     }
 
     /// Forgets frame-to-frame state (occlusion history, camera history for prefetching): after

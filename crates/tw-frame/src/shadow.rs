@@ -755,7 +755,7 @@ fn aspect([w, h]: [u32; 2]) -> f32 {
 }
 
 /// The store's bounds in scene space.
-fn scene_box(header: &tw_store::Header) -> (Vec3, Vec3) {
+pub fn scene_box(header: &tw_store::Header) -> (Vec3, Vec3) {
     let o = glam::DVec3::from_array(header.grid_origin);
     let lo = (glam::DVec3::from_array(header.bounds_min) - o).as_vec3();
     let hi = (glam::DVec3::from_array(header.bounds_max) - o).as_vec3();

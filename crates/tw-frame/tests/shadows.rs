@@ -11,7 +11,7 @@
 use std::collections::HashSet;
 use std::sync::Arc;
 
-use tw_frame::shadow::ShadowOptions;
+use tw_frame::shadow::{scene_box, ShadowOptions};
 use tw_frame::{FrameSettings, Occlusion, ShadowLod, ShadowSettings};
 use tw_gpu::{wgpu, ColorMode};
 use tw_runtime::pathgen::{generate_path, PathOptions, PathPart};
@@ -160,7 +160,7 @@ fn the_finer_of_both_lods_refines_for_the_light_in_both_views() {
         eye_triangles += eye_info.cut_triangles;
         finer_triangles += finer_info.cut_triangles;
         let shadows = walk.last_shadows().expect("the frame drew shadows").clone();
-        let lod = LightLod::new(&shadows, camera).expect("layers");
+        let lod = LightLod::new(&shadows, camera, scene_box(store.header())).expect("layers");
         let options =
             SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false, light_lod: Some(lod) };
         let eye_only = SelectOptions { light_lod: None, ..options };

@@ -450,6 +450,17 @@ fn fit_sun(
     Some((layers, (options.bias_texels as f64 / k) as f32, needs))
 }
 
+/// The near plane of a point light's cube faces at `position` in a scene whose box is `scene`
+/// (module documentation): a small fraction of the scene's diagonal, or 0.9 of the distance to
+/// the box for a light outside it.
+pub fn point_near(position: Vec3, scene: (Vec3, Vec3)) -> f64 {
+    let p = position.as_dvec3();
+    let (lo, hi) = (scene.0.as_dvec3(), scene.1.as_dvec3());
+    let diag = (hi - lo).length().max(1e-6 * (p.length() + 1.0));
+    let outside = (lo - p).max(p - hi).max(DVec3::ZERO).length();
+    (diag * POINT_NEAR_FRACTION).max(0.9 * outside)
+}
+
 /// The point light's cube faces and bias (module documentation).
 fn fit_point(
     position: Vec3,
@@ -458,10 +469,7 @@ fn fit_point(
     options: &ShadowOptions,
 ) -> Option<(Vec<ShadowLayer>, f32)> {
     let p = position.as_dvec3();
-    let (lo, hi) = (scene.0.as_dvec3(), scene.1.as_dvec3());
-    let diag = (hi - lo).length().max(1e-6 * (p.length() + 1.0));
-    let outside = (lo - p).max(p - hi).max(DVec3::ZERO).length();
-    let near = (diag * POINT_NEAR_FRACTION).max(0.9 * outside);
+    let near = point_near(position, scene);
     let farthest = corners(scene.0, scene.1).iter().map(|c| (c.as_dvec3() - p).length()).fold(0f64, f64::max);
     let far = (farthest * 1.01).max(near * 2.0);
     // Standard depth, 0 at `near`: view z = −near → 0, z = −far → 1.

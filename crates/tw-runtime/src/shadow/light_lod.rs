@@ -18,7 +18,8 @@
 //! - **Point light**: the cube faces are 90° perspective views from the light, texels of `t`
 //!   scene units at unit distance, so an error `e` at distance `d` covers `e / (t·d)` texels,
 //!   `d` the distance from the light to the nearest point, clamped below by the faces' near
-//!   plane (a group around the light refines to its finest level, as one around the eye does).
+//!   plane ([`point_near`]: a group around the light refines to its finest level, as one
+//!   around the eye does).
 //!
 //! The metric is a pure function of its fields: every evaluation of the same (error, sphere)
 //! pair gives the same bits, as src/lod_error.rs requires of the eye's.
@@ -27,7 +28,7 @@ use glam::{DVec3, Vec3};
 
 use crate::camera::Camera;
 use crate::light::Light;
-use crate::shadow::fit::texel_size;
+use crate::shadow::fit::{point_near, texel_size};
 use crate::shadow::Shadows;
 
 /// The most sun cascades ([`crate::shadow::ShadowOptions::cascades`] is at most 4).
@@ -49,17 +50,18 @@ enum Kind {
 }
 
 impl LightLod {
-    /// The light's metric for the layers `shadows` was fitted with, seen by `eye` (whose depth
-    /// picks a sun's cascade). `None` without layers (nothing is shadowed, nothing to refine
-    /// for), or when a layer's texel size cannot be read from its matrix.
-    pub fn new(shadows: &Shadows, eye: &Camera) -> Option<LightLod> {
+    /// The light's metric for the layers `shadows` was fitted with in a scene whose box is
+    /// `scene`, seen by `eye` (whose depth picks a sun's cascade). `None` without layers
+    /// (nothing is shadowed, nothing to refine for), or when a layer's texel size cannot be
+    /// read from its matrix.
+    pub fn new(shadows: &Shadows, eye: &Camera, scene: (Vec3, Vec3)) -> Option<LightLod> {
         let sizes: Option<Vec<f64>> =
             (0..shadows.layers.len()).map(|i| texel_size(shadows, i).map(|t| t as f64)).collect();
         let sizes = sizes.filter(|s| !s.is_empty() && s.iter().all(|t| t.is_finite() && *t > 0.0))?;
         let kind = match shadows.light {
             Light::Sun { .. } => sun(shadows, eye, &sizes),
             Light::Point { position } => {
-                let near = point_near(shadows).max(f64::MIN_POSITIVE);
+                let near = point_near(position, scene).max(f64::MIN_POSITIVE);
                 let texel = sizes.iter().copied().fold(f64::INFINITY, f64::min);
                 Kind::Point { light: position.as_dvec3(), texel, near }
             }
@@ -134,41 +136,6 @@ fn sun(shadows: &Shadows, eye: &Camera, sizes: &[f64]) -> Kind {
     Kind::Sun { eye: eye.eye.as_dvec3(), forward: eye.direction().as_dvec3(), cascades, count }
 }
 
-/// The near plane of a point light's cube faces, from a face's matrix: depth 0 at the near
-/// plane, so the point at unit distance along the face's axis has depth `f/(f−n)·(1 − n)`,
-/// whose solution is read back from the projection (`near = −m[3][2] / m[2][2]` in a standard
-/// perspective with depth 0..1 along −z of the view). A matrix that does not give a positive
-/// finite value gives 0 (clamped to the smallest positive distance by the caller).
-fn point_near(shadows: &Shadows) -> f64 {
-    let Some(layer) = shadows.layers.first() else { return 0.0 };
-    // Depth at distances 1 and 2 along the face's axis gives n: d(z) = a − b/z with
-    // d(n) = 0, so n = b/a; a and b from the two samples.
-    let axis = face_axis(&layer.view_proj);
-    let Light::Point { position } = shadows.light else { return 0.0 };
-    let depth_at = |z: f32| {
-        let p = layer.view_proj * (position + axis * z).extend(1.0);
-        (p.z / p.w) as f64
-    };
-    let (d1, d2) = (depth_at(1.0), depth_at(2.0));
-    let b = 2.0 * (d2 - d1);
-    let a = d1 + b;
-    let n = b / a;
-    if n.is_finite() && n > 0.0 {
-        n
-    } else {
-        0.0
-    }
-}
-
-/// The direction a perspective face looks along: where its clip space's centre ray goes (the
-/// inverse matrix's image of the centre at depths 0 and 1).
-fn face_axis(view_proj: &glam::Mat4) -> Vec3 {
-    let inv = view_proj.inverse();
-    let near = inv.project_point3(Vec3::new(0.0, 0.0, 0.0));
-    let far = inv.project_point3(Vec3::new(0.0, 0.0, 1.0));
-    (far - near).normalize_or_zero()
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -198,7 +165,7 @@ mod tests {
     fn sun_lod(cascades: u32) -> (Shadows, LightLod) {
         let sun = Light::Sun { towards: Vec3::new(0.3, 0.2, 1.0).normalize() };
         let shadows = fitted(sun, cascades);
-        let lod = LightLod::new(&shadows, &eye()).expect("layers fitted");
+        let lod = LightLod::new(&shadows, &eye(), scene()).expect("layers fitted");
         (shadows, lod)
     }
 
@@ -233,7 +200,7 @@ mod tests {
     fn a_point_light_projects_with_distance_from_the_light() {
         let light = Light::Point { position: Vec3::new(100.0, 0.0, 5.0) };
         let shadows = fitted(light, 4);
-        let lod = LightLod::new(&shadows, &eye()).expect("faces fitted");
+        let lod = LightLod::new(&shadows, &eye(), scene()).expect("faces fitted");
         let (at10, at20) = (lod.sphere(0.5, [110.0, 0.0, 5.0, 0.0]), lod.sphere(0.5, [120.0, 0.0, 5.0, 0.0]));
         assert!((at10 / at20 - 2.0).abs() < 1e-6, "{at10} {at20}");
         let t = texel_size(&shadows, 0).unwrap() as f64;
@@ -248,6 +215,6 @@ mod tests {
     fn no_layers_no_metric() {
         let (mut shadows, _) = sun_lod(1);
         shadows.layers.clear();
-        assert!(LightLod::new(&shadows, &eye()).is_none());
+        assert!(LightLod::new(&shadows, &eye(), scene()).is_none());
     }
 }
