@@ -681,7 +681,8 @@ fn slab_ply(path: &Path) {
 #[test]
 fn open_and_drop_switch_the_scene_under_xvfb() {
     let (gap_a, gap_b) = ((184, 197), (284, 297));
-    let script = "view -y\nwait 8\nscreenshot cubes.png\nopen slab.ply\nwait-open 2000\nview -y\nwait 8\n\
+    let script = "view -y\nwait 8\nscreenshot cubes.png\nscreenshot-window plain.png\nwait 1\npress ctrl+O\n\
+                  wait 3\nscreenshot-window dialog.png\nwait 1\nopen slab.ply\nwait-open 2000\nview -y\nwait 8\n\
                   screenshot slab.png\ndrop other.tw\nwait-open 2000\nview -y\nwait 8\nscreenshot dropped.png\n\
                   open broken.ply\nwait-open 2000\nwait 4\nscreenshot-window error.png\nwait 2\n\
                   screenshot after.png\n";
@@ -700,17 +701,27 @@ fn open_and_drop_switch_the_scene_under_xvfb() {
         .replace("broken.ply", scratch.path().join("broken.ply").to_str().unwrap());
     let Some((dir, _, err)) = script_session(cubes, &script, &extra) else { return };
     let shot = |n: &str| dir.path().join(n);
-    let gaps = |n: &str| covered_in_columns(&shot(n), gap_a.0, gap_a.1) + covered_in_columns(&shot(n), gap_b.0, gap_b.1);
+    let gaps = |n: &str| {
+        covered_in_columns(&shot(n), gap_a.0, gap_a.1) + covered_in_columns(&shot(n), gap_b.0, gap_b.1)
+    };
     let whole = |n: &str| covered_in_columns(&shot(n), 0, 480);
     // The slab fills the gaps the cubes leave (at most the cubes' side faces show there).
     let (cubes_gaps, slab_gaps) = (gaps("cubes.png"), gaps("slab.png"));
-    assert!(slab_gaps > 2 * cubes_gaps + 500, "the opened slab is not shown: gaps {cubes_gaps} → {slab_gaps}: {err}");
+    eprintln!("covered pixels in the gaps: cubes {cubes_gaps}, slab {slab_gaps}");
+    assert!(
+        slab_gaps > 2 * cubes_gaps + 500,
+        "the opened slab is not shown: gaps {cubes_gaps} → {slab_gaps}: {err}"
+    );
     assert!(err.contains("opened ") && err.contains("slab.ply (12 triangles, 1 objects)"), "{err}");
     let cached: Vec<_> = std::fs::read_dir(scratch.path().join("cache")).unwrap().flatten().collect();
     assert!(cached.iter().any(|e| e.file_name().to_string_lossy().starts_with("slab-")), "{cached:?}");
     // The dropped store is the cubes again: the picture returns to the first one's.
     assert_eq!(gaps("dropped.png"), cubes_gaps, "{err}");
     assert_eq!(whole("dropped.png"), whole("cubes.png"), "{err}");
+    // Ctrl+O shows the open dialog over the window (the scene image stays the same).
+    let img = |n: &str| tw_gpu::Image::from_png_bytes(&std::fs::read(shot(n)).unwrap()).unwrap();
+    let dialog = img("plain.png").differing_share(&img("dialog.png")).unwrap();
+    assert!(dialog > 0.05, "Ctrl+O showed no dialog ({dialog} of the window changed): {err}");
     // The broken file: said, and the cubes stay.
     let said = message_after(&err, "cannot open ");
     assert!(said.contains("broken.ply"), "{said}");

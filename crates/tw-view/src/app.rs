@@ -925,6 +925,12 @@ impl App {
                 // The scene as the last frame drew it (before this frame's steps act).
                 Step::Screenshot(p) => self.screenshot(&p),
                 Step::WindowScreenshot(p) => self.window_shot = Some(p),
+                Step::PressCtrl(k) => {
+                    self.key(KeyCode::ControlLeft, true, false, event_loop);
+                    self.key(k, true, false, event_loop);
+                    self.key(k, false, false, event_loop);
+                    self.key(KeyCode::ControlLeft, false, false, event_loop);
+                }
                 Step::Open(p) => self.open_file(&p),
                 Step::Drop(p) => self.dropped(p),
                 Step::Wait(_) | Step::Hold(..) | Step::WaitOpen(_) => {

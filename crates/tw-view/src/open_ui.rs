@@ -107,7 +107,7 @@ fn dialog(ctx: &egui::Context, opening: &mut Opening, actions: &mut Vec<OpenActi
         .anchor(Align2::CENTER_CENTER, [0.0, 0.0])
         .show(ctx, |ui| {
             ui.horizontal(|ui| {
-                if ui.button("⬆ Parent").clicked() {
+                if ui.button("Parent folder").clicked() {
                     b.parent(&accepts);
                 }
                 ui.monospace(b.dir.display().to_string());
@@ -136,7 +136,8 @@ fn dialog(ctx: &egui::Context, opening: &mut Opening, actions: &mut Vec<OpenActi
                 if activate {
                     submit = Some(b.activate(&path, &accepts));
                 } else {
-                    b.path_text = path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+                    b.path_text =
+                        path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
                 }
             }
             ui.separator();

@@ -57,7 +57,10 @@ impl Opener {
 
     /// Opens stores only (what tw-view can do without a builder).
     pub fn stores_only() -> Opener {
-        Opener::new(Arc::new(|p: &Path, _: &dyn Fn(Progress)| Ok(p.to_path_buf())), Arc::new(|p: &Path| is_store(p)))
+        Opener::new(
+            Arc::new(|p: &Path, _: &dyn Fn(Progress)| Ok(p.to_path_buf())),
+            Arc::new(|p: &Path| is_store(p)),
+        )
     }
 
     pub fn accepts(&self, path: &Path) -> bool {
@@ -150,7 +153,8 @@ impl Opening {
         }
         self.failure = None;
         self.browser = None;
-        let shared = Arc::new(Mutex::new(Shared { progress: Progress::default(), phase_started: Instant::now() }));
+        let shared =
+            Arc::new(Mutex::new(Shared { progress: Progress::default(), phase_started: Instant::now() }));
         let (tx, rx) = mpsc::channel();
         let (open, requested, report) = (self.opener.open.clone(), path.to_path_buf(), shared.clone());
         let spawned = std::thread::Builder::new().name("terawalk open".into()).spawn(move || {
@@ -214,9 +218,9 @@ fn report_progress(shared: &Mutex<Shared>, p: Progress) {
 fn open_store(store: &Path, requested: PathBuf) -> Result<Opened, String> {
     match Store::open(store) {
         Ok(store) => Ok(Opened { requested, store }),
-        Err(e) if store == requested => Err(format!(
-            "{e} (terawalk opens its stores and the model formats `terawalk build` reads)"
-        )),
+        Err(e) if store == requested => {
+            Err(format!("{e} (terawalk opens its stores and the model formats `terawalk build` reads)"))
+        }
         Err(e) => Err(format!("cannot open the store {} built from it: {e}", store.display())),
     }
 }

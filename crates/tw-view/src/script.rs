@@ -10,6 +10,7 @@
 //! hold W 20            # hold a key for 20 frames (W A S D Q E, Up Down Left Right, Shift…)
 //! press F1             # press and release a key (any key the viewer knows: F1, L, C, 2, …)
 //! press Shift+H        # … with Shift held (show all objects)
+//! press Ctrl+O         # … with Ctrl held (the open dialog)
 //! press ]              # the sun keys: ] [ turn it, Shift+] Shift+[ raise and lower it
 //! look 120 -40         # move the mouse-look by (dx, dy) pixels
 //! scroll 3             # the wheel: +3 lines (speed; zoom in orbit and orthographic views)
@@ -68,6 +69,8 @@ pub enum Step {
     Drop(PathBuf),
     /// Draw frames until the open running finished, at most this many.
     WaitOpen(u32),
+    /// A key pressed with Ctrl held (Ctrl+O: the open dialog).
+    PressCtrl(KeyCode),
 }
 
 impl Step {
@@ -193,9 +196,10 @@ impl StepLine<'_> {
             "press" => {
                 self.want(1)?;
                 let lower = args[0].to_ascii_lowercase();
-                match lower.strip_prefix("shift+") {
-                    Some(k) => Step::PressShifted(self.key(k)?),
-                    None => Step::Press(self.key(args[0])?),
+                match (lower.strip_prefix("shift+"), lower.strip_prefix("ctrl+")) {
+                    (Some(k), _) => Step::PressShifted(self.key(k)?),
+                    (_, Some(k)) => Step::PressCtrl(self.key(k)?),
+                    _ => Step::Press(self.key(args[0])?),
                 }
             }
             "click" => {
@@ -489,6 +493,35 @@ mod tests {
             ]
         );
         assert_eq!(s.frames(), 6);
+    }
+
+    #[test]
+    fn open_steps_parse_and_wait_open_ends_with_the_open() {
+        let s =
+            parse("press ctrl+O\nopen my models/a.ply\nwait-open 50\nscreenshot s.png\ndrop b.tw\n").unwrap();
+        assert_eq!(
+            s.steps,
+            vec![
+                Step::PressCtrl(KeyCode::KeyO),
+                Step::Open("my models/a.ply".into()),
+                Step::WaitOpen(50),
+                Step::Screenshot("s.png".into()),
+                Step::Drop("b.tw".into()),
+            ]
+        );
+        assert!(parse("open\n").unwrap_err().to_string().contains("takes a file path"));
+        let mut r = ScriptRunner::new(s);
+        assert_eq!(r.next_frame().instant.len(), 2, "the press and the open, then the wait");
+        for _ in 0..5 {
+            // The open runs: the wait goes on.
+            assert!(r.next_frame().instant.is_empty());
+        }
+        r.open_finished();
+        // The frame that saw the open end draws the new scene; the steps come in the next.
+        assert!(r.next_frame().instant.is_empty());
+        let f = r.next_frame();
+        assert_eq!(f.instant, vec![Step::Screenshot("s.png".into()), Step::Drop("b.tw".into())]);
+        assert!(f.last);
     }
 
     #[test]

@@ -26,8 +26,8 @@ use clap::Parser;
 
 use crate::cli::{BuildArgs, OpenArgs};
 use crate::commands::build::{build_store_with, options, Bars};
-use tw_build::BuildProgress;
 use crate::units::fmt_bytes;
+use tw_build::BuildProgress;
 use tw_store::Store;
 
 /// Opens the store for `input`: `input` itself unless it is a model file, else the cached store
@@ -45,7 +45,12 @@ pub fn open(input: &Path, up: Option<u8>, open: &OpenArgs, quiet: bool) -> Resul
 /// The path of the store to open for `input`: `input` itself unless it is a model, else its
 /// cached store, built now (reporting to `progress`) when missing or unreadable. The viewer's
 /// opener (`commands::view`) runs this on its background thread.
-pub fn store_for(input: &Path, up: Option<u8>, open: &OpenArgs, progress: &mut dyn BuildProgress) -> Result<PathBuf> {
+pub fn store_for(
+    input: &Path,
+    up: Option<u8>,
+    open: &OpenArgs,
+    progress: &mut dyn BuildProgress,
+) -> Result<PathBuf> {
     if !is_model(input) {
         return Ok(input.to_path_buf());
     }
