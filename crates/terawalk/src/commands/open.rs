@@ -1,7 +1,8 @@
 //! Opening a model file where a store is expected (`terawalk render plant.ply`, `terawalk view
 //! scan.glb`): the model is built once into a cache folder by the very code `terawalk build`
-//! runs ([`build_store`]: the same options, progress bars and atomic write, so an interrupted
-//! build leaves no half-written store), and the cached store is opened. A later run with the
+//! runs ([`build_store_with`]: the same options and atomic write, so an interrupted build
+//! leaves no half-written store; `build`'s progress bars, or the viewer's progress window when
+//! the viewer opens a file), and the cached store is opened. A later run with the
 //! same file and options finds it and opens it at once.
 //!
 //! The cache key is a hash of what decides the store's content: the input's canonical path,
