@@ -99,7 +99,7 @@ impl App {
         }
         self.scene = scene;
         self.reset_for_new_scene();
-        let (tris, objects) = (self.scene.header().triangle_count, self.scene.store().objects().len());
+        let (tris, objects) = (self.scene.header().input_triangles, self.scene.store().objects().len());
         self.say(format!("opened {} ({tris} triangles, {objects} objects)", requested.display()));
         self.opened_file = requested;
         Ok(())
