@@ -685,7 +685,7 @@ fn open_and_drop_switch_the_scene_under_xvfb() {
                   wait 3\nscreenshot-window dialog.png\nwait 1\nopen slab.ply\nwait-open 2000\nview -y\nwait 8\n\
                   screenshot slab.png\ndrop other.tw\nwait-open 2000\nview -y\nwait 8\nscreenshot dropped.png\n\
                   open broken.ply\nwait-open 2000\nwait 4\nscreenshot-window error.png\nwait 2\n\
-                  screenshot after.png\n";
+                  screenshot after.png\npress Escape\nwait 3\nscreenshot-window closed.png\nwait 2\n";
     let scratch = tempfile::tempdir().unwrap();
     // The session copies the store it starts on; the files it opens are made here and copied
     // in by the script's relative paths, from the session's folder.
@@ -727,7 +727,12 @@ fn open_and_drop_switch_the_scene_under_xvfb() {
     assert!(said.contains("broken.ply"), "{said}");
     assert_eq!(gaps("after.png"), cubes_gaps, "the scene changed after a failed open: {err}");
     // The error window: red text in the window's screenshot (the scene has none).
-    let (px, _) = rgba(&shot("error.png"));
-    let red = px.chunks_exact(4).filter(|p| p[0] > 200 && p[1] < 140 && p[2] < 130).count();
-    assert!(red > 20, "no error window ({red} red pixels): {err}");
+    let red = |n: &str| {
+        let (px, _) = rgba(&shot(n));
+        px.chunks_exact(4).filter(|p| p[0] > 200 && p[1] < 140 && p[2] < 130).count()
+    };
+    assert!(red("error.png") > 20, "no error window ({} red pixels): {err}", red("error.png"));
+    // Esc closes it (and does not quit: the script ran to its end).
+    assert_eq!(red("closed.png"), 0, "Esc did not close the error window: {err}");
+    assert!(err.contains("closed the open dialog"), "{err}");
 }

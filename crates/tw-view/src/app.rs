@@ -775,6 +775,11 @@ impl App {
             return;
         }
         match code {
+            KeyCode::Escape if self.opening.browser.is_some() || self.opening.failure.is_some() => {
+                self.opening.browser = None;
+                self.opening.failure = None;
+                self.say("closed the open dialog (Esc again quits)".into());
+            }
             KeyCode::Escape if self.measuring || self.picked.is_some() => {
                 self.measuring = false;
                 self.measure = Measure::default();

@@ -112,7 +112,10 @@ pub const HELP: &[(&str, &str)] = &[
     ("Home", "back to the starting view"),
     ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
     ("F1", "this help"),
-    ("Esc", "clear the pick and the measurement; quit when there is none"),
+    (
+        "Esc",
+        "close the open dialog or its error; clear the pick and the measurement; quit when there is none",
+    ),
 ];
 
 /// Builds this frame's UI.
