@@ -116,7 +116,9 @@ pub enum Command {
                             0 iso, O orthographic, F11 fullscreen, Tab panels; named viewpoints in the Controls \
                             panel (saved to STORE.views.json). G raster / rt (ray traced), T flashlight (rt). \
                             Shadows (--light): J on/off, [ ] turn the sun, Shift+[ ] its elevation, U point \
-                            light at the eye.")]
+                            light at the eye. Ctrl+O (or Open…) opens another store or model in the viewer's \
+                            file dialog, and a file dropped on the window opens too (a model is built into \
+                            the cache in the background, with a progress window).")]
     View(ViewArgs),
     /// The main job: generate a plant (cached), read it back, render views, print a summary.
     #[command(after_help = "Examples:\n  terawalk demo\n  terawalk demo --triangles 20M --dir /tmp/tw")]

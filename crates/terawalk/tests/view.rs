@@ -649,3 +649,90 @@ fn shadow_keys_turn_the_light_under_xvfb() {
         assert!(covered > 0.05 && colours >= 8, "{shot}: {covered} covered, {colours} colours");
     }
 }
+
+/// A slab as wide as [`cubes_store`]'s row of cubes (x 0..4, y 0..1, z 0..1, the same bounds):
+/// from -y it also covers the gaps between the cubes. ASCII PLY, built by the viewer's opener.
+fn slab_ply(path: &Path) {
+    let mut ply = String::from(
+        "ply\nformat ascii 1.0\nelement vertex 8\nproperty float x\nproperty float y\nproperty float z\n\
+         element face 12\nproperty list uchar int vertex_indices\nend_header\n",
+    );
+    // Vertex i: x bit 2 (0 or 4), y bit 1, z bit 0.
+    for i in 0..8 {
+        ply += &format!("{} {} {}\n", 4 * (i >> 2), (i >> 1) & 1, i & 1);
+    }
+    let v = |x: usize, y: usize, z: usize| x * 4 + y * 2 + z;
+    for a in 0..2 {
+        for q in [
+            [v(a, 0, 0), v(a, 1, 0), v(a, 1, 1), v(a, 0, 1)],
+            [v(0, a, 0), v(1, a, 0), v(1, a, 1), v(0, a, 1)],
+            [v(0, 0, a), v(1, 0, a), v(1, 1, a), v(0, 1, a)],
+        ] {
+            ply += &format!("3 {} {} {}\n3 {} {} {}\n", q[0], q[1], q[2], q[0], q[2], q[3]);
+        }
+    }
+    std::fs::write(path, ply).unwrap();
+}
+
+/// Switching the scene at run time: on the cubes, `open` a PLY model (built in the background
+/// into `--cache-dir`), then `drop` another store, then `open` a broken file; each opened
+/// scene is seen from -y, where the slab covers the gaps the cubes leave, and the broken file
+/// leaves the cubes shown with the error said.
+#[test]
+fn open_and_drop_switch_the_scene_under_xvfb() {
+    let (gap_a, gap_b) = ((184, 197), (284, 297));
+    let script = "view -y\nwait 8\nscreenshot cubes.png\nscreenshot-window plain.png\nwait 1\npress ctrl+O\n\
+                  wait 3\nscreenshot-window dialog.png\nwait 1\nopen slab.ply\nwait-open 2000\nview -y\nwait 8\n\
+                  screenshot slab.png\ndrop other.tw\nwait-open 2000\nview -y\nwait 8\nscreenshot dropped.png\n\
+                  open broken.ply\nwait-open 2000\nwait 4\nscreenshot-window error.png\nwait 2\n\
+                  screenshot after.png\npress Escape\nwait 3\nscreenshot-window closed.png\nwait 2\n";
+    let scratch = tempfile::tempdir().unwrap();
+    // The session copies the store it starts on; the files it opens are made here and copied
+    // in by the script's relative paths, from the session's folder.
+    let cubes = cubes_store();
+    slab_ply(&scratch.path().join("slab.ply"));
+    std::fs::copy(cubes, scratch.path().join("other.tw")).unwrap();
+    std::fs::write(scratch.path().join("broken.ply"), "ply\nformat ascii 1.0\nelement vertex 3\n").unwrap();
+    let cache = scratch.path().join("cache");
+    let extra = ["--cache-dir", cache.to_str().unwrap()];
+    let script = script
+        .replace("slab.ply", scratch.path().join("slab.ply").to_str().unwrap())
+        .replace("other.tw", scratch.path().join("other.tw").to_str().unwrap())
+        .replace("broken.ply", scratch.path().join("broken.ply").to_str().unwrap());
+    let Some((dir, _, err)) = script_session(cubes, &script, &extra) else { return };
+    let shot = |n: &str| dir.path().join(n);
+    let gaps = |n: &str| {
+        covered_in_columns(&shot(n), gap_a.0, gap_a.1) + covered_in_columns(&shot(n), gap_b.0, gap_b.1)
+    };
+    let whole = |n: &str| covered_in_columns(&shot(n), 0, 480);
+    // The slab fills the gaps the cubes leave (at most the cubes' side faces show there).
+    let (cubes_gaps, slab_gaps) = (gaps("cubes.png"), gaps("slab.png"));
+    eprintln!("covered pixels in the gaps: cubes {cubes_gaps}, slab {slab_gaps}");
+    assert!(
+        slab_gaps > 2 * cubes_gaps + 500,
+        "the opened slab is not shown: gaps {cubes_gaps} → {slab_gaps}: {err}"
+    );
+    assert!(err.contains("opened ") && err.contains("slab.ply (12 triangles, 1 objects)"), "{err}");
+    let cached: Vec<_> = std::fs::read_dir(scratch.path().join("cache")).unwrap().flatten().collect();
+    assert!(cached.iter().any(|e| e.file_name().to_string_lossy().starts_with("slab-")), "{cached:?}");
+    // The dropped store is the cubes again: the picture returns to the first one's.
+    assert_eq!(gaps("dropped.png"), cubes_gaps, "{err}");
+    assert_eq!(whole("dropped.png"), whole("cubes.png"), "{err}");
+    // Ctrl+O shows the open dialog over the window (the scene image stays the same).
+    let img = |n: &str| tw_gpu::Image::from_png_bytes(&std::fs::read(shot(n)).unwrap()).unwrap();
+    let dialog = img("plain.png").differing_share(&img("dialog.png")).unwrap();
+    assert!(dialog > 0.05, "Ctrl+O showed no dialog ({dialog} of the window changed): {err}");
+    // The broken file: said, and the cubes stay.
+    let said = message_after(&err, "cannot open ");
+    assert!(said.contains("broken.ply"), "{said}");
+    assert_eq!(gaps("after.png"), cubes_gaps, "the scene changed after a failed open: {err}");
+    // The error window: red text in the window's screenshot (the scene has none).
+    let red = |n: &str| {
+        let (px, _) = rgba(&shot(n));
+        px.chunks_exact(4).filter(|p| p[0] > 200 && p[1] < 140 && p[2] < 130).count()
+    };
+    assert!(red("error.png") > 20, "no error window ({} red pixels): {err}", red("error.png"));
+    // Esc closes it (and does not quit: the script ran to its end).
+    assert_eq!(red("closed.png"), 0, "Esc did not close the error window: {err}");
+    assert!(err.contains("closed the open dialog"), "{err}");
+}

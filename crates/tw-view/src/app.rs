@@ -18,6 +18,9 @@
 //! window manager answers, [`crate::fullscreen`]), and named viewpoints are saved next to the store
 //! ([`crate::viewpoints`]).
 //!
+//! Opening another file (Ctrl+O's dialog, a file dropped on the window, the script's `open` and
+//! `drop`): [`switch`] starts it in the background and swaps the new scene in when it is ready.
+//!
 //! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
 //! tracer's flashlight; while the camera stands still the ray-traced image gathers samples, and
 //! the scene asks for frames until it has them all ([`Scene::wants_redraw`]).
@@ -56,6 +59,8 @@ use crate::settings::{Coloring, LightKey, LightKind, RendererKind, Settings, SUN
 use crate::ui::{self, Action, Line};
 use crate::viewpoints::{Preset, Viewpoint, Viewpoints};
 use crate::ViewOptions;
+
+mod switch;
 
 /// The most node boxes the debug view draws.
 const MAX_BOXES: usize = 4000;
@@ -128,6 +133,9 @@ pub(crate) struct App {
     viewpoints: Option<Viewpoints>,
     /// F11's fullscreen while on.
     fullscreen: Option<Fullscreen>,
+    /// Opening another file (dialog, drag and drop: [`crate::opening`]), and the file shown.
+    opening: crate::opening::Opening,
+    opened_file: std::path::PathBuf,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -148,6 +156,8 @@ impl App {
         let scripted = options.exit_after.is_some() || options.script.is_some();
         let playing = player.is_some() && (options.play || scripted);
         let script = options.script.clone().map(ScriptRunner::new);
+        let opening = crate::opening::Opening::new(options.opener.clone());
+        let opened_file = options.file.clone();
         let mut app = App {
             start_camera: options.camera,
             controller,
@@ -184,6 +194,8 @@ impl App {
             press_at: None,
             viewpoints: None,
             fullscreen: None,
+            opening,
+            opened_file,
             error: None,
             report: Default::default(),
         };
@@ -751,6 +763,7 @@ impl App {
         }
         self.keys.insert(code);
         let shift = self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight);
+        let ctrl = self.keys.contains(&KeyCode::ControlLeft) || self.keys.contains(&KeyCode::ControlRight);
         // The sun keys repeat while held: the shadows sweep as the sun turns.
         if let KeyCode::BracketLeft | KeyCode::BracketRight = code {
             let step = if code == KeyCode::BracketLeft { -SUN_STEP_DEG } else { SUN_STEP_DEG };
@@ -762,6 +775,11 @@ impl App {
             return;
         }
         match code {
+            KeyCode::Escape if self.opening.browser.is_some() || self.opening.failure.is_some() => {
+                self.opening.browser = None;
+                self.opening.failure = None;
+                self.say("closed the open dialog (Esc again quits)".into());
+            }
             KeyCode::Escape if self.measuring || self.picked.is_some() => {
                 self.measuring = false;
                 self.measure = Measure::default();
@@ -783,6 +801,7 @@ impl App {
                 };
                 self.say(m.into());
             }
+            KeyCode::KeyO if ctrl => self.show_open_dialog(),
             KeyCode::KeyO => self.act(Action::ToggleOrtho),
             KeyCode::F11 => self.act(Action::ToggleFullscreen),
             KeyCode::Digit4 => self.act(Action::View(Preset::PosX)),
@@ -843,6 +862,9 @@ impl App {
     /// screenshots); returns whether this frame is the script's last.
     fn script_steps(&mut self, event_loop: &ActiveEventLoop) -> bool {
         let Some(runner) = self.script.as_mut() else { return false };
+        if !self.opening.busy() {
+            runner.open_finished();
+        }
         let steps = runner.next_frame();
         if let Some(k) = steps.release {
             self.key(k, false, false, event_loop);
@@ -908,7 +930,17 @@ impl App {
                 // The scene as the last frame drew it (before this frame's steps act).
                 Step::Screenshot(p) => self.screenshot(&p),
                 Step::WindowScreenshot(p) => self.window_shot = Some(p),
-                Step::Wait(_) | Step::Hold(..) => unreachable!("frame steps are not instant"),
+                Step::PressCtrl(k) => {
+                    self.key(KeyCode::ControlLeft, true, false, event_loop);
+                    self.key(k, true, false, event_loop);
+                    self.key(k, false, false, event_loop);
+                    self.key(KeyCode::ControlLeft, false, false, event_loop);
+                }
+                Step::Open(p) => self.open_file(&p),
+                Step::Drop(p) => self.dropped(p),
+                Step::Wait(_) | Step::Hold(..) | Step::WaitOpen(_) => {
+                    unreachable!("frame steps are not instant")
+                }
             }
         }
         steps.last
@@ -919,6 +951,7 @@ impl App {
     /// whether the next frame must follow at once.
     fn redraw(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
         let dt = self.frame_time();
+        self.finish_open()?;
         // The script's steps first: a resize it asks for may apply at once.
         let last_step = self.script_steps(event_loop);
         self.check_fullscreen();
@@ -940,10 +973,13 @@ impl App {
         let lines = self.overlay_lines(&draw, px, size);
         self.update_scene_texture();
         let hud = self.hud_frame(&info, &ss);
-        let (out, actions) = self.run_ui(&hud, &lines, &review, &viewpoint_names);
+        let (out, actions, opens) = self.run_ui(&hud, &lines, &review, &viewpoint_names);
         let repaint_now = self.present(out)?;
         for a in actions {
             self.act(a);
+        }
+        for a in opens {
+            self.open_action(a);
         }
 
         if self.count_frame(event_loop, size, info.triangles, last_step)? {
@@ -1228,7 +1264,7 @@ impl App {
         lines: &[Line],
         review: &[(String, String)],
         viewpoints: &[String],
-    ) -> (egui::FullOutput, Vec<Action>) {
+    ) -> (egui::FullOutput, Vec<Action>, Vec<crate::open_ui::OpenAction>) {
         if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
             self.message = None;
         }
@@ -1251,10 +1287,13 @@ impl App {
             measuring: self.measuring,
             viewpoints,
         };
-        let mut actions = Vec::new();
-        let settings = &mut self.settings;
-        let out = w.egui.egui_ctx().run_pass(raw, |ctx| actions = ui::draw(ctx, settings, &view));
-        (out, actions)
+        let (mut actions, mut opens) = (Vec::new(), Vec::new());
+        let (settings, opening) = (&mut self.settings, &mut self.opening);
+        let out = w.egui.egui_ctx().run_pass(raw, |ctx| {
+            actions = ui::draw(ctx, settings, &view);
+            opens = crate::open_ui::draw(ctx, opening);
+        });
+        (out, actions, opens)
     }
 
     /// Presents the UI's output, taking the window screenshot when one is due; returns whether
@@ -1402,12 +1441,30 @@ impl ApplicationHandler for App {
                 w.window.request_redraw();
             }
             WindowEvent::Focused(false) => self.keys.clear(),
+            WindowEvent::HoveredFile(path) => {
+                self.opening.hovered = Some(path);
+                w.window.request_redraw();
+            }
+            WindowEvent::HoveredFileCancelled => {
+                self.opening.hovered = None;
+                w.window.request_redraw();
+            }
+            WindowEvent::DroppedFile(path) => self.dropped(path),
             _ => {}
         }
     }
 
     fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
         event_loop.set_control_flow(ControlFlow::Wait);
+        if self.opening.busy() {
+            // The progress window, ten times a second, while an open runs (and its end).
+            let next = self.last_time + std::time::Duration::from_millis(100);
+            if Instant::now() >= next {
+                self.request_redraw();
+            } else {
+                event_loop.set_control_flow(ControlFlow::WaitUntil(next));
+            }
+        }
         if self.animating() {
             if let Some(w) = &self.win {
                 w.window.request_redraw();

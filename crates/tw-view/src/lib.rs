@@ -24,6 +24,8 @@
 //! - [`gfx`]: window surface, device and egui-wgpu;
 //! - [`readback`]: textures to images (screenshots);
 //! - [`ui`]: the egui panels;
+//! - [`opening`], [`browser`], [`open_ui`]: opening another file at run time (in the
+//!   background, with a progress window), the open dialog and drag and drop;
 //! - [`script`]: scripted sessions (`--script`: keys, mouse look, clicks, resizes, minimising,
 //!   preset and named views, screenshots, frame by frame);
 //! - `app`: the winit event loop tying them together.
@@ -32,6 +34,7 @@
 //! last step of a `script`, or with the first error (no panics on user input).
 
 pub mod accumulate;
+pub mod browser;
 pub mod collision;
 pub mod controller;
 pub mod debug_view;
@@ -39,6 +42,8 @@ pub mod error;
 pub mod fullscreen;
 pub mod gfx;
 pub mod hud;
+pub mod open_ui;
+pub mod opening;
 pub mod pick;
 pub mod readback;
 pub mod recorder;
@@ -92,6 +97,11 @@ pub struct ViewOptions {
     /// Replace `settings.occlusion` by the fastest conservative strategy on the window's
     /// device once it is open (`--occlusion auto`).
     pub occlusion_auto: bool,
+    /// The file the scene was opened from (the open dialog starts in its folder).
+    pub file: PathBuf,
+    /// How files opened in the viewer become stores (a model built into a cache); `None`:
+    /// only stores are opened ([`opening::Opener::stores_only`]).
+    pub opener: Option<opening::Opener>,
 }
 
 /// What a viewer session did.

@@ -375,6 +375,10 @@ impl Scene {
         Ok(())
     }
 
+    pub fn fit_memory(&self) -> bool {
+        self.fit_memory
+    }
+
     /// A new streamer with the walkthrough's options changed by `change` (none is made before
     /// the first frame), and the next frame drawn anew.
     fn restream(&mut self, change: impl FnOnce(StreamOptions) -> StreamOptions) -> Result<(), ViewError> {

@@ -10,6 +10,7 @@
 //! hold W 20            # hold a key for 20 frames (W A S D Q E, Up Down Left Right, Shift…)
 //! press F1             # press and release a key (any key the viewer knows: F1, L, C, 2, …)
 //! press Shift+H        # … with Shift held (show all objects)
+//! press Ctrl+O         # … with Ctrl held (the open dialog)
 //! press ]              # the sun keys: ] [ turn it, Shift+] Shift+[ raise and lower it
 //! look 120 -40         # move the mouse-look by (dx, dy) pixels
 //! scroll 3             # the wheel: +3 lines (speed; zoom in orbit and orthographic views)
@@ -22,7 +23,15 @@
 //! restore
 //! screenshot a.png     # the scene image of the last frame drawn (as F12)
 //! screenshot-window b.png   # the whole window, HUD included (as Shift+F12)
+//! open model.ply       # open a file, as the open dialog's Enter (built in the background)
+//! drop scene.tw        # open a file as if dropped on the window (winit's DroppedFile)
+//! wait-open 600        # draw frames until the open finished, at most 600
 //! ```
+//!
+//! `open` and `drop` start the open and go on at once (the build runs in the background while
+//! frames are drawn, as for a person); `wait-open N` waits for its end: the frame after the open
+//! ended draws the new scene (or the old one, with the error shown, when the open failed), and
+//! the steps after `wait-open` come in the frame after that one.
 //!
 //! Minimising: a window system minimises a window asynchronously and differently (Windows sends
 //! a zero size; X11 without a window manager ignores the request), so `minimize` both asks the
@@ -54,6 +63,14 @@ pub enum Step {
     Restore,
     Screenshot(PathBuf),
     WindowScreenshot(PathBuf),
+    /// Open a file as the open dialog's Enter does.
+    Open(PathBuf),
+    /// Open a file as a drop on the window does.
+    Drop(PathBuf),
+    /// Draw frames until the open running finished, at most this many.
+    WaitOpen(u32),
+    /// A key pressed with Ctrl held (Ctrl+O: the open dialog).
+    PressCtrl(KeyCode),
 }
 
 impl Step {
@@ -61,7 +78,7 @@ impl Step {
     /// after it, up to the next one that takes frames).
     pub fn frames(&self) -> u32 {
         match self {
-            Step::Wait(n) | Step::Hold(_, n) => *n,
+            Step::Wait(n) | Step::Hold(_, n) | Step::WaitOpen(n) => *n,
             _ => 0,
         }
     }
@@ -179,9 +196,10 @@ impl StepLine<'_> {
             "press" => {
                 self.want(1)?;
                 let lower = args[0].to_ascii_lowercase();
-                match lower.strip_prefix("shift+") {
-                    Some(k) => Step::PressShifted(self.key(k)?),
-                    None => Step::Press(self.key(args[0])?),
+                match (lower.strip_prefix("shift+"), lower.strip_prefix("ctrl+")) {
+                    (Some(k), _) => Step::PressShifted(self.key(k)?),
+                    (_, Some(k)) => Step::PressCtrl(self.key(k)?),
+                    _ => Step::Press(self.key(args[0])?),
                 }
             }
             "click" => {
@@ -229,11 +247,27 @@ impl StepLine<'_> {
                 self.want(1)?;
                 Step::WindowScreenshot(PathBuf::from(args[0]))
             }
+            "open" | "drop" => {
+                // A path may hold spaces: the rest of the line.
+                if args.is_empty() {
+                    return Err(self.err(format!("`{}` takes a file path", self.cmd)));
+                }
+                let path = PathBuf::from(args.join(" "));
+                if self.cmd == "open" {
+                    Step::Open(path)
+                } else {
+                    Step::Drop(path)
+                }
+            }
+            "wait-open" => {
+                self.want(1)?;
+                Step::WaitOpen(self.count(args[0])?)
+            }
             other => {
                 return Err(self.err(format!(
                     "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
                      save-view, load-view, resize, minimize, restore, screenshot, \
-                     screenshot-window)"
+                     screenshot-window, open, drop, wait-open)"
                 )))
             }
         })
@@ -301,6 +335,8 @@ pub struct ScriptRunner {
     /// Frames left of the step being run (a wait or a held key), and the key held.
     left: u32,
     held: Option<KeyCode>,
+    /// The frames being waited are a `wait-open`'s: they end when the open does.
+    waiting_open: bool,
 }
 
 /// What to do at the start of a frame.
@@ -318,7 +354,7 @@ pub struct FrameSteps {
 
 impl ScriptRunner {
     pub fn new(script: Script) -> ScriptRunner {
-        ScriptRunner { steps: script.steps.into(), left: 0, held: None }
+        ScriptRunner { steps: script.steps.into(), left: 0, held: None, waiting_open: false }
     }
 
     /// The steps of the next frame.
@@ -334,7 +370,12 @@ impl ScriptRunner {
         // A step's frames are counted from this frame on.
         while let Some(step) = self.steps.pop_front() {
             match step {
-                Step::Wait(0) | Step::Hold(_, 0) => {}
+                Step::Wait(0) | Step::Hold(_, 0) | Step::WaitOpen(0) => {}
+                Step::WaitOpen(n) => {
+                    self.left = n;
+                    self.waiting_open = true;
+                    break;
+                }
                 Step::Wait(n) => {
                     self.left = n;
                     break;
@@ -350,6 +391,13 @@ impl ScriptRunner {
         }
         out.last = self.left == 0 && self.steps.is_empty();
         out
+    }
+
+    /// No open runs: a `wait-open` being waited ends with the next frame.
+    pub fn open_finished(&mut self) {
+        if std::mem::take(&mut self.waiting_open) {
+            self.left = self.left.min(2);
+        }
     }
 
     pub fn finished(&self) -> bool {
@@ -445,6 +493,35 @@ mod tests {
             ]
         );
         assert_eq!(s.frames(), 6);
+    }
+
+    #[test]
+    fn open_steps_parse_and_wait_open_ends_with_the_open() {
+        let s =
+            parse("press ctrl+O\nopen my models/a.ply\nwait-open 50\nscreenshot s.png\ndrop b.tw\n").unwrap();
+        assert_eq!(
+            s.steps,
+            vec![
+                Step::PressCtrl(KeyCode::KeyO),
+                Step::Open("my models/a.ply".into()),
+                Step::WaitOpen(50),
+                Step::Screenshot("s.png".into()),
+                Step::Drop("b.tw".into()),
+            ]
+        );
+        assert!(parse("open\n").unwrap_err().to_string().contains("takes a file path"));
+        let mut r = ScriptRunner::new(s);
+        assert_eq!(r.next_frame().instant.len(), 2, "the press and the open, then the wait");
+        for _ in 0..5 {
+            // The open runs: the wait goes on.
+            assert!(r.next_frame().instant.is_empty());
+        }
+        r.open_finished();
+        // The frame that saw the open end draws the new scene; the steps come in the next.
+        assert!(r.next_frame().instant.is_empty());
+        let f = r.next_frame();
+        assert_eq!(f.instant, vec![Step::Screenshot("s.png".into()), Step::Drop("b.tw".into())]);
+        assert!(f.last);
     }
 
     #[test]

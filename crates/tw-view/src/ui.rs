@@ -92,6 +92,7 @@ pub const HELP: &[(&str, &str)] = &[
     ("0", "isometric view"),
     ("O", "orthographic / perspective view (orbit zoom: view height)"),
     ("F11", "fullscreen"),
+    ("Ctrl+O / drop a file", "open a store or a model (built into the cache in the background)"),
     ("scroll wheel", "speed (fly, walk); distance (orbit); zoom in orthographic views"),
     ("1 / 2 / 3", "fly / walk / orbit"),
     ("N", "walk: fly through walls / collide with them (the HUD shows the collision's time)"),
@@ -111,7 +112,10 @@ pub const HELP: &[(&str, &str)] = &[
     ("Home", "back to the starting view"),
     ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
     ("F1", "this help"),
-    ("Esc", "clear the pick and the measurement; quit when there is none"),
+    (
+        "Esc",
+        "close the open dialog or its error; clear the pick and the measurement; quit when there is none",
+    ),
 ];
 
 /// Builds this frame's UI.

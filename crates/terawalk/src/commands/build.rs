@@ -114,9 +114,18 @@ fn output_path(args: &BuildArgs) -> Result<PathBuf> {
 /// `terawalk build` and the commands opening a model directly (`commands::open`) share. The
 /// store appears atomically (tw-build writes a temporary file and renames it).
 pub fn build_store(args: &BuildArgs, output: &std::path::Path, quiet: bool) -> Result<tw_build::BuildReport> {
+    build_store_with(args, output, quiet, &mut Bars { bar: None, quiet })
+}
+
+/// [`build_store`] reporting its phases to `progress` (the viewer's progress window).
+pub fn build_store_with(
+    args: &BuildArgs,
+    output: &std::path::Path,
+    quiet: bool,
+    progress: &mut dyn BuildProgress,
+) -> Result<tw_build::BuildReport> {
     let (scene, opts, _prepared) = open_scene(args, output, quiet)?;
-    let mut bars = Bars { bar: None, quiet };
-    tw_build::build(scene, output, &opts, &mut bars).with_context(|| format!("building {}", output.display()))
+    tw_build::build(scene, output, &opts, progress).with_context(|| format!("building {}", output.display()))
 }
 
 /// The build's scene and options from its arguments: the generator of `--generate`, or the

@@ -1,7 +1,8 @@
 //! Opening a model file where a store is expected (`terawalk render plant.ply`, `terawalk view
 //! scan.glb`): the model is built once into a cache folder by the very code `terawalk build`
-//! runs ([`build_store`]: the same options, progress bars and atomic write, so an interrupted
-//! build leaves no half-written store), and the cached store is opened. A later run with the
+//! runs ([`build_store_with`]: the same options and atomic write, so an interrupted build
+//! leaves no half-written store; `build`'s progress bars, or the viewer's progress window when
+//! the viewer opens a file), and the cached store is opened. A later run with the
 //! same file and options finds it and opens it at once.
 //!
 //! The cache key is a hash of what decides the store's content: the input's canonical path,
@@ -25,8 +26,9 @@ use anyhow::{Context, Result};
 use clap::Parser;
 
 use crate::cli::{BuildArgs, OpenArgs};
-use crate::commands::build::{build_store, options};
+use crate::commands::build::{build_store_with, options, Bars};
 use crate::units::fmt_bytes;
+use tw_build::BuildProgress;
 use tw_store::Store;
 
 /// Opens the store for `input`: `input` itself unless it is a model file, else the cached store
@@ -36,6 +38,35 @@ pub fn open(input: &Path, up: Option<u8>, open: &OpenArgs, quiet: bool) -> Resul
     if !is_model(input) {
         return Ok((input.to_path_buf(), crate::commands::open_store(input)?));
     }
+    let path = cached_store(input, up, open, quiet, &mut Bars::new(quiet))?;
+    let store = crate::commands::open_store(&path)?;
+    Ok((path, store))
+}
+
+/// The path of the store to open for `input`: `input` itself unless it is a model, else its
+/// cached store, built now (reporting to `progress`) when missing or unreadable. The viewer's
+/// opener (`commands::view`) runs this on its background thread.
+pub fn store_for(
+    input: &Path,
+    up: Option<u8>,
+    open: &OpenArgs,
+    progress: &mut dyn BuildProgress,
+) -> Result<PathBuf> {
+    if !is_model(input) {
+        return Ok(input.to_path_buf());
+    }
+    cached_store(input, up, open, true, progress)
+}
+
+/// The cached store of the model `input`, built when missing or unreadable; the cache is
+/// trimmed to `--cache-size` after.
+fn cached_store(
+    input: &Path,
+    up: Option<u8>,
+    open: &OpenArgs,
+    quiet: bool,
+    progress: &mut dyn BuildProgress,
+) -> Result<PathBuf> {
     let args = build_args(input, up, open)?;
     let cache = cache_dir(open)?;
     let path = cache.join(cached_name(input, &args)?);
@@ -47,17 +78,13 @@ pub fn open(input: &Path, up: Option<u8>, open: &OpenArgs, quiet: bool) -> Resul
         }
         Err(_) => None,
     };
-    let store = match cached {
-        Some(store) => {
+    match cached {
+        Some(_) => {
             outln!("using cached store {} (built from {})", path.display(), input.display());
             mark_used(&path);
-            store
         }
-        None => {
-            build_into_cache(input, &args, &path, quiet)?;
-            crate::commands::open_store(&path)?
-        }
-    };
+        None => build_into_cache(input, &args, &path, quiet, progress)?,
+    }
     for (removed, bytes) in evict(&cache, open.cache_size, &path) {
         outln!(
             "removed cached store {} ({}): the cache keeps at most {} (--cache-size)",
@@ -66,18 +93,24 @@ pub fn open(input: &Path, up: Option<u8>, open: &OpenArgs, quiet: bool) -> Resul
             fmt_bytes(open.cache_size)
         );
     }
-    Ok((path, store))
+    Ok(path)
 }
 
-/// Builds `input` into `store` in the cache folder, with `build`'s progress bars.
-fn build_into_cache(input: &Path, args: &BuildArgs, store: &Path, quiet: bool) -> Result<()> {
+/// Builds `input` into `store` in the cache folder, reporting to `progress`.
+fn build_into_cache(
+    input: &Path,
+    args: &BuildArgs,
+    store: &Path,
+    quiet: bool,
+    progress: &mut dyn BuildProgress,
+) -> Result<()> {
     if let Some(cache) = store.parent() {
         std::fs::create_dir_all(cache)
             .with_context(|| format!("cannot create the cache folder {}", cache.display()))?;
     }
     outln!("building {} into the cache: {} (once; later runs reuse it)", input.display(), store.display());
     let start = Instant::now();
-    let report = build_store(args, store, quiet)?;
+    let report = build_store_with(args, store, quiet, progress)?;
     outln!(
         "built {} ({}) in {:.1} s",
         store.display(),
@@ -89,7 +122,7 @@ fn build_into_cache(input: &Path, args: &BuildArgs, store: &Path, quiet: bool) -
 
 /// A file the importers read (by its name, as `build` decides) that is not a store: a store
 /// named like a model (`x.ply` written by `build -o`) is still opened as a store.
-fn is_model(path: &Path) -> bool {
+pub fn is_model(path: &Path) -> bool {
     // A format the importers read, or one `build` converts with an external tool first.
     let known = tw_io::format::Format::from_name(path).is_some()
         || tw_io::convert::Converter::for_name(path).is_some();

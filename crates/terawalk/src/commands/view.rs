@@ -58,6 +58,8 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         },
         settings,
         occlusion_auto: args.occlusion == OcclusionChoice::Auto,
+        file: args.store.clone(),
+        opener: Some(opener(args.up, &args.open)),
     };
     let report = tw_view::run(scene, options)?;
     print_report(&report, scripted);
@@ -180,4 +182,37 @@ fn shadow_controls(
         // store's up axis (or --up's).
         None => ShadowControls::for_up_axis(up),
     })
+}
+
+/// How the viewer opens files (the open dialog, drag and drop): a model is built into the same
+/// cache and with the same options (`--up`, `--units`, `--cache-dir`, …) as the file named on
+/// the command line, reporting to the viewer's progress window; the dialog lists stores and
+/// the model files `build` reads.
+fn opener(up: Option<u8>, open: &crate::cli::OpenArgs) -> tw_view::opening::Opener {
+    let open = open.clone();
+    let build = move |input: &std::path::Path, report: &dyn Fn(tw_view::opening::Progress)| {
+        let mut progress = WindowProgress { report, phase: tw_view::opening::Progress::default() };
+        crate::commands::open::store_for(input, up, &open, &mut progress).map_err(|e| format!("{e:#}"))
+    };
+    let accepts = |p: &std::path::Path| tw_view::opening::is_store(p) || crate::commands::open::is_model(p);
+    tw_view::opening::Opener::new(std::sync::Arc::new(build), std::sync::Arc::new(accepts))
+}
+
+/// A build's progress, handed to the viewer's progress window.
+struct WindowProgress<'a> {
+    report: &'a dyn Fn(tw_view::opening::Progress),
+    phase: tw_view::opening::Progress,
+}
+
+impl tw_build::BuildProgress for WindowProgress<'_> {
+    fn phase(&mut self, name: &str, total: u64, unit: &str) {
+        self.phase = tw_view::opening::Progress { phase: name.into(), done: 0, total, unit: unit.into() };
+        (self.report)(self.phase.clone());
+    }
+    fn advance(&mut self, done: u64) {
+        self.phase.done = done;
+        self.phase.total = self.phase.total.max(done);
+        (self.report)(self.phase.clone());
+    }
+    fn end_phase(&mut self) {}
 }
