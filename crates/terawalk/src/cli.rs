@@ -101,7 +101,8 @@ pub enum Command {
     /// Open a store or model in an interactive window: fly, walk or orbit; HUD, controls, debug
     /// view.
     #[command(after_help = "Examples:\n  terawalk view plant.tw\n  \
-                            terawalk view scan.ply.gz --up y   # a model: built into the cache once\n  \
+                            terawalk view   # no file: the open dialog (Ctrl+O, or drop a file on the window)\n  \
+                            terawalk view scan.ply.gz --up y   # a model: built into the cache once, progress in the window\n  \
                             terawalk view plant.tw --camera \"10,5,1.7;40,5,1.7;0,0,1;70\" --error 2\n  \
                             terawalk view plant.tw --path walk.json --play\n  \
                             xvfb-run -a terawalk view plant.tw --path walk.json --exit-after 30 --screenshot out.png\n  \
@@ -591,8 +592,9 @@ fn parse_on_off(s: &str) -> Result<bool, String> {
 #[derive(Args, Debug)]
 pub struct ViewArgs {
     /// A store file written by `terawalk build`, or a model file (as `build` takes), built once
-    /// into the cache (see --cache-dir).
-    pub store: PathBuf,
+    /// into the cache (see --cache-dir) while the window shows the build's progress. None: the
+    /// window opens with the open dialog (Ctrl+O; or drop a file on it).
+    pub store: Option<PathBuf>,
     /// Starting camera "eye;target;up;fovy" in input coordinates: "x,y,z;x,y,z;x,y,z;degrees"
     /// (or "…;ortho:HEIGHT": orthographic). Default: the first frame of --path, else the whole
     /// scene from an oblique direction.

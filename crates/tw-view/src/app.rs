@@ -60,7 +60,11 @@ use crate::ui::{self, Action, Line};
 use crate::viewpoints::{Preset, Viewpoint, Viewpoints};
 use crate::ViewOptions;
 
+mod empty;
 mod switch;
+mod window;
+
+pub(crate) use empty::Viewer;
 
 /// The most node boxes the debug view draws.
 const MAX_BOXES: usize = 4000;
@@ -222,15 +226,14 @@ impl App {
     }
 
     fn open_window(&mut self, event_loop: &ActiveEventLoop) -> Result<(), ViewError> {
-        let (w, h) = self.options.size;
-        let title = format!("terawalk — {}", self.options.title);
-        let attrs = Window::default_attributes()
-            .with_title(title)
-            .with_inner_size(winit::dpi::PhysicalSize::new(w, h));
-        let window = Arc::new(event_loop.create_window(attrs).map_err(|e| ViewError::Window(e.to_string()))?);
-        let gfx = Gfx::new(window.clone(), event_loop.owned_display_handle())?;
-        tracing::info!("window adapter: {}", gfx.adapter_summary());
-        // One device for the window, egui and the scene.
+        self.win = Some(WindowState::open(event_loop, self.options.size, &self.options.title)?);
+        self.attach_scene()
+    }
+
+    /// The scene onto the window's device (one device for the window, egui and the scene), and
+    /// `--occlusion auto`'s choice on it.
+    fn attach_scene(&mut self) -> Result<(), ViewError> {
+        let gfx = &self.win.as_ref().expect("the window is open").gfx;
         self.scene.attach(
             gfx.device.clone(),
             gfx.queue.clone(),
@@ -243,17 +246,6 @@ impl App {
                 tracing::info!("occlusion culling: {} (the fastest conservative strategy here)", o.name());
             }
         }
-        let ctx = egui::Context::default();
-        let max_side = gfx.device.limits().max_texture_dimension_2d as usize;
-        let egui = egui_winit::State::new(
-            ctx,
-            egui::ViewportId::ROOT,
-            &*window,
-            Some(window.scale_factor() as f32),
-            None,
-            Some(max_side),
-        );
-        self.win = Some(WindowState { window, gfx, egui, scene_tex: None });
         Ok(())
     }
 
@@ -1298,26 +1290,13 @@ impl App {
 
     /// Presents the UI's output, taking the window screenshot when one is due; returns whether
     /// egui asks to be repainted at once.
-    fn present(&mut self, mut out: egui::FullOutput) -> Result<bool, ViewError> {
+    fn present(&mut self, out: egui::FullOutput) -> Result<bool, ViewError> {
         let w = self.win.as_mut().expect("redraw checked the window");
-        w.egui.handle_platform_output(&w.window, out.platform_output);
-        let jobs = w.egui.egui_ctx().tessellate(out.shapes, out.pixels_per_point);
-        let want_window = self.window_shot.is_some();
-        let mut captured = None;
-        w.gfx.present(
-            &w.window,
-            &jobs,
-            &mut out.textures_delta,
-            out.pixels_per_point,
-            want_window.then_some(&mut captured),
-        )?;
-        if let (Some(p), Some(img)) = (self.window_shot.take(), captured) {
-            match img.save_png(&p) {
-                Ok(()) => self.say(format!("window screenshot {}", p.display())),
-                Err(e) => self.say(format!("window screenshot failed: {e}")),
-            }
+        let (repaint, said) = w.present_ui(out, self.window_shot.take())?;
+        if let Some(m) = said {
+            self.say(m);
         }
-        Ok(out.viewport_output.get(&egui::ViewportId::ROOT).is_some_and(|v| v.repaint_delay.is_zero()))
+        Ok(repaint)
     }
 
     /// Counts the frame. Scripted runs stop after N frames (or at the script's last step) with

@@ -57,7 +57,7 @@ pub mod viewpoints;
 
 mod app;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 pub use error::ViewError;
 pub use scene::Scene;
@@ -67,7 +67,8 @@ use tw_runtime::{Camera, CameraPath};
 /// How to start the viewer.
 #[derive(Clone, Debug)]
 pub struct ViewOptions {
-    /// The starting camera (scene space).
+    /// The starting camera (scene space). Without a scene at the start ([`run_empty`]) only
+    /// its field of view counts: an opened scene starts at its isometric view.
     pub camera: Camera,
     /// A path to play (`--path`); with `play` or `exit_after` it plays at once.
     pub path: Option<CameraPath>,
@@ -102,6 +103,9 @@ pub struct ViewOptions {
     /// How files opened in the viewer become stores (a model built into a cache); `None`:
     /// only stores are opened ([`opening::Opener::stores_only`]).
     pub opener: Option<opening::Opener>,
+    /// Keep the resident geometry within the memory budget by coarsening (`--fit-memory`), for
+    /// a scene opened after the start (the starting scene is set up by the caller).
+    pub fit_memory: bool,
 }
 
 /// What a viewer session did.
@@ -120,13 +124,30 @@ pub struct ViewReport {
 
 /// Opens the window over `scene` and runs until it is closed (see the crate documentation).
 pub fn run(scene: Scene, options: ViewOptions) -> Result<ViewReport, ViewError> {
-    let event_loop = winit::event_loop::EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))?;
-    let mut app = app::App::new(scene, options)?;
-    let result = event_loop.run_app(&mut app).map_err(|e| ViewError::Window(e.to_string()));
-    app.finish();
+    let event_loop = event_loop()?;
+    let viewer = app::Viewer::with_scene(scene, options)?;
+    run_viewer(event_loop, viewer)
+}
+
+/// Opens the window with no scene (`terawalk view` with no file): a hint and the open dialog,
+/// or, with `open`, the progress window of that file's open in the background (a model being
+/// built into the cache); the scene shows when the open ends. Until then only opening files,
+/// the window screenshot and quitting do something (`app::empty`).
+pub fn run_empty(options: ViewOptions, open: Option<&Path>) -> Result<ViewReport, ViewError> {
+    let event_loop = event_loop()?;
+    run_viewer(event_loop, app::Viewer::empty(options, open))
+}
+
+fn event_loop() -> Result<winit::event_loop::EventLoop<()>, ViewError> {
+    winit::event_loop::EventLoop::new().map_err(|e| ViewError::Window(e.to_string()))
+}
+
+fn run_viewer(
+    event_loop: winit::event_loop::EventLoop<()>,
+    mut viewer: app::Viewer,
+) -> Result<ViewReport, ViewError> {
+    let result = event_loop.run_app(&mut viewer).map_err(|e| ViewError::Window(e.to_string()));
+    viewer.finish();
     result?;
-    if let Some(e) = app.error.take() {
-        return Err(e);
-    }
-    Ok(app.report.clone())
+    viewer.result()
 }

@@ -58,6 +58,19 @@ pub fn store_for(
     cached_store(input, up, open, true, progress)
 }
 
+/// Whether opening `input` would build a store: a model file whose cached store is missing or
+/// unreadable (the viewer then opens its window at once and builds in the background, with
+/// its progress window). Bad options or an unreadable input are errors here, before any
+/// window.
+pub fn needs_build(input: &Path, up: Option<u8>, open: &OpenArgs) -> Result<bool> {
+    if !is_model(input) {
+        return Ok(false);
+    }
+    let args = build_args(input, up, open)?;
+    let path = cache_dir(open)?.join(cached_name(input, &args)?);
+    Ok(Store::open(&path).is_err())
+}
+
 /// The cached store of the model `input`, built when missing or unreadable; the cache is
 /// trimmed to `--cache-size` after.
 fn cached_store(

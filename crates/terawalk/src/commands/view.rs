@@ -1,6 +1,14 @@
 //! `terawalk view`: the interactive viewer (tw-view). Everything that can be wrong with the
 //! user's input — a missing or corrupt store, a bad camera or path file, a bad option — is
 //! checked here and reported with a clear message and exit code 1 before any window opens.
+//!
+//! With no file the window opens empty, with the open dialog; with a model the cache lacks it
+//! opens at once and builds the model in the background, showing the build's progress (the
+//! viewer's opener, the one the open dialog uses), unless an option needs the store before the
+//! window (`--camera`, `--path`, `--light`): then it is built first, with the terminal's
+//! progress, as `render` does. A model whose file is missing is an error before the window.
+
+use std::path::Path;
 
 use anyhow::{Context, Result};
 use tw_runtime::{CameraPath, InputCamera};
@@ -12,36 +20,113 @@ use crate::commands::render::{default_camera, up_axis};
 
 pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
     check_args(&args)?;
-    let occlusion = match args.occlusion {
-        OcclusionChoice::Auto => Occlusion::None,
-        OcclusionChoice::Is(o) => o,
-    };
     let scripted = args.exit_after.is_some() || args.script.is_some();
     let script = match &args.script {
         Some(p) => Some(tw_view::script::Script::load(p)?),
         None => None,
     };
-    let (_, store) = crate::commands::open::open(&args.store, args.up, &args.open, quiet)?;
+    let report = match start(&args)? {
+        Start::Empty => tw_view::run_empty(empty_options(&args, script, None)?, None)?,
+        Start::Build(model) => tw_view::run_empty(empty_options(&args, script, Some(model))?, Some(model))?,
+        Start::Store(file) => run_on_store(&args, file, script, quiet)?,
+    };
+    print_report(&report, scripted);
+    Ok(())
+}
+
+/// What the window starts with.
+enum Start<'a> {
+    /// No file: the open dialog.
+    Empty,
+    /// A model the cache lacks: built in the background, in the viewer's progress window.
+    Build(&'a Path),
+    /// A store, or a model built first (its cached store, or built with the terminal's progress
+    /// when an option needs the store before the window opens).
+    Store(&'a Path),
+}
+
+/// No file: an empty window (options that need a scene are refused); a model the cache lacks,
+/// with no option that reads its store before the window opens (`--camera`, `--path`,
+/// `--light`): its build in the window; else the store.
+fn start(args: &ViewArgs) -> Result<Start<'_>> {
+    let needs_store = [
+        (args.camera.is_some(), "--camera"),
+        (args.path.is_some(), "--path"),
+        (args.shadows.light.is_some(), "--light"),
+    ];
+    let Some(file) = args.store.as_deref() else {
+        if let Some((_, name)) = needs_store.iter().find(|(given, _)| *given) {
+            anyhow::bail!("{name} needs a FILE to view (it is read in the scene's coordinates): terawalk view FILE {name} …");
+        }
+        return Ok(Start::Empty);
+    };
+    let in_window = file.exists() && !needs_store.iter().any(|(given, _)| *given);
+    if in_window && crate::commands::open::needs_build(file, args.up, &args.open)? {
+        Ok(Start::Build(file))
+    } else {
+        Ok(Start::Store(file))
+    }
+}
+
+/// The viewer over the store `file` (a model: its cached store, built first when missing).
+fn run_on_store(
+    args: &ViewArgs,
+    file: &Path,
+    script: Option<tw_view::script::Script>,
+    quiet: bool,
+) -> Result<tw_view::ViewReport> {
+    let (_, store) = crate::commands::open::open(file, args.up, &args.open, quiet)?;
     let path = match &args.path {
         Some(p) => Some(CameraPath::load(p)?),
         None => None,
     };
-    if args.play && path.is_none() {
-        anyhow::bail!("--play needs --path FILE");
-    }
     let header = store.header();
-    let camera = start_camera(&args, header, path.as_ref())?;
-    let shadows = shadow_controls(&args, header, &camera)?;
-    let settings = settings(&args, occlusion, shadows);
-    let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    let camera = start_camera(args, header, path.as_ref())?;
+    let shadows = shadow_controls(args, header, &camera)?;
     let mut scene = Scene::new(store, args.memory);
     scene.set_fit_memory(args.fit_memory)?;
     if let Some(axis) = args.up {
         scene.set_up_axis(axis);
     }
-    let options = ViewOptions {
+    let options = ViewOptions { path, ..view_options(args, camera, shadows, script, Some(file)) };
+    Ok(tw_view::run(scene, options)?)
+}
+
+/// The options of a window that starts with no scene (`model`: the file being built for it).
+/// The camera and the shadows are the opened scene's own (its iso view, shadows off): only
+/// the field of view of this camera counts.
+fn empty_options(
+    args: &ViewArgs,
+    script: Option<tw_view::script::Script>,
+    model: Option<&Path>,
+) -> Result<ViewOptions> {
+    let camera = tw_runtime::Camera::new(
+        glam::Vec3::new(0.0, -1.0, 0.0),
+        glam::Vec3::ZERO,
+        glam::Vec3::Z,
+        tw_preview::camera::FRAMING_FOVY_DEG.to_radians() as f32,
+        1e-3,
+        10.0,
+    )?;
+    Ok(view_options(args, camera, ShadowControls::for_up_axis(2), script, model))
+}
+
+/// The viewer's options from the command's (`file`: the file named, shown in the title).
+fn view_options(
+    args: &ViewArgs,
+    camera: tw_runtime::Camera,
+    shadows: ShadowControls,
+    script: Option<tw_view::script::Script>,
+    file: Option<&Path>,
+) -> ViewOptions {
+    let occlusion = match args.occlusion {
+        OcclusionChoice::Auto => Occlusion::None,
+        OcclusionChoice::Is(o) => o,
+    };
+    let file = file.map(Path::to_path_buf).unwrap_or_default();
+    ViewOptions {
         camera,
-        path,
+        path: None,
         play: args.play,
         exit_after: args.exit_after,
         script,
@@ -50,30 +135,25 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
         record: args.record.clone(),
         output_dir: args.output_dir.clone(),
         size: args.size,
-        title,
+        title: file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         mode: match args.mode {
             CameraModeArg::Fly => tw_view::controller::Mode::Fly,
             CameraModeArg::Walk => tw_view::controller::Mode::Walk,
             CameraModeArg::Orbit => tw_view::controller::Mode::Orbit,
         },
-        settings,
+        settings: settings(args, occlusion, shadows),
         occlusion_auto: args.occlusion == OcclusionChoice::Auto,
-        file: args.store.clone(),
+        file,
         opener: Some(opener(args.up, &args.open)),
-    };
-    let report = tw_view::run(scene, options)?;
-    print_report(&report, scripted);
-    Ok(())
+        fit_memory: args.fit_memory,
+    }
 }
 
 /// Refuses options that cannot work together, and outputs that would overwrite an input,
 /// before anything is read.
 fn check_args(args: &ViewArgs) -> Result<()> {
     let inputs: Vec<&std::path::Path> =
-        [Some(args.store.as_path()), args.path.as_deref(), args.script.as_deref()]
-            .into_iter()
-            .flatten()
-            .collect();
+        [args.store.as_deref(), args.path.as_deref(), args.script.as_deref()].into_iter().flatten().collect();
     for out in [&args.screenshot, &args.screenshot_window, &args.record].into_iter().flatten() {
         tw_core::output::check_output(out, &inputs)?;
     }
@@ -91,6 +171,9 @@ fn check_args(args: &ViewArgs) -> Result<()> {
         anyhow::bail!(
             "--screenshot needs --exit-after N or --script FILE (press F12 for screenshots while viewing)"
         );
+    }
+    if args.play && args.path.is_none() {
+        anyhow::bail!("--play needs --path FILE");
     }
     if args.exit_after.is_some() && args.script.is_some() {
         anyhow::bail!("--exit-after and --script both say when to stop: give one of them");

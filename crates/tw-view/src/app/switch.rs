@@ -75,14 +75,7 @@ impl App {
     /// The new store in place of the scene (see the module documentation).
     fn replace_scene(&mut self, opened: Opened) -> Result<(), ViewError> {
         let Some(w) = self.win.as_mut() else { return Ok(()) };
-        let Opened { requested, store } = opened;
-        let built = store.path() != requested.as_path();
-        let mut scene = Scene::new(store, self.scene.memory_budget());
-        scene.set_fit_memory(self.scene.fit_memory())?;
-        if built {
-            // Viewpoints belong to the model, not to a cache entry that may be evicted.
-            scene.set_views_file(crate::viewpoints::views_file(&requested));
-        }
+        let (mut scene, requested) = scene_for(opened, self.scene.memory_budget(), self.scene.fit_memory())?;
         scene.attach(
             w.gfx.device.clone(),
             w.gfx.queue.clone(),
@@ -91,22 +84,30 @@ impl App {
         )?;
         // The new scene's texture generations start again: egui must take its texture anew.
         w.scene_tex = w.scene_tex.map(|(id, _)| (id, u64::MAX));
-        let name = requested.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
-        w.window.set_title(&format!("terawalk — {name}"));
         if self.recorder.is_some() {
             // Saved in the old scene's coordinates, which it was recorded in.
             self.toggle_recording();
         }
         self.scene = scene;
         self.reset_for_new_scene();
-        let (tris, objects) = (self.scene.header().input_triangles, self.scene.store().objects().len());
-        self.say(format!("opened {} ({tris} triangles, {objects} objects)", requested.display()));
-        self.opened_file = requested;
+        self.announce_opened(requested);
         Ok(())
     }
 
+    /// The window's title and the message line name the file just opened, which the open
+    /// dialog starts from next time.
+    pub(super) fn announce_opened(&mut self, requested: PathBuf) {
+        let name = requested.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        if let Some(w) = &self.win {
+            w.window.set_title(&format!("terawalk — {name}"));
+        }
+        let (tris, objects) = (self.scene.header().input_triangles, self.scene.store().objects().len());
+        self.say(format!("opened {} ({tris} triangles, {objects} objects)", requested.display()));
+        self.opened_file = requested;
+    }
+
     /// Forgets what belonged to the old scene and starts the camera at the new one's view.
-    fn reset_for_new_scene(&mut self) {
+    pub(super) fn reset_for_new_scene(&mut self) {
         self.frozen = None;
         self.settings.debug_view = false;
         self.settings.shadows = ShadowControls::for_up_axis(self.scene.header().up_axis.min(2));
@@ -134,4 +135,21 @@ impl App {
             w.window.request_redraw();
         }
     }
+}
+
+/// The scene of an opened store with the viewer's memory options, and the file asked for.
+pub(super) fn scene_for(
+    opened: Opened,
+    memory_budget: u64,
+    fit_memory: bool,
+) -> Result<(Scene, PathBuf), ViewError> {
+    let Opened { requested, store } = opened;
+    let built = store.path() != requested.as_path();
+    let mut scene = Scene::new(store, memory_budget);
+    scene.set_fit_memory(fit_memory)?;
+    if built {
+        // Viewpoints belong to the model, not to a cache entry that may be evicted.
+        scene.set_views_file(crate::viewpoints::views_file(&requested));
+    }
+    Ok((scene, requested))
 }
