@@ -404,17 +404,28 @@ fn script_session(
     script: &str,
     extra: &[&str],
 ) -> Option<(tempfile::TempDir, String, String)> {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(store_file, dir.path().join("m.tw")).unwrap();
+    let args: Vec<&str> = ["m.tw"].into_iter().chain(extra.iter().copied()).collect();
+    xvfb_view(dir, script, &args)
+}
+
+/// Runs `terawalk view ARGS --script` under Xvfb (Vulkan) in `dir`, with `script`; returns the
+/// folder, stdout and stderr, or None when skipped as [`run_under_xvfb`] skips.
+fn xvfb_view(
+    dir: tempfile::TempDir,
+    script: &str,
+    extra: &[&str],
+) -> Option<(tempfile::TempDir, String, String)> {
     let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
     let Some(xvfb_run) = which("xvfb-run") else {
         assert!(!require_gpu(), "TERAWALK_REQUIRE_GPU is set but xvfb-run is missing");
         eprintln!("skipped: xvfb-run not found (apt-get install xvfb xauth)");
         return None;
     };
-    let dir = tempfile::tempdir().unwrap();
-    std::fs::copy(store_file, dir.path().join("m.tw")).unwrap();
     std::fs::write(dir.path().join("script.txt"), script).unwrap();
     let mut cmd = Command::new(xvfb_run);
-    cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view", "m.tw"])
+    cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view"])
         .args(["--size", "480x320", "--script", "script.txt"])
         .args(extra)
         .current_dir(dir.path())
@@ -735,4 +746,87 @@ fn open_and_drop_switch_the_scene_under_xvfb() {
     // Esc closes it (and does not quit: the script ran to its end).
     assert_eq!(red("closed.png"), 0, "Esc did not close the error window: {err}");
     assert!(err.contains("closed the open dialog"), "{err}");
+}
+
+/// `view` with no file: the window shows the hint and the open dialog (Esc closes it and does
+/// not quit); a screenshot step before any scene is said, not taken; `open` a store shows it,
+/// and the script runs on to its end (exit 0).
+#[test]
+fn view_with_no_file_starts_with_the_open_dialog_under_xvfb() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(cubes_store(), dir.path().join("cubes.tw")).unwrap();
+    // Without a scene frames are quick: egui's windows need some to fade in and out.
+    let script = "wait 40\nscreenshot-window dialog.png\nwait 1\npress Escape\nwait 40\n\
+                  screenshot-window hint.png\nscreenshot early.png\nclick 240 160\nview -y\nwait 1\n\
+                  open cubes.tw\nwait-open 2000\nview -y\nwait 8\nscreenshot cubes.png\n";
+    let Some((dir, out, err)) = xvfb_view(dir, script, &[]) else { return };
+    let shot = |n: &str| dir.path().join(n);
+    let img = |n: &str| tw_gpu::Image::from_png_bytes(&std::fs::read(shot(n)).unwrap()).unwrap();
+    // The dialog covers much of the window; closed, the plain background and the hint remain.
+    let dialog = img("hint.png").differing_share(&img("dialog.png")).unwrap();
+    assert!(dialog > 0.1, "no open dialog at the start ({dialog} of the window changed): {err}");
+    let dark = |n: &str, y0: usize, y1: usize| {
+        let (px, w) = rgba(&shot(n));
+        px.chunks_exact(4).enumerate().filter(|(i, p)| (y0..y1).contains(&(i / w)) && p[0] < 120).count()
+    };
+    // The dialog is a dark window in the middle.
+    let dialog_px = dark("dialog.png", 40, 260);
+    assert!(dialog_px > 20000, "no open dialog at the start ({dialog_px} dark pixels): {err}");
+    // The hint's dark text along the top; the rest is the background (and the Open… button).
+    assert!(
+        dark("hint.png", 0, 40) > 100,
+        "no hint at the top ({} dark pixels): {err}",
+        dark("hint.png", 0, 40)
+    );
+    assert_eq!(dark("hint.png", 40, 260), 0, "the empty window is not plain: {err}");
+    assert!(err.contains("closed the open dialog"), "{err}");
+    // Before any scene: the screenshot is said not to be taken, clicks and views do nothing.
+    assert!(!shot("early.png").exists());
+    assert!(message_after(&err, "screenshot early.png").contains("no scene yet"), "{err}");
+    assert!(err.contains("needs a scene"), "{err}");
+    // The store opened: the cubes show.
+    assert!(err.contains("opened cubes.tw (36 triangles, 3 objects)"), "{err}");
+    let covered = covered_in_columns(&shot("cubes.png"), 0, 480);
+    assert!(covered > 5000, "the opened store is not shown ({covered} px): {err}");
+    assert!(out.contains("frames"), "{out}");
+}
+
+/// `view MODEL` with a model the cache lacks: the window opens at once with the build's
+/// progress, the model shows when the build ends (`wait-open`), and the cache holds its store;
+/// a second run finds it there and opens it before the window.
+#[test]
+fn view_a_model_builds_it_in_the_window_under_xvfb() {
+    let dir = tempfile::tempdir().unwrap();
+    slab_ply(&dir.path().join("slab.ply"));
+    let script = "screenshot-window start.png\nwait-open 2000\nview -y\nwait 8\nscreenshot slab.png\n";
+    let Some((dir, _, err)) = xvfb_view(dir, script, &["slab.ply", "--cache-dir", "cache"]) else { return };
+    assert!(err.contains("opening slab.ply"), "the build did not run in the window: {err}");
+    assert!(err.contains("opened slab.ply (12 triangles, 1 objects)"), "{err}");
+    // From -y the slab covers the whole row, gaps included.
+    let covered = covered_in_columns(&dir.path().join("slab.png"), 0, 480);
+    assert!(covered > 20000, "the model is not shown ({covered} px): {err}");
+    let cached: Vec<_> = std::fs::read_dir(dir.path().join("cache")).unwrap().flatten().collect();
+    assert!(cached.iter().any(|e| e.file_name().to_string_lossy().starts_with("slab-")), "{cached:?}");
+    // Cached now: opened before the window, as a store.
+    let script = "view -y\nwait 8\nscreenshot again.png\n";
+    let dir = {
+        let again = dir;
+        let Some((again, out, err)) = xvfb_view(again, script, &["slab.ply", "--cache-dir", "cache"]) else {
+            return;
+        };
+        assert!(out.contains("using cached store") || err.contains("using cached store"), "{out}{err}");
+        assert!(!err.contains("opening slab.ply"), "{err}");
+        again
+    };
+    assert_eq!(covered_in_columns(&dir.path().join("again.png"), 0, 480), covered);
+}
+
+/// Options that need a scene's coordinates are refused without a file, before any window.
+#[test]
+fn view_with_no_file_refuses_a_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = terawalk(&["view", "--camera", "0,0,0;1,0,0;0,0,1;60"], dir.path());
+    assert_clean_error(&o, "--camera needs a FILE to view");
+    let o = terawalk(&["view", "--play"], dir.path());
+    assert_clean_error(&o, "--play needs --path FILE");
 }
