@@ -33,6 +33,11 @@
 //! ended draws the new scene (or the old one, with the error shown, when the open failed), and
 //! the steps after `wait-open` come in the frame after that one.
 //!
+//! Before any scene is open (`terawalk view` with no file, or a model still building): `open`,
+//! `drop`, `press` (Ctrl+O, Esc), `resize`, `screenshot-window` and the waits act; `screenshot`
+//! is said not to be taken (there is no scene image), and the steps that need a scene
+//! (`click`, `view`, `look`, …) are said to do nothing.
+//!
 //! Minimising: a window system minimises a window asynchronously and differently (Windows sends
 //! a zero size; X11 without a window manager ignores the request), so `minimize` both asks the
 //! window system and takes the viewer through its zero-size path, the one a zero-sized
