@@ -70,7 +70,7 @@ fn progress_window(ctx: &egui::Context, job: &JobView, actions: &mut Vec<OpenAct
             if ui.button("Cancel").clicked() {
                 actions.push(OpenAction::Cancel);
             }
-            ui.small("A build cannot be stopped halfway: Cancel keeps this scene, and the build ends in the background into the cache.");
+            ui.small("A build cannot be stopped halfway: Cancel stops waiting (the scene shown stays), and the build ends in the background into the cache.");
         });
 }
 
@@ -85,7 +85,7 @@ fn failure_window(ctx: &egui::Context, opening: &mut Opening) {
         .show(ctx, |ui| {
             ui.strong(f.path.display().to_string());
             ui.colored_label(Color32::from_rgb(255, 110, 100), f.error.as_str());
-            ui.label("The scene shown is the one before.");
+            ui.label("The scene shown (if any) is the one before.");
             dismissed = ui.button("OK").clicked();
         });
     if dismissed {
