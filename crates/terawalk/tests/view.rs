@@ -830,3 +830,32 @@ fn view_with_no_file_refuses_a_camera() {
     let o = terawalk(&["view", "--play"], dir.path());
     assert_clean_error(&o, "--play needs --path FILE");
 }
+
+/// `--screenshot` at the end of a run that opened no scene: a clear error (exit 1), no panic.
+#[test]
+fn a_screenshot_without_a_scene_is_a_clear_error() {
+    let _one = XVFB.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(xvfb_run) = which("xvfb-run") else {
+        assert!(!require_gpu(), "TERAWALK_REQUIRE_GPU is set but xvfb-run is missing");
+        return;
+    };
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join("script.txt"), "wait 2\n").unwrap();
+    let mut cmd = Command::new(xvfb_run);
+    cmd.args(["-a", "-s", "-screen 0 1024x768x24", env!("CARGO_BIN_EXE_terawalk"), "view"])
+        .args(["--size", "320x240", "--script", "script.txt", "--screenshot", "end.png"])
+        .current_dir(dir.path())
+        .env("WGPU_BACKEND", "vulkan");
+    let lvp = Path::new("/usr/share/vulkan/icd.d/lvp_icd.x86_64.json");
+    if std::env::var_os("VK_ICD_FILENAMES").is_none() && lvp.exists() {
+        cmd.env("VK_ICD_FILENAMES", lvp);
+    }
+    let o = run_with_timeout(cmd, Duration::from_secs(120)).expect("the viewer did not exit in time");
+    let err = text(&o.stderr);
+    if err.contains("no GPU adapter") || err.contains("cannot open a window") {
+        assert!(!require_gpu(), "{err}");
+        return;
+    }
+    assert_clean_error(&o, "no scene was opened: nothing to write to end.png");
+    assert!(!dir.path().join("end.png").exists());
+}
