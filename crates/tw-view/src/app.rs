@@ -20,6 +20,8 @@
 //!
 //! Opening another file (Ctrl+O's dialog, a file dropped on the window, the script's `open` and
 //! `drop`): [`switch`] starts it in the background and swaps the new scene in when it is ready.
+//! With no scene at the start (`terawalk view` with no file), [`empty`] runs the window until
+//! the first open ends, then hands it to [`App`].
 //!
 //! Ray tracing: G switches the renderer (raster / rt, [`crate::traced`]) and T the ray
 //! tracer's flashlight; while the camera stands still the ray-traced image gathers samples, and
