@@ -634,7 +634,7 @@ fn model_tree_search_select_and_isolate_under_xvfb() {
     let Some((dir, err)) = review_session(cubes_store(), script) else { return };
     let shot = |n: &str| dir.path().join(n);
     assert!(err.contains("model tree: 3 objects, made in "), "{err}");
-    assert!(err.contains("model tree: 1 of 3 objects match `IDD`"), "{err}");
+    assert!(err.contains("model tree: 1 of 3 objects match `IDD` ("), "{err}");
     assert!(
         message_after(&err, "picked ").starts_with("`middle` (id 1): 12 triangles, box (1.5000, "),
         "{err}"

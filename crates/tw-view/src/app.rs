@@ -423,9 +423,14 @@ impl App {
             TreeStep::Toggle => self.act(Action::ToggleTree),
             TreeStep::Search(q) => {
                 let Some(tree) = self.tree.as_mut() else { return };
+                let start = Instant::now();
                 tree.set_query(&q);
-                let (n, all) = (tree.rows().len(), tree.objects());
-                self.say(format!("model tree: {n} of {all} objects match `{q}`"));
+                let ms = start.elapsed().as_secs_f64() * 1e3;
+                let (n, all, searching) = (tree.rows().len(), tree.objects(), tree.is_searching());
+                self.say(match searching {
+                    true => format!("model tree: {n} of {all} objects match `{q}` ({ms:.1} ms)"),
+                    false => format!("model tree: all {all} objects, {n} rows shown"),
+                });
             }
             TreeStep::Select(target) => match self.tree_target(&target) {
                 Ok(id) => self.act(Action::SelectObject(id)),

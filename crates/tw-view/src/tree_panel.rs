@@ -2,10 +2,11 @@
 //! buttons (they act on the selected object, which is the picked one), and the rows of
 //! [`ModelTree`] in a virtualised list (`ScrollArea::show_rows`: only the rows on screen are
 //! laid out, whatever the number of objects). A click on a row selects its object as a pick in
-//! the scene would; the triangle before a group opens or closes it.
+//! the scene would; the `+` / `-` before a group (or its name) opens or closes it.
 
 use std::time::Instant;
 
+use crate::hud::count;
 use crate::model_tree::ModelTree;
 use crate::ui::Action;
 
@@ -69,9 +70,9 @@ fn header(ui: &mut egui::Ui, tree: &mut ModelTree, selected: Option<u32>, action
         tree.set_query(&query);
     }
     let shown = if tree.is_searching() {
-        format!("{} of {} objects match", tree.rows().len(), tree.objects())
+        format!("{} of {} objects match", count(tree.rows().len() as u64), count(tree.objects() as u64))
     } else {
-        format!("{} objects", tree.objects())
+        format!("{} objects", count(tree.objects() as u64))
     };
     ui.label(shown);
     ui.horizontal(|ui| {
@@ -111,7 +112,7 @@ fn rows(
                     ui.add_space(node.depth as f32 * 12.0);
                     if node.children.is_empty() {
                         ui.add_space(ui.spacing().icon_width);
-                    } else if ui.small_button(if tree.is_expanded(n) { "⏷" } else { "⏵" }).clicked() {
+                    } else if ui.small_button(if tree.is_expanded(n) { "-" } else { "+" }).clicked() {
                         toggled = Some(n);
                     }
                 }
