@@ -113,7 +113,9 @@ pub enum Command {
                             orbit around a point, F debug view, L freeze LOD, R record, P play, F12 screenshot, \
                             F1 help, Esc quit (first it clears a pick or measurement). Design review: click \
                             picks an object (name, id, triangles, box, point), H hide, I isolate, Shift+H show \
-                            all, M measure (two clicks, snaps to vertices), 4-9 axis views (+X -X +Y -Y +Z -Z), \
+                            all, M measure (two clicks, snaps to vertices, else edges), Shift+M measure to a \
+                            plane (a face, then points), Shift+T model tree (search, select, hide, isolate), \
+                            4-9 axis views (+X -X +Y -Y +Z -Z), \
                             0 iso, O orthographic, F11 fullscreen, Tab panels; named viewpoints in the Controls \
                             panel (saved to STORE.views.json). G raster / rt (ray traced), T flashlight (rt). \
                             Shadows (--light): J on/off, [ ] turn the sun, Shift+[ ] its elevation, U point \

@@ -541,6 +541,141 @@ fn pick_hide_isolate_and_measure_under_xvfb() {
     assert!(m.ends_with("snapped to a vertex"), "{m}");
 }
 
+/// Every text after `needle` in the viewer's messages, each up to the end of its line.
+fn messages_after<'a>(err: &'a str, needle: &str) -> Vec<&'a str> {
+    err.match_indices(needle)
+        .map(|(at, _)| err[at + needle.len()..].lines().next().unwrap_or_default())
+        .collect()
+}
+
+/// The first number of a message (a distance, a coordinate).
+fn leading_number(m: &str) -> f64 {
+    m.split_whitespace().next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("no number: {m}"))
+}
+
+/// The point `(x, y, z)` after "at " in a pick message.
+fn picked_point(m: &str) -> [f64; 3] {
+    let at = m.find("at (").unwrap_or_else(|| panic!("no point in {m}")) + 4;
+    let v: Vec<f64> = m[at..].split(')').next().unwrap().split(", ").map(|v| v.parse().unwrap()).collect();
+    [v[0], v[1], v[2]]
+}
+
+/// The covered box (x0, x1, y0, y1) of the pixels in columns `cols` of a screenshot.
+fn covered_box(png_file: &Path, cols: (usize, usize)) -> (usize, usize, usize, usize) {
+    let (px, w) = rgba(png_file);
+    let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
+    for (i, p) in px.chunks_exact(4).enumerate() {
+        let (x, y) = (i % w, i / w);
+        if (cols.0..cols.1).contains(&x) && p[..3] != [205, 218, 235] {
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
+        }
+    }
+    (x0, x1, y0, y1)
+}
+
+/// Measurement-yellow pixels (the line's colour, `MEASURE_COLOR`) in row `y` ± 1 between
+/// columns `x0..x1` of a window screenshot.
+fn yellow_in_row(png_file: &Path, y: usize, x0: usize, x1: usize) -> usize {
+    let (px, w) = rgba(png_file);
+    px.chunks_exact(4)
+        .enumerate()
+        .filter(|(i, p)| {
+            (y - 1..=y + 1).contains(&(i / w))
+                && (x0..x1).contains(&(i % w))
+                && p[0] > 200
+                && p[1] > 170
+                && p[2] < 120
+        })
+        .count()
+}
+
+#[test]
+fn edge_snapping_and_point_to_plane_measuring_under_xvfb() {
+    // `middle`'s front face from -y spans x 1.5..2.5 on y = 0 (found in a first picture). Clicks
+    // 2 pixels inside its left and right edges on one row land on the surface about 0.05 m short
+    // of each edge; measuring snaps them onto both edges: exactly 1 m. Then to a plane: the
+    // first click (from +x, the centre: `right`'s face x = 4) sets the plane, a click near
+    // `middle`'s left edge from -y is 2.5 m from it, the centre of `middle`'s face 2 m.
+    let Some((dir, _)) = review_session(cubes_store(), "view -y\nwait 8\nscreenshot front.png\n") else {
+        return;
+    };
+    let (x0, x1, y0, y1) = covered_box(&dir.path().join("front.png"), (200, 280));
+    let (xl, xr, row) = (x0 + 2, x1 - 2, (y0 + y1) / 2);
+    let script = format!(
+        "view -y\nwait 8\nclick {xl} {row}\nclick {xr} {row}\npress M\nclick {xl} {row}\nclick {xr} {row}\n\
+         press Tab\nwait 2\nscreenshot-window points.png\nwait 1\nmeasure plane\nview +x\nwait 8\n\
+         click 240 160\nview -y\nwait 8\nclick 240 160\nclick {xl} {row}\nwait 2\nscreenshot-window plane.png\n\
+         wait 1\n"
+    );
+    let Some((dir, err)) = review_session(cubes_store(), &script) else { return };
+    // Unsnapped, the clicks are on the surface, inside the edges.
+    let picks = messages_after(&err, "picked `middle` (id 1): 12 triangles, ");
+    assert_eq!(picks.len(), 2, "{err}");
+    let (l, r) = (picked_point(picks[0]), picked_point(picks[1]));
+    assert!(l[0] > 1.5 + 1e-3 && r[0] < 2.5 - 1e-3 && r[0] - l[0] < 0.99, "surface {l:?} {r:?}");
+    // Snapped onto both edges: 1 m to the model's precision (f32 on a 4 m scene).
+    let m = message_after(&err, "measure: distance ");
+    assert!(m.starts_with("1.0000 m from (1.5000, 0.0000, ") && m.ends_with("snapped to an edge"), "{m}");
+    assert!(err.contains("measure: first point (1.5000, 0.0000, "), "{err}");
+    // The line between them, yellow over the scene along the row.
+    assert!(yellow_in_row(&dir.path().join("points.png"), row, xl + 5, xr - 5) > (xr - xl) / 2, "no line");
+    // To the plane x = 4 through `right`'s face.
+    let plane = message_after(&err, "measure: plane through ");
+    assert!(plane.starts_with("(4.0000, ") && plane.contains("1.0000, 0.0000, 0.0000)"), "{plane}");
+    let d = messages_after(&err, "measure: distance to the plane ");
+    assert_eq!(d.len(), 2, "{err}");
+    assert!((leading_number(d[0]) - 2.0).abs() < 1e-3 && d[0].contains("to the foot (4.0000, "), "{}", d[0]);
+    assert!(
+        d[1].starts_with("2.5000 m from (1.5000, 0.0000, ") && d[1].ends_with("snapped to an edge"),
+        "{}",
+        d[1]
+    );
+    // The perpendicular from `middle`'s edge to the plane runs along the row, to `right`.
+    assert!(yellow_in_row(&dir.path().join("plane.png"), row, xl + 5, xr + 60) > 60, "no perpendicular");
+}
+
+#[test]
+fn model_tree_search_select_and_isolate_under_xvfb() {
+    // A search for "IDD" finds `middle` alone; selecting its row tints it as a pick does, and
+    // the tree's isolate leaves only its pixels. Then `right` by name (after show all).
+    let script = "view -y\nwait 8\nscreenshot front.png\ntree-search IDD\ntree-select row=1\nwait 3\n\
+                  screenshot selected.png\ntree-isolate\nwait 3\nscreenshot isolated.png\ntree-show-all\n\
+                  tree-search\ntree-select RIGHT\ntree-frame\nwait 6\nscreenshot framed.png\n\
+                  tree-select id=7\ntree-select row=9\nwait 1\n";
+    let Some((dir, err)) = review_session(cubes_store(), script) else { return };
+    let shot = |n: &str| dir.path().join(n);
+    assert!(err.contains("model tree: 3 objects, made in "), "{err}");
+    assert!(err.contains("model tree: 1 of 3 objects match `IDD` ("), "{err}");
+    assert!(
+        message_after(&err, "picked ").starts_with("`middle` (id 1): 12 triangles, box (1.5000, "),
+        "{err}"
+    );
+    let colour = |n: &str, x: usize, y: usize| {
+        let (px, w) = rgba(&shot(n));
+        let i = (y * w + x) * 4;
+        [px[i] as i32, px[i + 1] as i32, px[i + 2] as i32]
+    };
+    let tinted = |c: [i32; 3]| c[0] > c[2] + 60;
+    // `middle` tinted, `left` and `right` not.
+    assert!(tinted(colour("selected.png", 240, 160)), "{:?}", colour("selected.png", 240, 160));
+    assert!(!tinted(colour("selected.png", 135, 160)) && !tinted(colour("selected.png", 345, 160)));
+    assert!(!tinted(colour("front.png", 240, 160)));
+    let (left, mid, right) = ((0, 190), (200, 280), (290, 480));
+    let iso = shot("isolated.png");
+    assert_eq!(covered_in_columns(&iso, left.0, left.1) + covered_in_columns(&iso, right.0, right.1), 0);
+    assert!(covered_in_columns(&iso, mid.0, mid.1) > 1000);
+    // `right` by name, framed: it fills the middle of the picture, tinted.
+    assert!(err.contains("picked `right` (id 2)") && err.contains("framed `right` (object 2)"), "{err}");
+    assert!(tinted(colour("framed.png", 240, 160)), "{:?}", colour("framed.png", 240, 160));
+    assert!(coverage(&shot("framed.png")).0 > coverage(&shot("front.png")).0, "framing did not come closer");
+    // Bad targets are said, not fatal.
+    assert!(
+        err.contains("model tree: no object id=7") || err.contains("model tree: no object #7 (3 objects)"),
+        "{err}"
+    );
+    assert!(err.contains("model tree: row 9 is not an object (3 rows shown)"), "{err}");
+}
+
 #[test]
 fn preset_views_viewpoints_and_ortho_under_xvfb() {
     // The +x view differs from the starting one; a viewpoint saved in the iso view and recalled

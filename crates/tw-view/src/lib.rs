@@ -10,9 +10,13 @@
 //! - [`hud`]: fps, frame-time graph, disk throughput and the HUD's figures;
 //! - [`debug_view`]: the third-person debug view's geometry (frustum, node boxes, projection);
 //! - [`pick`]: CPU ray casting for the orbit pivot, walk mode's ground, picking objects and
-//!   measuring (snapping to a vertex);
+//!   measuring;
+//! - [`model_tree`]: the objects as a tree (names with `/` paths) or a list, and its search;
+//! - [`tree_panel`]: the model tree's window (virtualised rows);
+//! - [`measure_draw`]: the measurements' lines over the scene (the plane's outline, crosses);
+//! - [`snap`]: a measurement point snapped to the picked triangle's vertex or edge on the screen;
 //! - [`review`]: design-review state: hidden / isolated objects, the picked object, the
-//!   point-to-point measurement;
+//!   point-to-point and point-to-plane measurements;
 //! - [`viewpoints`]: the axis and isometric preset views, named viewpoints saved next to the
 //!   store;
 //! - [`recorder`]: camera path recording and playback (the `path`/`bench` JSON format);
@@ -42,6 +46,8 @@ pub mod error;
 pub mod fullscreen;
 pub mod gfx;
 pub mod hud;
+pub mod measure_draw;
+pub mod model_tree;
 pub mod open_ui;
 pub mod opening;
 pub mod pick;
@@ -51,7 +57,9 @@ pub mod review;
 pub mod scene;
 pub mod script;
 pub mod settings;
+pub mod snap;
 pub mod traced;
+pub mod tree_panel;
 pub mod ui;
 pub mod viewpoints;
 

@@ -1,8 +1,9 @@
 //! Picking by ray casting on the CPU, plain data: the ray through a pixel of a camera, ray–box
 //! and ray–triangle (Möller–Trumbore) tests, and [`pick_clusters`], the nearest hit among the
 //! clusters a frame drew (cluster boxes first), [`pick_triangle`], the same with the hit
-//! triangle's object and corners, and [`snap_to_vertex`]. The viewer uses it for the orbit pivot
-//! (a clicked point), the ground below the eye in walk mode, picking objects and measuring.
+//! triangle's object and corners (which [`crate::snap`] snaps measurement points to). The
+//! viewer uses it for the orbit pivot (a clicked point), the ground below the eye in walk mode,
+//! picking objects and measuring.
 
 use glam::Vec3;
 use tw_runtime::Camera;
@@ -81,7 +82,7 @@ pub fn pick_clusters<'a>(
 }
 
 /// A triangle hit by a ray: the distance along it, the triangle's input object id and its
-/// scene-space corners (for snapping to a vertex).
+/// scene-space corners (for snapping to a vertex or an edge).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TriangleHit {
     pub t: f32,
@@ -124,35 +125,6 @@ pub fn pick_triangle<'a>(
         }
     }
     best
-}
-
-/// Snaps `point` (on a picked triangle) to the nearest of the triangle's `corners` whose
-/// projection lies within `max_px` pixels of the point's on a `w` × `h` viewport seen through
-/// `view_projection`; returns the point unchanged when no corner is that close. Measuring
-/// between vertices is what people mean most of the time, and a click rarely lands on one
-/// exactly: a few pixels of tolerance, in screen space so it does not depend on the distance.
-pub fn snap_to_vertex(
-    point: Vec3,
-    corners: &[Vec3; 3],
-    view_projection: &glam::Mat4,
-    w: f32,
-    h: f32,
-    max_px: f32,
-) -> (Vec3, bool) {
-    let to_px = |p: Vec3| -> Option<glam::Vec2> {
-        let c = *view_projection * p.extend(1.0);
-        (c.w > 0.0).then(|| glam::Vec2::new((c.x / c.w * 0.5 + 0.5) * w, (0.5 - c.y / c.w * 0.5) * h))
-    };
-    let Some(at) = to_px(point) else { return (point, false) };
-    let nearest = corners
-        .iter()
-        .filter_map(|&c| to_px(c).map(|px| (c, px.distance(at))))
-        .filter(|(_, d)| d.is_finite() && *d <= max_px)
-        .min_by(|a, b| a.1.total_cmp(&b.1));
-    match nearest {
-        Some((c, _)) => (c, true),
-        None => (point, false),
-    }
 }
 
 #[cfg(test)]
@@ -203,23 +175,6 @@ mod tests {
         assert!((hit.t - 5.0).abs() < 1e-5);
         assert_eq!(hit.corners[1], Vec3::X);
         assert!(pick_triangle(&r, items, 1.0, 100.0, |o| o != 7).is_none());
-    }
-
-    #[test]
-    fn snapping_takes_the_nearest_vertex_within_the_pixel_radius() {
-        // Looking down -Z at the unit triangle from 5 units, 100 × 100 pixels, ~45° fov.
-        let cam = Camera::new(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y, 0.8, 0.1, 100.0).unwrap();
-        let vp = cam.view_projection(1.0);
-        let corners = [Vec3::ZERO, Vec3::X, Vec3::Y];
-        // 0.02 units from (1, 0, 0): about 0.5 px at this distance.
-        let (p, snapped) = snap_to_vertex(Vec3::new(0.98, 0.01, 0.0), &corners, &vp, 100.0, 100.0, 6.0);
-        assert!(snapped && p == Vec3::X, "{p}");
-        // The middle of the triangle is far from every corner: unchanged.
-        let mid = Vec3::new(0.3, 0.3, 0.0);
-        assert_eq!(snap_to_vertex(mid, &corners, &vp, 100.0, 100.0, 6.0), (mid, false));
-        // The same offset on a 10 000-pixel viewport is many pixels: not snapped.
-        let (_, far) = snap_to_vertex(Vec3::new(0.98, 0.01, 0.0), &corners, &vp, 1e4, 1e4, 6.0);
-        assert!(!far);
     }
 
     #[test]

@@ -26,6 +26,11 @@
 //! open model.ply       # open a file, as the open dialog's Enter (built in the background)
 //! drop scene.tw        # open a file as if dropped on the window (winit's DroppedFile)
 //! wait-open 600        # draw frames until the open finished, at most 600
+//! measure plane        # clicks measure: `point` (as M), `plane` (as Shift+M) or `off`
+//! tree                 # open / close the model tree (as Shift+T)
+//! tree-search pump 2   # search the object names (the rest of the line; none: the whole tree)
+//! tree-select middle   # select (pick) an object by name, `id=3` by id, `row=1` by row shown
+//! tree-isolate         # the tree's buttons: tree-hide, tree-isolate, tree-show-all, tree-frame
 //! ```
 //!
 //! `open` and `drop` start the open and go on at once (the build runs in the background while
@@ -38,6 +43,8 @@
 //! is said not to be taken (there is no scene image), and the steps that need a scene
 //! (`click`, `view`, `look`, …) are said to do nothing.
 //!
+//! The `tree-` steps open the model tree's window when it is closed.
+//!
 //! Minimising: a window system minimises a window asynchronously and differently (Windows sends
 //! a zero size; X11 without a window manager ignores the request), so `minimize` both asks the
 //! window system and takes the viewer through its zero-size path, the one a zero-sized
@@ -47,6 +54,7 @@ use std::path::{Path, PathBuf};
 
 use winit::keyboard::KeyCode;
 
+use crate::review::MeasureKind;
 use crate::viewpoints::Preset;
 
 /// One step of a script.
@@ -76,6 +84,33 @@ pub enum Step {
     WaitOpen(u32),
     /// A key pressed with Ctrl held (Ctrl+O: the open dialog).
     PressCtrl(KeyCode),
+    /// Measuring of a kind from a new measurement, or off (`None`).
+    Measure(Option<MeasureKind>),
+    /// The model tree's window, search, rows and buttons.
+    Tree(TreeStep),
+}
+
+/// A model tree step (`tree`, `tree-search`, `tree-select`, `tree-hide`…).
+#[derive(Clone, Debug, PartialEq)]
+pub enum TreeStep {
+    Toggle,
+    Search(String),
+    Select(TreeTarget),
+    Hide,
+    Isolate,
+    ShowAll,
+    Frame,
+}
+
+/// The object a `tree-select` names.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TreeTarget {
+    /// Its whole name (case-insensitive).
+    Name(String),
+    /// `id=N`: its id in the object table.
+    Id(u32),
+    /// `row=N`: the N-th row shown (from 1; after `tree-search`, the N-th match).
+    Row(usize),
 }
 
 impl Step {
@@ -268,11 +303,33 @@ impl StepLine<'_> {
                 self.want(1)?;
                 Step::WaitOpen(self.count(args[0])?)
             }
+            "measure" => {
+                self.want(1)?;
+                Step::Measure(self.measure_kind(args[0])?)
+            }
+            "tree" | "tree-hide" | "tree-isolate" | "tree-show-all" | "tree-frame" => {
+                self.want(0)?;
+                Step::Tree(match self.cmd.as_str() {
+                    "tree" => TreeStep::Toggle,
+                    "tree-hide" => TreeStep::Hide,
+                    "tree-isolate" => TreeStep::Isolate,
+                    "tree-show-all" => TreeStep::ShowAll,
+                    _ => TreeStep::Frame,
+                })
+            }
+            "tree-search" => Step::Tree(TreeStep::Search(args.join(" "))),
+            "tree-select" => {
+                if args.is_empty() {
+                    return Err(self.err("`tree-select` takes a name, id=N or row=N".into()));
+                }
+                Step::Tree(TreeStep::Select(self.tree_target(&args.join(" "))?))
+            }
             other => {
                 return Err(self.err(format!(
                     "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
                      save-view, load-view, resize, minimize, restore, screenshot, \
-                     screenshot-window, open, drop, wait-open)"
+                     screenshot-window, open, drop, wait-open, measure, tree, tree-search, tree-select, \
+                     tree-hide, tree-isolate, tree-show-all, tree-frame)"
                 )))
             }
         })
@@ -322,6 +379,33 @@ impl StepLine<'_> {
 
     fn preset(&self, s: &str) -> Result<Preset, ScriptError> {
         Preset::parse(s).ok_or_else(|| self.err(format!("unknown view `{s}` (+x -x +y -y +z -z iso)")))
+    }
+
+    /// `point`, `plane` or `off` (`None`).
+    fn measure_kind(&self, s: &str) -> Result<Option<MeasureKind>, ScriptError> {
+        if s.eq_ignore_ascii_case("off") {
+            return Ok(None);
+        }
+        MeasureKind::parse(s)
+            .map(Some)
+            .ok_or_else(|| self.err(format!("unknown measurement `{s}` (point, plane, off)")))
+    }
+
+    /// `id=N`, `row=N` (N from 1) or a name.
+    fn tree_target(&self, s: &str) -> Result<TreeTarget, ScriptError> {
+        let bad = |what: &str| self.err(format!("`{s}` is not {what}"));
+        if let Some(id) = s.strip_prefix("id=") {
+            return id.parse().map(TreeTarget::Id).map_err(|_| bad("an object id (id=N)"));
+        }
+        if let Some(row) = s.strip_prefix("row=") {
+            return row
+                .parse()
+                .ok()
+                .filter(|&r| r >= 1)
+                .map(TreeTarget::Row)
+                .ok_or_else(|| bad("a row (row=N, N ≥ 1)"));
+        }
+        Ok(TreeTarget::Name(s.to_string()))
     }
 
     /// A window size `WIDTHxHEIGHT`, each 1..=16384.
@@ -473,7 +557,9 @@ mod tests {
         let s = parse(
             "# a walk\nwait 3\nhold w 2  # forward\npress F1\nlook 10 -5\nscroll 2\nresize 320x200\n\
              minimize\nrestore\nscreenshot a.png\nscreenshot-window b.png\n\npress shift+H\n\
-             click 12 30.5\nview -Z\nview iso\nsave-view door\nload-view door\n",
+             click 12 30.5\nview -Z\nview iso\nsave-view door\nload-view door\nmeasure plane\n\
+             measure OFF\ntree\ntree-search pump  2\ntree-select Left Cube\ntree-select id=2\n\
+             tree-select row=1\ntree-isolate\ntree-hide\ntree-show-all\ntree-frame\ntree-search\n",
         )
         .unwrap();
         assert_eq!(
@@ -495,6 +581,18 @@ mod tests {
                 Step::View(Preset::Iso),
                 Step::SaveView("door".into()),
                 Step::LoadView("door".into()),
+                Step::Measure(Some(MeasureKind::Plane)),
+                Step::Measure(None),
+                Step::Tree(TreeStep::Toggle),
+                Step::Tree(TreeStep::Search("pump 2".into())),
+                Step::Tree(TreeStep::Select(TreeTarget::Name("Left Cube".into()))),
+                Step::Tree(TreeStep::Select(TreeTarget::Id(2))),
+                Step::Tree(TreeStep::Select(TreeTarget::Row(1))),
+                Step::Tree(TreeStep::Isolate),
+                Step::Tree(TreeStep::Hide),
+                Step::Tree(TreeStep::ShowAll),
+                Step::Tree(TreeStep::Frame),
+                Step::Tree(TreeStep::Search(String::new())),
             ]
         );
         assert_eq!(s.frames(), 6);
@@ -542,6 +640,11 @@ mod tests {
             ("view front", 1, "unknown view `front`"),
             ("press shift+nope", 1, "unknown key `nope`"),
             ("save-view", 1, "takes 1 argument"),
+            ("measure line", 1, "unknown measurement `line`"),
+            ("tree-select", 1, "takes a name, id=N or row=N"),
+            ("tree-select row=0", 1, "not a row"),
+            ("tree-select id=x", 1, "not an object id"),
+            ("tree x", 1, "takes 0 argument"),
         ] {
             let e = parse(text).unwrap_err().to_string();
             assert!(e.starts_with(&format!("s.txt:{line}: ")) && e.contains(needle), "{e}");

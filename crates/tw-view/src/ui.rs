@@ -45,6 +45,14 @@ pub enum Action {
     TogglePointLight,
     /// The point light moved to the eye.
     MovePointLight,
+    /// Shift+M: clicks measure from a plane (the first click's face) from now on.
+    TogglePlaneMeasure,
+    /// Shift+T: the model tree's window.
+    ToggleTree,
+    /// A model tree row: select (pick) this object.
+    SelectObject(u32),
+    /// Move the camera to see the picked object's box.
+    FramePicked,
 }
 
 /// A 2D line in window points with its colour.
@@ -73,6 +81,8 @@ pub struct View<'a> {
     /// The design-review lines of the HUD (pick, hidden objects, measurement).
     pub review: &'a [(String, String)],
     pub measuring: bool,
+    /// Measuring from a plane (Shift+M) rather than between points.
+    pub measuring_plane: bool,
     /// The store's named viewpoints.
     pub viewpoints: &'a [String],
 }
@@ -86,8 +96,10 @@ pub const HELP: &[(&str, &str)] = &[
     ("right click", "orbit around the clicked point"),
     ("left click", "pick an object: name, id, triangles, box, point (tinted orange)"),
     ("H / I", "hide / isolate the picked object"),
+    ("Shift+T", "model tree: search object names, select, hide / isolate / frame"),
     ("Shift+H", "show every object again"),
-    ("M", "measure: click two points (snaps to a vertex within 8 px)"),
+    ("M", "measure: click two points (snaps to a vertex, else an edge, within 8 px)"),
+    ("Shift+M", "measure to a plane: click a face for the plane, then points (perpendicular distance)"),
     ("4 5 / 6 7 / 8 9", "views from +X −X / +Y −Y / +Z −Z"),
     ("0", "isometric view"),
     ("O", "orthographic / perspective view (orbit zoom: view height)"),
@@ -160,9 +172,13 @@ pub fn draw(ctx: &egui::Context, settings: &mut Settings, view: &View) -> Vec<Ac
             });
     }
     if let Some(m) = view.message {
-        egui::Area::new(egui::Id::unique("terawalk message"))
+        // An area per message: a kept one keeps the width of the first message it showed, and
+        // longer ones then wrap into a narrow column over the middle of the scene.
+        egui::Area::new(egui::Id::unique(("terawalk message", m)))
             .anchor(egui::Align2::CENTER_BOTTOM, [0.0, -12.0])
+            .default_width((screen.width() - 24.0).max(100.0))
             .show(ctx, |ui| {
+                ui.set_max_width((screen.width() - 24.0).max(100.0));
                 egui::Frame::popup(ui.style()).show(ui, |ui| ui.label(m));
             });
     }
@@ -375,8 +391,14 @@ fn review(ui: &mut egui::Ui, view: &View, actions: &mut Vec<Action>) {
                 actions.push(a);
             }
         }
-        if ui.selectable_label(view.measuring, "measure (M)").clicked() {
+        if ui.selectable_label(view.measuring && !view.measuring_plane, "measure (M)").clicked() {
             actions.push(Action::ToggleMeasure);
+        }
+        if ui.selectable_label(view.measuring_plane, "to plane (Shift+M)").clicked() {
+            actions.push(Action::TogglePlaneMeasure);
+        }
+        if ui.button("tree (Shift+T)").clicked() {
+            actions.push(Action::ToggleTree);
         }
     });
     ui.horizontal(|ui| {

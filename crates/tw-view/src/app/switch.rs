@@ -1,9 +1,9 @@
 //! Switching the scene at run time: the open dialog, drag and drop and the script's `open` /
 //! `drop` steps start an open ([`crate::opening`]); when it finishes, the new store replaces the
 //! scene, and everything that belonged to the old one is reset (streamer and GPU pool, filter,
-//! pick, measurement, viewpoints, path, debug view), the camera goes to the new scene's start
-//! view (its iso preset) and the controller takes its units and up axis. A failed open leaves the
-//! scene as it was and shows why (the error window, and the message line).
+//! pick, measurement, the model tree, viewpoints, path, debug view), the camera goes to the new
+//! scene's start view (its iso preset) and the controller takes its units and up axis. A failed
+//! open leaves the scene as it was and shows why (the error window, and the message line).
 
 use std::path::{Path, PathBuf};
 
@@ -118,6 +118,11 @@ impl App {
         self.pick_lines.clear();
         self.measure = Measure::default();
         self.measuring = false;
+        self.plane = crate::review::PlaneMeasure::default();
+        self.snap = None;
+        // The tree lists the old store's objects: made again from the new one when next opened.
+        self.tree = None;
+        self.tree_panel = crate::tree_panel::TreePanel::default();
         self.viewpoints = None;
         self.drawn_key = None;
         self.disk = Throughput::default();
