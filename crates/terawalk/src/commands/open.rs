@@ -60,8 +60,8 @@ pub fn store_for(
 
 /// Whether opening `input` would build a store: a model file whose cached store is missing or
 /// unreadable (the viewer then opens its window at once and builds in the background, with
-/// its progress window). Bad options or an unreadable input are errors here, before any
-/// window.
+/// its progress window). An unreadable input or no cache folder is an error here, before
+/// any window.
 pub fn needs_build(input: &Path, up: Option<u8>, open: &OpenArgs) -> Result<bool> {
     if !is_model(input) {
         return Ok(false);
@@ -341,6 +341,30 @@ mod tests {
         assert_ne!(name(Some(1), &open("", 1 << 30)), name(Some(2), &open("", 1 << 30)));
         std::fs::write(&model, "ply\nmore\n").unwrap();
         assert_ne!(name(None, &open("", 1 << 30)), base, "a changed file rebuilds");
+    }
+
+    #[test]
+    fn only_a_model_missing_from_the_cache_needs_a_build() {
+        let dir = tempfile::tempdir().unwrap();
+        let (model, store) = (dir.path().join("m.ply"), dir.path().join("s.tw"));
+        std::fs::write(&model, "ply\n").unwrap();
+        std::fs::write(&store, b"TERAWALK\x02\0\0\0").unwrap();
+        let open = |units: &str| OpenArgs {
+            cache_dir: Some(dir.path().join("cache")),
+            cache_size: 1 << 30,
+            units: units.into(),
+            build_memory: 1 << 30,
+        };
+        assert!(needs_build(&model, None, &open("")).unwrap());
+        assert!(!needs_build(&store, None, &open("")).unwrap());
+        // A cache entry that is not a readable store is built again.
+        let cached = dir
+            .path()
+            .join("cache")
+            .join(cached_name(&model, &build_args(&model, None, &open("")).unwrap()).unwrap());
+        std::fs::create_dir_all(cached.parent().unwrap()).unwrap();
+        std::fs::write(&cached, "not a store").unwrap();
+        assert!(needs_build(&model, None, &open("")).unwrap());
     }
 
     #[test]
