@@ -5,8 +5,8 @@
 //! With no file the window opens empty, with the open dialog; with a model the cache lacks it
 //! opens at once and builds the model in the background, showing the build's progress (the
 //! viewer's opener, the one the open dialog uses), unless an option needs the store before the
-//! window (`--camera`, `--path`, `--light`): then it is built first, with the terminal's
-//! progress, as `render` does. A model whose file is missing is an error before the window.
+//! window (`--camera`, `--path`, `--light`) or `--exit-after` counts frames from the start:
+//! then it is built first, with the terminal's progress, as `render` does. A model whose file is missing is an error before the window.
 
 use std::path::Path;
 
@@ -47,7 +47,7 @@ enum Start<'a> {
 
 /// No file: an empty window (options that need a scene are refused); a model the cache lacks,
 /// with no option that reads its store before the window opens (`--camera`, `--path`,
-/// `--light`): its build in the window; else the store.
+/// `--light`) and no `--exit-after`: its build in the window; else the store.
 fn start(args: &ViewArgs) -> Result<Start<'_>> {
     let needs_store = [
         (args.camera.is_some(), "--camera"),
@@ -60,7 +60,10 @@ fn start(args: &ViewArgs) -> Result<Start<'_>> {
         }
         return Ok(Start::Empty);
     };
-    let in_window = file.exists() && !needs_store.iter().any(|(given, _)| *given);
+    // `--exit-after N` counts frames from the start, and cannot wait for a build as a
+    // script's `wait-open` does: the store is built first.
+    let in_window =
+        file.exists() && !needs_store.iter().any(|(given, _)| *given) && args.exit_after.is_none();
     if in_window && crate::commands::open::needs_build(file, args.up, &args.open)? {
         Ok(Start::Build(file))
     } else {
