@@ -892,7 +892,8 @@ fn view_with_no_file_starts_with_the_open_dialog_under_xvfb() {
     std::fs::copy(cubes_store(), dir.path().join("cubes.tw")).unwrap();
     // Without a scene frames are quick: egui's windows need some to fade in and out.
     let script = "wait 40\nscreenshot-window dialog.png\nwait 1\npress Escape\nwait 40\n\
-                  screenshot-window hint.png\nscreenshot early.png\nclick 240 160\nview -y\nwait 1\n\
+                  screenshot-window hint.png\nwait 1\nscreenshot early.png\nclick 240 160\nview -y\npress F12\n\
+                  press shift+F12\nwait 2\n\
                   open cubes.tw\nwait-open 2000\nview -y\nwait 8\nscreenshot cubes.png\n";
     let Some((dir, out, err)) = xvfb_view(dir, script, &[]) else { return };
     let shot = |n: &str| dir.path().join(n);
@@ -919,6 +920,13 @@ fn view_with_no_file_starts_with_the_open_dialog_under_xvfb() {
     assert!(!shot("early.png").exists());
     assert!(message_after(&err, "screenshot early.png").contains("no scene yet"), "{err}");
     assert!(err.contains("needs a scene"), "{err}");
+    assert!(err.contains("screenshot: no scene yet (open"), "F12: {err}");
+    // Shift+F12, the whole window, works without a scene.
+    let windows = std::fs::read_dir(dir.path()).unwrap().flatten();
+    assert!(
+        windows.into_iter().any(|e| e.file_name().to_string_lossy().starts_with("terawalk-window-")),
+        "{err}"
+    );
     // The store opened: the cubes show.
     assert!(err.contains("opened cubes.tw (36 triangles, 3 objects)"), "{err}");
     let covered = covered_in_columns(&shot("cubes.png"), 0, 480);

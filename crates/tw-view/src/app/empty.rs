@@ -120,7 +120,7 @@ pub(crate) struct Empty {
     win: Option<WindowState>,
     opening: Opening,
     script: Option<ScriptRunner>,
-    /// The modifier keys held (Ctrl+O).
+    /// The keys held (Ctrl+O, Shift+F12).
     keys: HashSet<KeyCode>,
     message: Option<(String, Instant)>,
     window_shot: Option<PathBuf>,
@@ -246,7 +246,8 @@ impl Empty {
     }
 
     /// The keys of the empty window: Ctrl+O the dialog, Esc closes it (or its error window),
-    /// else quits; the others need a scene.
+    /// else quits, Shift+F12 the window screenshot; F12 says there is no scene to take, and the
+    /// others need a scene.
     fn key(&mut self, code: KeyCode, pressed: bool, event_loop: &ActiveEventLoop) {
         if !pressed {
             self.keys.remove(&code);
@@ -262,6 +263,17 @@ impl Empty {
                 self.say("closed the open dialog (Esc again quits)".into());
             }
             KeyCode::Escape => event_loop.exit(),
+            KeyCode::F12
+                if self.keys.contains(&KeyCode::ShiftLeft) || self.keys.contains(&KeyCode::ShiftRight) =>
+            {
+                let secs = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .map(|d| d.as_secs())
+                    .unwrap_or(0);
+                let name = format!("terawalk-window-{secs}-{}.png", self.frames);
+                self.window_shot = Some(self.options.output_dir.join(name));
+            }
+            KeyCode::F12 => self.say("screenshot: no scene yet (open a model or store first)".into()),
             _ => {}
         }
     }
@@ -361,16 +373,9 @@ impl Empty {
         let steps = runner.next_frame();
         for step in steps.instant {
             match step {
-                Step::Press(k) | Step::PressShifted(k) => {
-                    self.key(k, true, event_loop);
-                    self.key(k, false, event_loop);
-                }
-                Step::PressCtrl(k) => {
-                    self.key(KeyCode::ControlLeft, true, event_loop);
-                    self.key(k, true, event_loop);
-                    self.key(k, false, event_loop);
-                    self.key(KeyCode::ControlLeft, false, event_loop);
-                }
+                Step::Press(k) => self.press(&[k], event_loop),
+                Step::PressShifted(k) => self.press(&[KeyCode::ShiftLeft, k], event_loop),
+                Step::PressCtrl(k) => self.press(&[KeyCode::ControlLeft, k], event_loop),
                 Step::Open(p) => self.open_file(&p),
                 Step::Drop(p) => self.open_file(&p),
                 Step::WindowScreenshot(p) => self.window_shot = Some(p),
@@ -395,6 +400,16 @@ impl Empty {
             }
         }
         steps.last
+    }
+
+    /// Presses `keys` in order and releases them in reverse (a key with its modifiers).
+    fn press(&mut self, keys: &[KeyCode], event_loop: &ActiveEventLoop) {
+        for k in keys {
+            self.key(*k, true, event_loop);
+        }
+        for k in keys.iter().rev() {
+            self.key(*k, false, event_loop);
+        }
     }
 
     /// Counts the frame; a scripted run ends after N frames or at its last step (a
