@@ -6,7 +6,9 @@
 //! opens at once and builds the model in the background, showing the build's progress (the
 //! viewer's opener, the one the open dialog uses), unless an option needs the store before the
 //! window (`--camera`, `--path`, `--light`) or `--exit-after` counts frames from the start:
-//! then it is built first, with the terminal's progress, as `render` does. A model whose file is missing is an error before the window.
+//! then it is built first, with the terminal's progress, as `render` does. A model whose file
+//! is missing is an error before the window. `--up`, `--units` and the cache options apply to
+//! every build, the first and those the open dialog starts.
 
 use std::path::Path;
 
