@@ -124,6 +124,7 @@ impl Runner<'_> {
             visible_pixels: o.visible_pixels,
             triangle_culling: !o.whole_clusters,
             shadows: if plan.shadowed { self.shadows } else { None },
+            section: Default::default(),
         }
     }
 

@@ -48,7 +48,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cache = PageCache::new(&store, 4 << 30);
     cache.load_root_pages(&store);
     let selector = Selector::new(&store);
-    let select = SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true };
+    let select =
+        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true, ..Default::default() };
     let (mut near, mut truth) = (Nearby::default(), Nearby::default());
     let mut scratch = Vec::new();
     let mut feet = cameras[0].eye - up * eye_height;

@@ -47,7 +47,8 @@ fn the_capsule_along_a_plant_walk_never_penetrates_the_full_detail_geometry() {
     let cache = PageCache::new(&store, 1 << 30);
     cache.load_root_pages(&store);
     let selector = Selector::new(&store);
-    let select = SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true };
+    let select =
+        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true, ..Default::default() };
     let full = full_detail(&store);
     let page = |p: u32| cache.get(&store, p).ok().map(|p: Arc<_>| p);
     let (mut near, mut truth) = (Nearby::default(), Nearby::default());

@@ -196,5 +196,5 @@ pub fn object_space_cut(
 
 /// The selection options `render` uses for `tau` and a viewport.
 pub fn render_options(tau: f32, viewport: [u32; 2]) -> SelectOptions {
-    SelectOptions { tau, viewport, frustum_culling: true }
+    SelectOptions { tau, viewport, frustum_culling: true, ..Default::default() }
 }

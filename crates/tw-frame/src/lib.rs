@@ -40,8 +40,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use tw_gpu::{ColorMode, GpuError, Image, PoolStats, Renderer, Target};
 use tw_runtime::{
-    Camera, ClusterRef, PageCache, ResidentPage, RuntimeError, SelectOptions, SelectStats, Selection,
-    StreamOptions, StreamStats, Streamer,
+    Camera, ClusterRef, PageCache, ResidentPage, RuntimeError, Section, SelectOptions, SelectStats,
+    Selection, StreamOptions, StreamStats, Streamer,
 };
 use tw_store::{PageCluster, Store};
 
@@ -70,6 +70,10 @@ pub struct FrameSettings {
     pub triangle_culling: bool,
     /// Shadows of a light (`--light`; [`shadow`]): `None` draws the unshadowed shading.
     pub shadows: Option<ShadowSettings>,
+    /// Section planes and box (scene space, [`tw_runtime::section`]): culled by every
+    /// selection of the frame (the eye's, the prefetch views', the shadow layers') and clipped
+    /// per fragment by every pass the renderer draws.
+    pub section: Section,
 }
 
 impl Default for FrameSettings {
@@ -82,6 +86,7 @@ impl Default for FrameSettings {
             visible_pixels: 0,
             triangle_culling: true,
             shadows: None,
+            section: Section::default(),
         }
     }
 }
@@ -370,7 +375,7 @@ impl Walkthrough {
         tau: f32,
     ) -> Result<ExactVisibility, FrameError> {
         let (w, h) = self.renderer.size();
-        let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true };
+        let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true, ..Default::default() };
         let selection = self.streamer.select_blocking(camera, &options);
         self.visible_in(camera, &selection)
     }
@@ -407,7 +412,8 @@ impl Walkthrough {
     /// from nothing.
     fn full_detail(&mut self, camera: &Camera) -> Selection {
         let (w, h) = self.renderer.size();
-        let options = SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false };
+        let options =
+            SelectOptions { tau: 0.0, viewport: [w, h], frustum_culling: false, ..Default::default() };
         self.streamer.select_blocking(camera, &options)
     }
 
@@ -481,8 +487,12 @@ fn select_and_stream(
     settings: &FrameSettings,
     (w, h): (u32, u32),
 ) -> Streamed {
-    let options =
-        SelectOptions { tau: settings.tau, viewport: [w, h], frustum_culling: settings.frustum_culling };
+    let options = SelectOptions {
+        tau: settings.tau,
+        viewport: [w, h],
+        frustum_culling: settings.frustum_culling,
+        section: settings.section,
+    };
     if settings.wait_for_pages {
         let stats;
         (*selection, stats) = streamer.frame_blocking(camera, &options);
@@ -596,6 +606,7 @@ impl Walkthrough {
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<DrawnFrame, FrameError> {
+        self.renderer.set_section(&settings.section);
         if settings.occlusion == Occlusion::GpuHzb {
             return self.draw_frame(camera, &FrameSettings { shadows: None, ..*settings });
         }
@@ -668,6 +679,7 @@ impl Walkthrough {
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<DrawnFrame, FrameError> {
+        self.renderer.set_section(&settings.section);
         let start = Instant::now();
         let store = self.streamer.store().clone();
         let Streamed { pages, stats: stream, times: stream_times } = select_and_stream(
@@ -688,6 +700,7 @@ impl Walkthrough {
                     tau: settings.tau,
                     viewport: [w, h],
                     frustum_culling: settings.frustum_culling,
+                    section: settings.section,
                 };
                 let receivers = shadow::receivers(settings.occlusion, &self.occlusion, &clusters);
                 let (info, layers) = shadow::prepare(

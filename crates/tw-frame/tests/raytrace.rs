@@ -57,7 +57,7 @@ fn agreement(store: Arc<Store>, cameras: &[Camera], what: &str) -> Option<Agreem
     let _lock = gpu_lock();
     let mut walk = common::walkthrough(store.clone(), wgpu::Backends::VULKAN, what, 256 << 20)?;
     let mut tracer = StoreTracer::new(&store, 256 << 20);
-    let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true };
+    let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true, ..Default::default() };
     let mut a = Agreement { worst_psnr: f64::INFINITY, ..Default::default() };
     for (i, camera) in cameras.iter().enumerate() {
         let selection = walk.streamer().select_blocking(camera, &options);

@@ -106,7 +106,8 @@ fn shadow_maps_are_drawn_at_the_eyes_lod() {
     };
     for camera in cameras(&store, PathPart::Walk, 30, 15) {
         let light = Light::default_sun(&camera);
-        let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false };
+        let options =
+            SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false, ..Default::default() };
         // The eye's cut without its frustum: every cluster the eye's LOD would draw anywhere.
         let eye: HashSet<_> =
             walk.streamer().select_blocking(&camera, &options).clusters.into_iter().collect();

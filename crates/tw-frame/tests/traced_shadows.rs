@@ -62,7 +62,8 @@ fn shadow_rays_meet_casters_outside_the_view() {
             blocked += image.rgba.chunks_exact(4).filter(|p| *p == SHADOW_BLOCKED).count();
 
             // The eye's own cut: the same surfaces, no more shadows.
-            let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true };
+            let options =
+                SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true, ..Default::default() };
             let selection = casters.streamer().select_blocking(camera, &options);
             let pages = SelectionPages::resolve(&store, casters.streamer().cache(), &selection.clusters);
             let eye_only = eye_tracer.trace(&pages, camera, (W, H), &settings);

@@ -56,7 +56,7 @@ fn main() {
     eprintln!("draw mode: {:?}", renderer.draw_mode());
     let cache = PageCache::new(&store, 1 << 30);
     cache.load_root_pages(&store);
-    let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true };
+    let options = SelectOptions { tau, viewport: [w, h], frustum_culling: true, ..Default::default() };
     let selection = Selector::new(&store).select(&store, &cache, &camera, &options);
     let mut warm = Vec::new();
     let mut image = None;

@@ -66,7 +66,12 @@ fn plant_cameras(store: &Store, n: usize) -> Vec<Camera> {
 
 fn select(store: &Store, cache: &PageCache, camera: &Camera, tau: f32) -> Vec<ClusterRef> {
     Selector::new(store)
-        .select(store, cache, camera, &SelectOptions { tau, viewport: [W, H], frustum_culling: true })
+        .select(
+            store,
+            cache,
+            camera,
+            &SelectOptions { tau, viewport: [W, H], frustum_culling: true, ..Default::default() },
+        )
         .clusters
 }
 

@@ -96,7 +96,7 @@ fn check_backend_with(
         &store,
         &cache,
         &camera,
-        &SelectOptions { tau: 0.0, viewport: [W, H], frustum_culling: true },
+        &SelectOptions { tau: 0.0, viewport: [W, H], frustum_culling: true, ..Default::default() },
     );
     assert!(selection.triangles > 0);
     renderer.set_store_colors(&store);
@@ -178,7 +178,7 @@ fn debug_color_modes_and_png() {
         &store,
         &cache,
         &camera,
-        &SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true },
+        &SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true, ..Default::default() },
     );
     let mut images: Vec<Image> = Vec::new();
     for mode in [ColorMode::Material, ColorMode::Object, ColorMode::Level, ColorMode::Cluster] {
@@ -212,7 +212,7 @@ fn highlight_tints_exactly_its_objects_pixels_in_every_mode() {
     let store = Store::open(plant_path()).unwrap();
     let (_, camera) = cameras(&store);
     let cache = PageCache::new(&store, 1 << 30);
-    let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true };
+    let options = SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: true, ..Default::default() };
     let selection = Selector::new(&store).select(&store, &cache, &camera, &options);
     let items = renderer.item_buffer_selection(&store, &cache, &camera, &selection).unwrap();
     let visible = items.visible();
@@ -262,7 +262,8 @@ fn bench_plant_1280x720() {
     let pc = tw_preview::Camera::frame_bounds(&bounds, [-0.55, -0.75, 0.55], [0.0, 0.0, 1.0], 1280.0 / 720.0);
     let camera = Camera::from_input_coordinates(pc.eye, pc.target, pc.up, pc.fovy_deg, h).unwrap();
     let cache = PageCache::new(&store, 1 << 30);
-    let options = SelectOptions { tau: 0.0, viewport: [1280, 720], frustum_culling: true };
+    let options =
+        SelectOptions { tau: 0.0, viewport: [1280, 720], frustum_culling: true, ..Default::default() };
     let selection = Selector::new(&store).select(&store, &cache, &camera, &options);
     let mut times = Vec::new();
     for _ in 0..11 {

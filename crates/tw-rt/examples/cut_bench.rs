@@ -90,7 +90,12 @@ fn cut_scene(store: &Arc<Store>, camera: &Camera, args: &Args) -> Result<(CutSce
     let options =
         StreamOptions { budget_bytes: args.memory_mib << 20, loader_threads: 0, ..Default::default() };
     let mut streamer = Streamer::new(store.clone(), options).map_err(|e| e.to_string())?;
-    let select = SelectOptions { tau: 1.0, viewport: [args.width, args.height], frustum_culling: true };
+    let select = SelectOptions {
+        tau: 1.0,
+        viewport: [args.width, args.height],
+        frustum_culling: true,
+        ..Default::default()
+    };
     let (selection, _) = streamer.frame_blocking(camera, &select);
     let mut pages = Vec::new();
     for c in &selection.clusters {

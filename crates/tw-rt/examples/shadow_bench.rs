@@ -141,8 +141,12 @@ fn cut(
     args: &Args,
     light: Option<Light>,
 ) -> Result<(Selection, Vec<(u32, Arc<ResidentPage>)>), String> {
-    let select =
-        SelectOptions { tau: 1.0, viewport: [args.width, args.height], frustum_culling: light.is_none() };
+    let select = SelectOptions {
+        tau: 1.0,
+        viewport: [args.width, args.height],
+        frustum_culling: light.is_none(),
+        ..Default::default()
+    };
     let (mut selection, _) = streamer.frame_blocking(camera, &select);
     let store = streamer.store().clone();
     let mut pages = Vec::new();

@@ -97,7 +97,8 @@ fn check_sequence(store: &Store, budget: u64, frames: usize, seed: u64) {
         let Ok(camera) = Camera::new(eye, eye + dir, Vec3::Z, 60f32.to_radians(), 0.01, 1e5) else {
             continue;
         };
-        let options = SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum };
+        let options =
+            SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum, ..Default::default() };
         let what = format!("frame {frame}: eye {eye}, dir {dir}, tau {tau}, frustum {frustum}");
         if frame % 10 == 9 {
             // The blocking mode (loads what it needs into both caches alike).

@@ -34,7 +34,7 @@ fn camera(eye: Vec3, target: Vec3) -> Camera {
 }
 
 fn opts(tau: f32) -> SelectOptions {
-    SelectOptions { tau, viewport: [1280, 720], frustum_culling: true }
+    SelectOptions { tau, viewport: [1280, 720], frustum_culling: true, ..Default::default() }
 }
 
 /// The eye's own view-projection as the selection computes it.

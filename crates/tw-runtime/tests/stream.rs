@@ -32,7 +32,7 @@ fn scene_sphere(store: &Store) -> (Vec3, f32) {
 }
 
 fn opts(tau: f32, frustum: bool) -> SelectOptions {
-    SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum }
+    SelectOptions { tau, viewport: [1280, 720], frustum_culling: frustum, ..Default::default() }
 }
 
 /// No loader threads, and τ kept as asked (the fit is tested on its own).

@@ -28,6 +28,8 @@
 //! says the light in the message line; the HUD's "shadows" line and the controls' "Shadows"
 //! section show the last shadow stage's figures.
 
+mod section;
+
 use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Instant;
@@ -128,6 +130,8 @@ pub(crate) struct App {
     viewpoints: Option<Viewpoints>,
     /// F11's fullscreen while on.
     fullscreen: Option<Fullscreen>,
+    /// The last clicked surface: point and unit normal (a section plane goes through it).
+    section_pick: Option<(glam::Vec3, glam::Vec3)>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -184,6 +188,7 @@ impl App {
             press_at: None,
             viewpoints: None,
             fullscreen: None,
+            section_pick: None,
             error: None,
             report: Default::default(),
         };
@@ -344,6 +349,7 @@ impl App {
                 self.say(format!("shadows: {}", self.light_text()));
             }
             Action::ToggleFullscreen => self.toggle_fullscreen(),
+            Action::Section(s) => self.section_step(s),
         }
     }
 
@@ -624,6 +630,8 @@ impl App {
             return;
         };
         let point = ray.at(hit.t);
+        let [a, b, c] = hit.corners;
+        self.section_pick = Some((point, (b - a).cross(c - a).normalize_or(-ray.dir)));
         let units = tw_store::units::unit_suffix(self.scene.units()).to_string();
         let at = |p: glam::Vec3| {
             let [x, y, z] = self.scene.input_position(p).map(format_distance);
@@ -762,6 +770,7 @@ impl App {
             return;
         }
         match code {
+            _ if self.section_key(code, shift) => {}
             KeyCode::Escape if self.measuring || self.picked.is_some() => {
                 self.measuring = false;
                 self.measure = Measure::default();
@@ -908,6 +917,7 @@ impl App {
                 // The scene as the last frame drew it (before this frame's steps act).
                 Step::Screenshot(p) => self.screenshot(&p),
                 Step::WindowScreenshot(p) => self.window_shot = Some(p),
+                Step::Section(s) => self.section_step(s),
                 Step::Wait(_) | Step::Hold(..) => unreachable!("frame steps are not instant"),
             }
         }
@@ -1232,6 +1242,7 @@ impl App {
         if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
             self.message = None;
         }
+        let scene_box = self.scene_box();
         let w = self.win.as_mut().expect("redraw checked the window");
         let raw = w.egui.take_egui_input(&w.window);
         let view = ui::View {
@@ -1250,6 +1261,7 @@ impl App {
             review,
             measuring: self.measuring,
             viewpoints,
+            scene_box,
         };
         let mut actions = Vec::new();
         let settings = &mut self.settings;

@@ -22,6 +22,15 @@
 //! restore
 //! screenshot a.png     # the scene image of the last frame drawn (as F12)
 //! screenshot-window b.png   # the whole window, HUD included (as Shift+F12)
+//! section-plane x 0.5  # a section plane across x at half the scene box, keeping +x (y, z too)
+//! section-plane picked # a plane through the last clicked surface, removing the eye's side
+//! section-flip 1       # plane 1 keeps its other side
+//! section-move 1 0.1   # plane 1 moves along its normal by 0.1 × the scene's diagonal
+//! section-remove 1     # plane 1 goes
+//! section-box 0 0 0 0.5 0.5 1   # a section box at these fractions of the scene box (min, max)
+//! section-box picked   # a section box around the picked object
+//! section-toggle       # the section off / on
+//! section-clear        # every plane and the box gone
 //! ```
 //!
 //! Minimising: a window system minimises a window asynchronously and differently (Windows sends
@@ -54,6 +63,8 @@ pub enum Step {
     Restore,
     Screenshot(PathBuf),
     WindowScreenshot(PathBuf),
+    /// `section-…`: a section step (crate::section_tool::parse_step).
+    Section(crate::section_tool::SectionStep),
 }
 
 impl Step {
@@ -228,6 +239,9 @@ impl StepLine<'_> {
             "screenshot-window" => {
                 self.want(1)?;
                 Step::WindowScreenshot(PathBuf::from(args[0]))
+            }
+            cmd if cmd.starts_with("section") => {
+                Step::Section(crate::section_tool::parse_step(cmd, args).map_err(|m| self.err(m))?)
             }
             other => {
                 return Err(self.err(format!(
