@@ -816,6 +816,8 @@ pub struct BenchArgs {
     pub popping: bool,
     #[command(flatten)]
     pub shadows: ShadowArgs,
+    #[command(flatten)]
+    pub section: SectionArgs,
 }
 
 /// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device

@@ -114,11 +114,6 @@ struct Frame {
 impl<'s> FrameRenderer<'s> {
     fn new(store: &'s Arc<Store>, args: &RenderArgs) -> Result<Self> {
         let section = args.section.section(store.header())?;
-        if !section.is_empty() && args.renderer == RendererChoice::Rt {
-            anyhow::bail!(
-                "--section and --section-box need --renderer raster (the ray tracer does not clip yet)"
-            );
-        }
         let backend = match args.renderer {
             RendererChoice::Raster if args.shadows.light.is_some() => {
                 let mut renderer = Renderer::new_headless(args.frame.size.0, args.frame.size.1)?;
@@ -154,6 +149,7 @@ impl<'s> FrameRenderer<'s> {
                 let settings = TraceSettings {
                     coloring: args.color.mode(),
                     flashlight: args.flashlight,
+                    section,
                     ..Default::default()
                 };
                 let (_, bvhs) = StoreTracer::budget_split(args.memory);
