@@ -51,7 +51,8 @@ fn plane_row(
     let p = &mut tool.planes[i];
     let n = glam::DVec3::from_array(p.normal);
     let corners = (0..8).map(|k| {
-        let pick = |a: usize, bit: usize| if (k >> bit) & 1 == 1 { scene.max[a] } else { scene.min[a] } as f64;
+        let pick =
+            |a: usize, bit: usize| if (k >> bit) & 1 == 1 { scene.max[a] } else { scene.min[a] } as f64;
         n.dot(glam::DVec3::new(pick(0, 0), pick(1, 1), pick(2, 2)))
     });
     let (lo, hi) = corners.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
