@@ -32,7 +32,8 @@ pub fn run(args: ViewArgs, quiet: bool) -> Result<()> {
     let header = store.header();
     let camera = start_camera(&args, header, path.as_ref())?;
     let shadows = shadow_controls(&args, header, &camera)?;
-    let settings = settings(&args, occlusion, shadows);
+    let mut settings = settings(&args, occlusion, shadows);
+    settings.section = tw_view::section_tool::SectionTool::from_section(&args.section.section(header)?);
     let title = args.store.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
     let mut scene = Scene::new(store, args.memory);
     scene.set_fit_memory(args.fit_memory)?;
