@@ -465,6 +465,8 @@ pub struct RenderArgs {
     #[command(flatten)]
     pub shadows: ShadowArgs,
     #[command(flatten)]
+    pub section: SectionArgs,
+    #[command(flatten)]
     pub open: OpenArgs,
 }
 
@@ -488,6 +490,29 @@ pub struct OpenArgs {
     /// Memory budget of the build (as `build --memory`).
     #[arg(long, default_value = "2G", value_parser = parse_bytes)]
     pub build_memory: u64,
+}
+
+/// Section planes and a section box (`render`, `view`, `bench`): the part of the scene on a
+/// removed side is neither selected nor drawn (tw_runtime::section).
+#[derive(Args, Debug, Clone, Default)]
+#[command(next_help_heading = "Section")]
+pub struct SectionArgs {
+    /// A section plane "NX,NY,NZ,D" in input coordinates: keeps the points p with n·p ≥ D
+    /// (e.g. "0,0,1,5" keeps z ≥ 5, "0,0,-1,-5" keeps z ≤ 5). Repeat for up to 6 planes.
+    #[arg(long = "section", value_name = "NX,NY,NZ,D", allow_hyphen_values = true, value_parser = tw_runtime::SectionPlane::parse)]
+    pub planes: Vec<tw_runtime::SectionPlane>,
+    /// A section box "X0,Y0,Z0;X1,Y1,Z1" in input coordinates (min and max corners): keeps
+    /// its inside.
+    #[arg(long, value_name = "X0,Y0,Z0;X1,Y1,Z1", allow_hyphen_values = true, value_parser = tw_runtime::SectionBox::parse)]
+    pub section_box: Option<tw_runtime::SectionBox>,
+}
+
+impl SectionArgs {
+    /// The section in the scene space of the store of `header` (an error for more than 6
+    /// planes).
+    pub fn section(&self, header: &tw_store::Header) -> anyhow::Result<tw_runtime::Section> {
+        Ok(tw_runtime::Section::to_scene(&self.planes, self.section_box, header.grid_origin)?)
+    }
 }
 
 /// Shadows of one light (`render`, `view`, `bench`): shadow maps drawn from the light-view sets
@@ -682,6 +707,8 @@ pub struct ViewArgs {
     #[command(flatten)]
     pub shadows: ShadowArgs,
     #[command(flatten)]
+    pub section: SectionArgs,
+    #[command(flatten)]
     pub open: OpenArgs,
 }
 
@@ -807,6 +834,8 @@ pub struct BenchArgs {
     pub popping: bool,
     #[command(flatten)]
     pub shadows: ShadowArgs,
+    #[command(flatten)]
+    pub section: SectionArgs,
 }
 
 /// An `--occlusion` value: a strategy, or `auto` (the fastest conservative one on the device

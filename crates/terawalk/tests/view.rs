@@ -10,6 +10,10 @@ use std::process::{Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
+// The shared helpers (only the wound cubes are used here).
+#[allow(dead_code)]
+mod common;
+
 fn terawalk(args: &[&str], dir: &Path) -> Output {
     Command::new(env!("CARGO_BIN_EXE_terawalk")).args(args).current_dir(dir).output().expect("runs")
 }
@@ -1001,4 +1005,75 @@ fn a_screenshot_without_a_scene_is_a_clear_error() {
     }
     assert_clean_error(&o, "no scene was opened: nothing to write to end.png");
     assert!(!dir.path().join("end.png").exists());
+}
+
+/// Three unit cubes as in [`cubes_store`] (`left`, `middle`, `right` at x 0, 1.5, 3), wound
+/// counter-clockwise seen from outside, as the section colour of back faces expects.
+fn wound_cubes_store() -> &'static Path {
+    static STORE: OnceLock<(tempfile::TempDir, PathBuf)> = OnceLock::new();
+    &STORE
+        .get_or_init(|| {
+            let dir = tempfile::tempdir().unwrap();
+            let obj = common::wound_cubes_obj(&[("left", 0.0), ("middle", 1.5), ("right", 3.0)]);
+            std::fs::write(dir.path().join("cubes.obj"), obj).unwrap();
+            let o = terawalk(&["-q", "build", "cubes.obj", "-o", "cubes.tw", "--units", "m"], dir.path());
+            assert!(o.status.success(), "{}", text(&o.stderr));
+            let p = dir.path().join("cubes.tw");
+            (dir, p)
+        })
+        .1
+}
+
+#[test]
+fn section_planes_and_box_under_xvfb() {
+    // From -y: `left` in columns ~90..180, `middle` ~200..280, `right` ~300..390. The scene box
+    // is x 0..4, so a plane at x fraction 0.5 is x = 2 (through `middle`) and a box to x
+    // fraction 0.3 (x ≤ 1.2) holds `left` only.
+    let script = "view -y\nwait 8\nscreenshot front.png\nsection-plane x 0.5\nwait 3\nscreenshot plane.png\n\
+                  section-flip 1\nwait 3\nscreenshot flipped.png\nsection-move 1 0.1\nwait 3\n\
+                  screenshot moved.png\nsection-toggle\nwait 3\nscreenshot off.png\nsection-toggle\n\
+                  section-clear\nsection-box 0 0 0 0.3 1 1\nwait 3\nscreenshot box.png\nsection-clear\n\
+                  wait 3\nclick 240 160\nsection-plane picked\nwait 3\nscreenshot picked.png\nsection-flip 3\n\
+                  section-clear\npress Escape\nwait 3\nscreenshot cleared.png\n";
+    let Some((dir, err)) = review_session(wound_cubes_store(), script) else { return };
+    let shot = |n: &str| dir.path().join(n);
+    let (px, w) = rgba(&shot("front.png"));
+    let same_in = |n: &str, x0: usize, x1: usize| {
+        let (q, _) = rgba(&shot(n));
+        px.chunks_exact(4)
+            .zip(q.chunks_exact(4))
+            .enumerate()
+            .all(|(i, (a, b))| !(x0..x1).contains(&(i % w)) || a == b)
+    };
+    let (left, right) = ((0, 190), (290, 480));
+    for (x0, x1) in [left, (200, 280), right] {
+        assert!(covered_in_columns(&shot("front.png"), x0, x1) > 1000, "columns {x0}..{x1} empty");
+    }
+    // x ≥ 2: `left` gone, `right` as before; flipped, x ≤ 2: the other way round.
+    assert_eq!(covered_in_columns(&shot("plane.png"), left.0, left.1), 0);
+    assert!(same_in("plane.png", right.0, right.1), "right changed under the plane");
+    assert_eq!(covered_in_columns(&shot("flipped.png"), right.0, right.1), 0);
+    assert!(same_in("flipped.png", left.0, left.1), "left changed under the flipped plane");
+    // Moved by 0.1 × the diagonal (≈ 0.42 m) towards −x: x ≤ ~1.58 cuts most of `middle`.
+    let moved = covered_in_columns(&shot("moved.png"), 200, 280);
+    let flipped = covered_in_columns(&shot("flipped.png"), 200, 280);
+    assert!(moved < flipped, "moving the plane removed nothing: {moved} vs {flipped}");
+    // Off: the whole scene; the box keeps `left` only.
+    assert!(same_in("off.png", 0, w), "the section toggled off still cuts");
+    assert_eq!(covered_in_columns(&shot("box.png"), 200, 480), 0);
+    assert!(same_in("box.png", left.0, left.1));
+    // A plane through the picked front face of `middle` removes that face (and the eye's side
+    // of every cube): the centre pixel shows `middle`'s inside, the back wall in the section
+    // colour.
+    assert!(message_after(&err, "section: ").starts_with("plane 1 across x at 0.5"), "{err}");
+    assert!(err.contains("section: plane 1 through the picked point"), "{err}");
+    let (q, _) = rgba(&shot("picked.png"));
+    let i = (160 * w + 240) * 4;
+    let centre = [q[i] as i32, q[i + 1] as i32, q[i + 2] as i32];
+    assert!(
+        (centre[0] - 200).abs() <= 2 && (centre[1] - 30).abs() <= 2 && (centre[2] - 60).abs() <= 2,
+        "{centre:?}"
+    );
+    assert!(err.contains("section: no section plane 3 (there are 1)"), "{err}");
+    assert!(same_in("cleared.png", 0, w), "cleared (and the pick's tint with Esc), the scene is whole again");
 }

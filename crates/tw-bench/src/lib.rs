@@ -108,6 +108,7 @@ impl Bench {
             (Some(addr), None) => anyhow::bail!("cull server {addr}: no way to reach it was given"),
             (None, _) => None,
         };
+        let section = tw_runtime::Section::to_scene(&o.section_planes, o.section_box, header.grid_origin)?;
         let mut references = References::make(o, &mut walk, &frames, observer)?;
         let reference_records = std::mem::take(&mut references.records);
         let runner = Runner {
@@ -118,6 +119,7 @@ impl Bench {
             frames: &frames,
             references: &references,
             shadows,
+            section,
             image_frames: meta::image_frames(frames.cameras.len(), o.images),
             images: Vec::new(),
             net_lines: Vec::new(),

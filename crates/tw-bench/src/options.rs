@@ -51,6 +51,10 @@ pub struct BenchOptions {
     pub visible_pixels: u32,
     /// `hzb` without its per-triangle tests.
     pub whole_clusters: bool,
+    /// Section planes and box in input coordinates (`--section`, `--section-box`): every run
+    /// culls and clips by them (tw_runtime::section).
+    pub section_planes: Vec<tw_runtime::SectionPlane>,
+    pub section_box: Option<tw_runtime::SectionBox>,
     /// GPU budget of the resident cluster pool, bytes.
     pub gpu_memory: u64,
     /// Frames at the first camera before each run.

@@ -75,6 +75,8 @@ pub struct Runner<'a> {
     pub frames: &'a Frames,
     pub references: &'a References,
     pub shadows: Option<ShadowSettings>,
+    /// The section every run culls and clips by (scene space).
+    pub section: tw_runtime::Section,
     /// The frames of the first run embedded in the report as pictures.
     pub image_frames: Vec<usize>,
     pub images: Vec<ReportImage>,
@@ -124,6 +126,7 @@ impl Runner<'_> {
             visible_pixels: o.visible_pixels,
             triangle_culling: !o.whole_clusters,
             shadows: if plan.shadowed { self.shadows } else { None },
+            section: self.section,
         }
     }
 

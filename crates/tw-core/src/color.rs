@@ -49,6 +49,10 @@ pub const SHADOW_BLOCKED: [u8; 4] = [0, 0, 0, 255];
 /// [`ColorMode::Shadow`]: a surface facing away from the light (sRGB).
 pub const SHADOW_AWAY: [u8; 4] = [128, 128, 128, 255];
 
+/// The flat colour of the back faces a section reveals (sRGB; tw-gpu draw.wgsl `fs_main`): the
+/// inside of a cut solid reads as a cut, not as more surface.
+pub const SECTION: [u8; 4] = [200, 30, 60, 255];
+
 /// The picked object's tint (sRGB): its colour, in every colour mode, is drawn half-way to this
 /// orange ([`highlight`]).
 pub const HIGHLIGHT: [u8; 4] = [255, 140, 0, 255];

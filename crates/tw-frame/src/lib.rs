@@ -40,8 +40,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use tw_gpu::{ColorMode, GpuError, Image, PoolStats, Renderer, Target};
 use tw_runtime::{
-    Camera, ClusterRef, PageCache, ResidentPage, RuntimeError, SelectOptions, SelectStats, Selection,
-    StreamOptions, StreamStats, Streamer,
+    Camera, ClusterRef, PageCache, ResidentPage, RuntimeError, Section, SelectOptions, SelectStats,
+    Selection, StreamOptions, StreamStats, Streamer,
 };
 use tw_store::{PageCluster, Store};
 
@@ -70,6 +70,10 @@ pub struct FrameSettings {
     pub triangle_culling: bool,
     /// Shadows of a light (`--light`; [`shadow`]): `None` draws the unshadowed shading.
     pub shadows: Option<ShadowSettings>,
+    /// Section planes and box (scene space, [`tw_runtime::section`]): culled by every
+    /// selection of the frame (the eye's, the prefetch views', the shadow layers') and clipped
+    /// per fragment by every pass the renderer draws.
+    pub section: Section,
 }
 
 impl Default for FrameSettings {
@@ -82,6 +86,7 @@ impl Default for FrameSettings {
             visible_pixels: 0,
             triangle_culling: true,
             shadows: None,
+            section: Section::default(),
         }
     }
 }
@@ -532,13 +537,20 @@ fn select_and_stream_lod(
     }
 }
 
-/// The selection options of a frame: its τ, viewport and frustum culling, and a light's LOD.
+/// The selection options of a frame: its τ, viewport, frustum culling and section, and a light's
+/// LOD.
 fn select_options(
     settings: &FrameSettings,
     viewport: [u32; 2],
     light_lod: Option<tw_runtime::shadow::LightLod>,
 ) -> SelectOptions {
-    SelectOptions { tau: settings.tau, viewport, frustum_culling: settings.frustum_culling, light_lod }
+    SelectOptions {
+        tau: settings.tau,
+        viewport,
+        frustum_culling: settings.frustum_culling,
+        section: settings.section,
+        light_lod,
+    }
 }
 
 /// Loads the pages of `clusters[from..]` into `cache` in parallel, up to `pages` distinct ones
@@ -643,6 +655,7 @@ impl Walkthrough {
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<DrawnFrame, FrameError> {
+        self.renderer.set_section(&settings.section);
         if settings.occlusion == Occlusion::GpuHzb {
             return self.draw_frame(camera, &FrameSettings { shadows: None, ..*settings });
         }
@@ -715,6 +728,7 @@ impl Walkthrough {
         camera: &Camera,
         settings: &FrameSettings,
     ) -> Result<DrawnFrame, FrameError> {
+        self.renderer.set_section(&settings.section);
         let start = Instant::now();
         let store = self.streamer.store().clone();
         let light_lod = self.light_lod(camera, settings);

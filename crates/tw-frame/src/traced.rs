@@ -92,8 +92,11 @@ impl TracedWalkthrough {
         settings: &FrameSettings,
     ) -> Result<(Image, FrameInfo, TracedFrame), FrameError> {
         let start = Instant::now();
-        let trace =
-            TraceSettings { light: settings.shadows.map(|s| s.light).or(self.trace.light), ..self.trace };
+        let trace = TraceSettings {
+            light: settings.shadows.map(|s| s.light).or(self.trace.light),
+            section: settings.section,
+            ..self.trace
+        };
         let select_settings =
             FrameSettings { frustum_culling: settings.frustum_culling && trace.light.is_none(), ..*settings };
         let Streamed { pages, stats: stream, times: stream_times } =

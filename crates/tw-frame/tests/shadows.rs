@@ -161,8 +161,13 @@ fn the_finer_of_both_lods_refines_for_the_light_in_both_views() {
         finer_triangles += finer_info.cut_triangles;
         let shadows = walk.last_shadows().expect("the frame drew shadows").clone();
         let lod = LightLod::new(&shadows, camera, scene_box(store.header())).expect("layers");
-        let options =
-            SelectOptions { tau: 1.0, viewport: [W, H], frustum_culling: false, light_lod: Some(lod) };
+        let options = SelectOptions {
+            tau: 1.0,
+            viewport: [W, H],
+            frustum_culling: false,
+            light_lod: Some(lod),
+            ..Default::default()
+        };
         let eye_only = SelectOptions { light_lod: None, ..options };
         let finer = walk.streamer().select_blocking(camera, &options);
         let coarser = walk.streamer().select_blocking(camera, &eye_only);

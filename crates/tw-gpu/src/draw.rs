@@ -33,6 +33,8 @@ pub(crate) struct Uniforms {
     pub params: [u32; 4],
     /// xyz: unit direction from the view's target towards the eye (the headlight).
     pub headlight: [f32; 4],
+    /// The section's half-spaces (`tw_runtime::Section::clip_planes`; common.wgsl `clip`).
+    pub clip: [[f32; 4]; 12],
 }
 
 /// How a shaded pipeline lights its triangles.
@@ -61,8 +63,8 @@ pub(crate) struct LookupLayers {
     pub orthographic: bool,
 }
 
-/// What a shaded pipeline is made for: (format, samples, mode, shading).
-type ShadedKey = (wgpu::TextureFormat, u32, ColorMode, Shading);
+/// What a shaded pipeline is made for: (format, samples, mode, shading, section).
+type ShadedKey = (wgpu::TextureFormat, u32, ColorMode, Shading, bool);
 
 /// The pipelines and their layout.
 pub(crate) struct Pipelines {
@@ -73,11 +75,12 @@ pub(crate) struct Pipelines {
     shadowed_layout: wgpu::PipelineLayout,
     shade: wgpu::ShaderModule,
     shaded: Vec<(ShadedKey, wgpu::RenderPipeline)>,
-    /// The shadow map's depth-only pipeline.
-    shadow_depth: Option<wgpu::RenderPipeline>,
-    /// The eye's depth-only pipelines, by samples per pixel.
-    eye_depth: Vec<(u32, wgpu::RenderPipeline)>,
-    item: Option<wgpu::RenderPipeline>,
+    /// The shadow map's depth-only pipelines, without and with a section.
+    shadow_depth: [Option<wgpu::RenderPipeline>; 2],
+    /// The eye's depth-only pipelines, by samples per pixel and section.
+    eye_depth: Vec<((u32, bool), wgpu::RenderPipeline)>,
+    /// The item-buffer pipelines, without and with a section.
+    item: [Option<wgpu::RenderPipeline>; 2],
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
     pub primitive_index: bool,
 }
@@ -145,9 +148,9 @@ impl Pipelines {
             shadowed_layout,
             shade,
             shaded: Vec::new(),
-            shadow_depth: None,
+            shadow_depth: [None, None],
             eye_depth: Vec::new(),
-            item: None,
+            item: [None, None],
             primitive_index: device.features().contains(wgpu::Features::PRIMITIVE_INDEX),
         }
     }
@@ -165,21 +168,26 @@ impl Pipelines {
     /// mask): with one pipeline branching on the class, a 1280×720 pass of only `Lit` clusters
     /// took 76 ms against 34 ms unshadowed; with its own pipeline, 25–33 ms (tests/shadows.rs
     /// `bench_shadow_passes`, release, a busy 2-core machine).
+    ///
+    /// With `section`, the pipeline constant `SECTION` turns on the fragment stage's clip test
+    /// and the back faces' section colour (draw.wgsl `section_color`); without, no fragment
+    /// stage discards.
     pub fn shaded(
         &mut self,
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
         samples: u32,
-        mode: ColorMode,
-        shading: Shading,
+        (mode, shading): (ColorMode, Shading),
+        section: bool,
     ) -> &wgpu::RenderPipeline {
-        let key = (format, samples, mode, shading);
+        let key = (format, samples, mode, shading, section);
         let i = match self.shaded.iter().position(|(k, _)| *k == key) {
             Some(i) => i,
             None => {
                 let constants = [
                     ("COLOR_MODE", crate::color::mode_code(mode) as f64),
                     ("ENCODE_SRGB", if format.is_srgb() { 0.0 } else { 1.0 }),
+                    ("SECTION", if section { 1.0 } else { 0.0 }),
                 ];
                 let p = match shading {
                     Shading::Plain => pipeline(
@@ -187,7 +195,7 @@ impl Pipelines {
                         &self.layout,
                         &self.shade,
                         ("vs_shade", &constants),
-                        ("fs_main", &[]),
+                        ("fs_main", &constants),
                         format,
                         samples,
                     ),
@@ -196,7 +204,7 @@ impl Pipelines {
                         &self.shadowed_layout,
                         &self.shade,
                         ("vs_shadowed", &constants),
-                        ("fs_classified", &[]),
+                        ("fs_classified", &constants),
                         format,
                         samples,
                     ),
@@ -204,6 +212,7 @@ impl Pipelines {
                         let all = [
                             constants[0],
                             constants[1],
+                            constants[2],
                             ("SHADOW_LAYERS", layers.count as f64),
                             ("SHADOW_DISJOINT", if layers.disjoint { 1.0 } else { 0.0 }),
                             ("SHADOW_ORTHO", if layers.orthographic { 1.0 } else { 0.0 }),
@@ -226,9 +235,11 @@ impl Pipelines {
         &self.shaded[i].1
     }
 
-    /// The item-buffer pipeline ([`ITEM_FORMAT`]), created on first use.
-    pub fn item(&mut self, device: &wgpu::Device) -> &wgpu::RenderPipeline {
-        if self.item.is_none() {
+    /// The item-buffer pipeline ([`ITEM_FORMAT`]), created on first use; with `section` it
+    /// discards the removed fragments (ids.wgsl).
+    pub fn item(&mut self, device: &wgpu::Device, section: bool) -> &wgpu::RenderPipeline {
+        let slot = section as usize;
+        if self.item[slot].is_none() {
             let ids = if self.primitive_index {
                 include_str!("ids.wgsl")
                     .replace("PRIM_ARG", ", @builtin(primitive_index) prim: u32")
@@ -242,42 +253,45 @@ impl Pipelines {
                 label: Some("item buffer"),
                 source: wgpu::ShaderSource::Wgsl(source.into()),
             });
-            self.item = Some(pipeline(
+            let constants = [("SECTION", if section { 1.0 } else { 0.0 })];
+            self.item[slot] = Some(pipeline(
                 device,
                 &self.layout,
                 &module,
-                ("vs_main", &[]),
-                ("fs_items", &[]),
+                ("vs_main", &constants),
+                ("fs_items", &constants),
                 ITEM_FORMAT,
                 1,
             ));
         }
-        self.item.as_ref().expect("just created")
+        self.item[slot].as_ref().expect("just created")
     }
 
     /// The eye's depth-only pipeline at `samples` per pixel (shadow.wgsl `vs_depth` with the
     /// camera's uniforms, no fragment stage), created on first use: reverse-Z (`Greater`),
     /// both faces, no bias, as the shaded pipelines write depth. The occluder pass of the
     /// parallel pipelines (GigaWalk's OR renders depth only) draws with it.
-    pub fn eye_depth(&mut self, device: &wgpu::Device, samples: u32) -> &wgpu::RenderPipeline {
-        if let Some(i) = self.eye_depth.iter().position(|(s, _)| *s == samples) {
+    pub fn eye_depth(&mut self, device: &wgpu::Device, samples: u32, section: bool) -> &wgpu::RenderPipeline {
+        if let Some(i) = self.eye_depth.iter().position(|(k, _)| *k == (samples, section)) {
             return &self.eye_depth[i].1;
         }
         let depth = (wgpu::CompareFunction::Greater, Default::default());
-        let pipeline = depth_only(device, &self.layout, &self.shade, "eye depth", depth, samples);
-        self.eye_depth.push((samples, pipeline));
+        let pipeline = depth_only(device, &self.layout, &self.shade, ("eye depth", section), depth, samples);
+        self.eye_depth.push(((samples, section), pipeline));
         &self.eye_depth.last().expect("just pushed").1
     }
 
     /// The shadow map's depth-only pipeline (shadow.wgsl `vs_depth`, no fragment stage),
     /// created on first use: standard depth (`Less`, 0 nearest the light), both faces drawn,
     /// and [`SHADOW_DEPTH_BIAS`] so that a lit surface is not shadowed by itself.
-    pub fn shadow_depth(&mut self, device: &wgpu::Device) -> &wgpu::RenderPipeline {
-        if self.shadow_depth.is_none() {
+    pub fn shadow_depth(&mut self, device: &wgpu::Device, section: bool) -> &wgpu::RenderPipeline {
+        let slot = section as usize;
+        if self.shadow_depth[slot].is_none() {
             let depth = (wgpu::CompareFunction::Less, SHADOW_DEPTH_BIAS);
-            self.shadow_depth = Some(depth_only(device, &self.layout, &self.shade, "shadow map", depth, 1));
+            let label = ("shadow map", section);
+            self.shadow_depth[slot] = Some(depth_only(device, &self.layout, &self.shade, label, depth, 1));
         }
-        self.shadow_depth.as_ref().expect("just created")
+        self.shadow_depth[slot].as_ref().expect("just created")
     }
 }
 
@@ -294,7 +308,7 @@ pub(crate) const SHADOW_DEPTH_BIAS: wgpu::DepthBiasState =
 /// WGSL constants of [`ColorMode::Shadow`]'s mask colours and of the highlight's tint (sRGB,
 /// 0..1), from `tw_core::color`.
 fn color_constants() -> String {
-    use tw_core::color::{HIGHLIGHT, SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT};
+    use tw_core::color::{HIGHLIGHT, SECTION, SHADOW_AWAY, SHADOW_BLOCKED, SHADOW_LIT};
     let c = |name: &str, v: [u8; 4]| {
         let f = |b: u8| format!("{:?}", b as f32 / 255.0);
         format!("const {name}: vec3<f32> = vec3<f32>({}, {}, {});\n", f(v[0]), f(v[1]), f(v[2]))
@@ -303,15 +317,19 @@ fn color_constants() -> String {
         + &c("SHADOW_BLOCKED", SHADOW_BLOCKED)
         + &c("SHADOW_AWAY", SHADOW_AWAY)
         + &c("HIGHLIGHT", HIGHLIGHT)
+        + &c("SECTION_COLOR", SECTION)
 }
 
 /// A depth-only pipeline: shadow.wgsl's `vs_depth` (positions only, through `u.view_proj`), no
 /// fragment stage, both faces, depth written with `compare` and `bias`, at `samples` per pixel.
+/// With a section (`label.1`): common.wgsl's `vs_depth_world` and a fragment stage,
+/// `fs_depth_clip`, that discards the removed points, so that the depth the occlusion tests
+/// and the shadow lookups read holds only what is drawn.
 fn depth_only(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
-    label: &str,
+    (label, section): (&str, bool),
     (compare, bias): (wgpu::CompareFunction, wgpu::DepthBiasState),
     samples: u32,
 ) -> wgpu::RenderPipeline {
@@ -320,7 +338,7 @@ fn depth_only(
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some("vs_depth"),
+            entry_point: Some(if section { "vs_depth_world" } else { "vs_depth" }),
             compilation_options: Default::default(),
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: UNIT,
@@ -341,7 +359,15 @@ fn depth_only(
             bias,
         }),
         multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
-        fragment: None,
+        fragment: section.then(|| wgpu::FragmentState {
+            module,
+            entry_point: Some("fs_depth_clip"),
+            compilation_options: wgpu::PipelineCompilationOptions {
+                constants: &[("SECTION", 1.0)],
+                ..Default::default()
+            },
+            targets: &[],
+        }),
         multiview_mask: None,
         cache: None,
     })

@@ -86,6 +86,8 @@ fn mode_color(object: u32, slot: u32) -> vec3<f32> {
 struct ShadeOut {
     @builtin(position) clip: vec4<f32>,
     @location(0) @interpolate(flat) color: vec3<f32>,
+    // Scene space, for the section's clip test (read only where SECTION).
+    @location(1) world: vec3<f32>,
 };
 
 // The sRGB transfer function (IEC 61966-2-1), linear to encoded.
@@ -148,6 +150,7 @@ fn vs_shade(
 ) -> ShadeOut {
     var out: ShadeOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
+    out.world = position;
     let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let sun = max(dot(n, u.sun.xyz), 0.0);
@@ -169,7 +172,20 @@ fn vs_shade(
     return out;
 }
 
+// With a section: a fragment on a removed side is discarded, and a back face (the inside of a
+// cut solid, seen through the cut) is drawn in the flat SECTION_COLOR so that the cut reads.
+// Inputs that are not consistently wound show some back faces anyway; they get the colour too.
+fn section_color(color: vec3<f32>, world: vec3<f32>, front: bool) -> vec3<f32> {
+    if (section_removes(world)) {
+        discard;
+    }
+    return select(flat_srgb(SECTION_COLOR), color, front);
+}
+
 @fragment
-fn fs_main(in: ShadeOut) -> @location(0) vec4<f32> {
+fn fs_main(in: ShadeOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (SECTION) {
+        return vec4<f32>(section_color(in.color, in.world, front), 1.0);
+    }
     return vec4<f32>(in.color, 1.0);
 }

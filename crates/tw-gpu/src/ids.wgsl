@@ -5,5 +5,9 @@
 
 @fragment
 fn fs_items(in: VertexOut PRIM_ARG) -> @location(0) vec4<u32> {
+    // With a section, a removed point is no item (the CPU pick ignores it too, tw-view pick.rs).
+    if (SECTION && section_removes(in.world)) {
+        discard;
+    }
     return vec4<u32>(in.object, slots[in.slot].item, PRIM_VALUE, 1u);
 }

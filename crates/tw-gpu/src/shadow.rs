@@ -480,7 +480,9 @@ impl Renderer {
         samples: u32,
         shading: Shading,
     ) -> Result<(wgpu::RenderPipeline, Option<wgpu::BindGroup>), GpuError> {
-        let pipeline = self.pipelines.shaded(&self.device, format, samples, self.mode, shading).clone();
+        let section = self.sectioned();
+        let pipeline =
+            self.pipelines.shaded(&self.device, format, samples, (self.mode, shading), section).clone();
         if shading == Shading::Plain {
             return Ok((pipeline, None));
         }

@@ -60,6 +60,8 @@ struct ShadowedOut {
     @location(7) l3: vec4<f32>,
     @location(8) l4: vec4<f32>,
     @location(9) l5: vec4<f32>,
+    // Scene space, for the section's clip test (draw.wgsl `section_color`).
+    @location(10) world: vec3<f32>,
 };
 
 // The light clip position of `p` in layer `i` (zero past SHADOW_LAYERS).
@@ -116,6 +118,7 @@ fn vs_shadowed(
     var out: ShadowedOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
     out.eye_depth = dot(position - u.eye.xyz, su.view_dir.xyz);
+    out.world = position;
     out.l0 = layer_clip_of(0u, position);
     out.l1 = layer_clip_of(1u, position);
     out.l2 = layer_clip_of(2u, position);
@@ -249,12 +252,22 @@ fn light_reaches(in: ShadowedOut) -> bool {
 // Clusters the cross-culling classified (Lit, Shadowed): no lookup code at all (draw.rs,
 // `Shading::Classified`).
 @fragment
-fn fs_classified(in: ShadowedOut) -> @location(0) vec4<f32> {
-    return vec4<f32>(select(in.dark, in.lit, in.shadow_class == CLASS_LIT), 1.0);
+fn fs_classified(in: ShadowedOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    let c = select(in.dark, in.lit, in.shadow_class == CLASS_LIT);
+    if (SECTION) {
+        return vec4<f32>(section_color(c, in.world, front), 1.0);
+    }
+    return vec4<f32>(c, 1.0);
 }
 
 @fragment
-fn fs_shadowed(in: ShadowedOut) -> @location(0) vec4<f32> {
+fn fs_shadowed(in: ShadowedOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (SECTION && section_removes(in.world)) {
+        discard;
+    }
+    if (SECTION && !front) {
+        return vec4<f32>(flat_srgb(SECTION_COLOR), 1.0);
+    }
     var lit = in.shadow_class == CLASS_LIT;
     if (in.shadow_class == CLASS_PARTIAL) {
         lit = light_reaches(in);

@@ -108,7 +108,8 @@ fn cut_scene(store: &Arc<Store>, camera: &Camera, args: &Args) -> Result<(CutSce
     let held = SelectionPages::from_resident(&pages, &selection.clusters);
     let triangles = held.clusters().iter().map(|(_, c)| c.triangle_count() as u64).sum();
     let (clusters, _) = BlasCache::new(usize::MAX).prepare(&held, store.header().grid_step);
-    let clip = Clip { forward: camera.direction(), near: camera.near, far: camera.far };
+    let clip =
+        Clip { forward: camera.direction(), near: camera.near, far: camera.far, section: Default::default() };
     Ok((CutScene::build(clusters, clip), triangles))
 }
 

@@ -62,6 +62,7 @@ pub mod path;
 pub mod pathgen;
 pub mod prefetch;
 pub mod resolve;
+pub mod section;
 pub mod select;
 pub mod shadow;
 pub mod stream;
@@ -84,6 +85,7 @@ pub use pathgen::{
 };
 pub use prefetch::{prefetch_views, CameraHistory, PrefetchOptions};
 pub use resolve::SelectionPages;
+pub use section::{Section, SectionBox, SectionError, SectionPlane, MAX_SECTION_PLANES};
 pub use select::{ClusterRef, SelectOptions, SelectStats, Selection, Selector};
 pub use shadow::{ShadowClass, ShadowLayer, Shadows, TriangleClasses};
 pub use stream::{StreamFrame, StreamOptions, StreamStats, StreamTimes, Streamer};

@@ -25,6 +25,13 @@
 //! 4. **Clusters** of such a group are drawn when `proj(self_sphere, self_error) ≤ τ` (the
 //!    cluster is fine enough) and their vertex box is not outside the frustum.
 //!
+//! **Section** ([`SelectOptions::section`], [`crate::section`]): a node box, group sphere or
+//! cluster box that lies entirely on a removed side of a section plane, or outside the section
+//! box, is culled at steps 1, 3 and 4 exactly like a frustum miss (the same containment
+//! argument: nothing below it has a kept point), and counted apart
+//! ([`SelectStats::nodes_culled_section`] …). The renderer clips the rest per fragment, so
+//! culling only saves work, it never decides what shows.
+//!
 //! **Per step, not per cluster.** A cluster's LOD decision depends only on its *step* — its
 //! `(self_error, self_sphere)`, shared by the clusters one simplification made — and, when
 //! streaming, on the availability of that step's sources. So the decision is evaluated once per
@@ -92,6 +99,7 @@ use crate::cache::{ClusterInfo, PageCache, ResidentPage};
 use crate::camera::Camera;
 use crate::frustum::{grid_box, Frustum};
 use crate::lod_error::LodMetric;
+use crate::section::Section;
 use crate::shadow::LightLod;
 
 mod traversal;
@@ -112,11 +120,20 @@ pub struct SelectOptions {
     /// cut fine enough in both the eye's pixels and the light's texels
     /// ([`LodMetric::with_light`]). `None`, the default: the eye's LOD alone (method 2).
     pub light_lod: Option<LightLod>,
+    /// Section planes and box (scene space): what lies entirely on a removed side is culled
+    /// like a frustum miss, in every view (the eye's, the light's, the prefetch views).
+    pub section: Section,
 }
 
 impl Default for SelectOptions {
     fn default() -> Self {
-        SelectOptions { tau: 1.0, viewport: [1280, 720], frustum_culling: true, light_lod: None }
+        SelectOptions {
+            tau: 1.0,
+            viewport: [1280, 720],
+            frustum_culling: true,
+            light_lod: None,
+            section: Section::default(),
+        }
     }
 }
 
@@ -154,6 +171,14 @@ pub struct SelectStats {
     pub clusters_fallback: u64,
     /// Clusters of selected groups that were fine enough but outside the frustum.
     pub clusters_culled_frustum: u64,
+    /// Nodes skipped (with their subtrees) because their box lies entirely on a removed side
+    /// of the section ([`SelectOptions::section`]).
+    pub nodes_culled_section: u64,
+    /// Groups whose sphere lies entirely on a removed side of the section.
+    pub groups_culled_section: u64,
+    /// Clusters of selected groups, fine enough and in the frustum, whose box lies entirely on
+    /// a removed side of the section.
+    pub clusters_culled_section: u64,
     pub clusters_selected: u64,
     /// Distinct pages the selected groups live in.
     pub pages_touched: u64,
@@ -177,6 +202,8 @@ struct View {
     /// Whether `frustum` culls at all (`--frustum off` turns culling off in every view).
     cull: bool,
     tau: f64,
+    /// The section; culls only when not empty.
+    section: Section,
 }
 
 impl View {
@@ -194,6 +221,7 @@ impl View {
             frustum: Frustum::from_view_projection(view_proj),
             cull: options.frustum_culling,
             tau: options.tau as f64,
+            section: options.section,
         }
     }
 }

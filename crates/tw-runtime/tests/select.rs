@@ -522,3 +522,49 @@ fn bench_selection_1m_plant() {
         }
     }
 }
+
+/// A section (tw_runtime::section) only removes clusters, and exactly those it must: a cluster
+/// whose box lies wholly on a removed side is never selected, one whose box is wholly kept is
+/// selected as without the section, and the culling is counted.
+#[test]
+fn section_culls_the_clusters_wholly_removed() {
+    use tw_runtime::{frustum::grid_box, Section, SectionBox, SectionPlane};
+    let store = open(plant_path());
+    let cache = PageCache::new(&store, u64::MAX);
+    let h = store.header();
+    let (c, r) = scene_sphere(&store);
+    // Keep x ≥ the centre (a plane through the middle, in input coordinates) and a box around
+    // the centre of half the scene's radius.
+    let cx = c.x as f64 + h.grid_origin[0];
+    let plane = SectionPlane { normal: [1.0, 0.0, 0.0], offset: cx };
+    let half = (r * 0.5) as f64;
+    let centre = [0, 1, 2].map(|a| c[a] as f64 + h.grid_origin[a]);
+    let boxed = SectionBox { min: centre.map(|v| v - half), max: centre.map(|v| v + half) };
+    let section = Section::to_scene(&[plane], Some(boxed), h.grid_origin).unwrap();
+    let corners = |(lo, hi): (Vec3, Vec3)| {
+        (0..8).map(move |i| Vec3::new([lo.x, hi.x][i & 1], [lo.y, hi.y][(i >> 1) & 1], [lo.z, hi.z][i >> 2]))
+    };
+    let mut culled = 0;
+    for cam in cameras(&store) {
+        for tau in [0.0, 1.0] {
+            let whole = select(&store, &cache, &cam, opts(tau, true));
+            let cut = select(&store, &cache, &cam, SelectOptions { section, ..opts(tau, true) });
+            let kept: HashSet<(u32, u32)> = sorted(&cut).into_iter().collect();
+            for k in sorted(&whole) {
+                let page = cache.get(&store, k.0).unwrap();
+                let (cmin, cmax) = page.bounds[k.1 as usize];
+                let b = grid_box(cmin, cmax, h.grid_step);
+                if section.removes_box(b.0, b.1) {
+                    assert!(!kept.contains(&k), "tau {tau}: cluster {k:?} wholly removed but selected");
+                } else if corners(b).all(|p| section.keeps(p)) {
+                    assert!(kept.contains(&k), "tau {tau}: cluster {k:?} wholly kept but culled");
+                }
+            }
+            assert!(kept.iter().all(|k| whole.clusters.iter().any(|c| (c.page, c.index_in_page) == *k)));
+            let s = cut.stats;
+            culled += s.nodes_culled_section + s.groups_culled_section + s.clusters_culled_section;
+            assert!(cut.triangles <= whole.triangles);
+        }
+    }
+    assert!(culled > 0, "the section culled nothing");
+}

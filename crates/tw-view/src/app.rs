@@ -36,6 +36,8 @@
 //! says the light in the message line; the HUD's "shadows" line and the controls' "Shadows"
 //! section show the last shadow stage's figures.
 
+mod section;
+
 use std::collections::HashSet;
 use std::sync::Arc;
 use std::time::Instant;
@@ -158,6 +160,8 @@ pub(crate) struct App {
     /// Opening another file (dialog, drag and drop: [`crate::opening`]), and the file shown.
     opening: crate::opening::Opening,
     opened_file: std::path::PathBuf,
+    /// The last clicked surface: point and unit normal (a section plane goes through it).
+    section_pick: Option<(glam::Vec3, glam::Vec3)>,
     pub(crate) error: Option<ViewError>,
     pub(crate) report: crate::ViewReport,
 }
@@ -223,6 +227,7 @@ impl App {
             fullscreen: None,
             opening,
             opened_file,
+            section_pick: None,
             error: None,
             report: Default::default(),
         };
@@ -373,6 +378,7 @@ impl App {
             }
             Action::SelectObject(id) => self.pick_object(id, None),
             Action::FramePicked => self.frame_picked(),
+            Action::Section(s) => self.section_step(s),
         }
     }
 
@@ -771,6 +777,8 @@ impl App {
             return;
         };
         let point = ray.at(hit.t);
+        let [a, b, c] = hit.corners;
+        self.section_pick = Some((point, (b - a).cross(c - a).normalize_or(-ray.dir)));
         if self.measuring {
             let screen = Screen { view_projection: cam.view_projection(vw / vh.max(1.0)), w: vw, h: vh };
             self.measure_click(point, &hit, &screen);
@@ -980,6 +988,7 @@ impl App {
             return;
         }
         match code {
+            _ if self.section_key(code, shift) => {}
             KeyCode::Escape if self.opening.browser.is_some() || self.opening.failure.is_some() => {
                 self.opening.browser = None;
                 self.opening.failure = None;
@@ -1147,6 +1156,7 @@ impl App {
                 Step::Drop(p) => self.dropped(p),
                 Step::Measure(kind) => self.set_measure(kind),
                 Step::Tree(t) => self.tree_step(t),
+                Step::Section(s) => self.section_step(s),
                 Step::Wait(_) | Step::Hold(..) | Step::WaitOpen(_) => {
                     unreachable!("frame steps are not instant")
                 }
@@ -1491,6 +1501,7 @@ impl App {
         if self.message.as_ref().is_some_and(|(_, t)| t.elapsed().as_secs_f32() > 4.0) {
             self.message = None;
         }
+        let scene_box = self.scene_box();
         let w = self.win.as_mut().expect("redraw checked the window");
         let raw = w.egui.take_egui_input(&w.window);
         let view = ui::View {
@@ -1510,6 +1521,7 @@ impl App {
             measuring: self.measuring,
             measuring_plane: self.measuring && self.measure_kind == MeasureKind::Plane,
             viewpoints,
+            scene_box,
         };
         let (mut actions, mut opens) = (Vec::new(), Vec::new());
         let (settings, opening) = (&mut self.settings, &mut self.opening);

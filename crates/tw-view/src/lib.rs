@@ -56,6 +56,8 @@ pub mod recorder;
 pub mod review;
 pub mod scene;
 pub mod script;
+pub mod section_tool;
+pub mod section_ui;
 pub mod settings;
 pub mod snap;
 pub mod traced;

@@ -91,6 +91,8 @@ struct SelectKey {
     occlusion: tw_frame::Occlusion,
     /// Selected with objects hidden (without occlusion culling).
     filtered: bool,
+    /// The section it was culled by.
+    section: tw_runtime::Section,
 }
 
 /// Format of the scene's colour texture. The renderer's own target is `Rgba8Unorm` holding the
@@ -189,6 +191,8 @@ pub struct Scene {
     highlight: Option<u32>,
     /// Where named viewpoints are saved (default: next to the store).
     views_file: std::path::PathBuf,
+    /// The section of the last selected frame: the pick looks through what it removes.
+    section: tw_runtime::Section,
 }
 
 /// The resident pages of the `drawn` clusters, sorted by page number (pages no longer in
@@ -232,6 +236,7 @@ impl Scene {
             filter: ObjectFilter::default(),
             highlight: None,
             views_file,
+            section: Default::default(),
         }
     }
 
@@ -535,7 +540,9 @@ impl Scene {
             viewport: size,
             occlusion,
             filtered,
+            section: settings.section.section(),
         };
+        self.section = key.section;
         let shadows = settings.shadows.frame_settings(self.store.header(), self.up_axis, cull);
         let walk = self.walk.as_mut().ok_or_else(|| ViewError::Gpu("no walkthrough".into()))?;
         let fs = FrameSettings {
@@ -544,6 +551,7 @@ impl Scene {
             occlusion,
             wait_for_pages: false,
             shadows,
+            section: key.section,
             ..Default::default()
         };
         let d = walk.draw_frame(cull, &fs)?;
@@ -753,7 +761,16 @@ impl Scene {
             let (lo, hi) = page.bounds.get(r.index_in_page as usize)?;
             Some((tw_runtime::frustum::grid_box(*lo, *hi, step), c))
         });
-        pick_triangle(ray, items.collect::<Vec<_>>(), step, max_t, |o| self.filter.shows(o))
+        // With a section, the ray starts where it enters the kept part and ends where it
+        // leaves it: hits on a removed side are not seen, as the renderer does not draw them.
+        let (t0, t1) = self.section.ray_interval(ray.origin, ray.dir);
+        let (t0, t1) = (t0.max(0.0), t1.min(max_t));
+        if t0 > t1 {
+            return None;
+        }
+        let kept = Ray { origin: ray.at(t0), dir: ray.dir };
+        let hit = pick_triangle(&kept, items.collect::<Vec<_>>(), step, t1 - t0, |o| self.filter.shows(o))?;
+        Some(TriangleHit { t: hit.t + t0, ..hit })
     }
 
     /// The scene-space box of object `id`'s triangles in the current cut's resident clusters

@@ -31,6 +31,15 @@
 //! tree-search pump 2   # search the object names (the rest of the line; none: the whole tree)
 //! tree-select middle   # select (pick) an object by name, `id=3` by id, `row=1` by row shown
 //! tree-isolate         # the tree's buttons: tree-hide, tree-isolate, tree-show-all, tree-frame
+//! section-plane x 0.5  # a section plane across x at half the scene box, keeping +x (y, z too)
+//! section-plane picked # a plane through the last clicked surface, removing the eye's side
+//! section-flip 1       # plane 1 keeps its other side
+//! section-move 1 0.1   # plane 1 moves along its normal by 0.1 × the scene's diagonal
+//! section-remove 1     # plane 1 goes
+//! section-box 0 0 0 0.5 0.5 1   # a section box at these fractions of the scene box (min, max)
+//! section-box picked   # a section box around the picked object
+//! section-toggle       # the section off / on
+//! section-clear        # every plane and the box gone
 //! ```
 //!
 //! `open` and `drop` start the open and go on at once (the build runs in the background while
@@ -88,6 +97,8 @@ pub enum Step {
     Measure(Option<MeasureKind>),
     /// The model tree's window, search, rows and buttons.
     Tree(TreeStep),
+    /// `section-…`: a section step (crate::section_tool::parse_step).
+    Section(crate::section_tool::SectionStep),
 }
 
 /// A model tree step (`tree`, `tree-search`, `tree-select`, `tree-hide`…).
@@ -324,12 +335,16 @@ impl StepLine<'_> {
                 }
                 Step::Tree(TreeStep::Select(self.tree_target(&args.join(" "))?))
             }
+            cmd if cmd.starts_with("section") => {
+                Step::Section(crate::section_tool::parse_step(cmd, args).map_err(|m| self.err(m))?)
+            }
             other => {
                 return Err(self.err(format!(
                     "unknown step `{other}` (wait, hold, press, look, scroll, click, view, \
                      save-view, load-view, resize, minimize, restore, screenshot, \
                      screenshot-window, open, drop, wait-open, measure, tree, tree-search, tree-select, \
-                     tree-hide, tree-isolate, tree-show-all, tree-frame)"
+                     tree-hide, tree-isolate, tree-show-all, tree-frame, section-plane, section-flip, \
+                     section-move, section-remove, section-box, section-toggle, section-clear)"
                 )))
             }
         })

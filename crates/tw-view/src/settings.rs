@@ -327,6 +327,8 @@ pub struct Settings {
     pub show_help: bool,
     /// Shadows of one light (J, `[` `]`, U; `view --light`).
     pub shadows: ShadowControls,
+    /// Section planes and box (crate::section_tool): culled and clipped in every frame.
+    pub section: crate::section_tool::SectionTool,
 }
 
 impl Default for Settings {
@@ -348,6 +350,7 @@ impl Default for Settings {
             show_controls: true,
             show_help: false,
             shadows: ShadowControls::default(),
+            section: Default::default(),
         }
     }
 }

@@ -45,6 +45,8 @@ struct TraceKey {
     light: Option<Light>,
     size: [u32; 2],
     highlight: Option<u32>,
+    /// A new section starts a new mean.
+    section: tw_runtime::Section,
 }
 
 /// What one [`TracedScene::frame`] did.
@@ -101,6 +103,7 @@ impl TracedScene {
             light,
             size,
             highlight,
+            section: settings.section.section(),
         };
         if self.key.as_ref() != Some(&key) {
             self.mean.reset();
@@ -118,11 +121,13 @@ impl TracedScene {
             flashlight: settings.flashlight,
             subpixel: sample_position(position),
             light,
+            section: Default::default(),
         };
         let fs = FrameSettings {
             tau: settings.pixel_error,
             frustum_culling: settings.frustum_culling,
             wait_for_pages: false,
+            section: settings.section.section(),
             ..Default::default()
         };
         let (mut image, info, traced) = self.walk.frame(camera, &fs)?;

@@ -53,6 +53,8 @@ pub enum Action {
     SelectObject(u32),
     /// Move the camera to see the picked object's box.
     FramePicked,
+    /// A section step (the "Section" panel's buttons; crate::section_tool).
+    Section(crate::section_tool::SectionStep),
 }
 
 /// A 2D line in window points with its colour.
@@ -85,6 +87,8 @@ pub struct View<'a> {
     pub measuring_plane: bool,
     /// The store's named viewpoints.
     pub viewpoints: &'a [String],
+    /// The scene's box (the "Section" panel's slider ranges).
+    pub scene_box: crate::section_tool::SceneBox,
 }
 
 /// Keyboard help (F1).
@@ -124,6 +128,11 @@ pub const HELP: &[(&str, &str)] = &[
     ("Home", "back to the starting view"),
     ("F12", "screenshot of the 3D view (PNG); Shift+F12 the whole window"),
     ("F1", "this help"),
+    ("X / Shift+X", "section plane through the picked surface (removes the eye's side) / remove the last"),
+    ("V", "flip the last section plane"),
+    (", / .", "move the last section plane back / forward"),
+    ("B / Shift+B", "section box around the picked object (the scene when none) / no box"),
+    ("K / Shift+K", "section on / off; clear every plane and the box (the Section panel has sliders)"),
     (
         "Esc",
         "close the open dialog or its error; clear the pick and the measurement; quit when there is none",
@@ -280,6 +289,9 @@ fn controls(ui: &mut egui::Ui, s: &mut Settings, view: &View, actions: &mut Vec<
     egui::CollapsingHeader::new("Shadows (J)")
         .default_open(s.shadows.enabled)
         .show(ui, |ui| shadows(ui, &mut s.shadows, s.renderer, view, actions));
+    egui::CollapsingHeader::new("Section (K)")
+        .default_open(!s.section.planes.is_empty() || s.section.boxed.is_some())
+        .show(ui, |ui| crate::section_ui::panel(ui, &mut s.section, view.scene_box, actions));
     ui.separator();
     let mut debug = s.debug_view;
     if ui.checkbox(&mut debug, "third-person debug view (F)").changed() {

@@ -74,6 +74,8 @@ fn options(args: &BenchArgs) -> BenchOptions {
         fit_memory: args.fit_memory,
         visible_pixels: args.visible_pixels,
         whole_clusters: args.whole_clusters,
+        section_planes: args.section.planes.clone(),
+        section_box: args.section.section_box,
         gpu_memory: args.gpu_memory,
         warmup: args.warmup,
         images: args.images,

@@ -165,6 +165,7 @@ pub fn frame_of(r: &CameraRequest, server_occlusion: Occlusion) -> Result<(Camer
         visible_pixels: r.visible_pixels,
         triangle_culling: r.flags & CameraRequest::TRIANGLE_CULLING != 0,
         shadows: None,
+        section: Default::default(),
     };
     Ok((camera, settings))
 }
@@ -227,6 +228,7 @@ mod tests {
                 visible_pixels: 3,
                 triangle_culling: false,
                 shadows: None,
+                section: Default::default(),
             };
             let r = request_of(5, &camera, &settings, (640, 480));
             assert_eq!(frame_of(&r, Occlusion::None).unwrap(), (camera, settings));

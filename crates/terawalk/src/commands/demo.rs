@@ -163,5 +163,6 @@ fn bench_args(store: &Path, path_file: &Path, out: &Path) -> crate::cli::BenchAr
         flashlight: false,
         popping: false,
         shadows: crate::cli::ShadowArgs::default(),
+        section: crate::cli::SectionArgs::default(),
     }
 }

@@ -113,6 +113,7 @@ struct Frame {
 
 impl<'s> FrameRenderer<'s> {
     fn new(store: &'s Arc<Store>, args: &RenderArgs) -> Result<Self> {
+        let section = args.section.section(store.header())?;
         let backend = match args.renderer {
             RendererChoice::Raster if args.shadows.light.is_some() => {
                 let mut renderer = Renderer::new_headless(args.frame.size.0, args.frame.size.1)?;
@@ -129,6 +130,7 @@ impl<'s> FrameRenderer<'s> {
                 renderer.set_samples(args.frame.samples.resolve(&renderer))?;
                 renderer.set_store_colors(store);
                 renderer.set_color_mode(args.color.mode());
+                renderer.set_section(&section);
                 Backend::Raster(Box::new(renderer))
             }
             RendererChoice::Rt if args.shadows.light.is_some() => {
@@ -147,6 +149,7 @@ impl<'s> FrameRenderer<'s> {
                 let settings = TraceSettings {
                     coloring: args.color.mode(),
                     flashlight: args.flashlight,
+                    section,
                     ..Default::default()
                 };
                 let (_, bvhs) = StoreTracer::budget_split(args.memory);
@@ -171,6 +174,7 @@ impl<'s> FrameRenderer<'s> {
             tau: args.error,
             viewport: [args.frame.size.0, args.frame.size.1],
             frustum_culling: true,
+            section,
             ..Default::default()
         };
         Ok(FrameRenderer { store, backend, size: args.frame.size, cache, selector, options, up: args.up })
@@ -229,7 +233,13 @@ impl<'s> FrameRenderer<'s> {
 /// The frame pipeline's settings of `render` with `--light`: the cut at `--error`, every page
 /// loaded first, no occlusion culling (as the direct draws), with `shadows`.
 fn frame_settings(options: &SelectOptions, shadows: Option<tw_frame::ShadowSettings>) -> FrameSettings {
-    FrameSettings { tau: options.tau, wait_for_pages: true, shadows, ..Default::default() }
+    FrameSettings {
+        tau: options.tau,
+        wait_for_pages: true,
+        shadows,
+        section: options.section,
+        ..Default::default()
+    }
 }
 
 /// `-o FILE`: one frame from `--camera` (or the default overview), with the figures of its cut.
@@ -254,6 +264,15 @@ fn render_one(frame: &mut FrameRenderer, output: &Path, args: &RenderArgs) -> Re
         fmt_bytes(cs.resident_bytes),
         fmt_count(selection.stats.nodes_culled_frustum + selection.stats.groups_culled_frustum),
     );
+    if !frame.options.section.is_empty() {
+        let s = &selection.stats;
+        outln!(
+            "section: culled {} nodes, {} groups, {} clusters",
+            fmt_count(s.nodes_culled_section),
+            fmt_count(s.groups_culled_section),
+            fmt_count(s.clusters_culled_section),
+        );
+    }
     match (&frame.backend, traced) {
         (Backend::Raster(renderer), _) => print_raster_stats(renderer),
         (Backend::Shadowed(walk, _), _) => {

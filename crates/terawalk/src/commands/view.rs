@@ -5,7 +5,8 @@
 //! With no file the window opens empty, with the open dialog; with a model the cache lacks it
 //! opens at once and builds the model in the background, showing the build's progress (the
 //! viewer's opener, the one the open dialog uses), unless an option needs the store before the
-//! window (`--camera`, `--path`, `--light`) or `--exit-after` counts frames from the start:
+//! window (`--camera`, `--path`, `--light`, `--section`, `--section-box`: given in the model's
+//! coordinates) or `--exit-after` counts frames from the start:
 //! then it is built first, with the terminal's progress, as `render` does. A model whose file
 //! is missing is an error before the window. `--up`, `--units` and the cache options apply to
 //! every build, the first and those the open dialog starts.
@@ -49,12 +50,14 @@ enum Start<'a> {
 
 /// No file: an empty window (options that need a scene are refused); a model the cache lacks,
 /// with no option that reads its store before the window opens (`--camera`, `--path`,
-/// `--light`) and no `--exit-after`: its build in the window; else the store.
+/// `--light`, the section's) and no `--exit-after`: its build in the window; else the store.
 fn start(args: &ViewArgs) -> Result<Start<'_>> {
     let needs_store = [
         (args.camera.is_some(), "--camera"),
         (args.path.is_some(), "--path"),
         (args.shadows.light.is_some(), "--light"),
+        (!args.section.planes.is_empty(), "--section"),
+        (args.section.section_box.is_some(), "--section-box"),
     ];
     let Some(file) = args.store.as_deref() else {
         if let Some((_, name)) = needs_store.iter().find(|(given, _)| *given) {
@@ -88,12 +91,14 @@ fn run_on_store(
     let header = store.header();
     let camera = start_camera(args, header, path.as_ref())?;
     let shadows = shadow_controls(args, header, &camera)?;
+    let section = tw_view::section_tool::SectionTool::from_section(&args.section.section(header)?);
     let mut scene = Scene::new(store, args.memory);
     scene.set_fit_memory(args.fit_memory)?;
     if let Some(axis) = args.up {
         scene.set_up_axis(axis);
     }
-    let options = ViewOptions { path, ..view_options(args, camera, shadows, script, Some(file)) };
+    let mut options = ViewOptions { path, ..view_options(args, camera, shadows, script, Some(file)) };
+    options.settings.section = section;
     Ok(tw_view::run(scene, options)?)
 }
 

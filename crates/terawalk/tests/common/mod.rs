@@ -15,3 +15,32 @@ pub fn stdout(o: &Output) -> String {
 pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// An OBJ of unit cubes, one object per `(name, x0)` at x `x0..x0+1`, y and z `0..1`, every
+/// face wound counter-clockwise seen from outside (glTF's convention, which the section colour
+/// of back faces relies on: tw-gpu draw.wgsl `section_color`).
+#[allow(dead_code)] // Not every test binary uses every helper.
+pub fn wound_cubes_obj(cubes: &[(&str, f64)]) -> String {
+    let mut obj = String::new();
+    for (k, (name, x0)) in cubes.iter().enumerate() {
+        obj += &format!("o {name}\n");
+        for i in 0..8 {
+            obj += &format!("v {} {} {}\n", x0 + (i & 1) as f64, (i >> 1) & 1, (i >> 2) & 1);
+        }
+        for axis in 0..3 {
+            let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+            for side in 0..2 {
+                // Corners (0,0) (1,0) (1,1) (0,1) in the (b, c) plane turn around +axis.
+                let mut q: Vec<usize> = [(0, 0), (1, 0), (1, 1), (0, 1)]
+                    .iter()
+                    .map(|&(u, v)| k * 8 + 1 + (side << axis) + (u << b) + (v << c))
+                    .collect();
+                if side == 0 {
+                    q.reverse();
+                }
+                obj += &format!("f {} {} {}\nf {} {} {}\n", q[0], q[1], q[2], q[0], q[2], q[3]);
+            }
+        }
+    }
+    obj
+}

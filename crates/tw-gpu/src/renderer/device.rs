@@ -209,6 +209,7 @@ impl Renderer {
             object_colors,
             object_color_count: 0,
             highlight: None,
+            section: Default::default(),
             bind_group,
             bind_generation: pool.generation,
             pool,

@@ -115,6 +115,8 @@ pub struct Renderer {
     object_color_count: u32,
     /// The object drawn tinted ([`Renderer::set_highlight`]).
     highlight: Option<u32>,
+    /// The section every pass clips by ([`Renderer::set_section`]).
+    pub(crate) section: tw_runtime::Section,
     pub(crate) bind_group: wgpu::BindGroup,
     pub(crate) bind_generation: u64,
     pub(crate) pool: ClusterPool,
@@ -236,6 +238,20 @@ impl Renderer {
     /// `None` tints nothing. A viewer's picked object.
     pub fn set_highlight(&mut self, object: Option<u32>) {
         self.highlight = object.filter(|&o| o != u32::MAX);
+    }
+
+    /// Clips every later pass (colour, depth, item buffer, shadow map) by `section`: the
+    /// fragments on a removed side are discarded, and the back faces the cut reveals are drawn
+    /// in the flat `tw_core::color::SECTION` colour. An empty section (the default) clips
+    /// nothing and draws with the pipelines that have no clip test. The selection culls by the
+    /// same section (`tw_runtime::SelectOptions::section`); this makes the cut exact.
+    pub fn set_section(&mut self, section: &tw_runtime::Section) {
+        self.section = *section;
+    }
+
+    /// Whether the passes clip by a section.
+    pub(crate) fn sectioned(&self) -> bool {
+        !self.section.is_empty()
     }
 
     /// [`set_object_colors`](Self::set_object_colors) from the store's object table.

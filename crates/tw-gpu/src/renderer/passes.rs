@@ -344,8 +344,14 @@ impl Renderer {
                 self.highlight.unwrap_or(u32::MAX),
             ],
             headlight: camera.headlight().extend(0.0).to_array(),
+            clip: self.clip_planes(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
+    }
+
+    /// The section's half-spaces for the uniforms (common.wgsl `clip`).
+    fn clip_planes(&self) -> [[f32; 4]; 12] {
+        self.section.clip_planes().map(|p| p.to_array())
     }
 
     /// The draw shaders' uniforms for a shadow-map pass: only the transform matters to its
@@ -357,6 +363,7 @@ impl Renderer {
             sun: [0.0; 4],
             params: [0, self.object_color_count, color::pack(DEFAULT_COLOR), 0],
             headlight: [0.0; 4],
+            clip: self.clip_planes(),
         };
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
     }
@@ -620,9 +627,14 @@ impl Renderer {
                 let lookup = self.shaded_pipeline(format, samples, Shading::Lookup(layers))?;
                 (classified.clone(), Some(classified), Some(lookup))
             }
-            Kind::Items => ((self.pipelines.item(&self.device).clone(), None), None, None),
-            Kind::EyeDepth => ((self.pipelines.eye_depth(&self.device, samples).clone(), None), None, None),
-            Kind::ShadowMap => ((self.pipelines.shadow_depth(&self.device).clone(), None), None, None),
+            Kind::Items => ((self.pipelines.item(&self.device, self.sectioned()).clone(), None), None, None),
+            Kind::EyeDepth => {
+                let p = self.pipelines.eye_depth(&self.device, samples, self.sectioned()).clone();
+                ((p, None), None, None)
+            }
+            Kind::ShadowMap => {
+                ((self.pipelines.shadow_depth(&self.device, self.sectioned()).clone(), None), None, None)
+            }
         })
     }
 

@@ -45,12 +45,14 @@ pub struct CutScene {
 
 /// The rasterizer's near and far planes as limits on a ray's parameter: a point is drawn when
 /// its depth (distance along `forward` from the plane through the rays' origin) lies in
-/// `[near, far]`.
+/// `[near, far]` and the section keeps it (its kept part is convex, so a ray meets it in one
+/// interval, `tw_runtime::Section::ray_interval`: the first hit in it is the one drawn).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Clip {
     pub forward: Vec3,
     pub near: f32,
     pub far: f32,
+    pub section: tw_runtime::Section,
 }
 
 impl Clip {
@@ -60,9 +62,9 @@ impl Clip {
     pub fn for_view(camera: &tw_runtime::Camera) -> Clip {
         let forward = camera.direction();
         if camera.is_orthographic() {
-            Clip { forward, near: 0.0, far: camera.far - camera.near }
+            Clip { forward, near: 0.0, far: camera.far - camera.near, section: Default::default() }
         } else {
-            Clip { forward, near: camera.near, far: camera.far }
+            Clip { forward, near: camera.near, far: camera.far, section: Default::default() }
         }
     }
 
@@ -76,6 +78,7 @@ impl Clip {
         let mut r = *ray;
         r.t_min = r.t_min.max(self.near / along);
         r.t_max = r.t_max.min(self.far / along);
+        let r = section_limited(&self.section, r);
         (r.t_min < r.t_max).then_some(r)
     }
 
@@ -89,6 +92,16 @@ impl Clip {
         }
         out
     }
+}
+
+/// `ray` limited to where `section` keeps it (unchanged without a section).
+fn section_limited(section: &tw_runtime::Section, mut ray: Ray) -> Ray {
+    if !section.is_empty() {
+        let (t0, t1) = section.ray_interval(ray.origin, ray.dir);
+        ray.t_min = ray.t_min.max(t0);
+        ray.t_max = ray.t_max.min(t1);
+    }
+    ray
 }
 
 impl CutScene {
@@ -116,7 +129,11 @@ impl CutScene {
     /// Whether anything blocks `ray` within `[t_min, t_max)` (shadow rays; no clip planes: a
     /// light sees what the camera's planes cut away).
     pub fn occluded(&self, ray: &Ray) -> bool {
-        let mut r = *ray;
+        // What the section removes casts no shadow (the rasterizer clips its shadow maps too).
+        let mut r = section_limited(&self.clip.section, *ray);
+        if r.t_min >= r.t_max {
+            return false;
+        }
         self.tlas.traverse_any(&mut r, |c, r| self.clusters[c as usize].bvh.occluded(r))
     }
 
@@ -300,7 +317,8 @@ mod tests {
     fn packets_through_the_two_level_scene_equal_single_rays() {
         let mut rng = Rng::new(23);
         // Clip planes with a forward direction that part of the random rays point away from.
-        let clip = Clip { forward: Vec3::new(0.3, -0.2, 0.9).normalize(), near: 0.05, far: 3.0 };
+        let forward = Vec3::new(0.3, -0.2, 0.9).normalize();
+        let clip = Clip { forward, near: 0.05, far: 3.0, section: Default::default() };
         let (scene, corners) = random_scene(&mut rng, 400, clip);
         let rays = rays(&mut rng);
         let mut hit = 0;
@@ -332,7 +350,8 @@ mod tests {
         let eye = Vec3::new(0.4, -2.6, 0.7);
         let target = Vec3::ZERO;
         // The far plane cuts through the scene, so clipped lanes sit in packets with others.
-        let clip = Clip { forward: (target - eye).normalize(), near: 1.0, far: 2.8 };
+        let clip =
+            Clip { forward: (target - eye).normalize(), near: 1.0, far: 2.8, section: Default::default() };
         let (scene, _) = random_scene(&mut rng, 300, clip);
         let camera = Camera::look_at(eye, target, Vec3::Z, 1.0, 1.3);
         // 37 x 29: blocks at the right and bottom edges are partial packets.

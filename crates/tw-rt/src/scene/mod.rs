@@ -52,11 +52,20 @@ pub struct TraceSettings {
     /// multiplied by a shadow ray's verdict (the reference the rasterized shadow maps are
     /// checked against); `None`: the fixed, unshadowed sun.
     pub light: Option<Light>,
+    /// Section planes and box (scene space): primary rays see only what it keeps, and what it
+    /// removes casts no shadow ([`cut::Clip`]).
+    pub section: tw_runtime::Section,
 }
 
 impl Default for TraceSettings {
     fn default() -> Self {
-        TraceSettings { coloring: ColorMode::Material, flashlight: false, subpixel: [0.5, 0.5], light: None }
+        TraceSettings {
+            coloring: ColorMode::Material,
+            flashlight: false,
+            subpixel: [0.5, 0.5],
+            light: None,
+            section: Default::default(),
+        }
     }
 }
 
@@ -169,7 +178,7 @@ impl StoreTracer {
         let start = Instant::now();
         let entries: Vec<(ClusterRef, &PageCluster)> = pages.clusters();
         let keys: Vec<ClusterRef> = entries.iter().map(|(k, _)| *k).collect();
-        let clip = Clip::for_view(camera);
+        let clip = Clip { section: settings.section, ..Clip::for_view(camera) };
         let mut stats = TraceStats {
             clusters: entries.len(),
             triangles: entries.iter().map(|(_, c)| c.triangle_count() as u64).sum(),
@@ -413,7 +422,7 @@ mod tests {
 
     fn scene(clusters: &[PageCluster]) -> CutScene {
         let blas = clusters.iter().map(|c| Arc::new(ClusterBlas::build(c, 1.0))).collect();
-        let clip = Clip { forward: -Vec3::Z, near: 0.01, far: 1e6 };
+        let clip = Clip { forward: -Vec3::Z, near: 0.01, far: 1e6, section: Default::default() };
         CutScene::build(blas, clip)
     }
 
@@ -464,8 +473,10 @@ mod tests {
         assert_eq!((cluster, hit.t), (1, 5.0), "the nearer square, 5 below the eye");
         assert_eq!(triangle, 1, "(2, 7) lies in the square's second triangle");
         // Beyond the far plane nothing is hit, as nothing is drawn there.
-        let near_only =
-            CutScene::build(scene.clusters().to_vec(), Clip { forward: -Vec3::Z, near: 0.01, far: 4.0 });
+        let near_only = CutScene::build(
+            scene.clusters().to_vec(),
+            Clip { forward: -Vec3::Z, near: 0.01, far: 4.0, section: Default::default() },
+        );
         assert!(near_only.intersect(&ray).is_none());
     }
 

@@ -108,7 +108,7 @@ mod tests {
 
     fn scene(clusters: &[PageCluster], grid_step: f64) -> CutScene {
         let blas = clusters.iter().map(|c| Arc::new(ClusterBlas::build(c, grid_step))).collect();
-        CutScene::build(blas, Clip { forward: -Vec3::Z, near: 0.01, far: 1e9 })
+        CutScene::build(blas, Clip { forward: -Vec3::Z, near: 0.01, far: 1e9, section: Default::default() })
     }
 
     fn sun(elevation_deg: f32) -> Light {

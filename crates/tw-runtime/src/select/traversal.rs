@@ -120,6 +120,10 @@ impl<'t> Traversal<'t> {
                 Containment::Intersecting => {}
             }
         }
+        if !view.section.is_empty() && view.section.removes_box(lo, hi) {
+            stats.nodes_culled_section += 1;
+            return None;
+        }
         let (blo, bhi) = self.selector.lod_boxes[ni];
         if view.metric.aabb(self.selector.subtree_error[ni], blo, bhi) * (1.0 + 1e-9) <= view.tau {
             stats.nodes_culled_lod += 1;
@@ -278,6 +282,10 @@ impl<'t> Traversal<'t> {
                 out.stats.clusters_culled_frustum += 1;
                 continue;
             }
+            if !view.section.is_empty() && self.cluster_removed(view, cmin, cmax) {
+                out.stats.clusters_culled_section += 1;
+                continue;
+            }
             if fallback {
                 out.stats.clusters_fallback += 1;
                 self.request_step_sources(mode, view, at.gi, page.steps()[info.step as usize]);
@@ -329,6 +337,14 @@ impl<'t> Traversal<'t> {
         view.frustum.test_aabb(clo, chi) == Containment::Outside
     }
 
+    /// Whether a cluster's vertex box (grid coordinates `cmin..=cmax`) lies entirely on a
+    /// removed side of the section.
+    #[inline]
+    fn cluster_removed(&self, view: &View, cmin: [u32; 3], cmax: [u32; 3]) -> bool {
+        let (clo, chi) = grid_box(cmin, cmax, self.selector.grid_step);
+        view.section.removes_box(clo, chi)
+    }
+
     /// When streaming, requests the sources of the step `(error, sphere)` that a fallback
     /// cluster of group `gi` stands in for.
     #[inline]
@@ -370,6 +386,12 @@ fn group_test(view: &View, stats: &mut SelectStats, error: f32, sphere: [f32; 4]
             == Containment::Outside
     {
         stats.groups_culled_frustum += 1;
+        return false;
+    }
+    if !view.section.is_empty()
+        && view.section.removes_sphere(Vec3::new(sphere[0], sphere[1], sphere[2]), sphere[3])
+    {
+        stats.groups_culled_section += 1;
         return false;
     }
     true
