@@ -7,7 +7,7 @@ use std::process::{Command, Output, Stdio};
 
 mod common;
 
-use common::{stderr, stdout, terawalk};
+use common::{no_gpu, stderr, stdout, terawalk};
 
 /// A folder with a small plant model `p.ply` and its store `p.tw`.
 fn model_and_store() -> tempfile::TempDir {
@@ -17,17 +17,6 @@ fn model_and_store() -> tempfile::TempDir {
     let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     dir
-}
-
-/// Whether a GPU command failed only for want of an adapter (then the test is skipped).
-fn no_gpu(o: &Output) -> bool {
-    let skip = !o.status.success()
-        && stderr(o).contains("no GPU adapter")
-        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1");
-    if skip {
-        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(o));
-    }
-    skip
 }
 
 /// Runs the program with its standard output a pipe whose reader has already gone: every write

@@ -2,11 +2,11 @@
 //! numbers, killed builds, closed pipes. Each test failed before the fix it covers.
 
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Stdio};
 
 mod common;
 
-use common::{stderr, stdout, terawalk};
+use common::{no_gpu, stderr, stdout, terawalk};
 
 /// A small plant model and its store in a new folder.
 fn plant_and_store() -> tempfile::TempDir {
@@ -16,16 +16,6 @@ fn plant_and_store() -> tempfile::TempDir {
     let o = terawalk(&["build", "p.ply", "-o", "p.tw", "--memory", "256M"], dir.path());
     assert!(o.status.success(), "{}", stderr(&o));
     dir
-}
-
-fn no_gpu(o: &Output) -> bool {
-    let skip = !o.status.success()
-        && stderr(o).contains("no GPU adapter")
-        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1");
-    if skip {
-        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(o));
-    }
-    skip
 }
 
 #[test]

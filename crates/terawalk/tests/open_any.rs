@@ -12,7 +12,7 @@ use std::time::{Duration, SystemTime};
 
 mod common;
 
-use common::{stderr, stdout, terawalk};
+use common::{no_gpu, stderr, stdout, terawalk};
 
 /// The program with `args` in `dir`, its build cache in `cache`.
 fn terawalk_cached(args: &[&str], dir: &Path, cache: &Path) -> Output {
@@ -22,16 +22,6 @@ fn terawalk_cached(args: &[&str], dir: &Path, cache: &Path) -> Output {
         .env("TERAWALK_CACHE", cache)
         .output()
         .expect("runs")
-}
-
-fn no_gpu(o: &Output) -> bool {
-    let skip = !o.status.success()
-        && stderr(o).contains("no GPU adapter")
-        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1");
-    if skip {
-        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(o));
-    }
-    skip
 }
 
 /// A 30k-triangle plant, its store and a 6-frame camera path through it, made once.

@@ -5,13 +5,12 @@
 //! message. On lavapipe; skipped without an adapter unless `TERAWALK_REQUIRE_GPU=1`.
 
 use std::path::Path;
-use std::process::Output;
 use std::sync::OnceLock;
 
 #[allow(dead_code)] // stdout is not used here.
 mod common;
 
-use common::{stderr, terawalk};
+use common::{no_gpu, stderr, terawalk};
 
 /// The renderer's background (sRGB).
 const BACKGROUND: [u8; 3] = [205, 218, 235];
@@ -34,17 +33,6 @@ fn cubes() -> &'static Path {
             (dir, p)
         })
         .1
-}
-
-/// Whether a render failed only for want of an adapter (then the test is skipped).
-fn no_gpu(o: &Output) -> bool {
-    let skip = !o.status.success()
-        && stderr(o).contains("no GPU adapter")
-        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1");
-    if skip {
-        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(o));
-    }
-    skip
 }
 
 /// Renders the cubes from the front and above into `name` with `extra` arguments; the pixels

@@ -16,6 +16,19 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// Whether a GPU command failed only for want of an adapter (then the test is skipped, unless
+/// `TERAWALK_REQUIRE_GPU=1` makes that a failure).
+#[allow(dead_code)] // Not every test binary uses every helper.
+pub fn no_gpu(o: &Output) -> bool {
+    let skip = !o.status.success()
+        && stderr(o).contains("no GPU adapter")
+        && std::env::var("TERAWALK_REQUIRE_GPU").as_deref() != Ok("1");
+    if skip {
+        eprintln!("SKIPPED: {} (set TERAWALK_REQUIRE_GPU=1 to make this a failure)", stderr(o));
+    }
+    skip
+}
+
 /// An OBJ of unit cubes, one object per `(name, x0)` at x `x0..x0+1`, y and z `0..1`, every
 /// face wound counter-clockwise seen from outside (glTF's convention, which the section colour
 /// of back faces relies on: tw-gpu draw.wgsl `section_color`).
