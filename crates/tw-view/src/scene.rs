@@ -283,12 +283,7 @@ impl Scene {
 
     /// The model's bounds in scene space.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        let h = self.header();
-        let o = glam::DVec3::from_array(h.grid_origin);
-        (
-            (glam::DVec3::from_array(h.bounds_min) - o).as_vec3(),
-            (glam::DVec3::from_array(h.bounds_max) - o).as_vec3(),
-        )
+        tw_frame::shadow::scene_box(self.header())
     }
 
     /// The up axis as a unit vector: the store's, unless overridden ([`Scene::set_up_axis`]).
