@@ -154,6 +154,10 @@ pub(crate) struct DagStats {
     pub terminal: usize,
     /// Triangles removed as whole parts by rule 2 (module comment).
     pub pruned_triangles: usize,
+    /// Simplifier runs (a group takes one per try of [`DagConfig::growth`], plus the last).
+    pub tries: usize,
+    /// Triangles fed to the simplifier over all tries.
+    pub tried_triangles: usize,
 }
 
 /// A cluster inside the loop: a range of `indices`, its bounds and its source group.
@@ -423,14 +427,19 @@ fn simplify_group(
     let limits = config.growth.iter().filter(|_| child_error > 0.0).map(|g| child_error * g);
     let mut kept = None;
     for limit in limits {
+        stats.tries += 1;
+        stats.tried_triangles += merged.len() / 3;
         let tried = simplify_parts(&parts, vertices, merged, locks, target, limit);
         if (tried.0.len() / 3) as f32 <= accept {
             kept = Some(tried);
             break;
         }
     }
-    let (out, error, removed) =
-        kept.unwrap_or_else(|| simplify_parts(&parts, vertices, merged, locks, target, f32::MAX));
+    let (out, error, removed) = kept.unwrap_or_else(|| {
+        stats.tries += 1;
+        stats.tried_triangles += merged.len() / 3;
+        simplify_parts(&parts, vertices, merged, locks, target, f32::MAX)
+    });
     stats.pruned_triangles += removed;
     (out, error)
 }
