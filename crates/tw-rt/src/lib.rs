@@ -77,6 +77,7 @@ pub mod camera;
 pub mod image;
 mod mesh;
 mod packet;
+pub mod proxy;
 mod ray;
 pub mod scene;
 mod simd;
