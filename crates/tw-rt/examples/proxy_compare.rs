@@ -17,8 +17,12 @@
 //! with `--cut-proxies`), and their time and size reported.
 //!
 //! ```text
-//! cargo run --release -p tw-rt --example proxy_compare -- STORE.tw (--camera "EYE;TARGET;UP;FOVY" | --path PATH.json) [options]
+//! cargo run --release -p tw-rt --example proxy_compare -- (STORE.tw | --plant TRIANGLES) [options]
+//!   --plant N       a generated plant of N triangles (seed 1), built into a temporary store
+//!   --camera C      a camera "EYE;TARGET;UP;FOVY" (repeatable)
+//!   --path P.json   the first cameras of a camera path
 //!   --cameras N     the path's first N cameras (default 1)
+//!   (with neither: the first camera of each part of the path `terawalk path` generates)
 //!   --size WxH      image size (default 640x480)
 //!   --step N        pages loaded per step (default 4)
 //!   --rays N        rays per proxy (default 10000, the paper's; at most 2^20)
@@ -35,17 +39,17 @@ use std::time::{Duration, Instant};
 
 use tw_core::color::{ColorMode, BACKGROUND};
 use tw_rt::proxy::{DEFAULT_RAYS, MAX_RAYS};
-use tw_rt::scene::proxies::{overlay_proxies, GroupProxies, ProxyScene};
-use tw_rt::scene::shade::Shader;
+use tw_rt::scene::proxies::GroupProxies;
 use tw_rt::scene::{StoreTracer, TraceSettings, TracedFrame};
 use tw_runtime::{
-    Camera, CameraPath, ClusterRef, InputCamera, PageCache, PrefetchOptions, ResidentPage, SelectOptions,
-    SelectionPages, StreamOptions, Streamer,
+    Camera, CameraPath, ClusterRef, InputCamera, PageCache, PrefetchOptions, SelectOptions, SelectionPages,
+    StreamOptions, Streamer,
 };
 use tw_store::Store;
 
 struct Args {
     store: PathBuf,
+    plant: Option<u64>,
     cameras: Vec<InputCamera>,
     path: Option<PathBuf>,
     path_cameras: usize,
@@ -72,7 +76,7 @@ fn main() {
 fn run() -> Result<(), String> {
     let args = parse_args()?;
     rayon::ThreadPoolBuilder::new().num_threads(args.threads).build_global().map_err(|e| e.to_string())?;
-    let store = Arc::new(Store::open(&args.store).map_err(|e| format!("{}: {e}", args.store.display()))?);
+    let (store, _built) = open_store(&args)?;
     let cameras = cameras(&args, &store)?;
     let select = SelectOptions {
         tau: 1.0,
@@ -86,9 +90,10 @@ fn run() -> Result<(), String> {
         cameras.iter().map(|c| Warm::new(&store, c, &select, &args)).collect::<Result<_, _>>()?;
     let non_root = store.pages().iter().filter(|p| !p.is_root()).count();
     let input_triangles: u64 = store.header().input_triangles;
+    let name = args.plant.map_or(args.store.display().to_string(), |n| format!("plant {n}"));
     println!(
         "store {}: {} groups, {} pages ({} not root), {input_triangles} input triangles; {} cameras at {}x{}, {} threads",
-        args.store.display(),
+        name,
         store.groups().len(),
         store.pages().len(),
         non_root,
@@ -138,11 +143,12 @@ fn run() -> Result<(), String> {
             warm.page_bytes as f64 / 1e6,
             warm.covered
         );
-        let dag = run_dag(&store, camera, &select, warm, &args)?;
+        let dag = run_dag(&store, camera, &select, warm, &proxies, &args)?;
         let proxy = run_proxy(&store, camera, warm, &proxies, &args)?;
         print_steps(&dag, &proxy, (args.width * args.height) as usize);
-        for (name, steps) in [("dag", &dag), ("proxy", &proxy)] {
-            println!("  {name:<5} {}", summary(steps, args.psnr));
+        let same: Vec<Step> = dag.iter().filter_map(|s| s.same_pages.as_deref().cloned()).collect();
+        for (name, steps) in [("dag", &dag), ("proxies over the dag's pages", &same), ("proxies", &proxy)] {
+            println!("  {name}: {}", summary(steps, args.psnr));
         }
     }
     Ok(())
@@ -204,7 +210,7 @@ fn stream_options(args: &Args) -> StreamOptions {
 }
 
 /// One frame of a cold start.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 struct Step {
     /// Non-root pages resident, and their bytes in the store.
     pages: usize,
@@ -217,6 +223,8 @@ struct Step {
     psnr: f64,
     /// Pixels shaded from proxies.
     proxied: usize,
+    /// The DAG run's steps: the paper's frame over the same resident pages.
+    same_pages: Option<Box<Step>>,
 }
 
 /// The default: the availability rule's cut over what the streamer loaded so far.
@@ -225,10 +233,12 @@ fn run_dag(
     camera: &Camera,
     select: &SelectOptions,
     warm: &Warm,
+    proxies: &GroupProxies,
     args: &Args,
 ) -> Result<Vec<Step>, String> {
     let mut streamer = Streamer::new(store.clone(), stream_options(args)).map_err(|e| e.to_string())?;
     let mut tracer = StoreTracer::new(store, u64::MAX);
+    let mut same = ProxyFrames::new(store, camera, warm, proxies, args);
     let (mut steps, mut load) = (Vec::new(), Duration::ZERO);
     for _ in 0..MAX_STEPS {
         let t = Instant::now();
@@ -245,6 +255,7 @@ fn run_dag(
             covered: covered(&traced) as f64 / warm.covered.max(1) as f64,
             psnr: psnr(&traced, &warm.frame),
             proxied: 0,
+            same_pages: Some(Box::new(same.step(streamer.cache(), load))),
         });
         let t = Instant::now();
         if streamer.load_queued(args.step) == 0 {
@@ -255,7 +266,54 @@ fn run_dag(
     Ok(steps)
 }
 
-/// The paper's way: the warm cut's resident groups, proxies for the missing ones.
+/// Frames drawn the paper's way ([`StoreTracer::trace_with_proxies`]).
+struct ProxyFrames<'a> {
+    store: &'a Arc<Store>,
+    camera: &'a Camera,
+    warm: &'a Warm,
+    proxies: &'a GroupProxies,
+    tracer: StoreTracer,
+    size: (u32, u32),
+}
+
+impl<'a> ProxyFrames<'a> {
+    fn new(
+        store: &'a Arc<Store>,
+        camera: &'a Camera,
+        warm: &'a Warm,
+        proxies: &'a GroupProxies,
+        args: &Args,
+    ) -> Self {
+        let tracer = StoreTracer::new(store, u64::MAX);
+        ProxyFrames { store, camera, warm, proxies, tracer, size: (args.width, args.height) }
+    }
+
+    fn step(&mut self, cache: &PageCache, load: Duration) -> Step {
+        let t = Instant::now();
+        let (traced, proxied) = self.tracer.trace_with_proxies(
+            cache,
+            &self.warm.cut,
+            self.proxies,
+            self.camera,
+            self.size,
+            &settings(),
+        );
+        let frame = t.elapsed();
+        let (pages, bytes) = resident(self.store, cache);
+        Step {
+            pages,
+            bytes,
+            load,
+            frame,
+            covered: covered(&traced) as f64 / self.warm.covered.max(1) as f64,
+            psnr: psnr(&traced, &self.warm.frame),
+            proxied,
+            same_pages: None,
+        }
+    }
+}
+
+/// The paper's way with its own loading order: the warm cut's missing pages by Wald's priority.
 fn run_proxy(
     store: &Arc<Store>,
     camera: &Camera,
@@ -265,51 +323,10 @@ fn run_proxy(
 ) -> Result<Vec<Step>, String> {
     let cache = PageCache::new(store, args.memory_mib << 20);
     cache.load_root_pages(store);
-    let mut tracer = StoreTracer::new(store, u64::MAX);
-    let rt_camera = tw_rt::Camera::for_view(camera, args.width as f32 / args.height as f32);
-    let object_colors: Vec<Option<[u8; 4]>> = store.objects().iter().map(|o| o.color).collect();
-    let shader = Shader {
-        mode: ColorMode::Material,
-        object_colors: &object_colors,
-        eye: camera.eye,
-        orthographic: camera.is_orthographic(),
-        headlight: camera.headlight(),
-        sun: camera.sun_direction(),
-    };
+    let mut frames = ProxyFrames::new(store, camera, warm, proxies, args);
     let (mut steps, mut load, mut next) = (Vec::new(), Duration::ZERO, 0);
     loop {
-        let t = Instant::now();
-        let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
-        let mut missing: HashSet<u32> = HashSet::new();
-        for c in &warm.cut {
-            match cache.try_get(c.page) {
-                Some(p) => {
-                    if pages.last().map(|(q, _)| *q) != Some(c.page) {
-                        pages.push((c.page, p));
-                    }
-                }
-                None => {
-                    missing.insert(c.group);
-                }
-            }
-        }
-        pages.sort_by_key(|(p, _)| *p);
-        pages.dedup_by_key(|(p, _)| *p);
-        let held = SelectionPages::from_resident(&pages, &warm.cut);
-        let mut traced = tracer.trace(&held, camera, (args.width, args.height), &settings());
-        let scene = ProxyScene::new(proxies, missing.iter().copied());
-        let proxied = overlay_proxies(&mut traced, &scene, camera, &rt_camera, &shader);
-        let frame_time = t.elapsed();
-        let (resident_pages, bytes) = resident(store, &cache);
-        steps.push(Step {
-            pages: resident_pages,
-            bytes,
-            load,
-            frame: frame_time,
-            covered: covered(&traced) as f64 / warm.covered.max(1) as f64,
-            psnr: psnr(&traced, &warm.frame),
-            proxied,
-        });
+        steps.push(frames.step(&cache, load));
         if next >= warm.pages.len() || steps.len() >= MAX_STEPS {
             break;
         }
@@ -358,13 +375,20 @@ fn psnr(a: &TracedFrame, b: &TracedFrame) -> f64 {
     }
 }
 
+/// One line per step: the DAG run, the proxies over the DAG run's pages, the proxy run.
 fn print_steps(dag: &[Step], proxy: &[Step], pixels: usize) {
     println!(
-        "  {:>4} | {:>6} {:>8} {:>8} {:>7} {:>6} | {:>6} {:>8} {:>8} {:>7} {:>6} {:>7}",
+        "  {:>4} | {:^43} | {:^14} | {:^51}",
+        "", "dag (streamer's order)", "proxies, same", "proxies (Wald's order)"
+    );
+    println!(
+        "  {:>4} | {:>6} {:>8} {:>8} {:>7} {:>6} | {:>7} {:>6} | {:>6} {:>8} {:>8} {:>7} {:>6} {:>7}",
         "step",
         "pages",
         "MB",
         "load ms",
+        "cover%",
+        "PSNR",
         "cover%",
         "PSNR",
         "pages",
@@ -388,10 +412,14 @@ fn print_steps(dag: &[Step], proxy: &[Step], pixels: usize) {
             ),
             None => format!("{:>6} {:>8} {:>8} {:>7} {:>6}", "", "", "", "", ""),
         };
+        let same = match dag.get(i).and_then(|s| s.same_pages.as_deref()) {
+            Some(s) => format!("{:>7.1} {:>6.1}", 100.0 * s.covered, s.psnr.min(99.0)),
+            None => format!("{:>7} {:>6}", "", ""),
+        };
         let p = proxy.get(i);
         let share =
             p.map_or(String::new(), |s| format!("{:>7.1}", 100.0 * s.proxied as f64 / pixels.max(1) as f64));
-        println!("  {i:>4} | {} | {} {share}", cell(dag.get(i)), cell(p));
+        println!("  {i:>4} | {} | {same} | {} {share}", cell(dag.get(i)), cell(p));
     }
 }
 
@@ -428,6 +456,17 @@ fn summary(steps: &[Step], psnr_goal: f64) -> String {
     )
 }
 
+/// The store of `--plant` (built now, kept while the returned guard lives) or the named one.
+fn open_store(args: &Args) -> Result<(Arc<Store>, Option<tw_testkit::Built>), String> {
+    let Some(triangles) = args.plant else {
+        let store = Store::open(&args.store).map_err(|e| format!("{}: {e}", args.store.display()))?;
+        return Ok((Arc::new(store), None));
+    };
+    let source = tw_testkit::Generated::Plant(tw_io::generate::PlantParams { triangles, seed: 1 }).source();
+    let built = tw_testkit::build(source, &Default::default());
+    Ok((built.store(), Some(built)))
+}
+
 fn cameras(args: &Args, store: &Store) -> Result<Vec<Camera>, String> {
     let mut inputs = args.cameras.clone();
     if let Some(path) = &args.path {
@@ -435,7 +474,16 @@ fn cameras(args: &Args, store: &Store) -> Result<Vec<Camera>, String> {
         inputs.extend(p.frames.iter().take(args.path_cameras).map(|f| f.input_camera()));
     }
     if inputs.is_empty() {
-        return Err("give --camera or --path".into());
+        // The first camera of each part (walk, fly-over) of the generated path.
+        let options = tw_runtime::PathOptions { frames: 300, ..Default::default() };
+        let generated =
+            tw_runtime::generate_path(store, &options, &mut |_, _, _| {}).map_err(|e| e.to_string())?;
+        let frames = &generated.path.frames;
+        for (i, f) in frames.iter().enumerate() {
+            if i == 0 || frames[i - 1].segment != f.segment {
+                inputs.push(f.input_camera());
+            }
+        }
     }
     inputs.iter().map(|c| c.to_scene(store.header()).map_err(|e| e.to_string())).collect()
 }
@@ -444,6 +492,7 @@ fn parse_args() -> Result<Args, String> {
     let mut args = std::env::args().skip(1);
     let mut parsed = Args {
         store: PathBuf::new(),
+        plant: None,
         cameras: Vec::new(),
         path: None,
         path_cameras: 1,
@@ -491,6 +540,7 @@ fn parse_args() -> Result<Args, String> {
             }
             "--memory" => parsed.memory_mib = number("--memory", value("--memory", &mut args)?, 1 << 20)?,
             "--cut-proxies" => parsed.cut_proxies = true,
+            "--plant" => parsed.plant = Some(number("--plant", value("--plant", &mut args)?, 1 << 30)?),
             "--threads" => {
                 parsed.threads = number("--threads", value("--threads", &mut args)?, 256)? as usize
             }
@@ -498,8 +548,8 @@ fn parse_args() -> Result<Args, String> {
             s => parsed.store = PathBuf::from(s),
         }
     }
-    if parsed.store.as_os_str().is_empty() {
-        return Err("give a store".into());
+    if parsed.store.as_os_str().is_empty() == parsed.plant.is_none() {
+        return Err("give a store or --plant".into());
     }
     Ok(parsed)
 }

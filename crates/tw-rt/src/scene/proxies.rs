@@ -14,17 +14,19 @@
 //! paper's 80: a kd-tree voxel's box is implicit in the tree, a group's is not).
 
 use std::collections::HashMap;
+use std::sync::Arc;
 
 use glam::Vec3;
 use rayon::prelude::*;
-use tw_core::color::DEFAULT_COLOR;
+use tw_core::color::{ColorMode, DEFAULT_COLOR};
+use tw_runtime::{ClusterRef, PageCache, ResidentPage, SelectionPages};
 use tw_store::{PageCluster, Store, StoreError};
 
 use super::blas::scene_position;
 use super::cut::Clip;
 use super::shade::Shader;
-use super::TracedFrame;
-use crate::proxy::{generate, Proxy, ProxyError, ProxyInput};
+use super::{StoreTracer, TraceSettings, TracedFrame};
+use crate::proxy::{generate, Proxy, ProxyError, ProxyInput, ProxySample};
 use crate::{Aabb, BuildOptions, Bvh, Ray};
 
 /// The proxies of a store's groups.
@@ -181,22 +183,69 @@ impl<'a> ProxyScene<'a> {
         self.items.is_empty()
     }
 
-    /// Where `ray` first enters a box within `[ray.t_min, ray.t_max)`, and that box's proxy.
-    pub fn entry(&self, ray: &Ray) -> Option<(f32, &'a Proxy)> {
+    /// Where `ray` first enters a box within `[ray.t_min, ray.t_max)` whose proxy saw a surface
+    /// around the ray's direction, with that look (a proxy that saw nothing from there lets the
+    /// ray through, as the region's geometry would).
+    pub fn entry(&self, ray: &Ray) -> Option<(f32, ProxySample)> {
         let mut ray = *ray;
-        let mut best: Option<(f32, &Proxy)> = None;
+        let mut best: Option<(f32, ProxySample)> = None;
         self.bvh.traverse(&mut ray, |prim, r| {
             let (proxy, bounds) = self.items[prim as usize];
-            match bounds.intersect(r) {
-                Some((near, _)) if near < r.t_max => {
-                    r.t_max = near;
-                    best = Some((near, proxy));
-                    true
-                }
-                _ => false,
+            let Some((near, _)) = bounds.intersect(r) else { return false };
+            if near >= r.t_max {
+                return false;
             }
+            let Some(look) = proxy.sample(r.dir) else { return false };
+            r.t_max = near;
+            best = Some((near, look));
+            true
         });
         best
+    }
+}
+
+impl StoreTracer {
+    /// Traces `cut` — a frame's cut selected as if every page were resident (the warm cut) —
+    /// the paper's way: its clusters on pages resident in `cache` at their level, and every
+    /// group on a missing page as its box shaded from its proxy ([`overlay_proxies`]; the
+    /// proxies are coloured as [`ColorMode::Material`] colours, whatever `settings` says).
+    /// Returns the frame and how many pixels the proxies shaded.
+    #[allow(clippy::too_many_arguments)]
+    pub fn trace_with_proxies(
+        &mut self,
+        cache: &PageCache,
+        cut: &[ClusterRef],
+        proxies: &GroupProxies,
+        camera: &tw_runtime::Camera,
+        size: (u32, u32),
+        settings: &TraceSettings,
+    ) -> (TracedFrame, usize) {
+        let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
+        let mut missing: Vec<u32> = Vec::new();
+        for c in cut {
+            match cache.try_get(c.page) {
+                Some(p) => pages.push((c.page, p)),
+                None => missing.push(c.group),
+            }
+        }
+        pages.sort_unstable_by_key(|(p, _)| *p);
+        pages.dedup_by_key(|(p, _)| *p);
+        missing.sort_unstable();
+        missing.dedup();
+        let held = SelectionPages::from_resident(&pages, cut);
+        let mut frame = self.trace(&held, camera, size, settings);
+        let scene = ProxyScene::new(proxies, missing);
+        let rt_camera = crate::Camera::for_view(camera, size.0 as f32 / size.1.max(1) as f32);
+        let shader = Shader {
+            mode: ColorMode::Material,
+            object_colors: &self.object_colors,
+            eye: camera.eye,
+            orthographic: camera.is_orthographic(),
+            headlight: camera.headlight(),
+            sun: camera.sun_direction(),
+        };
+        let shaded = overlay_proxies(&mut frame, &scene, camera, &rt_camera, &shader);
+        (frame, shaded)
     }
 }
 
@@ -236,8 +285,7 @@ pub fn overlay_proxies(
                 }
                 ray.t_min = clip.near / along;
                 ray.t_max = (clip.far / along).min(distance[x]);
-                let Some((t, proxy)) = scene.entry(&ray) else { continue };
-                let Some(look) = proxy.sample(ray.dir) else { continue };
+                let Some((t, look)) = scene.entry(&ray) else { continue };
                 rgba[x * 4..x * 4 + 4].copy_from_slice(&shader.shade_color(look.color, look.normal));
                 distance[x] = t;
                 (objects[x], clusters[x], triangles[x]) = (u32::MAX, u32::MAX, u32::MAX);
@@ -269,13 +317,18 @@ mod tests {
         let scene = ProxyScene::new(&proxies, [10, 11, 99]);
         assert_eq!(scene.len(), 2, "a group without a proxy is left out");
         let down = Ray::new(Vec3::new(0.5, 0.5, 10.0), -Vec3::Z);
-        let (t, p) = scene.entry(&down).unwrap();
-        assert_eq!((t, p.direction(0).unwrap().color), (4.0, [0, 0, 255]));
+        let (t, look) = scene.entry(&down).unwrap();
+        assert_eq!((t, look.color), (4.0, [0, 0, 255]));
         // Geometry hit before the first box: no proxy.
         assert!(scene.entry(&Ray { t_max: 3.0, ..down }).is_none());
         // Starting beyond the first box's entry: inside it, killed at once.
         let (t, _) = scene.entry(&Ray { t_min: 4.5, ..down }).unwrap();
         assert_eq!(t, 4.5);
         assert!(scene.entry(&Ray::new(Vec3::new(3.0, 0.5, 10.0), -Vec3::Z)).is_none());
+        // A proxy that saw nothing from above lets the ray through to the next box.
+        proxies.proxies[1].samples = [[0, 0]; DIRECTIONS];
+        let scene = ProxyScene::new(&proxies, [10, 11]);
+        let (t, look) = scene.entry(&down).unwrap();
+        assert_eq!((t, look.color), (9.0, [255, 0, 0]));
     }
 }
