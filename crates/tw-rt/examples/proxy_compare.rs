@@ -20,8 +20,8 @@
 //! cargo run --release -p tw-rt --example proxy_compare -- (STORE.tw | --plant TRIANGLES) [options]
 //!   --plant N       a generated plant of N triangles (seed 1), built into a temporary store
 //!   --camera C      a camera "EYE;TARGET;UP;FOVY" (repeatable)
-//!   --path P.json   the first cameras of a camera path
-//!   --cameras N     the path's first N cameras (default 1)
+//!   --path P.json   the first cameras of a camera path (repeatable)
+//!   --cameras N     each path's first N cameras (default 1)
 //!   (with neither: the first camera of each part of the path `terawalk path` generates)
 //!   --size WxH      image size (default 640x480)
 //!   --step N        pages loaded per step (default 4)
@@ -39,7 +39,7 @@ use std::time::{Duration, Instant};
 
 use tw_core::color::{ColorMode, BACKGROUND};
 use tw_rt::proxy::{DEFAULT_RAYS, MAX_RAYS};
-use tw_rt::scene::proxies::GroupProxies;
+use tw_rt::scene::proxies::{uncovered_groups, GroupProxies};
 use tw_rt::scene::{StoreTracer, TraceSettings, TracedFrame};
 use tw_runtime::{
     Camera, CameraPath, ClusterRef, InputCamera, PageCache, PrefetchOptions, SelectOptions, SelectionPages,
@@ -51,7 +51,7 @@ struct Args {
     store: PathBuf,
     plant: Option<u64>,
     cameras: Vec<InputCamera>,
-    path: Option<PathBuf>,
+    paths: Vec<PathBuf>,
     path_cameras: usize,
     width: u32,
     height: u32,
@@ -147,7 +147,14 @@ fn run() -> Result<(), String> {
         let proxy = run_proxy(&store, camera, warm, &proxies, &args)?;
         print_steps(&dag, &proxy, (args.width * args.height) as usize);
         let same: Vec<Step> = dag.iter().filter_map(|s| s.same_pages.as_deref().cloned()).collect();
-        for (name, steps) in [("dag", &dag), ("proxies over the dag's pages", &same), ("proxies", &proxy)] {
+        let hybrid: Vec<Step> = dag.iter().filter_map(|s| s.hybrid.as_deref().cloned()).collect();
+        let runs = [
+            ("dag", &dag),
+            ("dag + proxies in its holes", &hybrid),
+            ("proxies over the dag's pages", &same),
+            ("proxies", &proxy),
+        ];
+        for (name, steps) in runs {
             println!("  {name}: {}", summary(steps, args.psnr));
         }
     }
@@ -225,6 +232,8 @@ struct Step {
     proxied: usize,
     /// The DAG run's steps: the paper's frame over the same resident pages.
     same_pages: Option<Box<Step>>,
+    /// The DAG run's steps: its frame with proxies where its cut leaves holes.
+    hybrid: Option<Box<Step>>,
 }
 
 /// The default: the availability rule's cut over what the streamer loaded so far.
@@ -246,6 +255,12 @@ fn run_dag(
         let held = SelectionPages::from_resident(&frame.pages, &frame.selection.clusters);
         let traced = tracer.trace(&held, camera, (args.width, args.height), &settings());
         let frame_time = t.elapsed();
+        // The hybrid: this frame, with proxies in the holes its cut leaves.
+        let t = Instant::now();
+        let mut hybrid = traced.clone();
+        let holes = uncovered_groups(store, &warm.cut, &frame.selection.clusters);
+        let proxied = tracer.shade_missing(&mut hybrid, proxies, holes, camera);
+        let hybrid_time = frame_time + t.elapsed();
         let (pages, bytes) = resident(store, streamer.cache());
         steps.push(Step {
             pages,
@@ -256,6 +271,17 @@ fn run_dag(
             psnr: psnr(&traced, &warm.frame),
             proxied: 0,
             same_pages: Some(Box::new(same.step(streamer.cache(), load))),
+            hybrid: Some(Box::new(Step {
+                pages,
+                bytes,
+                load,
+                frame: hybrid_time,
+                covered: covered(&hybrid) as f64 / warm.covered.max(1) as f64,
+                psnr: psnr(&hybrid, &warm.frame),
+                proxied,
+                same_pages: None,
+                hybrid: None,
+            })),
         });
         let t = Instant::now();
         if streamer.load_queued(args.step) == 0 {
@@ -309,6 +335,7 @@ impl<'a> ProxyFrames<'a> {
             psnr: psnr(&traced, &self.warm.frame),
             proxied,
             same_pages: None,
+            hybrid: None,
         }
     }
 }
@@ -375,18 +402,21 @@ fn psnr(a: &TracedFrame, b: &TracedFrame) -> f64 {
     }
 }
 
-/// One line per step: the DAG run, the proxies over the DAG run's pages, the proxy run.
+/// One line per step: the DAG run, the hybrid and the proxies over the DAG run's pages, the
+/// proxy run.
 fn print_steps(dag: &[Step], proxy: &[Step], pixels: usize) {
     println!(
-        "  {:>4} | {:^43} | {:^14} | {:^51}",
-        "", "dag (streamer's order)", "proxies, same", "proxies (Wald's order)"
+        "  {:>4} | {:^43} | {:^14} | {:^14} | {:^51}",
+        "", "dag (streamer's order)", "dag + proxies", "proxies, same", "proxies (Wald's order)"
     );
     println!(
-        "  {:>4} | {:>6} {:>8} {:>8} {:>7} {:>6} | {:>7} {:>6} | {:>6} {:>8} {:>8} {:>7} {:>6} {:>7}",
+        "  {:>4} | {:>6} {:>8} {:>8} {:>7} {:>6} | {:>7} {:>6} | {:>7} {:>6} | {:>6} {:>8} {:>8} {:>7} {:>6} {:>7}",
         "step",
         "pages",
         "MB",
         "load ms",
+        "cover%",
+        "PSNR",
         "cover%",
         "PSNR",
         "cover%",
@@ -412,14 +442,16 @@ fn print_steps(dag: &[Step], proxy: &[Step], pixels: usize) {
             ),
             None => format!("{:>6} {:>8} {:>8} {:>7} {:>6}", "", "", "", "", ""),
         };
-        let same = match dag.get(i).and_then(|s| s.same_pages.as_deref()) {
+        let short = |s: Option<&Step>| match s {
             Some(s) => format!("{:>7.1} {:>6.1}", 100.0 * s.covered, s.psnr.min(99.0)),
             None => format!("{:>7} {:>6}", "", ""),
         };
+        let d = dag.get(i);
+        let (hybrid, same) = (d.and_then(|s| s.hybrid.as_deref()), d.and_then(|s| s.same_pages.as_deref()));
         let p = proxy.get(i);
         let share =
             p.map_or(String::new(), |s| format!("{:>7.1}", 100.0 * s.proxied as f64 / pixels.max(1) as f64));
-        println!("  {i:>4} | {} | {same} | {} {share}", cell(dag.get(i)), cell(p));
+        println!("  {i:>4} | {} | {} | {} | {} {share}", cell(d), short(hybrid), short(same), cell(p));
     }
 }
 
@@ -469,7 +501,7 @@ fn open_store(args: &Args) -> Result<(Arc<Store>, Option<tw_testkit::Built>), St
 
 fn cameras(args: &Args, store: &Store) -> Result<Vec<Camera>, String> {
     let mut inputs = args.cameras.clone();
-    if let Some(path) = &args.path {
+    for path in &args.paths {
         let p = CameraPath::load(path).map_err(|e| format!("{}: {e}", path.display()))?;
         inputs.extend(p.frames.iter().take(args.path_cameras).map(|f| f.input_camera()));
     }
@@ -494,7 +526,7 @@ fn parse_args() -> Result<Args, String> {
         store: PathBuf::new(),
         plant: None,
         cameras: Vec::new(),
-        path: None,
+        paths: Vec::new(),
         path_cameras: 1,
         width: 640,
         height: 480,
@@ -518,7 +550,7 @@ fn parse_args() -> Result<Args, String> {
                 let s = value("--camera", &mut args)?;
                 parsed.cameras.push(InputCamera::parse(&s).map_err(|e| format!("--camera: {e}"))?);
             }
-            "--path" => parsed.path = Some(PathBuf::from(value("--path", &mut args)?)),
+            "--path" => parsed.paths.push(PathBuf::from(value("--path", &mut args)?)),
             "--cameras" => {
                 parsed.path_cameras = number("--cameras", value("--cameras", &mut args)?, 1000)? as usize
             }

@@ -234,8 +234,21 @@ impl StoreTracer {
         missing.dedup();
         let held = SelectionPages::from_resident(&pages, cut);
         let mut frame = self.trace(&held, camera, size, settings);
-        let scene = ProxyScene::new(proxies, missing);
-        let rt_camera = crate::Camera::for_view(camera, size.0 as f32 / size.1.max(1) as f32);
+        let shaded = self.shade_missing(&mut frame, proxies, missing, camera);
+        (frame, shaded)
+    }
+
+    /// [`overlay_proxies`] of the proxies of `groups` on `frame` (traced from `camera`), lit as
+    /// this tracer lights a frame; returns the pixels they shaded.
+    pub fn shade_missing(
+        &self,
+        frame: &mut TracedFrame,
+        proxies: &GroupProxies,
+        groups: impl IntoIterator<Item = u32>,
+        camera: &tw_runtime::Camera,
+    ) -> usize {
+        let scene = ProxyScene::new(proxies, groups);
+        let rt_camera = crate::Camera::for_view(camera, frame.width as f32 / frame.height.max(1) as f32);
         let shader = Shader {
             mode: ColorMode::Material,
             object_colors: &self.object_colors,
@@ -244,9 +257,40 @@ impl StoreTracer {
             headlight: camera.headlight(),
             sun: camera.sun_direction(),
         };
-        let shaded = overlay_proxies(&mut frame, &scene, camera, &rt_camera, &shader);
-        (frame, shaded)
+        overlay_proxies(frame, &scene, camera, &rt_camera, &shader)
     }
+}
+
+/// The groups of `cut` (a frame's cut with every page resident) that `drawn` (the same frame's
+/// cut by the availability rule) leaves without geometry: neither the group nor any of its
+/// ancestors in the DAG has a cluster in `drawn`. What a hybrid draws from proxies: the coarser
+/// resident levels wherever the DAG has them, proxies only in its holes. (An ancestor with a
+/// drawn cluster is taken to cover the group; strictly only the clusters of the step that
+/// consumed the group's line of descent do.)
+pub fn uncovered_groups(store: &Store, cut: &[ClusterRef], drawn: &[ClusterRef]) -> Vec<u32> {
+    let drawn: std::collections::HashSet<u32> = drawn.iter().map(|c| c.group).collect();
+    let mut covered: HashMap<u32, bool> = HashMap::new();
+    let mut out: Vec<u32> =
+        cut.iter().map(|c| c.group).filter(|&g| !is_covered(store, g, &drawn, &mut covered)).collect();
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+/// Whether `group` or one of its ancestors is in `drawn` (memoised in `known`).
+fn is_covered(
+    store: &Store,
+    group: u32,
+    drawn: &std::collections::HashSet<u32>,
+    known: &mut HashMap<u32, bool>,
+) -> bool {
+    if let Some(&k) = known.get(&group) {
+        return k;
+    }
+    let covered = drawn.contains(&group)
+        || store.group_parents(group).iter().any(|&p| is_covered(store, p, drawn, known));
+    known.insert(group, covered);
+    covered
 }
 
 /// Kills every pixel's ray of `frame` (traced from `camera`, `rt_camera` its rays) that enters
