@@ -1,20 +1,27 @@
-//! Drawing with pages missing, two ways, from a cold start (docs/RUNTIME.md "Ray tracing"):
+//! Drawing with pages missing, from a cold start, the DAG's way and Wald's (docs/RUNTIME.md
+//! "Ray tracing"), side by side in one process:
 //!
 //! - **dag** (the default of `--renderer rt`): the frame's cut by the availability rule — a
 //!   missing page's groups drawn by their resident coarser ancestors of the cluster DAG — with
 //!   pages loaded in the streamer's priority order (`Streamer::frame`'s requests);
-//! - **proxy** (Wald, Dietrich & Slusallek 2004, §5): the warm frame's cut, its resident groups
+//! - **dag + proxies**: the same frame, with the proxies of the warm cut's groups that neither
+//!   it nor an ancestor has drawn ([`tw_rt::scene::proxies::uncovered_groups`]): proxies only in
+//!   the DAG's holes;
+//! - **proxies, same pages**: the paper's frame (next item) over the dag run's resident pages;
+//! - **proxies** (Wald, Dietrich & Slusallek 2004, §5): the warm frame's cut, its resident groups
 //!   at their level, every missing group's box killing the rays that reach it and shading them
-//!   from the group's 18-direction proxy ([`tw_rt::scene::proxies`]); pages loaded in the
-//!   paper's priority (the group's size over its distance to the eye, the page taking its
-//!   largest group's).
+//!   from the group's 18-direction proxy ([`tw_rt::scene::proxies`]); only the warm cut's pages
+//!   loaded, in the paper's priority (the group's size over its distance to the eye, the page
+//!   taking its largest group's).
 //!
-//! Both start from the root pages alone and load `--step` pages between frames on this thread
-//! (reproducible; no loader threads, no prefetch); each frame is compared with the warm frame
-//! (the cut with every page loaded): PSNR over the composited RGB and the share of the warm
-//! frame's covered pixels that it covers (the bench's `cold start:` criterion). The proxies are
-//! generated first, for every group of the store's non-root pages (or only the warm cuts' groups
-//! with `--cut-proxies`), and their time and size reported.
+//! Both runs start from the root pages alone and load `--step` pages between frames on this
+//! thread (reproducible; no loader threads, no prefetch); each frame is compared with the warm
+//! frame (the cut with every page loaded): the share of the warm frame's covered pixels that it
+//! covers (the bench's `cold start:` criterion), PSNR over the composited RGB, and an edge SSIM
+//! (`ssim`: SSIM over the windows where the warm frame has structure), the one of the three
+//! that a flat frame does not pass. The proxies are generated first, for every group of the
+//! store's non-root pages (or only the warm cuts' groups with `--cut-proxies`), and their time
+//! and size reported.
 //!
 //! ```text
 //! cargo run --release -p tw-rt --example proxy_compare -- (STORE.tw | --plant TRIANGLES) [options]
