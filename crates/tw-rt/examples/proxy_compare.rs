@@ -4,9 +4,9 @@
 //! - **dag** (the default of `--renderer rt`): the frame's cut by the availability rule — a
 //!   missing page's groups drawn by their resident coarser ancestors of the cluster DAG — with
 //!   pages loaded in the streamer's priority order (`Streamer::frame`'s requests);
-//! - **dag + proxies**: the same frame, with the proxies of the warm cut's groups that neither
-//!   it nor an ancestor has drawn ([`tw_rt::scene::proxies::uncovered_groups`]): proxies only in
-//!   the DAG's holes;
+//! - **dag + proxies**: the same frame, its empty pixels shaded from the proxies of the warm
+//!   cut's missing groups ([`tw_rt::scene::proxies::ProxyPixels::Holes`]): proxies only in the
+//!   DAG's holes;
 //! - **proxies, same pages**: the paper's frame (next item) over the dag run's resident pages;
 //! - **proxies** (Wald, Dietrich & Slusallek 2004, §5): the warm frame's cut, its resident groups
 //!   at their level, every missing group's box killing the rays that reach it and shading them
@@ -48,7 +48,7 @@ use std::time::{Duration, Instant};
 
 use tw_core::color::{ColorMode, BACKGROUND};
 use tw_rt::proxy::{DEFAULT_RAYS, MAX_RAYS};
-use tw_rt::scene::proxies::{uncovered_groups, GroupProxies};
+use tw_rt::scene::proxies::{missing_groups, GroupProxies, ProxyPixels};
 use tw_rt::scene::{StoreTracer, TraceSettings, TracedFrame};
 use tw_runtime::{
     Camera, CameraPath, ClusterRef, InputCamera, PageCache, PrefetchOptions, SelectOptions, SelectionPages,
@@ -272,8 +272,8 @@ fn run_dag(
         // The hybrid: this frame, with proxies in the holes its cut leaves.
         let t = Instant::now();
         let mut hybrid = traced.clone();
-        let holes = uncovered_groups(store, &warm.cut, &frame.selection.clusters);
-        let proxied = tracer.shade_missing(&mut hybrid, proxies, holes, camera);
+        let missing = missing_groups(&warm.cut, streamer.cache());
+        let proxied = tracer.shade_missing(&mut hybrid, proxies, missing, camera, ProxyPixels::Holes);
         let hybrid_time = frame_time + t.elapsed();
         if steps.is_empty() {
             write_frame(args, camera_index, "dag-first", &traced)?;

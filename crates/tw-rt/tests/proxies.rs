@@ -6,7 +6,7 @@
 use std::sync::Arc;
 
 use tw_core::color::ColorMode;
-use tw_rt::scene::proxies::GroupProxies;
+use tw_rt::scene::proxies::{missing_groups, GroupProxies, ProxyPixels};
 use tw_rt::scene::{StoreTracer, TraceSettings, TracedFrame};
 use tw_runtime::{
     generate_path, Camera, PageCache, PathOptions, SelectOptions, SelectionPages, StreamOptions, Streamer,
@@ -107,6 +107,21 @@ fn withheld_pages_are_shaded_from_proxies_in_front_of_their_surface() {
             }
         }
         assert!(behind * 100 <= both, "{behind} of {both} pixels see past the missing geometry");
+
+        // The hybrid shades only the pixels a frame left empty: on the warm frame with every
+        // group of the cut as missing, nothing it drew changes.
+        let all: Vec<u32> = cut.iter().map(|c| c.group).collect();
+        let mut hybrid = warm.clone();
+        let filled = tracer.shade_missing(&mut hybrid, &proxies, all.clone(), &camera, ProxyPixels::Holes);
+        for (i, d) in warm.distance.iter().enumerate() {
+            if d.is_finite() {
+                assert_eq!(hybrid.rgba[i * 4..i * 4 + 4], warm.rgba[i * 4..i * 4 + 4], "pixel {i}");
+            }
+        }
+        assert!(filled <= warm.distance.iter().filter(|d| !d.is_finite()).count());
+        let mut before = warm.clone();
+        assert!(tracer.shade_missing(&mut before, &proxies, all, &camera, ProxyPixels::BeforeHits) > filled);
+        assert!(!missing_groups(&cut, &cache).is_empty());
 
         // Every page of the cut resident: no proxy, the warm frame exactly.
         for c in &cut {

@@ -220,32 +220,27 @@ impl StoreTracer {
         size: (u32, u32),
         settings: &TraceSettings,
     ) -> (TracedFrame, usize) {
-        let mut pages: Vec<(u32, Arc<ResidentPage>)> = Vec::new();
-        let mut missing: Vec<u32> = Vec::new();
-        for c in cut {
-            match cache.try_get(c.page) {
-                Some(p) => pages.push((c.page, p)),
-                None => missing.push(c.group),
-            }
-        }
+        let mut pages: Vec<(u32, Arc<ResidentPage>)> =
+            cut.iter().filter_map(|c| Some((c.page, cache.try_get(c.page)?))).collect();
         pages.sort_unstable_by_key(|(p, _)| *p);
         pages.dedup_by_key(|(p, _)| *p);
-        missing.sort_unstable();
-        missing.dedup();
+        let missing = missing_groups(cut, cache);
         let held = SelectionPages::from_resident(&pages, cut);
         let mut frame = self.trace(&held, camera, size, settings);
-        let shaded = self.shade_missing(&mut frame, proxies, missing, camera);
+        let shaded = self.shade_missing(&mut frame, proxies, missing, camera, ProxyPixels::BeforeHits);
         (frame, shaded)
     }
 
-    /// [`overlay_proxies`] of the proxies of `groups` on `frame` (traced from `camera`), lit as
-    /// this tracer lights a frame; returns the pixels they shaded.
+    /// [`overlay_proxies`] of the proxies of `groups` on `frame` (traced from `camera`) at
+    /// `pixels`, lit as this tracer lights a frame; returns the pixels they shaded. With
+    /// [`ProxyPixels::Holes`] and the [`missing_groups`] of a warm cut, the hybrid.
     pub fn shade_missing(
         &self,
         frame: &mut TracedFrame,
         proxies: &GroupProxies,
         groups: impl IntoIterator<Item = u32>,
         camera: &tw_runtime::Camera,
+        pixels: ProxyPixels,
     ) -> usize {
         let scene = ProxyScene::new(proxies, groups);
         let rt_camera = crate::Camera::for_view(camera, frame.width as f32 / frame.height.max(1) as f32);
@@ -257,46 +252,33 @@ impl StoreTracer {
             headlight: camera.headlight(),
             sun: camera.sun_direction(),
         };
-        overlay_proxies(frame, &scene, camera, &rt_camera, &shader)
+        overlay_proxies(frame, &scene, camera, &rt_camera, &shader, pixels)
     }
 }
 
-/// The groups of `cut` (a frame's cut with every page resident) that `drawn` (the same frame's
-/// cut by the availability rule) leaves without geometry: neither the group nor any of its
-/// ancestors in the DAG has a cluster in `drawn`. What a hybrid draws from proxies: the coarser
-/// resident levels wherever the DAG has them, proxies only in its holes. (An ancestor with a
-/// drawn cluster is taken to cover the group; strictly only the clusters of the step that
-/// consumed the group's line of descent do.)
-pub fn uncovered_groups(store: &Store, cut: &[ClusterRef], drawn: &[ClusterRef]) -> Vec<u32> {
-    let drawn: std::collections::HashSet<u32> = drawn.iter().map(|c| c.group).collect();
-    let mut covered: HashMap<u32, bool> = HashMap::new();
-    let mut out: Vec<u32> =
-        cut.iter().map(|c| c.group).filter(|&g| !is_covered(store, g, &drawn, &mut covered)).collect();
-    out.sort_unstable();
-    out.dedup();
-    out
+/// The groups of `cut` whose page `cache` does not hold: what a frame drawn the paper's way
+/// shows from proxies.
+pub fn missing_groups(cut: &[ClusterRef], cache: &PageCache) -> Vec<u32> {
+    let mut missing: Vec<u32> = cut.iter().filter(|c| !cache.contains(c.page)).map(|c| c.group).collect();
+    missing.sort_unstable();
+    missing.dedup();
+    missing
 }
 
-/// Whether `group` or one of its ancestors is in `drawn` (memoised in `known`).
-fn is_covered(
-    store: &Store,
-    group: u32,
-    drawn: &std::collections::HashSet<u32>,
-    known: &mut HashMap<u32, bool>,
-) -> bool {
-    if let Some(&k) = known.get(&group) {
-        return k;
-    }
-    let covered = drawn.contains(&group)
-        || store.group_parents(group).iter().any(|&p| is_covered(store, p, drawn, known));
-    known.insert(group, covered);
-    covered
+/// Which pixels [`overlay_proxies`] may shade.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProxyPixels {
+    /// Every pixel whose ray enters a box before its hit (the paper's way).
+    BeforeHits,
+    /// Only the pixels the frame left empty (the hybrid: the DAG's coarser levels where they
+    /// draw something, proxies in the holes they leave).
+    Holes,
 }
 
 /// Kills every pixel's ray of `frame` (traced from `camera`, `rt_camera` its rays) that enters
 /// a box of `scene` before its hit, within the clip planes, and shades it from that box's proxy
-/// with `shader`'s headlight and sun ([`Shader::shade_color`]). Returns how many pixels were
-/// shaded so. The pixel's object, cluster and triangle become `u32::MAX`, its distance the
+/// with `shader`'s headlight and sun ([`Shader::shade_color`]); with [`ProxyPixels::Holes`] only
+/// the rays that hit nothing. Returns how many pixels were shaded so. The pixel's object, cluster and triangle become `u32::MAX`, its distance the
 /// box's entry.
 pub fn overlay_proxies(
     frame: &mut TracedFrame,
@@ -304,6 +286,7 @@ pub fn overlay_proxies(
     camera: &tw_runtime::Camera,
     rt_camera: &crate::Camera,
     shader: &Shader,
+    pixels: ProxyPixels,
 ) -> usize {
     if scene.is_empty() {
         return 0;
@@ -322,6 +305,9 @@ pub fn overlay_proxies(
         .map(|(y, ((((rgba, distance), objects), clusters), triangles))| {
             let mut shaded = 0;
             for x in 0..w {
+                if pixels == ProxyPixels::Holes && distance[x].is_finite() {
+                    continue;
+                }
                 let mut ray = rt_camera.pixel_ray(x as u32, y as u32, width, height);
                 let along = ray.dir.dot(clip.forward);
                 if along <= 0.0 {
