@@ -573,7 +573,7 @@ fn summary(steps: &[Step], psnr_goal: f64, ssim_goal: f64) -> String {
 /// The store of `--plant` (built now, kept while the returned guard lives) or the named one.
 fn open_store(args: &Args) -> Result<(Arc<Store>, Option<tw_testkit::Built>), String> {
     let Some(triangles) = args.plant else {
-        let store = Store::open(&args.store).map_err(|e| format!("{}: {e}", args.store.display()))?;
+        let store = Store::open(&args.store).map_err(|e| e.to_string())?;
         return Ok((Arc::new(store), None));
     };
     let source = tw_testkit::Generated::Plant(tw_io::generate::PlantParams { triangles, seed: 1 }).source();
