@@ -147,7 +147,8 @@ impl GroupMesh {
             for (t, idx) in c.indices.chunks_exact(3).enumerate() {
                 mesh.triangles.push([0, 1, 2].map(|k| base + idx[k] as u32));
                 let object = c.objects.get(t).copied().unwrap_or(u32::MAX);
-                let color = object_colors.get(object as usize).copied().unwrap_or([180, 180, 180]);
+                let [r, g, b, _] = DEFAULT_COLOR;
+                let color = object_colors.get(object as usize).copied().unwrap_or([r, g, b]);
                 mesh.colors.push(color);
             }
         }
