@@ -31,6 +31,10 @@
 //!   for the rays that reach the cluster.
 //! - `simd`: AVX2/FMA entry points chosen at run time, a portable fallback ([`Simd`]).
 //! - [`camera`](mod@camera) and [`image`](mod@image): pinhole rays and [`trace_image`].
+//! - [`proxy`]: Wald 2004's 18-direction proxies (§5.2), what a ray reaching missing geometry
+//!   can be shaded from; [`scene::proxies`] makes them for a store's groups and draws a cut with
+//!   pages missing the paper's way. Measured against the DAG's coarser levels and not the
+//!   default (docs/DESIGN.md D8).
 //!
 //! Measured with `scripts/peer-embree.sh data/dragon_vrip.ply.gz --rounds 3` (Stanford dragon,
 //! 871 K triangles, 1280x720, one primary ray per pixel centre, the model covering 47% of the
@@ -77,6 +81,7 @@ pub mod camera;
 pub mod image;
 mod mesh;
 mod packet;
+pub mod proxy;
 mod ray;
 pub mod scene;
 mod simd;

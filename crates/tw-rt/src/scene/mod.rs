@@ -19,6 +19,7 @@
 pub mod blas;
 pub mod casters;
 pub mod cut;
+pub mod proxies;
 pub mod shade;
 pub mod shadow;
 pub mod stored;

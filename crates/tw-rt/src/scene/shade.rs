@@ -82,6 +82,15 @@ impl Shader<'_> {
         [rgb[0], rgb[1], rgb[2], 255]
     }
 
+    /// The sRGB colour of a surface of sRGB colour `base` and unit normal `n` under the
+    /// headlight and the fixed sun (no flashlight, no shadows): how a proxy is lit
+    /// ([`crate::proxy`]), with [`Shader::shade`]'s formula.
+    pub fn shade_color(&self, base: [u8; 3], n: Vec3) -> [u8; 4] {
+        let light = 0.18 + 0.62 * n.dot(self.headlight).abs() + 0.35 * n.dot(self.sun).max(0.0);
+        let rgb = base.map(|c| srgb_encode((srgb_decode(c) * light).min(1.0)));
+        [rgb[0], rgb[1], rgb[2], 255]
+    }
+
     fn base_color(&self, key: ClusterRef, cluster: &PageCluster, object: u32) -> [u8; 3] {
         let c = match self.mode {
             ColorMode::Material => {
