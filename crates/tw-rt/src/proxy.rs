@@ -1,5 +1,5 @@
 //! Wald's 18-direction proxies (Wald, Dietrich & Slusallek 2004, §5.2 "Hybrid
-//! volumetric/lightfield-like proxies"; ../shared/papers/NOTES-wald-2004-and-gigawalk.md part A):
+//! volumetric/lightfield-like proxies"):
 //! what a ray that reaches missing geometry is shaded from. A proxy stands for a region seen
 //! from outside and keeps, per direction of the incoming ray, the averaged diffuse colour and the
 //! averaged normal of the surface first seen from that direction; the hit position is ignored
