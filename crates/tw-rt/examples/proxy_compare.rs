@@ -249,6 +249,32 @@ struct Step {
     hybrid: Option<Box<Step>>,
 }
 
+impl Step {
+    /// The step of `image` against the warm frame, with `pages` (count, bytes) resident after
+    /// `load`, drawn in `frame` with `proxied` pixels from proxies; no nested runs.
+    fn of(
+        image: &TracedFrame,
+        warm: &Warm,
+        (pages, bytes): (usize, u64),
+        load: Duration,
+        frame: Duration,
+        proxied: usize,
+    ) -> Step {
+        Step {
+            pages,
+            bytes,
+            load,
+            frame,
+            covered: covered(image) as f64 / warm.covered.max(1) as f64,
+            psnr: psnr(image, &warm.frame),
+            ssim: ssim(image, &warm.frame),
+            proxied,
+            same_pages: None,
+            hybrid: None,
+        }
+    }
+}
+
 /// The default: the availability rule's cut over what the streamer loaded so far.
 fn run_dag(
     store: &Arc<Store>,
@@ -281,27 +307,9 @@ fn run_dag(
         }
         let (pages, bytes) = resident(store, streamer.cache());
         steps.push(Step {
-            pages,
-            bytes,
-            load,
-            frame: frame_time,
-            covered: covered(&traced) as f64 / warm.covered.max(1) as f64,
-            psnr: psnr(&traced, &warm.frame),
-            ssim: ssim(&traced, &warm.frame),
-            proxied: 0,
             same_pages: Some(Box::new(same.step(streamer.cache(), load)?)),
-            hybrid: Some(Box::new(Step {
-                pages,
-                bytes,
-                load,
-                frame: hybrid_time,
-                covered: covered(&hybrid) as f64 / warm.covered.max(1) as f64,
-                psnr: psnr(&hybrid, &warm.frame),
-                ssim: ssim(&hybrid, &warm.frame),
-                proxied,
-                same_pages: None,
-                hybrid: None,
-            })),
+            hybrid: Some(Box::new(Step::of(&hybrid, warm, (pages, bytes), load, hybrid_time, proxied))),
+            ..Step::of(&traced, warm, (pages, bytes), load, frame_time, 0)
         });
         let t = Instant::now();
         if streamer.load_queued(args.step) == 0 {
@@ -353,18 +361,7 @@ impl<'a> ProxyFrames<'a> {
             write_frame(args, camera_index, name, &traced)?;
         }
         let (pages, bytes) = resident(self.store, cache);
-        Ok(Step {
-            pages,
-            bytes,
-            load,
-            frame,
-            covered: covered(&traced) as f64 / self.warm.covered.max(1) as f64,
-            psnr: psnr(&traced, &self.warm.frame),
-            ssim: ssim(&traced, &self.warm.frame),
-            proxied,
-            same_pages: None,
-            hybrid: None,
-        })
+        Ok(Step::of(&traced, self.warm, (pages, bytes), load, frame, proxied))
     }
 }
 
