@@ -3,14 +3,16 @@
 //! Along a camera path, a cluster-DAG cut switches whole groups at once when their error crosses
 //! τ, and the image jumps there (Yoon et al. 2003 §1 call it popping; Govindaraju's thesis lists
 //! it among the limits of static LODs). The camera moves too, so two consecutive frames differ for
-//! both reasons; to separate them, the frame's camera draws both the previous frame's cut and its
-//! own, with the same renderer state and without occlusion culling: whatever differs between the
-//! two images is the LOD's doing alone. A still camera keeps its cut, so its change is 0.
+//! both reasons; to separate them, the frame's camera draws both the previous frame's drawn state
+//! and its own, with the same renderer state and without occlusion culling: whatever differs
+//! between the two images is the LOD's doing alone. The drawn state is the cut plus, with a
+//! cross-fade (`--transition dither`, [`crate::transition`]), the clusters fading in and out at
+//! their masks. A still camera keeps its cut, so its change is 0.
 
 use tw_gpu::{GpuError, Image};
 use tw_runtime::{Camera, Selection};
 
-use crate::{FrameError, Walkthrough};
+use crate::{DrawnState, FrameError, Walkthrough};
 
 /// The LOD-only change of one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -40,17 +42,28 @@ impl LodChange {
 }
 
 impl Walkthrough {
-    /// The LOD-only change at `camera` between `previous` (the cut of the frame before) and the
-    /// cut of the frame just drawn ([`Walkthrough::selection`]): both drawn whole, unshadowed,
-    /// pages loaded as needed. Leaves the renderer's own target holding the frame's own cut.
-    pub fn lod_change(&mut self, camera: &Camera, previous: &Selection) -> Result<LodChange, FrameError> {
+    /// The LOD-only change at `camera` between `previous` (what the frame before drew,
+    /// [`Walkthrough::drawn_state`]) and what the frame just drawn drew: both drawn with their
+    /// fades, unshadowed, without occlusion culling, pages loaded as needed. Leaves the
+    /// renderer's own target holding the frame's own state.
+    pub fn lod_change(&mut self, camera: &Camera, previous: &DrawnState) -> Result<LodChange, FrameError> {
+        let now = self.drawn_state();
+        crate::shadow::clear(&mut self.renderer);
+        let before = self.render_state(camera, previous);
+        let after = before.and_then(|b| Ok((b, self.render_state(camera, &now)?)));
+        self.renderer.set_fades([]);
+        let (before, after) = after?;
+        let triangles = (previous.triangles, now.triangles);
+        Ok(LodChange::between(&before, &after, triangles)?)
+    }
+
+    /// `state` drawn whole from `camera` (its fading clusters with their masks).
+    fn render_state(&mut self, camera: &Camera, state: &DrawnState) -> Result<Image, FrameError> {
         let store = self.streamer.store().clone();
         let cache = self.streamer.cache().clone();
-        crate::shadow::clear(&mut self.renderer);
-        let before = self.renderer.render_selection(&store, &cache, camera, previous)?;
-        let now = self.renderer.render_selection(&store, &cache, camera, &self.selection)?;
-        let triangles = (previous.triangles, self.selection.triangles);
-        Ok(LodChange::between(&before, &now, triangles)?)
+        self.renderer.set_fades(state.fades.iter().copied());
+        let selection = Selection { clusters: state.clusters.clone(), ..Default::default() };
+        Ok(self.renderer.render_selection(&store, &cache, camera, &selection)?)
     }
 }
 

@@ -683,6 +683,8 @@ impl Renderer {
                     if shadows {
                         self.shadow.note_slot(pk, slot);
                     }
+                    let fade = self.fades.get(&pk).copied().unwrap_or(0);
+                    self.pool.set_fade(&self.queue, slot, fade);
                     list.push(Candidate::new(b, args));
                     keys.push(pk);
                 }

@@ -166,6 +166,7 @@ pub fn frame_of(r: &CameraRequest, server_occlusion: Occlusion) -> Result<(Camer
         triangle_culling: r.flags & CameraRequest::TRIANGLE_CULLING != 0,
         shadows: None,
         section: Default::default(),
+        transition: Default::default(),
     };
     Ok((camera, settings))
 }

@@ -210,6 +210,7 @@ impl Renderer {
             object_color_count: 0,
             highlight: None,
             section: Default::default(),
+            fades: Default::default(),
             bind_group,
             bind_generation: pool.generation,
             pool,

@@ -483,6 +483,10 @@ impl Renderer {
                     if b.items {
                         self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
                     }
+                    if matches!(b.kind, Kind::Shade { .. } | Kind::EyeDepth) {
+                        let fade = self.fades.get(&pk).copied().unwrap_or(0);
+                        self.pool.set_fade(&self.queue, slot, fade);
+                    }
                     let lookups = match b.kind {
                         Kind::Shade { shadow_layers: Some(_), .. } => self.shadow.note_slot(pk, slot),
                         _ => false,
@@ -629,7 +633,8 @@ impl Renderer {
             }
             Kind::Items => ((self.pipelines.item(&self.device, self.sectioned()).clone(), None), None, None),
             Kind::EyeDepth => {
-                let p = self.pipelines.eye_depth(&self.device, samples, self.sectioned()).clone();
+                let clip = (self.sectioned(), self.dithered());
+                let p = self.pipelines.eye_depth(&self.device, samples, clip).clone();
                 ((p, None), None, None)
             }
             Kind::ShadowMap => {
