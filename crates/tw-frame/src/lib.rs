@@ -230,8 +230,8 @@ pub struct Walkthrough {
     fades: transition::Fades,
     /// The last frame's fading-out clusters that it drew, and the fade words it drew with.
     faded: (Vec<ClusterRef>, Vec<(ClusterRef, u32)>),
-    /// The view-projection of the last frame that faded (what it could show).
-    fade_view: Option<glam::Mat4>,
+    /// The view-projection of the last frame's camera (what it could show; [`transition`]).
+    view: Option<glam::Mat4>,
 }
 
 impl Walkthrough {
@@ -253,7 +253,7 @@ impl Walkthrough {
             shadow_cache: Default::default(),
             fades: Default::default(),
             faded: Default::default(),
-            fade_view: None,
+            view: None,
         })
     }
 
@@ -331,7 +331,7 @@ impl Walkthrough {
     pub fn reset(&mut self) {
         self.occlusion.reset();
         self.fades.reset();
-        self.fade_view = None;
+        self.view = None;
         self.shadow_cache = Default::default();
         self.streamer.reset_history();
     }

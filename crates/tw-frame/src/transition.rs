@@ -36,8 +36,8 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
-use tw_gpu::dither::{fade_word, Fade};
 use glam::Mat4;
+use tw_gpu::dither::{fade_word, Fade};
 use tw_runtime::{Camera, ClusterRef, Containment, Frustum, ResidentPage};
 
 use crate::Walkthrough;
@@ -168,6 +168,8 @@ pub struct DrawnState {
     pub fades: Vec<(ClusterRef, u32)>,
     /// Triangles of the cut (the fading-out clusters not counted).
     pub triangles: u64,
+    /// The view-projection of the frame's camera (what it could show; `None` before a frame).
+    pub view_proj: Option<Mat4>,
 }
 
 impl Walkthrough {
@@ -181,10 +183,12 @@ impl Walkthrough {
         transition: Transition,
         mut pages: Vec<(u32, Arc<ResidentPage>)>,
     ) -> Vec<(u32, Arc<ResidentPage>)> {
+        let (w, h) = self.renderer.size();
+        let view_proj = camera.view_projection(w as f32 / h.max(1) as f32);
+        let before = self.view.replace(view_proj);
         let frames = match transition {
             Transition::Pop => {
                 self.fades.reset();
-                self.fade_view = None;
                 self.faded = Default::default();
                 self.renderer.set_fades([]);
                 return pages;
@@ -192,8 +196,6 @@ impl Walkthrough {
             Transition::Dither { frames } => frames,
         };
         let cache = self.streamer.cache();
-        let (w, h) = self.renderer.size();
-        let view_proj = camera.view_projection(w as f32 / h.max(1) as f32);
         let grid_step = self.streamer.store().header().grid_step;
         let seen_by = |view_proj: Option<Mat4>, c: &ClusterRef| {
             let Some(view_proj) = view_proj else { return true };
@@ -202,10 +204,10 @@ impl Walkthrough {
                 Err(_) => cache.try_get(c.page).and_then(|p| p.bounds.get(c.index_in_page as usize).copied()),
             };
             bounds.is_none_or(|(min, max)| {
-                Frustum::from_view_projection(&view_proj).test_grid_box(min, max, grid_step) != Containment::Outside
+                Frustum::from_view_projection(&view_proj).test_grid_box(min, max, grid_step)
+                    != Containment::Outside
             })
         };
-        let before = self.fade_view.replace(view_proj);
         self.fades.advance(
             &self.selection.clusters,
             frames,
@@ -245,7 +247,8 @@ impl Walkthrough {
     pub fn drawn_state(&self) -> DrawnState {
         let mut clusters = self.selection.clusters.clone();
         clusters.extend_from_slice(&self.faded.0);
-        DrawnState { clusters, fades: self.faded.1.clone(), triangles: self.selection.triangles }
+        let triangles = self.selection.triangles;
+        DrawnState { clusters, fades: self.faded.1.clone(), triangles, view_proj: self.view }
     }
 }
 

@@ -149,7 +149,12 @@ fn occlusion_with_dither_equals_none_with_dither() {
         let (images, culled, _) = run(&mut w, occlusion);
         for (i, (a, b)) in images.iter().zip(&none).enumerate() {
             let differing = a.differing_share(b).unwrap();
-            assert_eq!(differing, 0.0, "{}: frame {i} differs from none under the same fades", occlusion.name());
+            assert_eq!(
+                differing,
+                0.0,
+                "{}: frame {i} differs from none under the same fades",
+                occlusion.name()
+            );
         }
         eprintln!("{}: {culled} clusters culled", occlusion.name());
     }
@@ -181,7 +186,9 @@ fn dither_reduces_the_popping_along_a_fly_over() {
     };
     let (pop_worst, pop_sum) = measure(Transition::Pop);
     let (dither_worst, dither_sum) = measure(Transition::Dither { frames: 8 });
-    eprintln!("pop: worst {pop_worst:.5}, sum {pop_sum:.5}; dither:8: worst {dither_worst:.5}, sum {dither_sum:.5}");
+    eprintln!(
+        "pop: worst {pop_worst:.5}, sum {pop_sum:.5}; dither:8: worst {dither_worst:.5}, sum {dither_sum:.5}"
+    );
     assert!(pop_worst > 0.0, "the cut never changed the image along the fly-over");
     assert!(dither_worst < pop_worst / 2.0, "worst frame: dither {dither_worst} against pop {pop_worst}");
 }

@@ -480,7 +480,7 @@ impl Renderer {
         samples: u32,
         shading: Shading,
     ) -> Result<(wgpu::RenderPipeline, Option<wgpu::BindGroup>), GpuError> {
-        let clip = (self.sectioned(), self.dithered());
+        let clip = (self.sectioned(), self.dither_pipelines);
         let pipeline =
             self.pipelines.shaded(&self.device, format, samples, (self.mode, shading), clip).clone();
         if shading == Shading::Plain {

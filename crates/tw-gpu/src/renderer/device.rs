@@ -211,6 +211,7 @@ impl Renderer {
             highlight: None,
             section: Default::default(),
             fades: Default::default(),
+            dither_pipelines: false,
             bind_group,
             bind_generation: pool.generation,
             pool,

@@ -66,6 +66,7 @@ pub enum Target<'a> {
     View { view: &'a wgpu::TextureView, format: wgpu::TextureFormat, size: (u32, u32) },
 }
 
+#[derive(Clone, Copy)]
 pub(crate) enum Pass<'a> {
     /// A shaded pass into `view`; `own` when that is the renderer's own colour target, whose
     /// multisampled colour is resolved only when it is read ([`Renderer::resolve_color`]).
@@ -121,6 +122,9 @@ pub struct Renderer {
     /// The cross-fade words of the clusters that fade ([`Renderer::set_fades`]); every other
     /// cluster is drawn whole.
     pub(crate) fades: std::collections::HashMap<crate::pool::PoolKey, u32>,
+    /// Whether the eye pipelines being chosen test the fade words (the passes' fading part,
+    /// [`Renderer::set_fades`]).
+    pub(crate) dither_pipelines: bool,
     pub(crate) bind_group: wgpu::BindGroup,
     pub(crate) bind_generation: u64,
     pub(crate) pool: ClusterPool,
@@ -272,6 +276,11 @@ impl Renderer {
     /// Whether the eye passes cross-fade some clusters ([`Renderer::set_fades`]).
     pub(crate) fn dithered(&self) -> bool {
         !self.fades.is_empty()
+    }
+
+    /// Whether cluster `key` fades.
+    pub(crate) fn fades(&self, key: &ClusterKey) -> bool {
+        self.fades.contains_key(&(key.page, key.index_in_page))
     }
 
     /// [`set_object_colors`](Self::set_object_colors) from the store's object table.
