@@ -72,6 +72,8 @@ pub struct BenchOptions {
     pub flashlight: bool,
     /// The LOD-only image change of every frame.
     pub popping: bool,
+    /// How LOD switches are drawn (`--transition`; [`tw_frame::transition`]).
+    pub transition: tw_frame::Transition,
     /// Shadows of one light: every strategy runs with them and without.
     pub shadows: Option<ShadowRequest>,
     /// The program, for the report's header.

@@ -127,6 +127,7 @@ impl Runner<'_> {
             triangle_culling: !o.whole_clusters,
             shadows: if plan.shadowed { self.shadows } else { None },
             section: self.section,
+            transition: o.transition,
         }
     }
 
@@ -205,7 +206,7 @@ impl Runner<'_> {
         let o = self.options;
         let frames = self.frames;
         let camera = &frames.cameras[i];
-        let previous = (o.popping && i > 0).then(|| self.walk.selection().clone());
+        let previous = (o.popping && i > 0).then(|| self.walk.drawn_state());
         let (image, info) = self.frame(camera, settings)?;
         if let (0, Some((_, cold))) = (i, &self.traced) {
             if let Some(line) = cold.report(image.covered_pixels()) {
@@ -228,7 +229,7 @@ impl Runner<'_> {
         &mut self,
         rec: &mut FrameRecord,
         camera: &Camera,
-        previous: Option<tw_runtime::Selection>,
+        previous: Option<tw_frame::DrawnState>,
     ) -> Result<()> {
         let change = match &previous {
             Some(previous) => Some(self.walk.lod_change(camera, previous)?),
@@ -297,8 +298,12 @@ impl Runner<'_> {
             Pipeline::Serial => String::new(),
             p => format!("; {} (frame time = throughput, latency recorded)", p.description()),
         };
+        let transition = match o.transition {
+            tw_frame::Transition::Pop => String::new(),
+            t => format!(", LOD switches cross-faded ({})", t.name()),
+        };
         format!(
-            "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}{shadows}{pipeline}",
+            "LOD cut at {} px, frustum culling, occlusion culling: {}{cutoff}{shadows}{transition}{pipeline}",
             o.error,
             plan.occlusion.name()
         )

@@ -32,6 +32,7 @@ pub mod remote;
 pub mod shadow;
 pub mod supersample;
 pub mod traced;
+pub mod transition;
 
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -48,6 +49,7 @@ use tw_store::{PageCluster, Store};
 pub use occlude::{Occlusion, OcclusionStats};
 pub use pipeline::{Pipe, Pipeline, PipelinedFrame};
 pub use shadow::{ShadowInfo, ShadowLod, ShadowSettings};
+pub use transition::{DrawnState, Transition};
 
 /// What a frame draws, apart from the camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -74,6 +76,9 @@ pub struct FrameSettings {
     /// selection of the frame (the eye's, the prefetch views', the shadow layers') and clipped
     /// per fragment by every pass the renderer draws.
     pub section: Section,
+    /// How LOD switches are drawn (`--transition`, [`transition`]): at once, or cross-faded
+    /// over a few frames. Only [`Walkthrough::draw_frame`] (and so the serial pipeline) fades.
+    pub transition: Transition,
 }
 
 impl Default for FrameSettings {
@@ -87,6 +92,7 @@ impl Default for FrameSettings {
             triangle_culling: true,
             shadows: None,
             section: Section::default(),
+            transition: Transition::Pop,
         }
     }
 }
@@ -220,6 +226,12 @@ pub struct Walkthrough {
     shadows: Option<tw_runtime::Shadows>,
     /// What the shadow stage keeps between frames: its layers and what they hold ([`shadow`]).
     shadow_cache: shadow::ShadowCache,
+    /// The clusters fading in and out ([`transition`]).
+    fades: transition::Fades,
+    /// The last frame's fading-out clusters that it drew, and the fade words it drew with.
+    faded: (Vec<ClusterRef>, Vec<(ClusterRef, u32)>),
+    /// The view-projection of the last frame's camera (what it could show; [`transition`]).
+    view: Option<glam::Mat4>,
 }
 
 impl Walkthrough {
@@ -239,6 +251,9 @@ impl Walkthrough {
             selection: Selection::default(),
             shadows: None,
             shadow_cache: Default::default(),
+            fades: Default::default(),
+            faded: Default::default(),
+            view: None,
         })
     }
 
@@ -315,6 +330,8 @@ impl Walkthrough {
     /// a teleport or a change of settings.
     pub fn reset(&mut self) {
         self.occlusion.reset();
+        self.fades.reset();
+        self.view = None;
         self.shadow_cache = Default::default();
         self.streamer.reset_history();
     }
@@ -706,6 +723,7 @@ impl Walkthrough {
         self.streamer = Streamer::new(store, stream)?;
         self.selection = Selection::default();
         self.occlusion.reset();
+        self.fades.reset();
         Ok(())
     }
 
@@ -741,8 +759,10 @@ impl Walkthrough {
             light_lod,
         );
         let select = start.elapsed();
-        let clusters = lookup(&pages, &self.selection.clusters);
+        let pages = self.fade(camera, settings.transition, pages);
+        let mut clusters = lookup(&pages, &self.selection.clusters);
         let cut_triangles = triangles(&clusters);
+        clusters.extend(lookup(&pages, &self.faded.0));
         let bounds = |c: &ClusterRef| page_bounds(&pages, c);
         let shadow = match &settings.shadows {
             Some(shadows) => {
@@ -780,7 +800,11 @@ impl Walkthrough {
             camera,
             &clusters,
             bounds,
-        )?;
+        );
+        // The fades are this frame's: the passes drawn later (a reference, the item buffer)
+        // draw whole clusters.
+        self.renderer.set_fades([]);
+        let culled = culled?;
         let select_times = selection_times(select, stream_times);
         let mut info = FrameInfo::culled(
             select_times,

@@ -3,14 +3,24 @@
 //! Along a camera path, a cluster-DAG cut switches whole groups at once when their error crosses
 //! τ, and the image jumps there (Yoon et al. 2003 §1 call it popping; Govindaraju's thesis lists
 //! it among the limits of static LODs). The camera moves too, so two consecutive frames differ for
-//! both reasons; to separate them, the frame's camera draws both the previous frame's cut and its
-//! own, with the same renderer state and without occlusion culling: whatever differs between the
-//! two images is the LOD's doing alone. A still camera keeps its cut, so its change is 0.
+//! both reasons; to separate them, the frame's camera draws both the previous frame's drawn state
+//! and its own, with the same renderer state and without occlusion culling: whatever differs
+//! between the two images is the LOD's doing alone. The drawn state is the cut plus, with a
+//! cross-fade (`--transition dither`, [`crate::transition`]), the clusters fading in and out at
+//! their masks. A still camera keeps its cut, so its change is 0.
+//!
+//! The frustum is not the LOD: clusters that joined the cut because they came into view (their
+//! box outside the previous frame's frustum, so no part of them could show in that frame) are
+//! added to the previous state too: otherwise the previous cut, drawn from the new camera, would
+//! leave the newly seen border empty, and a turning camera would count as popping (on the 10^7
+//! fly-over this was most of the change measured: docs/benchmarks-log.md, session 39).
 
+use std::collections::HashSet;
 use tw_gpu::{GpuError, Image};
-use tw_runtime::{Camera, Selection};
 
-use crate::{FrameError, Walkthrough};
+use tw_runtime::{Camera, ClusterRef, Containment, Frustum, Selection};
+
+use crate::{DrawnState, FrameError, Walkthrough};
 
 /// The LOD-only change of one frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -40,17 +50,48 @@ impl LodChange {
 }
 
 impl Walkthrough {
-    /// The LOD-only change at `camera` between `previous` (the cut of the frame before) and the
-    /// cut of the frame just drawn ([`Walkthrough::selection`]): both drawn whole, unshadowed,
-    /// pages loaded as needed. Leaves the renderer's own target holding the frame's own cut.
-    pub fn lod_change(&mut self, camera: &Camera, previous: &Selection) -> Result<LodChange, FrameError> {
+    /// The LOD-only change at `camera` between `previous` (what the frame before drew,
+    /// [`Walkthrough::drawn_state`]) and what the frame just drawn drew: both drawn with their
+    /// fades, unshadowed, without occlusion culling, pages loaded as needed. Leaves the
+    /// renderer's own target holding the frame's own state.
+    pub fn lod_change(&mut self, camera: &Camera, previous: &DrawnState) -> Result<LodChange, FrameError> {
+        let now = self.drawn_state();
+        let previous = self.with_clusters_come_into_view(previous, &now);
+        crate::shadow::clear(&mut self.renderer);
+        let before = self.render_state(camera, &previous);
+        let after = before.and_then(|b| Ok((b, self.render_state(camera, &now)?)));
+        self.renderer.set_fades([]);
+        let (before, after) = after?;
+        let triangles = (previous.triangles, now.triangles);
+        Ok(LodChange::between(&before, &after, triangles)?)
+    }
+
+    /// `previous` with the clusters of `now` that its frame could not show (their boxes outside
+    /// its frustum) and that it did not draw.
+    fn with_clusters_come_into_view(&self, previous: &DrawnState, now: &DrawnState) -> DrawnState {
+        let mut state = previous.clone();
+        let Some(view_proj) = previous.view_proj else { return state };
+        let frustum = Frustum::from_view_projection(&view_proj);
+        let (store, cache) = (self.streamer.store(), self.streamer.cache());
+        let grid_step = store.header().grid_step;
+        let drawn: HashSet<&ClusterRef> = previous.clusters.iter().collect();
+        let unseen = |c: &ClusterRef| match cache.get(store, c.page) {
+            Ok(page) => page.bounds.get(c.index_in_page as usize).is_some_and(|(min, max)| {
+                frustum.test_grid_box(*min, *max, grid_step) == Containment::Outside
+            }),
+            Err(_) => false,
+        };
+        state.clusters.extend(now.clusters.iter().filter(|c| !drawn.contains(c) && unseen(c)));
+        state
+    }
+
+    /// `state` drawn whole from `camera` (its fading clusters with their masks).
+    fn render_state(&mut self, camera: &Camera, state: &DrawnState) -> Result<Image, FrameError> {
         let store = self.streamer.store().clone();
         let cache = self.streamer.cache().clone();
-        crate::shadow::clear(&mut self.renderer);
-        let before = self.renderer.render_selection(&store, &cache, camera, previous)?;
-        let now = self.renderer.render_selection(&store, &cache, camera, &self.selection)?;
-        let triangles = (previous.triangles, self.selection.triangles);
-        Ok(LodChange::between(&before, &now, triangles)?)
+        self.renderer.set_fades(state.fades.iter().copied());
+        let selection = Selection { clusters: state.clusters.clone(), ..Default::default() };
+        Ok(self.renderer.render_selection(&store, &cache, camera, &selection)?)
     }
 }
 

@@ -27,7 +27,7 @@ fn popping_is_zero_for_a_still_camera_and_seen_along_a_path() {
     let settings = FrameSettings { wait_for_pages: true, ..Default::default() };
 
     walk.frame(&cameras[0], &settings).unwrap();
-    let previous = walk.selection().clone();
+    let previous = walk.drawn_state();
     walk.frame(&cameras[0], &settings).unwrap();
     let still = walk.lod_change(&cameras[0], &previous).unwrap();
     assert_eq!(still.changed_pixels, 0.0, "{still:?}");
@@ -36,7 +36,7 @@ fn popping_is_zero_for_a_still_camera_and_seen_along_a_path() {
     let mut changed_frames = 0;
     for pair in cameras.windows(2) {
         walk.frame(&pair[0], &settings).unwrap();
-        let previous = walk.selection().clone();
+        let previous = walk.drawn_state();
         walk.frame(&pair[1], &settings).unwrap();
         let change = walk.lod_change(&pair[1], &previous).unwrap();
         assert!((0.0..=1.0).contains(&change.changed_pixels));

@@ -42,7 +42,36 @@ struct Slot {
     index_in_page: u32,
     level: u32,
     item: u32,
+    // The cross-fade word (dither.rs): 0 every pixel; bits 30-31 the side (1 entering, 2
+    // leaving), bits 0-16 the threshold t (65536 = 1).
+    fade: u32,
 };
+
+// Whether the pipeline tests each fragment against its cluster's fade word (a pipeline
+// constant, draw.rs `Pipelines`, like SECTION: without it no fragment stage discards).
+override DITHER: bool = false;
+
+// The rank of pixel p in the 8 x 8 Bayer matrix on the threshold's scale, the centre of its
+// cell (dither.rs `pixel_rank`).
+fn pixel_rank(p: vec2<u32>) -> u32 {
+    var rank = 0u;
+    for (var bit = 0u; bit < 3u; bit = bit + 1u) {
+        let bx = (p.x >> bit) & 1u;
+        let by = (p.y >> bit) & 1u;
+        rank = rank * 4u + (((bx ^ by) << 1u) | by);
+    }
+    return rank * 1024u + 512u;
+}
+
+// Whether a fragment at `frag` (framebuffer coordinates) of a cluster with fade word `fade` is
+// kept (dither.rs `keeps`): arithmetic on the word, which comes from the slot table, not the
+// uniforms.
+fn dither_keeps(frag: vec2<f32>, fade: u32) -> bool {
+    let side = fade >> 30u;
+    let t = fade & 0x1ffffu;
+    let h = pixel_rank(vec2<u32>(frag) & vec2<u32>(7u));
+    return side == 0u || (side == 1u && h < t) || (side == 2u && h >= t);
+}
 
 @group(0) @binding(0) var<uniform> u: Uniforms;
 @group(0) @binding(1) var<storage, read> slots: array<Slot>;
@@ -74,6 +103,35 @@ fn vs_depth_world(@location(0) position: vec3<f32>) -> DepthOut {
 fn fs_depth_clip(in: DepthOut) {
     if (section_removes(in.world)) {
         discard;
+    }
+}
+
+// The depth-only passes of a frame with cross-fades (draw.rs `depth_only`): the cluster's fade
+// word for the fragment stage's dither test, and the point for the section's.
+struct FadeDepthOut {
+    @builtin(position) clip: vec4<f32>,
+    @location(0) world: vec3<f32>,
+    @location(1) @interpolate(flat) fade: u32,
+};
+
+@vertex
+fn vs_depth_fade(@location(0) position: vec3<f32>, @location(2) slot: u32) -> FadeDepthOut {
+    var out: FadeDepthOut;
+    out.clip = u.view_proj * vec4<f32>(position, 1.0);
+    out.world = position;
+    out.fade = slots[slot].fade;
+    return out;
+}
+
+@fragment
+fn fs_depth_fade(in: FadeDepthOut) {
+    if (!dither_keeps(in.clip.xy, in.fade)) {
+        discard;
+    }
+    if (SECTION) {
+        if (section_removes(in.world)) {
+            discard;
+        }
     }
 }
 

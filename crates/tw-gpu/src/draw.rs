@@ -63,8 +63,8 @@ pub(crate) struct LookupLayers {
     pub orthographic: bool,
 }
 
-/// What a shaded pipeline is made for: (format, samples, mode, shading, section).
-type ShadedKey = (wgpu::TextureFormat, u32, ColorMode, Shading, bool);
+/// What a shaded pipeline is made for: (format, samples, mode, shading, section, dither).
+type ShadedKey = (wgpu::TextureFormat, u32, ColorMode, Shading, bool, bool);
 
 /// The pipelines and their layout.
 pub(crate) struct Pipelines {
@@ -77,8 +77,8 @@ pub(crate) struct Pipelines {
     shaded: Vec<(ShadedKey, wgpu::RenderPipeline)>,
     /// The shadow map's depth-only pipelines, without and with a section.
     shadow_depth: [Option<wgpu::RenderPipeline>; 2],
-    /// The eye's depth-only pipelines, by samples per pixel and section.
-    eye_depth: Vec<((u32, bool), wgpu::RenderPipeline)>,
+    /// The eye's depth-only pipelines, by samples per pixel, section and dither.
+    eye_depth: Vec<((u32, bool, bool), wgpu::RenderPipeline)>,
     /// The item-buffer pipelines, without and with a section.
     item: [Option<wgpu::RenderPipeline>; 2],
     /// Whether the item shader gets `@builtin(primitive_index)` (Features::PRIMITIVE_INDEX).
@@ -171,16 +171,18 @@ impl Pipelines {
     ///
     /// With `section`, the pipeline constant `SECTION` turns on the fragment stage's clip test
     /// and the back faces' section colour (draw.wgsl `section_color`); without, no fragment
-    /// stage discards.
+    /// stage discards. With `dither`, the constant `DITHER` turns on the cross-fade's test of
+    /// each fragment against its cluster's fade word (common.wgsl `dither_keeps`,
+    /// [`crate::dither`]).
     pub fn shaded(
         &mut self,
         device: &wgpu::Device,
         format: wgpu::TextureFormat,
         samples: u32,
         (mode, shading): (ColorMode, Shading),
-        section: bool,
+        (section, dither): (bool, bool),
     ) -> &wgpu::RenderPipeline {
-        let key = (format, samples, mode, shading, section);
+        let key = (format, samples, mode, shading, section, dither);
         let i = match self.shaded.iter().position(|(k, _)| *k == key) {
             Some(i) => i,
             None => {
@@ -188,6 +190,7 @@ impl Pipelines {
                     ("COLOR_MODE", crate::color::mode_code(mode) as f64),
                     ("ENCODE_SRGB", if format.is_srgb() { 0.0 } else { 1.0 }),
                     ("SECTION", if section { 1.0 } else { 0.0 }),
+                    ("DITHER", if dither { 1.0 } else { 0.0 }),
                 ];
                 let p = match shading {
                     Shading::Plain => pipeline(
@@ -213,6 +216,7 @@ impl Pipelines {
                             constants[0],
                             constants[1],
                             constants[2],
+                            constants[3],
                             ("SHADOW_LAYERS", layers.count as f64),
                             ("SHADOW_DISJOINT", if layers.disjoint { 1.0 } else { 0.0 }),
                             ("SHADOW_ORTHO", if layers.orthographic { 1.0 } else { 0.0 }),
@@ -270,14 +274,23 @@ impl Pipelines {
     /// The eye's depth-only pipeline at `samples` per pixel (shadow.wgsl `vs_depth` with the
     /// camera's uniforms, no fragment stage), created on first use: reverse-Z (`Greater`),
     /// both faces, no bias, as the shaded pipelines write depth. The occluder pass of the
-    /// parallel pipelines (GigaWalk's OR renders depth only) draws with it.
-    pub fn eye_depth(&mut self, device: &wgpu::Device, samples: u32, section: bool) -> &wgpu::RenderPipeline {
-        if let Some(i) = self.eye_depth.iter().position(|(k, _)| *k == (samples, section)) {
+    /// parallel pipelines (GigaWalk's OR renders depth only) draws with it. With `dither` it
+    /// discards what the cross-fade's shaded pass would (common.wgsl `fs_depth_fade`), so that
+    /// its depth is that pass's.
+    pub fn eye_depth(
+        &mut self,
+        device: &wgpu::Device,
+        samples: u32,
+        (section, dither): (bool, bool),
+    ) -> &wgpu::RenderPipeline {
+        let key = (samples, section, dither);
+        if let Some(i) = self.eye_depth.iter().position(|(k, _)| *k == key) {
             return &self.eye_depth[i].1;
         }
         let depth = (wgpu::CompareFunction::Greater, Default::default());
-        let pipeline = depth_only(device, &self.layout, &self.shade, ("eye depth", section), depth, samples);
-        self.eye_depth.push(((samples, section), pipeline));
+        let label = ("eye depth", section, dither);
+        let pipeline = depth_only(device, &self.layout, &self.shade, label, depth, samples);
+        self.eye_depth.push((key, pipeline));
         &self.eye_depth.last().expect("just pushed").1
     }
 
@@ -288,7 +301,7 @@ impl Pipelines {
         let slot = section as usize;
         if self.shadow_depth[slot].is_none() {
             let depth = (wgpu::CompareFunction::Less, SHADOW_DEPTH_BIAS);
-            let label = ("shadow map", section);
+            let label = ("shadow map", section, false);
             self.shadow_depth[slot] = Some(depth_only(device, &self.layout, &self.shade, label, depth, 1));
         }
         self.shadow_depth[slot].as_ref().expect("just created")
@@ -324,26 +337,37 @@ fn color_constants() -> String {
 /// fragment stage, both faces, depth written with `compare` and `bias`, at `samples` per pixel.
 /// With a section (`label.1`): common.wgsl's `vs_depth_world` and a fragment stage,
 /// `fs_depth_clip`, that discards the removed points, so that the depth the occlusion tests
-/// and the shadow lookups read holds only what is drawn.
+/// and the shadow lookups read holds only what is drawn. With a cross-fade (`label.2`):
+/// common.wgsl's `vs_depth_fade` (positions and slots) and `fs_depth_fade`, which discards what
+/// the dithered shaded pass discards (and the removed points where there is a section).
 fn depth_only(
     device: &wgpu::Device,
     layout: &wgpu::PipelineLayout,
     module: &wgpu::ShaderModule,
-    (label, section): (&str, bool),
+    (label, section, dither): (&str, bool, bool),
     (compare, bias): (wgpu::CompareFunction, wgpu::DepthBiasState),
     samples: u32,
 ) -> wgpu::RenderPipeline {
+    let (vertex, fragment) = match (dither, section) {
+        (true, _) => ("vs_depth_fade", Some("fs_depth_fade")),
+        (false, true) => ("vs_depth_world", Some("fs_depth_clip")),
+        (false, false) => ("vs_depth", None),
+    };
+    let constants = [("SECTION", if section { 1.0 } else { 0.0 })];
+    let positions = wgpu::vertex_attr_array![0 => Float32x3];
+    // Position at 0, object at 12, slot at 16 (pool.rs PoolVertex).
+    let with_slots = wgpu::vertex_attr_array![0 => Float32x3, 1 => Uint32, 2 => Uint32];
     device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
         label: Some(label),
         layout: Some(layout),
         vertex: wgpu::VertexState {
             module,
-            entry_point: Some(if section { "vs_depth_world" } else { "vs_depth" }),
+            entry_point: Some(vertex),
             compilation_options: Default::default(),
             buffers: &[Some(wgpu::VertexBufferLayout {
                 array_stride: UNIT,
                 step_mode: wgpu::VertexStepMode::Vertex,
-                attributes: &wgpu::vertex_attr_array![0 => Float32x3],
+                attributes: if dither { &with_slots[..] } else { &positions[..] },
             })],
         },
         primitive: wgpu::PrimitiveState {
@@ -359,11 +383,11 @@ fn depth_only(
             bias,
         }),
         multisample: wgpu::MultisampleState { count: samples, ..Default::default() },
-        fragment: section.then(|| wgpu::FragmentState {
+        fragment: fragment.map(|entry| wgpu::FragmentState {
             module,
-            entry_point: Some("fs_depth_clip"),
+            entry_point: Some(entry),
             compilation_options: wgpu::PipelineCompilationOptions {
-                constants: &[("SECTION", 1.0)],
+                constants: &constants,
                 ..Default::default()
             },
             targets: &[],

@@ -88,6 +88,8 @@ struct ShadeOut {
     @location(0) @interpolate(flat) color: vec3<f32>,
     // Scene space, for the section's clip test (read only where SECTION).
     @location(1) world: vec3<f32>,
+    // The cluster's fade word (read only where DITHER).
+    @location(2) @interpolate(flat) fade: u32,
 };
 
 // The sRGB transfer function (IEC 61966-2-1), linear to encoded.
@@ -151,6 +153,7 @@ fn vs_shade(
     var out: ShadeOut;
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
     out.world = position;
+    out.fade = slots[slot].fade;
     let n = viewer_normal(normal, position);
     let head = abs(dot(n, u.headlight.xyz));
     let sun = max(dot(n, u.sun.xyz), 0.0);
@@ -184,6 +187,11 @@ fn section_color(color: vec3<f32>, world: vec3<f32>, front: bool) -> vec3<f32> {
 
 @fragment
 fn fs_main(in: ShadeOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (DITHER) {
+        if (!dither_keeps(in.clip.xy, in.fade)) {
+            discard;
+        }
+    }
     if (SECTION) {
         return vec4<f32>(section_color(in.color, in.world, front), 1.0);
     }

@@ -683,6 +683,8 @@ impl Renderer {
                     if shadows {
                         self.shadow.note_slot(pk, slot);
                     }
+                    let fade = self.fades.get(&pk).copied().unwrap_or(0);
+                    self.pool.set_fade(&self.queue, slot, fade);
                     list.push(Candidate::new(b, args));
                     keys.push(pk);
                 }
@@ -773,6 +775,8 @@ impl Renderer {
         let shade = Pass::Shade { view: &color_view, format: COLOR_FORMAT, own: true };
         let att = self.attachments(&shade, size, self.depth_view.clone());
         let shading = shadow_layers.map_or(Shading::Plain, Shading::Lookup);
+        // Its draws are the GPU's to pick: every one tests its fade word when any fades.
+        self.dither_pipelines = self.dithered();
         let (pipeline, shadow_bind) = self.shaded_pipeline(COLOR_FORMAT, att.samples, shading)?;
         let Some(color) = att.color.clone() else {
             return Err(GpuError::Gpu("the GPU-culled draw has no colour target".into()));

@@ -56,6 +56,7 @@
 
 pub mod color;
 pub mod depth;
+pub mod dither;
 pub mod draw;
 pub mod error;
 pub mod gpu_cull;

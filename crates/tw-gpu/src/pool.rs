@@ -83,6 +83,8 @@ pub struct SlotInfo {
     pub level: u32,
     /// 1 + the cluster's position in the list drawn into the item buffer (0 otherwise).
     pub item: u32,
+    /// The cluster's cross-fade word ([`crate::dither`]; 0: drawn whole).
+    pub fade: u32,
 }
 
 /// Arguments of one cluster's indexed draw (the layout of `DrawIndexedIndirectArgs`).
@@ -292,6 +294,9 @@ pub struct ClusterPool {
     slot_count: u32,
     slot_buffer: wgpu::Buffer,
     slot_capacity: u32,
+    /// The fade word each slot's record holds (what [`ClusterPool::set_fade`] last wrote), so
+    /// that only changes are written.
+    slot_fades: Vec<u32>,
     /// Bumped whenever a buffer the bind groups hold is replaced.
     pub generation: u64,
     frame: u64,
@@ -327,6 +332,7 @@ impl ClusterPool {
             slot_count: 0,
             slot_buffer: slot_buffer(device, 1024),
             slot_capacity: 1024,
+            slot_fades: Vec::new(),
             generation: 0,
             // Frame 0 is "before any frame": a batch drawn before the first `begin_frame` (a
             // shadow map drawn first) is released to frame 0, which must exist.
@@ -394,6 +400,20 @@ impl ClusterPool {
         queue.write_buffer(&self.slot_buffer, offset, bytemuck::bytes_of(&item));
     }
 
+    /// Writes the cross-fade word `fade` ([`crate::dither`]) into the slot record of `slot`,
+    /// when it differs from the one there.
+    pub fn set_fade(&mut self, queue: &wgpu::Queue, slot: u32, fade: u32) {
+        let i = slot as usize;
+        if self.slot_fades.len() <= i {
+            self.slot_fades.resize(i + 1, 0);
+        }
+        if self.slot_fades[i] != fade {
+            self.slot_fades[i] = fade;
+            let offset = slot as u64 * std::mem::size_of::<SlotInfo>() as u64 + 16;
+            queue.write_buffer(&self.slot_buffer, offset, bytemuck::bytes_of(&fade));
+        }
+    }
+
     /// Makes `cluster` resident (uploading it if needed) and marks it drawn in this frame.
     pub fn ensure(
         &mut self,
@@ -453,7 +473,11 @@ impl ClusterPool {
         self.bytes.extend_from_slice(bytemuck::cast_slice(&self.layout.indices));
         self.bytes.resize((units * UNIT) as usize, 0);
         queue.write_buffer(arena, start * UNIT, &self.bytes);
-        let info = SlotInfo { page: key.0, index_in_page: key.1, level: cluster.level as u32, item: 0 };
+        let info =
+            SlotInfo { page: key.0, index_in_page: key.1, level: cluster.level as u32, item: 0, fade: 0 };
+        if let Some(f) = self.slot_fades.get_mut(slot as usize) {
+            *f = 0;
+        }
         queue.write_buffer(
             &self.slot_buffer,
             slot as u64 * std::mem::size_of::<SlotInfo>() as u64,

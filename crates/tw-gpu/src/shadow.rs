@@ -480,9 +480,9 @@ impl Renderer {
         samples: u32,
         shading: Shading,
     ) -> Result<(wgpu::RenderPipeline, Option<wgpu::BindGroup>), GpuError> {
-        let section = self.sectioned();
+        let clip = (self.sectioned(), self.dither_pipelines);
         let pipeline =
-            self.pipelines.shaded(&self.device, format, samples, (self.mode, shading), section).clone();
+            self.pipelines.shaded(&self.device, format, samples, (self.mode, shading), clip).clone();
         if shading == Shading::Plain {
             return Ok((pipeline, None));
         }

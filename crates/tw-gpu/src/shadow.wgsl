@@ -62,6 +62,8 @@ struct ShadowedOut {
     @location(9) l5: vec4<f32>,
     // Scene space, for the section's clip test (draw.wgsl `section_color`).
     @location(10) world: vec3<f32>,
+    // The cluster's fade word (read only where DITHER; common.wgsl `dither_keeps`).
+    @location(11) @interpolate(flat) fade: u32,
 };
 
 // The light clip position of `p` in layer `i` (zero past SHADOW_LAYERS).
@@ -119,6 +121,7 @@ fn vs_shadowed(
     out.clip = u.view_proj * vec4<f32>(position, 1.0);
     out.eye_depth = dot(position - u.eye.xyz, su.view_dir.xyz);
     out.world = position;
+    out.fade = slots[slot].fade;
     out.l0 = layer_clip_of(0u, position);
     out.l1 = layer_clip_of(1u, position);
     out.l2 = layer_clip_of(2u, position);
@@ -253,6 +256,11 @@ fn light_reaches(in: ShadowedOut) -> bool {
 // `Shading::Classified`).
 @fragment
 fn fs_classified(in: ShadowedOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (DITHER) {
+        if (!dither_keeps(in.clip.xy, in.fade)) {
+            discard;
+        }
+    }
     let c = select(in.dark, in.lit, in.shadow_class == CLASS_LIT);
     if (SECTION) {
         return vec4<f32>(section_color(c, in.world, front), 1.0);
@@ -262,6 +270,11 @@ fn fs_classified(in: ShadowedOut, @builtin(front_facing) front: bool) -> @locati
 
 @fragment
 fn fs_shadowed(in: ShadowedOut, @builtin(front_facing) front: bool) -> @location(0) vec4<f32> {
+    if (DITHER) {
+        if (!dither_keeps(in.clip.xy, in.fade)) {
+            discard;
+        }
+    }
     if (SECTION && section_removes(in.world)) {
         discard;
     }

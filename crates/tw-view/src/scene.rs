@@ -547,6 +547,7 @@ impl Scene {
             wait_for_pages: false,
             shadows,
             section: key.section,
+            transition: settings.transition,
             ..Default::default()
         };
         let d = walk.draw_frame(cull, &fs)?;
@@ -577,8 +578,9 @@ impl Scene {
         if cut_changed {
             self.prev_cut.clone_from(cut);
         }
-        self.settle =
-            occlusion != tw_frame::Occlusion::None && (self.key.as_ref() != Some(&key) || cut_changed);
+        // A cross-fade in progress (`--transition dither`) goes on with the camera still.
+        self.settle = walk.fading()
+            || occlusion != tw_frame::Occlusion::None && (self.key.as_ref() != Some(&key) || cut_changed);
         self.key = Some(key);
         Ok(info)
     }

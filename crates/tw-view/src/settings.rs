@@ -304,6 +304,8 @@ pub struct Settings {
     pub pixel_error: f32,
     /// The occlusion culling strategy (tw-frame's, as `terawalk bench` runs them).
     pub occlusion: Occlusion,
+    /// How LOD switches are drawn (`view --transition`; tw_frame::transition).
+    pub transition: tw_frame::Transition,
     pub frustum_culling: bool,
     /// Keep the current LOD cut (selection) while the camera moves.
     pub lod_freeze: bool,
@@ -336,6 +338,7 @@ impl Default for Settings {
         Settings {
             pixel_error: 1.0,
             occlusion: Occlusion::None,
+            transition: tw_frame::Transition::Pop,
             frustum_culling: true,
             lod_freeze: false,
             memory_budget: 1 << 30,

@@ -84,6 +84,7 @@ fn options(args: &BenchArgs) -> BenchOptions {
         ray_traced: args.renderer == RendererChoice::Rt,
         flashlight: args.flashlight,
         popping: args.popping,
+        transition: args.frame.transition,
         shadows: args.shadows.request(),
         program: Program {
             command_line: std::env::args().collect::<Vec<_>>().join(" "),

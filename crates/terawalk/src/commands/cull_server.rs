@@ -166,6 +166,7 @@ pub fn frame_of(r: &CameraRequest, server_occlusion: Occlusion) -> Result<(Camer
         triangle_culling: r.flags & CameraRequest::TRIANGLE_CULLING != 0,
         shadows: None,
         section: Default::default(),
+        transition: Default::default(),
     };
     Ok((camera, settings))
 }
@@ -229,6 +230,7 @@ mod tests {
                 triangle_culling: false,
                 shadows: None,
                 section: Default::default(),
+                transition: Default::default(),
             };
             let r = request_of(5, &camera, &settings, (640, 480));
             assert_eq!(frame_of(&r, Occlusion::None).unwrap(), (camera, settings));

@@ -139,7 +139,11 @@ fn bench_args(store: &Path, path_file: &Path, out: &Path) -> crate::cli::BenchAr
         path: Some(path_file.to_path_buf()),
         frames: None,
         out: out.to_path_buf(),
-        frame: crate::cli::FrameArgs { size: (1280, 720), samples: crate::cli::SamplesChoice::Auto },
+        frame: crate::cli::FrameArgs {
+            size: (1280, 720),
+            samples: crate::cli::SamplesChoice::Auto,
+            transition: Default::default(),
+        },
         error: 1.0,
         memory: 1 << 30,
         occlusion: tw_frame::Occlusion::ALL.iter().map(|&o| crate::cli::OcclusionChoice::Is(o)).collect(),

@@ -86,6 +86,8 @@ struct FrameRenderer<'s> {
     options: SelectOptions,
     /// `--up`, for `--light sun:AZ,EL`.
     up: Option<u8>,
+    /// `--transition`: with a cross-fade, frames go through the frame pipeline.
+    transition: tw_frame::Transition,
 }
 
 /// What draws the cut: the rasterizer or the ray tracer (`--renderer`); with `--light` the
@@ -114,8 +116,16 @@ struct Frame {
 impl<'s> FrameRenderer<'s> {
     fn new(store: &'s Arc<Store>, args: &RenderArgs) -> Result<Self> {
         let section = args.section.section(store.header())?;
+        let faded = args.frame.transition != tw_frame::Transition::Pop;
+        if faded && args.renderer == RendererChoice::Rt {
+            anyhow::bail!(
+                "--transition {} needs the rasterizer: the ray tracer switches LOD at once (use --transition pop)",
+                args.frame.transition.name()
+            );
+        }
         let backend = match args.renderer {
-            RendererChoice::Raster if args.shadows.light.is_some() => {
+            // A cross-fade needs the frame pipeline's state from frame to frame.
+            RendererChoice::Raster if args.shadows.light.is_some() || faded => {
                 let mut renderer = Renderer::new_headless(args.frame.size.0, args.frame.size.1)?;
                 outln!("adapter: {}", renderer.adapter_summary());
                 renderer.set_samples(args.frame.samples.resolve(&renderer))?;
@@ -177,7 +187,17 @@ impl<'s> FrameRenderer<'s> {
             section,
             ..Default::default()
         };
-        Ok(FrameRenderer { store, backend, size: args.frame.size, cache, selector, options, up: args.up })
+        let transition = args.frame.transition;
+        Ok(FrameRenderer {
+            store,
+            backend,
+            size: args.frame.size,
+            cache,
+            selector,
+            options,
+            up: args.up,
+            transition,
+        })
     }
 
     /// The LOD cut for `camera`, drawn and read back.
@@ -203,7 +223,10 @@ impl<'s> FrameRenderer<'s> {
                 Frame { image, selection, select_time, traced: Some(frame.stats), shadow: None }
             }
             Backend::Shadowed(walk, shadows) => {
-                let settings = frame_settings(&self.options, shadows.settings(header, up, camera)?);
+                let settings = FrameSettings {
+                    transition: self.transition,
+                    ..frame_settings(&self.options, shadows.settings(header, up, camera)?)
+                };
                 let (image, info) = walk.frame(camera, &settings)?;
                 let selection = walk.selection().clone();
                 Frame {

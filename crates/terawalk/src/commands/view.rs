@@ -219,6 +219,7 @@ fn settings(args: &ViewArgs, occlusion: Occlusion, shadows: ShadowControls) -> S
     Settings {
         pixel_error: args.error,
         occlusion,
+        transition: args.transition,
         frustum_culling: !args.no_frustum,
         memory_budget: args.memory,
         coloring: match args.color.color {

@@ -248,6 +248,13 @@ impl Walkthrough {
         body: impl FnOnce(&mut Pipe) -> R,
     ) -> Result<R, FrameError> {
         kind.supports(settings.occlusion).map_err(FrameError::Pipeline)?;
+        if settings.transition != crate::Transition::Pop && kind != Pipeline::Serial {
+            return Err(FrameError::Pipeline(format!(
+                "--pipeline {} does not cross-fade LOD switches yet (use --pipeline serial with --transition {})",
+                kind.name(),
+                settings.transition.name()
+            )));
+        }
         if settings.shadows.is_some() {
             return Err(FrameError::Pipeline(format!(
                 "--pipeline {} does not draw shadows yet (use --pipeline serial with --light)",

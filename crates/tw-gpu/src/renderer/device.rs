@@ -210,6 +210,8 @@ impl Renderer {
             object_color_count: 0,
             highlight: None,
             section: Default::default(),
+            fades: Default::default(),
+            dither_pipelines: false,
             bind_group,
             bind_generation: pool.generation,
             pool,

@@ -20,7 +20,8 @@ use crate::draw::{IndirectArgs, Pipelines};
 use crate::pool::ClusterPool;
 use crate::readback::Readback;
 use crate::{
-    color, depth, gpu_cull, msaa, query, ColorMode, DrawMode, PoolStats, DEFAULT_COLOR, GL_DEPTH_ROUNDING,
+    color, depth, gpu_cull, msaa, query, ClusterKey, ColorMode, DrawMode, PoolStats, DEFAULT_COLOR,
+    GL_DEPTH_ROUNDING,
 };
 use device::adapter_summary;
 
@@ -65,6 +66,7 @@ pub enum Target<'a> {
     View { view: &'a wgpu::TextureView, format: wgpu::TextureFormat, size: (u32, u32) },
 }
 
+#[derive(Clone, Copy)]
 pub(crate) enum Pass<'a> {
     /// A shaded pass into `view`; `own` when that is the renderer's own colour target, whose
     /// multisampled colour is resolved only when it is read ([`Renderer::resolve_color`]).
@@ -117,6 +119,12 @@ pub struct Renderer {
     highlight: Option<u32>,
     /// The section every pass clips by ([`Renderer::set_section`]).
     pub(crate) section: tw_runtime::Section,
+    /// The cross-fade words of the clusters that fade ([`Renderer::set_fades`]); every other
+    /// cluster is drawn whole.
+    pub(crate) fades: std::collections::HashMap<crate::pool::PoolKey, u32>,
+    /// Whether the eye pipelines being chosen test the fade words (the passes' fading part,
+    /// [`Renderer::set_fades`]).
+    pub(crate) dither_pipelines: bool,
     pub(crate) bind_group: wgpu::BindGroup,
     pub(crate) bind_generation: u64,
     pub(crate) pool: ClusterPool,
@@ -252,6 +260,27 @@ impl Renderer {
     /// Whether the passes clip by a section.
     pub(crate) fn sectioned(&self) -> bool {
         !self.section.is_empty()
+    }
+
+    /// Cross-fades the clusters of `fades` in every later eye pass (shaded colour, with or
+    /// without shadows, and depth only), each keeping the pixels its fade word gives
+    /// ([`crate::dither`]); the others are drawn whole. The shadow map and the item buffer
+    /// draw whole clusters. With no fades (the default) the passes use the pipelines without
+    /// the dither test.
+    pub fn set_fades(&mut self, fades: impl IntoIterator<Item = (ClusterKey, u32)>) {
+        self.fades.clear();
+        self.fades
+            .extend(fades.into_iter().filter(|(_, w)| *w != 0).map(|(k, w)| ((k.page, k.index_in_page), w)));
+    }
+
+    /// Whether the eye passes cross-fade some clusters ([`Renderer::set_fades`]).
+    pub(crate) fn dithered(&self) -> bool {
+        !self.fades.is_empty()
+    }
+
+    /// Whether cluster `key` fades.
+    pub(crate) fn fades(&self, key: &ClusterKey) -> bool {
+        self.fades.contains_key(&(key.page, key.index_in_page))
     }
 
     /// [`set_object_colors`](Self::set_object_colors) from the store's object table.

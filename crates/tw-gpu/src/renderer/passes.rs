@@ -368,12 +368,49 @@ impl Renderer {
         self.queue.write_buffer(&self.uniforms, 0, bytemuck::bytes_of(&u));
     }
 
+    /// Draws `clusters` (with `masks`) from `eye` into `pass`'s target of `size`
+    /// ([`draw_part`](Self::draw_part)). With cross-fades ([`Renderer::set_fades`]) an eye pass
+    /// draws its clusters drawn whole first, with the pipelines without the dither test, then
+    /// the fading ones with it: a fragment stage that may discard makes a CPU rasterizer test
+    /// depth late, for every fragment of the pipeline. A pass into a caller's encoder stays one
+    /// part, every draw with the dither test.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn draw_pass(
+        &mut self,
+        external: Option<&mut wgpu::CommandEncoder>,
+        pass: Pass<'_>,
+        size: (u32, u32),
+        eye: Eye<'_>,
+        grid_step: f64,
+        clusters: &[(ClusterKey, &PageCluster)],
+        masks: Option<&[TriangleMask]>,
+        clear: bool,
+    ) -> Result<(), GpuError> {
+        let eye_pass = matches!(pass, Pass::Shade { .. } | Pass::EyeDepth);
+        self.dither_pipelines = eye_pass && self.dithered();
+        if !self.dither_pipelines || external.is_some() {
+            return self.draw_part(external, pass, size, eye, grid_step, clusters, masks, clear);
+        }
+        let mut parts = [(Vec::new(), Vec::new()), (Vec::new(), Vec::new())];
+        for (i, c) in clusters.iter().enumerate() {
+            let part = &mut parts[self.fades(&c.0) as usize];
+            part.0.push(*c);
+            part.1.push(masks.and_then(|m| m.get(i).copied()).unwrap_or(u128::MAX));
+        }
+        let [(whole, whole_masks), (fading, fading_masks)] = parts;
+        self.dither_pipelines = false;
+        let first = self.draw_part(None, pass, size, eye, grid_step, &whole, Some(&whole_masks), clear);
+        self.dither_pipelines = true;
+        first?;
+        self.draw_part(None, pass, size, eye, grid_step, &fading, Some(&fading_masks), false)
+    }
+
     /// Draws `clusters` (with `masks`) from `eye` into `pass`'s target of `size`: makes each
     /// resident in the pool and gathers its draws, submitting the gathered part when the pool
     /// is full or the part's uploads reach the staging bound, and the rest at the end (into
     /// `external` when given: then the whole pass must fit the pool at once).
     #[allow(clippy::too_many_arguments)]
-    pub(crate) fn draw_pass(
+    fn draw_part(
         &mut self,
         mut external: Option<&mut wgpu::CommandEncoder>,
         pass: Pass<'_>,
@@ -482,6 +519,10 @@ impl Renderer {
                 Ensure::Ready { args, slot } => {
                     if b.items {
                         self.pool.set_item(&self.queue, slot, self.item_base + i as u32 + 1);
+                    }
+                    if matches!(b.kind, Kind::Shade { .. } | Kind::EyeDepth) {
+                        let fade = self.fades.get(&pk).copied().unwrap_or(0);
+                        self.pool.set_fade(&self.queue, slot, fade);
                     }
                     let lookups = match b.kind {
                         Kind::Shade { shadow_layers: Some(_), .. } => self.shadow.note_slot(pk, slot),
@@ -629,7 +670,8 @@ impl Renderer {
             }
             Kind::Items => ((self.pipelines.item(&self.device, self.sectioned()).clone(), None), None, None),
             Kind::EyeDepth => {
-                let p = self.pipelines.eye_depth(&self.device, samples, self.sectioned()).clone();
+                let clip = (self.sectioned(), self.dither_pipelines);
+                let p = self.pipelines.eye_depth(&self.device, samples, clip).clone();
                 ((p, None), None, None)
             }
             Kind::ShadowMap => {
