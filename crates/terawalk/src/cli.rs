@@ -389,8 +389,8 @@ pub struct FrameArgs {
     /// 1 on CPU drivers and GL.
     #[arg(long, default_value = "auto", value_parser = parse_samples)]
     pub samples: SamplesChoice,
-    /// How LOD switches are drawn: pop (at once) or dither[:N], a screen-door cross-fade of
-    /// the old and new clusters over N frames (default 8, at most 64; docs/RUNTIME.md
+    /// How LOD switches are drawn: pop (at once) or dither:N, a screen-door cross-fade of
+    /// the old and new clusters over N frames (`dither` alone: 8; at most 64; docs/RUNTIME.md
     /// "Transitions"). The rasterizer's serial frames only.
     #[arg(long, default_value = "pop", value_parser = tw_frame::Transition::parse)]
     pub transition: tw_frame::Transition,
@@ -672,8 +672,8 @@ pub struct ViewArgs {
     /// conservative one on the window's device; all of them give the image of none).
     #[arg(long, default_value = "auto", value_parser = parse_occlusion)]
     pub occlusion: OcclusionChoice,
-    /// How LOD switches are drawn: pop (at once) or dither[:N], a screen-door cross-fade of
-    /// the old and new clusters over N frames (default 8, at most 64; docs/RUNTIME.md
+    /// How LOD switches are drawn: pop (at once) or dither:N, a screen-door cross-fade of
+    /// the old and new clusters over N frames (`dither` alone: 8; at most 64; docs/RUNTIME.md
     /// "Transitions"). The rasterizer only.
     #[arg(long, default_value = "pop", value_parser = tw_frame::Transition::parse)]
     pub transition: tw_frame::Transition,
