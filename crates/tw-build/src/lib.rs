@@ -42,6 +42,7 @@ mod provisional;
 mod redefine;
 mod sampling;
 mod seams;
+mod spatial_meshlets;
 mod types;
 mod union_find;
 mod workio;
