@@ -83,7 +83,6 @@
 //! among parts go to the first triangle.
 
 use crate::part_shape::part_shapes;
-use crate::spatial_meshlets::spatial_meshlets;
 use crate::union_find::UnionFind;
 use meshopt::{SimplifyOptions, SimplifyVertex, VertexDataAdapter};
 
@@ -279,11 +278,10 @@ pub(crate) fn build_dag(
 /// Splits `indices` into clusters with meshopt's spatial clusterizer (fill weight 1: full
 /// clusters) and level-0 in-cluster reordering, appended to `clusters` (`refined` as given).
 ///
-/// [`spatial_meshlets`]: the clusters of `meshopt::build_meshlets_spatial` (which reorders every
-/// meshlet with `meshopt_optimizeMeshlet`, level 0), into reused buffers. Running
-/// `optimize_meshlet_level(.., 0)` on the output again changed nothing (level 0 is idempotent)
-/// and was 4–5 % of a build's time; `spatial_clusters_come_reordered_at_level_0` checks that the
-/// wrapper keeps doing it and `clusterize_matches_the_wrapper` that this function matches it.
+/// The reordering is the one `meshopt::build_meshlets_spatial` already applies to every meshlet
+/// (`meshopt_optimizeMeshlet`, which is level 0); running `optimize_meshlet_level(.., 0)` on its
+/// output again changed nothing (level 0 is idempotent) and was 4–5 % of a build's time.
+/// `spatial_clusters_come_reordered_at_level_0` checks that the wrapper keeps doing it.
 fn clusterize(
     clusters: &mut Vec<Cluster>,
     cluster_indices: &mut Vec<u32>,
@@ -293,12 +291,22 @@ fn clusterize(
     refined: i32,
 ) {
     let min_triangles = (config.max_triangles / 3).max(1);
-    let limits = (config.max_vertices, min_triangles, config.max_triangles);
-    spatial_meshlets(indices, vertices, limits, |verts, tris| {
+    let meshlets = meshopt::build_meshlets_spatial(
+        indices,
+        vertices,
+        config.max_vertices,
+        min_triangles,
+        config.max_triangles,
+        1.0,
+    );
+    for m in &meshlets.meshlets {
+        let (v0, vn) = (m.vertex_offset as usize, m.vertex_count as usize);
+        let (t0, tn) = (m.triangle_offset as usize, m.triangle_count as usize * 3);
         let offset = cluster_indices.len();
+        let (verts, tris) = (&meshlets.vertices[v0..v0 + vn], &meshlets.triangles[t0..t0 + tn]);
         cluster_indices.extend(tris.iter().map(|&t| verts[t as usize]));
-        clusters.push(Cluster { offset, count: tris.len(), refined, bounds: DagBounds::default() });
-    });
+        clusters.push(Cluster { offset, count: tn, refined, bounds: DagBounds::default() });
+    }
 }
 
 /// Partitions the clusters into groups (reordering `clusters` so that each group is contiguous)
@@ -354,23 +362,23 @@ fn lock_group_borders(
     (vertex_lock, anchor): (&[SimplifyVertex], &[bool]),
     frozen: &[bool],
 ) {
-    // `last_group`: the last group seen using a vertex, SHARED once two did (no per-level array).
-    const UNSEEN: u32 = u32::MAX;
-    const SHARED: u32 = u32::MAX - 1;
-    last_group.fill(UNSEEN);
+    let mut shared = vec![false; locks.len()];
+    last_group.fill(u32::MAX);
     for (g, range) in offsets.windows(2).enumerate() {
         for c in &clusters[range[0]..range[1]] {
             for &v in &cluster_indices[c.offset..c.offset + c.count] {
                 let last = &mut last_group[v as usize];
-                *last = if *last != UNSEEN && *last != g as u32 { SHARED } else { g as u32 };
+                if *last != u32::MAX && *last != g as u32 {
+                    shared[v as usize] = true;
+                }
+                *last = g as u32;
             }
         }
     }
     for (v, (lock, anchored)) in locks.iter_mut().zip(anchored.iter_mut()).enumerate() {
         let fixed = vertex_lock.get(v).copied().unwrap_or(SimplifyVertex::None);
-        let held = last_group[v] == SHARED || frozen[v];
-        *anchored = held || anchor.get(v).copied().unwrap_or(false);
-        *lock = if held { SimplifyVertex::Lock } else { fixed };
+        *anchored = shared[v] || frozen[v] || anchor.get(v).copied().unwrap_or(false);
+        *lock = if shared[v] || frozen[v] { SimplifyVertex::Lock } else { fixed };
     }
 }
 
@@ -737,55 +745,6 @@ mod tests {
     }
 
     /// The 12 triangles of the box from `lo` to `hi`, its corners appended to `positions`.
-    /// The wrapper's clusters, flattened to mesh indices, with their triangle counts.
-    fn wrapper_clusters(
-        positions: &[[f32; 3]],
-        indices: &[u32],
-        config: &DagConfig,
-    ) -> (Vec<u32>, Vec<usize>) {
-        let vertices = crate::lod::adapter(positions);
-        let meshlets = meshopt::build_meshlets_spatial(
-            indices,
-            &vertices,
-            config.max_vertices,
-            (config.max_triangles / 3).max(1),
-            config.max_triangles,
-            1.0,
-        );
-        let mut flat = Vec::new();
-        let mut counts = Vec::new();
-        for m in &meshlets.meshlets {
-            let (v0, vn) = (m.vertex_offset as usize, m.vertex_count as usize);
-            let (t0, tn) = (m.triangle_offset as usize, m.triangle_count as usize * 3);
-            let verts = &meshlets.vertices[v0..v0 + vn];
-            flat.extend(meshlets.triangles[t0..t0 + tn].iter().map(|&t| verts[t as usize]));
-            counts.push(tn);
-        }
-        (flat, counts)
-    }
-
-    #[test]
-    fn clusterize_matches_the_wrapper() {
-        // `clusterize` calls meshopt's FFI into reused buffers: its clusters must be the
-        // wrapper's, also when the buffers hold a larger mesh's leftovers (the big mesh first).
-        let config = DagConfig::new(crate::lod::MAX_CLUSTER_TRIANGLES, crate::lod::MAX_CLUSTER_VERTICES);
-        let mut boxes = (Vec::new(), Vec::new());
-        for i in 0..40 {
-            let lo = [i as f32 * 1.5, (i % 7) as f32, 0.0];
-            push_box(&mut boxes.0, &mut boxes.1, lo, [lo[0] + 1.0, lo[1] + 0.5, 2.0]);
-        }
-        for (positions, indices) in [grid_mesh(64), grid_mesh(9), boxes, grid_mesh(1)] {
-            let vertices = crate::lod::adapter(&positions);
-            let (mut clusters, mut flat) = (Vec::new(), Vec::new());
-            clusterize(&mut clusters, &mut flat, &config, &vertices, &indices, 7);
-            let (wrapper_flat, wrapper_counts) = wrapper_clusters(&positions, &indices, &config);
-            assert!(!wrapper_counts.is_empty());
-            assert_eq!(flat, wrapper_flat);
-            assert_eq!(clusters.iter().map(|c| c.count).collect::<Vec<_>>(), wrapper_counts);
-            assert!(clusters.iter().all(|c| c.refined == 7));
-        }
-    }
-
     fn push_box(positions: &mut Vec<[f32; 3]>, indices: &mut Vec<u32>, lo: [f32; 3], hi: [f32; 3]) {
         let base = positions.len() as u32;
         positions

@@ -50,7 +50,6 @@ use crate::lod::{
     MAX_CLUSTER_TRIANGLES, MAX_CLUSTER_VERTICES, MIN_ERROR,
 };
 use crate::part_shape::part_shapes;
-use crate::spatial_meshlets::spatial_meshlets;
 use crate::types::{Grid, LodCluster, LodDag, LodGroup, Sphere};
 use meshopt::{SimplifyOptions, VertexDataAdapter};
 
@@ -540,8 +539,16 @@ fn recluster(
     let max_triangles = (params.max_triangles.clamp(4, MAX_CLUSTER_TRIANGLES) / 4) * 4;
     let max_vertices = params.max_vertices.clamp(3, MAX_CLUSTER_VERTICES);
     let min_triangles = (max_triangles / 3).max(1);
+    let meshlets = meshopt::build_meshlets_spatial(
+        simplified,
+        vertices,
+        max_vertices,
+        min_triangles,
+        max_triangles,
+        1.0,
+    );
     let mut dag = LodDag::default();
-    spatial_meshlets(simplified, vertices, (max_vertices, min_triangles, max_triangles), |verts, tris| {
+    for m in meshlets.iter() {
         let group_clusters = params.group_clusters.max(1);
         if dag.groups.last().is_none_or(|g: &LodGroup| g.clusters.len() >= group_clusters) {
             let (sphere, level) = (node.sphere, node.level);
@@ -549,12 +556,13 @@ fn recluster(
         }
         let gi = dag.groups.len() - 1;
         let cluster = LodCluster {
-            positions: verts.iter().map(|&v| positions[v as usize]).collect(),
-            indices: tris.to_vec(),
-            objects: tris
+            positions: m.vertices.iter().map(|&v| positions[v as usize]).collect(),
+            indices: m.triangles.to_vec(),
+            objects: m
+                .triangles
                 .chunks_exact(3)
                 .map(|t| {
-                    let tri = [t[0], t[1], t[2]].map(|k| verts[k as usize]);
+                    let tri = [t[0], t[1], t[2]].map(|k| m.vertices[k as usize]);
                     triangle_object(vertex_object, tri)
                 })
                 .collect(),
@@ -566,7 +574,7 @@ fn recluster(
         };
         dag.groups[gi].clusters.push(dag.clusters.len() as u32);
         dag.clusters.push(cluster);
-    });
+    }
     dag
 }
 

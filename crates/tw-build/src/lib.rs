@@ -42,7 +42,6 @@ mod provisional;
 mod redefine;
 mod sampling;
 mod seams;
-mod spatial_meshlets;
 mod types;
 mod union_find;
 mod workio;
