@@ -204,22 +204,22 @@ impl Walkthrough {
         };
         let cache = self.streamer.cache();
         let grid_step = self.streamer.store().header().grid_step;
-        let seen_by = |view_proj: Option<Mat4>, c: &ClusterRef| {
-            let Some(view_proj) = view_proj else { return true };
+        // Each frustum once a frame, not once a cluster.
+        let (was, is) =
+            (before.map(|m| Frustum::from_view_projection(&m)), Frustum::from_view_projection(&view_proj));
+        let seen_by = |frustum: Option<&Frustum>, c: &ClusterRef| {
+            let Some(frustum) = frustum else { return true };
             let bounds = match pages.binary_search_by_key(&c.page, |(p, _)| *p) {
                 Ok(i) => pages[i].1.bounds.get(c.index_in_page as usize).copied(),
                 Err(_) => cache.try_get(c.page).and_then(|p| p.bounds.get(c.index_in_page as usize).copied()),
             };
-            bounds.is_none_or(|(min, max)| {
-                Frustum::from_view_projection(&view_proj).test_grid_box(min, max, grid_step)
-                    != Containment::Outside
-            })
+            bounds.is_none_or(|(min, max)| frustum.test_grid_box(min, max, grid_step) != Containment::Outside)
         };
         self.fades.advance(
             &self.selection.clusters,
             frames,
-            |c| seen_by(before, c),
-            |c| seen_by(Some(view_proj), c),
+            |c| seen_by(was.as_ref(), c),
+            |c| seen_by(Some(&is), c),
         );
         let mut drawn = Vec::new();
         let mut gone = HashSet::new();
